@@ -1,0 +1,226 @@
+//! From pixels to H-Net's input tensors, and from its outputs to masks and tip forces.
+//!
+//! Images enter as 8-bit RGB, row-major, `height·width·3` bytes, already resized to the model's
+//! input size (resizing belongs to whoever decodes the image: the dataset loader natively, the
+//! page in the browser). Grey X-ray images are passed with the grey value in all three channels.
+
+use alloc::vec::Vec;
+use core::fmt;
+
+use burn::tensor::{Device, Tensor, TensorData};
+
+use crate::model::{HNet, HNetOutput};
+
+/// One stereo pair of 8-bit RGB images of the same size.
+#[derive(Debug, Clone, Copy)]
+pub struct StereoPair<'a> {
+    /// View A pixels, `height·width·3` bytes.
+    pub view_a: &'a [u8],
+    /// View B pixels, `height·width·3` bytes.
+    pub view_b: &'a [u8],
+}
+
+/// A buffer does not hold an image of the expected size.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct InputSizeError {
+    /// Index of the pair in the batch.
+    pub pair: usize,
+    /// `"A"` or `"B"`.
+    pub view: &'static str,
+    /// Bytes found.
+    pub found: usize,
+    /// Bytes expected (`height·width·3`).
+    pub expected: usize,
+}
+
+impl fmt::Display for InputSizeError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "pair {} view {}: {} bytes, expected {} (an RGB image of the model's input size)",
+            self.pair, self.view, self.found, self.expected
+        )
+    }
+}
+
+impl core::error::Error for InputSizeError {}
+
+/// What H-Net says about one stereo pair.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StereoPrediction {
+    /// Input size `[height, width]` in pixels: the size of both masks.
+    pub size: [usize; 2],
+    /// View A catheter probability per pixel, row-major.
+    pub mask_a: Vec<f32>,
+    /// View B catheter probability per pixel, row-major.
+    pub mask_b: Vec<f32>,
+    /// Tip force `(Fx, Fy, Fz)` in newtons.
+    pub force: [f32; 3],
+}
+
+impl StereoPrediction {
+    /// Magnitude of the tip force in newtons.
+    pub fn force_magnitude(&self) -> f32 {
+        self.force.iter().map(|f| f * f).sum::<f32>().sqrt()
+    }
+}
+
+/// Appends an RGB image as planar channels scaled to `[0, 1]` (the `[3, H, W]` layout).
+fn push_planar(pixels: &[u8], out: &mut Vec<f32>) {
+    for channel in 0..3 {
+        out.extend(pixels.iter().skip(channel).step_by(3).map(|&v| f32::from(v) / 255.0));
+    }
+}
+
+/// Builds the two input tensors `[B, 3, H, W]` (values in `[0, 1]`) of a batch of pairs.
+pub fn stereo_batch(
+    pairs: &[StereoPair<'_>],
+    size: [usize; 2],
+    device: &Device,
+) -> Result<(Tensor<4>, Tensor<4>), InputSizeError> {
+    let expected = size[0] * size[1] * 3;
+    let mut a = Vec::with_capacity(pairs.len() * expected);
+    let mut b = Vec::with_capacity(pairs.len() * expected);
+    for (index, pair) in pairs.iter().enumerate() {
+        for (view, pixels) in [("A", pair.view_a), ("B", pair.view_b)] {
+            if pixels.len() != expected {
+                return Err(InputSizeError {
+                    pair: index,
+                    view,
+                    found: pixels.len(),
+                    expected,
+                });
+            }
+        }
+        push_planar(pair.view_a, &mut a);
+        push_planar(pair.view_b, &mut b);
+    }
+    let shape = [pairs.len(), 3, size[0], size[1]];
+    Ok((
+        Tensor::from_data(TensorData::new(a, shape), device),
+        Tensor::from_data(TensorData::new(b, shape), device),
+    ))
+}
+
+/// Host copies of a batch's outputs, split per pair.
+fn split_predictions(
+    size: [usize; 2],
+    mask_a: Vec<f32>,
+    mask_b: Vec<f32>,
+    force: Vec<f32>,
+) -> Vec<StereoPrediction> {
+    let pixels = size[0] * size[1];
+    mask_a
+        .chunks_exact(pixels)
+        .zip(mask_b.chunks_exact(pixels))
+        .zip(force.chunks_exact(3))
+        .map(|((a, b), f)| StereoPrediction {
+            size,
+            mask_a: a.to_vec(),
+            mask_b: b.to_vec(),
+            force: [f[0], f[1], f[2]],
+        })
+        .collect()
+}
+
+/// Reading a result back from the device failed.
+#[derive(Debug, Clone)]
+pub struct ReadbackError(pub alloc::string::String);
+
+impl fmt::Display for ReadbackError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "could not read the result back from the device: {}", self.0)
+    }
+}
+
+impl core::error::Error for ReadbackError {}
+
+fn to_vec(data: TensorData) -> Result<Vec<f32>, ReadbackError> {
+    data.try_into_vec::<f32>()
+        .map_err(|e| ReadbackError(alloc::format!("{e:?}")))
+}
+
+fn masks_and_force(output: HNetOutput) -> [Tensor<2>; 3] {
+    let [batch, _, _, _] = output.mask_logits_a.dims();
+    [
+        output.mask_a().reshape([batch as i32, -1]),
+        output.mask_b().reshape([batch as i32, -1]),
+        output.force,
+    ]
+}
+
+impl HNet {
+    /// Runs `pairs` (each image `size` = `[height, width]`) and reads the results back,
+    /// blocking until the device is done. Use [`HNet::predict_async`] in the browser.
+    pub fn predict(
+        &self,
+        pairs: &[StereoPair<'_>],
+        size: [usize; 2],
+        device: &Device,
+    ) -> Result<Vec<StereoPrediction>, PredictError> {
+        let (a, b) = stereo_batch(pairs, size, device)?;
+        let [mask_a, mask_b, force] = masks_and_force(self.forward(a, b));
+        Ok(split_predictions(
+            size,
+            to_vec(mask_a.into_data())?,
+            to_vec(mask_b.into_data())?,
+            to_vec(force.into_data())?,
+        ))
+    }
+
+    /// Like [`HNet::predict`], but waits for the device asynchronously (required on WebGPU in
+    /// the browser, where the page must not block).
+    pub async fn predict_async(
+        &self,
+        pairs: &[StereoPair<'_>],
+        size: [usize; 2],
+        device: &Device,
+    ) -> Result<Vec<StereoPrediction>, PredictError> {
+        let (a, b) = stereo_batch(pairs, size, device)?;
+        let [mask_a, mask_b, force] = masks_and_force(self.forward(a, b));
+        let read = |t: Tensor<2>| async move {
+            t.into_data_async()
+                .await
+                .map_err(|e| ReadbackError(alloc::format!("{e:?}")))
+                .and_then(to_vec)
+        };
+        Ok(split_predictions(
+            size,
+            read(mask_a).await?,
+            read(mask_b).await?,
+            read(force).await?,
+        ))
+    }
+}
+
+/// Why a prediction failed.
+#[derive(Debug, Clone)]
+pub enum PredictError {
+    /// An input image has the wrong size.
+    Input(InputSizeError),
+    /// The device could not return the result.
+    Readback(ReadbackError),
+}
+
+impl fmt::Display for PredictError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Input(e) => e.fmt(f),
+            Self::Readback(e) => e.fmt(f),
+        }
+    }
+}
+
+impl core::error::Error for PredictError {}
+
+impl From<InputSizeError> for PredictError {
+    fn from(e: InputSizeError) -> Self {
+        Self::Input(e)
+    }
+}
+
+impl From<ReadbackError> for PredictError {
+    fn from(e: ReadbackError) -> Self {
+        Self::Readback(e)
+    }
+}

@@ -1,0 +1,36 @@
+//! H-Net: one small network that segments a catheter in two simultaneous views (biplane
+//! fluoroscopy or two bench cameras) and estimates the 3D force at its tip.
+//!
+//! Fekri, Zadeh, Dargahi, "H-Net: A Multitask Architecture for Simultaneous 3D Force
+//! Estimation and Stereo Semantic Segmentation in Intracardiac Catheters", IEEE RA-L 2024.
+//!
+//! This crate holds everything about the network that the command-line tool, the browser app
+//! and the tests share, written once:
+//!
+//! - [`model`]: the architecture and its configuration ([`HNetConfig`], [`HNet`]);
+//! - [`loss`]: the paper's multitask loss (eq. 7);
+//! - [`metrics`]: the paper's force and segmentation metrics (section III.B), on plain slices so
+//!   they need no backend;
+//! - [`inference`]: turning RGB pixel buffers into input tensors and outputs into masks and a
+//!   tip force;
+//! - [`weights`]: saving and loading trained weights as a single self-describing burnpack file.
+//!
+//! The code has no backend type parameter: Burn 0.22 picks the backend from the [`Device`]
+//! (`Device::flex()` on the CPU, `Device::wgpu(..)` on a GPU or in the browser).
+//!
+//! Units: forces are in newtons, images in pixels, masks are probabilities in `[0, 1]` of a pixel
+//! showing the catheter.
+//!
+//! [`Device`]: burn::tensor::Device
+#![cfg_attr(not(feature = "std"), no_std)]
+
+extern crate alloc;
+
+pub mod inference;
+pub mod loss;
+pub mod metrics;
+pub mod model;
+pub mod weights;
+
+pub use loss::{HNetLoss, HNetLossConfig, LossTerms};
+pub use model::{HNet, HNetConfig, HNetConfigError, HNetOutput};

@@ -1,0 +1,364 @@
+//! The H-Net architecture (paper section II.B, Fig. 2).
+//!
+//! Each view goes through a U-Net-like encoder-decoder: `depth` encoder blocks of two 3x3
+//! convolutions with ReLU followed by 2x2 max pooling (the block output before pooling is kept as
+//! a skip connection), a bottleneck of two 3x3 convolutions, and `depth` decoder blocks of a 3x3
+//! transposed convolution with stride 2, concatenation with the matching skip and two 3x3
+//! convolutions. A 1x1 convolution and a sigmoid give the view's catheter mask. There are no
+//! normalization layers.
+//!
+//! By default the encoder, decoder and segmentation head are one set of weights applied to both
+//! views (the two views run as one batch of `2B`), so swapping the views swaps the masks.
+//!
+//! The force head global-average-pools the bottleneck and every decoder block output of each view
+//! (eq. 1, 2, 4), concatenates the pooled vectors of both views (eq. 5) and regresses the tip force
+//! `(Fx, Fy, Fz)` in newtons through dense layers of 64 and 32 units with ReLU and a linear output.
+
+use alloc::vec::Vec;
+use core::fmt;
+
+use burn::config::Config;
+use burn::module::Module;
+use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
+use burn::nn::{Linear, LinearConfig, PaddingConfig2d};
+use burn::tensor::activation::{relu, sigmoid};
+use burn::tensor::module::max_pool2d;
+use burn::tensor::ops::MaxPoolOptions;
+use burn::tensor::{Device, Tensor};
+
+/// Settings of the network. The defaults are the paper's.
+#[derive(Config, Debug, PartialEq)]
+pub struct HNetConfig {
+    /// Channels of each input image (3: RGB, or grey replicated to three channels).
+    #[config(default = 3)]
+    pub in_channels: usize,
+    /// Filters of every convolution (the paper uses 32 throughout).
+    #[config(default = 32)]
+    pub filters: usize,
+    /// Number of encoder blocks, and of decoder blocks (the paper uses 4).
+    #[config(default = 4)]
+    pub depth: usize,
+    /// Input image size `[height, width]` in pixels; both must be divisible by `2^depth`.
+    #[config(default = "[224, 224]")]
+    pub image_size: [usize; 2],
+    /// One encoder-decoder and segmentation head for both views (the paper's design). When false,
+    /// each view gets its own weights.
+    #[config(default = true)]
+    pub share_weights: bool,
+    /// Units of the two hidden dense layers of the force head.
+    #[config(default = "[64, 32]")]
+    pub force_hidden: [usize; 2],
+}
+
+/// Why a [`HNetConfig`] cannot build a network.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum HNetConfigError {
+    /// A size that must be positive is zero.
+    Zero(&'static str),
+    /// The image size cannot be halved `depth` times.
+    ImageSizeNotDivisible {
+        /// The configured `[height, width]`.
+        image_size: [usize; 2],
+        /// The configured depth: sizes must be divisible by `2^depth`.
+        depth: usize,
+    },
+}
+
+impl fmt::Display for HNetConfigError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Zero(field) => write!(f, "`{field}` must be at least 1"),
+            Self::ImageSizeNotDivisible { image_size, depth } => write!(
+                f,
+                "image size {}x{} (height x width) must be divisible by 2^depth = 2^{depth}",
+                image_size[0], image_size[1]
+            ),
+        }
+    }
+}
+
+impl core::error::Error for HNetConfigError {}
+
+impl HNetConfig {
+    /// Checks that the settings describe a network that can be built.
+    pub fn validate(&self) -> Result<(), HNetConfigError> {
+        for (name, value) in [
+            ("in_channels", self.in_channels),
+            ("filters", self.filters),
+            ("depth", self.depth),
+            ("image_size[0]", self.image_size[0]),
+            ("image_size[1]", self.image_size[1]),
+            ("force_hidden[0]", self.force_hidden[0]),
+            ("force_hidden[1]", self.force_hidden[1]),
+        ] {
+            if value == 0 {
+                return Err(HNetConfigError::Zero(name));
+            }
+        }
+        let divisible = |size: usize| {
+            u32::try_from(self.depth)
+                .ok()
+                .and_then(|depth| 1usize.checked_shl(depth))
+                .is_some_and(|divisor| divisor <= size && size % divisor == 0)
+        };
+        if !divisible(self.image_size[0]) || !divisible(self.image_size[1]) {
+            return Err(HNetConfigError::ImageSizeNotDivisible {
+                image_size: self.image_size,
+                depth: self.depth,
+            });
+        }
+        Ok(())
+    }
+
+    /// Length of the pooled feature vector of one view: the bottleneck and every decoder block.
+    pub fn pooled_features_per_view(&self) -> usize {
+        (self.depth + 1) * self.filters
+    }
+
+    /// Builds a network with freshly initialised weights on `device`.
+    pub fn init(&self, device: &Device) -> Result<HNet, HNetConfigError> {
+        self.validate()?;
+        let segmentation = SegmentationBranch::new(self, device);
+        let segmentation_b = (!self.share_weights).then(|| SegmentationBranch::new(self, device));
+        let features = 2 * self.pooled_features_per_view();
+        let force = ForceHead {
+            hidden1: LinearConfig::new(features, self.force_hidden[0]).init(device),
+            hidden2: LinearConfig::new(self.force_hidden[0], self.force_hidden[1]).init(device),
+            output: LinearConfig::new(self.force_hidden[1], 3).init(device),
+        };
+        Ok(HNet {
+            segmentation,
+            segmentation_b,
+            force,
+        })
+    }
+}
+
+/// Two 3x3 convolutions, each followed by ReLU, keeping the spatial size.
+#[derive(Module, Debug)]
+pub struct DoubleConv {
+    first: Conv2d,
+    second: Conv2d,
+}
+
+impl DoubleConv {
+    fn new(in_channels: usize, filters: usize, device: &Device) -> Self {
+        let conv = |cin| {
+            Conv2dConfig::new([cin, filters], [3, 3])
+                .with_padding(PaddingConfig2d::Same)
+                .init(device)
+        };
+        Self {
+            first: conv(in_channels),
+            second: conv(filters),
+        }
+    }
+
+    fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        relu(self.second.forward(relu(self.first.forward(x))))
+    }
+}
+
+/// A decoder block: 3x3 transposed convolution with stride 2 (doubling height and width), then
+/// concatenation with the encoder's skip connection and two 3x3 convolutions.
+#[derive(Module, Debug)]
+pub struct UpBlock {
+    up: ConvTranspose2d,
+    conv: DoubleConv,
+}
+
+impl UpBlock {
+    fn new(filters: usize, device: &Device) -> Self {
+        Self {
+            // padding 1 and output padding 1 give exactly twice the input size, like Keras'
+            // `Conv2DTranspose(strides=2, padding="same")`.
+            up: ConvTranspose2dConfig::new([filters, filters], [3, 3])
+                .with_stride([2, 2])
+                .with_padding([1, 1])
+                .with_padding_out([1, 1])
+                .init(device),
+            conv: DoubleConv::new(2 * filters, filters, device),
+        }
+    }
+
+    fn forward(&self, x: Tensor<4>, skip: Tensor<4>) -> Tensor<4> {
+        let up = self.up.forward(x);
+        self.conv.forward(Tensor::cat(alloc::vec![up, skip], 1))
+    }
+}
+
+/// The per-view encoder-decoder with its segmentation head.
+#[derive(Module, Debug)]
+pub struct SegmentationBranch {
+    encoder: Vec<DoubleConv>,
+    bottleneck: DoubleConv,
+    decoder: Vec<UpBlock>,
+    head: Conv2d,
+}
+
+/// What one pass of a [`SegmentationBranch`] produces.
+#[derive(Debug, Clone)]
+pub struct BranchOutput {
+    /// Mask logits `[N, 1, H, W]` (apply a sigmoid for probabilities).
+    pub mask_logits: Tensor<4>,
+    /// Global average pools of the bottleneck and of each decoder block, `[N, (depth+1)*filters]`.
+    pub pooled: Tensor<2>,
+}
+
+impl SegmentationBranch {
+    fn new(config: &HNetConfig, device: &Device) -> Self {
+        let f = config.filters;
+        let encoder = (0..config.depth)
+            .map(|i| DoubleConv::new(if i == 0 { config.in_channels } else { f }, f, device))
+            .collect();
+        Self {
+            encoder,
+            bottleneck: DoubleConv::new(f, f, device),
+            decoder: (0..config.depth).map(|_| UpBlock::new(f, device)).collect(),
+            head: Conv2dConfig::new([f, 1], [1, 1]).init(device),
+        }
+    }
+
+    /// Runs images `[N, C, H, W]` through the branch.
+    pub fn forward(&self, images: Tensor<4>) -> BranchOutput {
+        let mut skips = Vec::with_capacity(self.encoder.len());
+        let mut x = images;
+        for block in &self.encoder {
+            x = block.forward(x);
+            skips.push(x.clone());
+            x = max_pool2d(x, MaxPoolOptions::new([2, 2]));
+        }
+        x = self.bottleneck.forward(x);
+        let mut pooled = Vec::with_capacity(self.decoder.len() + 1);
+        pooled.push(global_average_pool(x.clone()));
+        for (block, skip) in self.decoder.iter().zip(skips.into_iter().rev()) {
+            x = block.forward(x, skip);
+            pooled.push(global_average_pool(x.clone()));
+        }
+        BranchOutput {
+            mask_logits: self.head.forward(x),
+            pooled: Tensor::cat(pooled, 1),
+        }
+    }
+}
+
+/// Mean over height and width: `[N, C, H, W]` to `[N, C]`.
+fn global_average_pool(x: Tensor<4>) -> Tensor<2> {
+    x.mean_dims(&[2, 3]).flatten(1, 3)
+}
+
+/// Dense regression head from the pooled stereo features to the tip force in newtons.
+#[derive(Module, Debug)]
+pub struct ForceHead {
+    hidden1: Linear,
+    hidden2: Linear,
+    output: Linear,
+}
+
+impl ForceHead {
+    fn forward(&self, features: Tensor<2>) -> Tensor<2> {
+        let x = relu(self.hidden1.forward(features));
+        let x = relu(self.hidden2.forward(x));
+        self.output.forward(x)
+    }
+}
+
+/// The H-Net network. Build it with [`HNetConfig::init`].
+#[derive(Module, Debug)]
+pub struct HNet {
+    /// View A's branch, and both views' when weights are shared.
+    segmentation: SegmentationBranch,
+    /// View B's own branch when weights are not shared.
+    segmentation_b: Option<SegmentationBranch>,
+    force: ForceHead,
+}
+
+/// The three heads' outputs for a batch of `B` stereo pairs.
+#[derive(Debug, Clone)]
+pub struct HNetOutput {
+    /// View A mask logits `[B, 1, H, W]`.
+    pub mask_logits_a: Tensor<4>,
+    /// View B mask logits `[B, 1, H, W]`.
+    pub mask_logits_b: Tensor<4>,
+    /// Tip force `[B, 3]` as `(Fx, Fy, Fz)` in newtons.
+    pub force: Tensor<2>,
+}
+
+impl HNetOutput {
+    /// View A catheter probabilities `[B, 1, H, W]`.
+    pub fn mask_a(&self) -> Tensor<4> {
+        sigmoid(self.mask_logits_a.clone())
+    }
+
+    /// View B catheter probabilities `[B, 1, H, W]`.
+    pub fn mask_b(&self) -> Tensor<4> {
+        sigmoid(self.mask_logits_b.clone())
+    }
+}
+
+impl HNet {
+    /// Whether both views run through one set of encoder-decoder weights.
+    pub fn shares_weights(&self) -> bool {
+        self.segmentation_b.is_none()
+    }
+
+    /// Runs a batch of stereo pairs: `view_a` and `view_b` are `[B, C, H, W]` images with values
+    /// in `[0, 1]`, where `H` and `W` are divisible by `2^depth`.
+    pub fn forward(&self, view_a: Tensor<4>, view_b: Tensor<4>) -> HNetOutput {
+        let (a, b) = match &self.segmentation_b {
+            None => {
+                let batch = view_a.dims()[0];
+                let both = self.segmentation.forward(Tensor::cat(alloc::vec![view_a, view_b], 0));
+                let mask_logits_a = both.mask_logits.clone().narrow(0, 0, batch);
+                let mask_logits_b = both.mask_logits.narrow(0, batch, batch);
+                let pooled_a = both.pooled.clone().narrow(0, 0, batch);
+                let pooled_b = both.pooled.narrow(0, batch, batch);
+                (
+                    BranchOutput {
+                        mask_logits: mask_logits_a,
+                        pooled: pooled_a,
+                    },
+                    BranchOutput {
+                        mask_logits: mask_logits_b,
+                        pooled: pooled_b,
+                    },
+                )
+            }
+            Some(branch_b) => (
+                self.segmentation.forward(view_a),
+                branch_b.forward(view_b),
+            ),
+        };
+        let features = Tensor::cat(alloc::vec![a.pooled, b.pooled], 1);
+        HNetOutput {
+            mask_logits_a: a.mask_logits,
+            mask_logits_b: b.mask_logits,
+            force: self.force.forward(features),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn config_rejects_sizes_that_cannot_be_pooled() {
+        let config = HNetConfig::new().with_image_size([100, 224]);
+        assert_eq!(
+            config.validate(),
+            Err(HNetConfigError::ImageSizeNotDivisible {
+                image_size: [100, 224],
+                depth: 4
+            })
+        );
+        assert!(HNetConfig::new().with_depth(0).validate().is_err());
+        assert!(HNetConfig::new().with_depth(70).validate().is_err());
+        assert!(HNetConfig::new().validate().is_ok());
+    }
+
+    #[test]
+    fn pooled_features_count_bottleneck_and_decoder_blocks() {
+        assert_eq!(HNetConfig::new().pooled_features_per_view(), 5 * 32);
+    }
+}

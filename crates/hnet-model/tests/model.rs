@@ -1,0 +1,215 @@
+//! Behaviour of the H-Net network: shapes, weight sharing, gradients, learning.
+
+use burn::module::{Module, ModuleVisitor, Param};
+use burn::optim::{GradientsParams, RmsPropConfig};
+use burn::tensor::Gradients;
+use burn::tensor::{Device, Distribution, Tensor, Tolerance};
+use hnet_model::{HNet, HNetConfig, HNetLossConfig};
+
+/// A small network that still has the paper's structure (two pooling levels, 8 filters).
+fn small_config() -> HNetConfig {
+    HNetConfig::new()
+        .with_filters(8)
+        .with_depth(2)
+        .with_image_size([16, 16])
+}
+
+fn random_views(device: &Device, batch: usize, size: usize) -> (Tensor<4>, Tensor<4>) {
+    let shape = [batch, 3, size, size];
+    (
+        Tensor::random(shape, Distribution::Uniform(0.0, 1.0), device),
+        Tensor::random(shape, Distribution::Uniform(0.0, 1.0), device),
+    )
+}
+
+#[test]
+fn outputs_have_the_documented_shapes() {
+    let device = Device::flex();
+    // The paper's depth and filters, at a small input size.
+    let model = HNetConfig::new()
+        .with_image_size([32, 48])
+        .init(&device)
+        .unwrap();
+    let shape = [2, 3, 32, 48];
+    let a = Tensor::zeros(shape, &device);
+    let b = Tensor::ones(shape, &device);
+    let out = model.forward(a, b);
+    assert_eq!(out.mask_logits_a.dims(), [2, 1, 32, 48]);
+    assert_eq!(out.mask_logits_b.dims(), [2, 1, 32, 48]);
+    assert_eq!(out.force.dims(), [2, 3]);
+    let mask = out.mask_a().into_data();
+    let values = mask.as_slice::<f32>().unwrap();
+    assert!(values.iter().all(|p| (0.0..=1.0).contains(p)));
+}
+
+#[test]
+fn swapping_the_views_swaps_the_masks_exactly() {
+    let device = Device::flex();
+    let model = small_config().init(&device).unwrap();
+    assert!(model.shares_weights());
+    let (a, b) = random_views(&device, 2, 16);
+    let forward = model.forward(a.clone(), b.clone());
+    let swapped = model.forward(b, a);
+    swapped
+        .mask_logits_a
+        .into_data()
+        .assert_eq(&forward.mask_logits_b.into_data(), true);
+    swapped
+        .mask_logits_b
+        .into_data()
+        .assert_eq(&forward.mask_logits_a.into_data(), true);
+}
+
+#[test]
+fn without_sharing_each_view_has_its_own_weights() {
+    let device = Device::flex();
+    let model = small_config()
+        .with_share_weights(false)
+        .init(&device)
+        .unwrap();
+    assert!(!model.shares_weights());
+    let shared = small_config().init(&device).unwrap();
+    assert!(model.num_params() > shared.num_params());
+    let (a, b) = random_views(&device, 1, 16);
+    let forward = model.forward(a.clone(), b.clone());
+    let swapped = model.forward(b, a);
+    let difference = (swapped.mask_logits_a - forward.mask_logits_b)
+        .abs()
+        .max()
+        .into_scalar::<f32>();
+    assert!(difference > 1e-6, "separate branches gave identical masks");
+}
+
+#[test]
+fn the_force_head_sees_both_views() {
+    let device = Device::flex();
+    let model = small_config().init(&device).unwrap();
+    let (a, b) = random_views(&device, 1, 16);
+    let (_, other_b) = random_views(&device, 1, 16);
+    let force = model.forward(a.clone(), b).force;
+    let force_other_b = model.forward(a, other_b).force;
+    let change = (force - force_other_b).abs().max().into_scalar::<f32>();
+    assert!(change > 1e-7, "changing view B did not change the force");
+}
+
+/// Fails the test for every parameter tensor whose gradient is missing or all zero.
+struct NonZeroGradients<'a> {
+    grads: &'a Gradients,
+    checked: usize,
+    missing: Vec<String>,
+}
+
+impl ModuleVisitor for NonZeroGradients<'_> {
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        self.checked += 1;
+        match param.val().grad(self.grads) {
+            Some(grad) if grad.clone().abs().sum().into_scalar::<f32>() > 0.0 => {}
+            Some(_) => self.missing.push(format!("{:?} (all zero)", param.id)),
+            None => self.missing.push(format!("{:?} (none)", param.id)),
+        }
+    }
+}
+
+fn targets(device: &Device, batch: usize, size: usize) -> (Tensor<4>, Tensor<4>, Tensor<2>) {
+    // A vertical bar in view A and a horizontal bar in view B.
+    let mut a = vec![0.0f32; batch * size * size];
+    let mut b = vec![0.0f32; batch * size * size];
+    for n in 0..batch {
+        for i in 0..size {
+            a[n * size * size + i * size + size / 2] = 1.0;
+            b[n * size * size + (size / 2) * size + i] = 1.0;
+        }
+    }
+    let shape = [batch, 1, size, size];
+    let force: Vec<f32> = (0..batch)
+        .flat_map(|n| [0.1 * n as f32, -0.2, 0.3])
+        .collect();
+    (
+        Tensor::from_data(burn::tensor::TensorData::new(a, shape), device),
+        Tensor::from_data(burn::tensor::TensorData::new(b, shape), device),
+        Tensor::from_data(burn::tensor::TensorData::new(force, [batch, 3]), device),
+    )
+}
+
+#[test]
+fn every_parameter_gets_a_gradient_from_the_total_loss() {
+    for share in [true, false] {
+        let device = Device::flex().autodiff();
+        let model = small_config()
+            .with_share_weights(share)
+            .init(&device)
+            .unwrap();
+        let (a, b) = random_views(&device, 2, 16);
+        let (mask_a, mask_b, force) = targets(&device, 2, 16);
+        let out = model.forward(a, b);
+        let loss = HNetLossConfig::new()
+            .init()
+            .forward(&out, mask_a, mask_b, force);
+        let grads = loss.total.backward();
+        let mut visitor = NonZeroGradients {
+            grads: &grads,
+            checked: 0,
+            missing: Vec::new(),
+        };
+        model.visit(&mut visitor);
+        // Per branch: 2 convs x (depth + 1) blocks + (1 transposed + 2 convs) x depth + head,
+        // each with weight and bias; force head: 3 dense layers with weight and bias.
+        let branch = 2 * (2 * 3 + 3 * 2 + 1);
+        let expected = if share { branch } else { 2 * branch } + 6;
+        assert_eq!(visitor.checked, expected, "share_weights = {share}");
+        assert!(
+            visitor.missing.is_empty(),
+            "share_weights = {share}: parameters without gradient: {:?}",
+            visitor.missing
+        );
+    }
+}
+
+#[test]
+fn a_few_training_steps_on_a_fixed_batch_lower_the_loss() {
+    let device = Device::flex().autodiff();
+    device.seed(7);
+    let mut model: HNet = small_config().init(&device).unwrap();
+    let (a, b) = random_views(&device, 2, 16);
+    let (mask_a, mask_b, force) = targets(&device, 2, 16);
+    let loss_fn = HNetLossConfig::new().init();
+    let mut optimizer = RmsPropConfig::new()
+        .with_alpha(0.9)
+        .with_momentum(0.0)
+        .with_epsilon(1e-7)
+        .init();
+    let mut losses = Vec::new();
+    for _ in 0..15 {
+        let out = model.forward(a.clone(), b.clone());
+        let loss = loss_fn.forward(&out, mask_a.clone(), mask_b.clone(), force.clone());
+        losses.push(loss.total.clone().into_scalar::<f32>());
+        let grads = GradientsParams::from_grads(loss.total.backward(), &model);
+        model = optimizer.step(1e-3, model, grads);
+    }
+    let first = losses[0];
+    let last = *losses.last().unwrap();
+    assert!(
+        last < 0.8 * first,
+        "loss did not fall enough: {losses:?}"
+    );
+}
+
+#[test]
+fn loss_terms_are_weighted_by_the_betas() {
+    let device = Device::flex();
+    let model = small_config().init(&device).unwrap();
+    let (a, b) = random_views(&device, 1, 16);
+    let (mask_a, mask_b, force) = targets(&device, 1, 16);
+    let out = model.forward(a, b);
+    let terms = HNetLossConfig::new()
+        .with_beta_a(2.0)
+        .with_beta_b(0.5)
+        .with_beta_force(10.0)
+        .init()
+        .forward(&out, mask_a, mask_b, force);
+    let expected = terms.bce_a.clone() * 2.0 + terms.bce_b.clone() * 0.5 + terms.mse.clone() * 10.0;
+    terms
+        .total
+        .into_data()
+        .assert_approx_eq::<f32>(&expected.into_data(), Tolerance::default());
+}

@@ -1,0 +1,127 @@
+//! Weights files: round trip, and clear errors for every kind of bad file.
+
+use std::collections::BTreeMap;
+
+use burn::tensor::{Device, Distribution, Tensor};
+use hnet_model::weights::{self, WeightsProblem};
+use hnet_model::{HNet, HNetConfig};
+
+fn config() -> HNetConfig {
+    HNetConfig::new()
+        .with_filters(4)
+        .with_depth(2)
+        .with_image_size([16, 16])
+}
+
+fn provenance() -> BTreeMap<String, String> {
+    BTreeMap::from([("seed".to_string(), "42".to_string())])
+}
+
+#[test]
+fn a_saved_network_loads_back_identically_with_its_config() {
+    let device = Device::flex();
+    let model = config().init(&device).unwrap();
+    let dir = std::env::temp_dir().join(format!("hnet-weights-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("model.bpk");
+    model.save_weights(&path, &config(), &provenance()).unwrap();
+
+    let (loaded, loaded_config, header) = HNet::load_weights(&path, &device).unwrap();
+    assert_eq!(loaded_config, config());
+    assert_eq!(header.architecture, "hnet");
+    assert_eq!(header.provenance, provenance());
+
+    let shape = [1, 3, 16, 16];
+    let a = Tensor::random(shape, Distribution::Default, &device);
+    let b = Tensor::random(shape, Distribution::Default, &device);
+    let expected = model.forward(a.clone(), b.clone());
+    let actual = loaded.forward(a, b);
+    actual.force.into_data().assert_eq(&expected.force.into_data(), true);
+    actual
+        .mask_logits_a
+        .into_data()
+        .assert_eq(&expected.mask_logits_a.into_data(), true);
+    std::fs::remove_dir_all(dir).ok();
+}
+
+#[test]
+fn truncated_files_are_reported_not_panicked_on() {
+    let device = Device::flex();
+    let bytes = config()
+        .init(&device)
+        .unwrap()
+        .to_weights_bytes(&config(), &provenance())
+        .unwrap();
+    // Every prefix that cuts into the header, the metadata or the tensor data.
+    let step = (bytes.len() / 97).max(1);
+    for cut in (0..bytes.len()).step_by(step) {
+        let err = HNet::from_weights_bytes(&bytes[..cut], &device, "cut.bpk")
+            .expect_err(&format!("a file cut at {cut} of {} bytes loaded", bytes.len()));
+        assert_eq!(err.source, "cut.bpk");
+        assert!(
+            err.to_string().starts_with("weights file 'cut.bpk': "),
+            "{err}"
+        );
+    }
+}
+
+#[test]
+fn a_file_that_is_not_burnpack_is_named_in_the_error() {
+    let device = Device::flex();
+    let err = HNet::from_weights_bytes(b"PNG\r\n this is not a model", &device, "photo.png")
+        .unwrap_err();
+    assert!(matches!(err.problem, WeightsProblem::NotBurnpack(_)), "{err}");
+    assert!(err.to_string().contains("photo.png"), "{err}");
+}
+
+#[test]
+fn a_burnpack_file_from_elsewhere_is_rejected() {
+    let device = Device::flex();
+    // A plain Burn record without H-Net Studio's metadata.
+    use burn::module::Module;
+    let bytes = config().init(&device).unwrap().into_record().into_bytes().unwrap();
+    let err = HNet::from_weights_bytes(&bytes, &device, "plain.bpk").unwrap_err();
+    assert_eq!(err.problem, WeightsProblem::NotHNetStudio);
+}
+
+#[test]
+fn weights_that_do_not_fit_the_config_are_a_mismatch() {
+    let device = Device::flex();
+    let model = config().init(&device).unwrap();
+    // Claim 8 filters for a network that has 4.
+    let lying = config().with_filters(8);
+    let bytes = weights::encode(
+        model,
+        "hnet",
+        &serde_json::to_string(&lying).unwrap(),
+        &provenance(),
+        "lying.bpk",
+    )
+    .unwrap();
+    let err = HNet::from_weights_bytes(&bytes, &device, "lying.bpk").unwrap_err();
+    assert!(matches!(err.problem, WeightsProblem::Mismatch(_)), "{err}");
+    assert!(err.to_string().contains("lying.bpk"));
+}
+
+#[test]
+fn weights_of_another_architecture_are_rejected() {
+    let device = Device::flex();
+    let model = config().init(&device).unwrap();
+    let bytes = weights::encode(model, "unet", "{}", &provenance(), "unet.bpk").unwrap();
+    let err = HNet::from_weights_bytes(&bytes, &device, "unet.bpk").unwrap_err();
+    assert_eq!(
+        err.problem,
+        WeightsProblem::WrongArchitecture {
+            expected: "hnet".into(),
+            found: "unet".into()
+        }
+    );
+}
+
+#[test]
+fn a_missing_file_is_an_io_error_naming_it() {
+    let err = HNet::load_weights(std::path::Path::new("/nonexistent/model.bpk"), &Device::flex())
+        .unwrap_err();
+    assert!(matches!(err.problem, WeightsProblem::Io(_)));
+    assert!(err.to_string().contains("/nonexistent/model.bpk"));
+}
