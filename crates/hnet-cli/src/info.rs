@@ -47,8 +47,9 @@ pub fn run(args: &InfoArgs) -> anyhow::Result<()> {
         Some(path) => {
             let text = std::fs::read_to_string(path)
                 .with_context(|| format!("cannot read config '{}'", path.display()))?;
-            serde_json::from_str::<HNetConfig>(&text)
-                .with_context(|| format!("config '{}' is not a valid H-Net config", path.display()))?
+            serde_json::from_str::<HNetConfig>(&text).with_context(|| {
+                format!("config '{}' is not a valid H-Net config", path.display())
+            })?
         }
         None => HNetConfig::new(),
     };
@@ -62,7 +63,11 @@ pub fn run(args: &InfoArgs) -> anyhow::Result<()> {
     let [h, w] = config.image_size;
     let info = Info {
         architecture: "hnet",
-        params: if config.share_weights { params } else { params_unshared },
+        params: if config.share_weights {
+            params
+        } else {
+            params_unshared
+        },
         params_unshared,
         params_force_head: force_head_params(&config),
         input: [config.in_channels, h, w],
@@ -79,7 +84,10 @@ pub fn run(args: &InfoArgs) -> anyhow::Result<()> {
         println!("H-Net ({} x {} input, {} channels)", h, w, info.input[0]);
         println!("  parameters, encoder-decoder shared by both views: {params}");
         println!("  parameters, one encoder-decoder per view:        {params_unshared}");
-        println!("  of which the force head:                          {}", info.params_force_head);
+        println!(
+            "  of which the force head:                          {}",
+            info.params_force_head
+        );
     }
     Ok(())
 }

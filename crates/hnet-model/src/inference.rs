@@ -68,7 +68,13 @@ impl StereoPrediction {
 /// Appends an RGB image as planar channels scaled to `[0, 1]` (the `[3, H, W]` layout).
 fn push_planar(pixels: &[u8], out: &mut Vec<f32>) {
     for channel in 0..3 {
-        out.extend(pixels.iter().skip(channel).step_by(3).map(|&v| f32::from(v) / 255.0));
+        out.extend(
+            pixels
+                .iter()
+                .skip(channel)
+                .step_by(3)
+                .map(|&v| f32::from(v) / 255.0),
+        );
     }
 }
 
@@ -129,7 +135,11 @@ pub struct ReadbackError(pub alloc::string::String);
 
 impl fmt::Display for ReadbackError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "could not read the result back from the device: {}", self.0)
+        write!(
+            f,
+            "could not read the result back from the device: {}",
+            self.0
+        )
     }
 }
 

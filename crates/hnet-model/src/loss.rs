@@ -107,9 +107,7 @@ mod tests {
         ];
         let mean = expected.iter().sum::<f64>() / expected.len() as f64;
         let bce = binary_cross_entropy_with_logits(logits, targets);
-        bce.into_data().assert_approx_eq::<f32>(
-            &TensorData::from([mean as f32]),
-            Tolerance::absolute(1e-4),
-        );
+        bce.into_data()
+            .assert_approx_eq::<f32>(&TensorData::from([mean as f32]), Tolerance::absolute(1e-4));
     }
 }

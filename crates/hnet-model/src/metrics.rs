@@ -136,10 +136,7 @@ impl ForceAccumulator {
         let n = 3.0 * self.len() as f64;
         let mse = self.axes.iter().map(|a| a.sum_squared_error).sum::<f64>() / n;
         let mean_of = |f: fn(&AxisMetrics) -> Option<f64>| {
-            axes.iter()
-                .map(f)
-                .sum::<Option<f64>>()
-                .map(|sum| sum / 3.0)
+            axes.iter().map(f).sum::<Option<f64>>().map(|sum| sum / 3.0)
         };
         Some(ForceMetrics {
             samples: self.len(),
@@ -271,16 +268,8 @@ impl SegmentationAccumulator {
                 }
             }
         };
-        let catheter = class(
-            self.true_positive,
-            self.false_negative,
-            self.false_positive,
-        );
-        let background = class(
-            self.true_negative,
-            self.false_positive,
-            self.false_negative,
-        );
+        let catheter = class(self.true_positive, self.false_negative, self.false_positive);
+        let background = class(self.true_negative, self.false_positive, self.false_negative);
         Some(SegmentationMetrics {
             pixels,
             accuracy: (self.true_positive + self.true_negative) as f64 / pixels as f64,
@@ -365,7 +354,8 @@ mod tests {
     fn segmentation_metrics_match_hand_computed_values() {
         let mut acc = SegmentationAccumulator::new();
         // TP, FN, FP, TN.
-        acc.push(&[0.9, 0.2, 0.7, 0.1], &[1.0, 1.0, 0.0, 0.0]).unwrap();
+        acc.push(&[0.9, 0.2, 0.7, 0.1], &[1.0, 1.0, 0.0, 0.0])
+            .unwrap();
         // Two more TN and one TP.
         acc.push(&[0.0, 0.4, 0.5], &[0.0, 0.0, 1.0]).unwrap();
         let m = acc.finish().unwrap();
@@ -387,14 +377,32 @@ mod tests {
         acc.push(&[0.0; 16], &[0.0; 16]).unwrap();
         let m = acc.finish().unwrap();
         assert_eq!(m.accuracy, 1.0);
-        assert_eq!(m.catheter, ClassMetrics { iou: 1.0, dice: 1.0 });
-        assert_eq!(m.background, ClassMetrics { iou: 1.0, dice: 1.0 });
+        assert_eq!(
+            m.catheter,
+            ClassMetrics {
+                iou: 1.0,
+                dice: 1.0
+            }
+        );
+        assert_eq!(
+            m.background,
+            ClassMetrics {
+                iou: 1.0,
+                dice: 1.0
+            }
+        );
 
         // Predicting catheter where the target is empty: catheter IoU 0, not NaN.
         let mut acc = SegmentationAccumulator::new();
         acc.push(&[1.0, 0.0], &[0.0, 0.0]).unwrap();
         let m = acc.finish().unwrap();
-        assert_eq!(m.catheter, ClassMetrics { iou: 0.0, dice: 0.0 });
+        assert_eq!(
+            m.catheter,
+            ClassMetrics {
+                iou: 0.0,
+                dice: 0.0
+            }
+        );
         assert!(close(m.background.iou, 0.5));
     }
 
@@ -417,6 +425,9 @@ mod tests {
         let err = SegmentationAccumulator::new()
             .push(&[0.0; 3], &[0.0; 4])
             .unwrap_err();
-        assert_eq!(err.to_string(), "predicted mask has 3 pixels but the target has 4");
+        assert_eq!(
+            err.to_string(),
+            "predicted mask has 3 pixels but the target has 4"
+        );
     }
 }

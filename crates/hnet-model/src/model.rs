@@ -308,7 +308,9 @@ impl HNet {
         let (a, b) = match &self.segmentation_b {
             None => {
                 let batch = view_a.dims()[0];
-                let both = self.segmentation.forward(Tensor::cat(alloc::vec![view_a, view_b], 0));
+                let both = self
+                    .segmentation
+                    .forward(Tensor::cat(alloc::vec![view_a, view_b], 0));
                 let mask_logits_a = both.mask_logits.clone().narrow(0, 0, batch);
                 let mask_logits_b = both.mask_logits.narrow(0, batch, batch);
                 let pooled_a = both.pooled.clone().narrow(0, 0, batch);
@@ -324,10 +326,7 @@ impl HNet {
                     },
                 )
             }
-            Some(branch_b) => (
-                self.segmentation.forward(view_a),
-                branch_b.forward(view_b),
-            ),
+            Some(branch_b) => (self.segmentation.forward(view_a), branch_b.forward(view_b)),
         };
         let features = Tensor::cat(alloc::vec![a.pooled, b.pooled], 1);
         HNetOutput {

@@ -67,7 +67,10 @@ impl fmt::Display for WeightsProblem {
         match self {
             Self::Io(e) => write!(f, "{e}"),
             Self::NotBurnpack(e) => {
-                write!(f, "not a readable burnpack weights file ({e}); is it truncated?")
+                write!(
+                    f,
+                    "not a readable burnpack weights file ({e}); is it truncated?"
+                )
             }
             Self::NotHNetStudio => write!(
                 f,
@@ -162,10 +165,11 @@ pub fn read_header(bytes: &[u8], source: &str) -> Result<WeightsHeader, WeightsE
         return Err(error(WeightsProblem::UnsupportedFormat(format.clone())));
     }
     let field = |key: &str| {
-        metadata
-            .get(key)
-            .cloned()
-            .ok_or_else(|| error(WeightsProblem::BadConfig(format!("missing `{key}` metadata"))))
+        metadata.get(key).cloned().ok_or_else(|| {
+            error(WeightsProblem::BadConfig(format!(
+                "missing `{key}` metadata"
+            )))
+        })
     };
     Ok(WeightsHeader {
         architecture: field(KEY_ARCHITECTURE)?,

@@ -188,10 +188,7 @@ fn a_few_training_steps_on_a_fixed_batch_lower_the_loss() {
     }
     let first = losses[0];
     let last = *losses.last().unwrap();
-    assert!(
-        last < 0.8 * first,
-        "loss did not fall enough: {losses:?}"
-    );
+    assert!(last < 0.8 * first, "loss did not fall enough: {losses:?}");
 }
 
 #[test]

@@ -36,7 +36,10 @@ fn a_saved_network_loads_back_identically_with_its_config() {
     let b = Tensor::random(shape, Distribution::Default, &device);
     let expected = model.forward(a.clone(), b.clone());
     let actual = loaded.forward(a, b);
-    actual.force.into_data().assert_eq(&expected.force.into_data(), true);
+    actual
+        .force
+        .into_data()
+        .assert_eq(&expected.force.into_data(), true);
     actual
         .mask_logits_a
         .into_data()
@@ -55,8 +58,10 @@ fn truncated_files_are_reported_not_panicked_on() {
     // Every prefix that cuts into the header, the metadata or the tensor data.
     let step = (bytes.len() / 97).max(1);
     for cut in (0..bytes.len()).step_by(step) {
-        let err = HNet::from_weights_bytes(&bytes[..cut], &device, "cut.bpk")
-            .expect_err(&format!("a file cut at {cut} of {} bytes loaded", bytes.len()));
+        let err = HNet::from_weights_bytes(&bytes[..cut], &device, "cut.bpk").expect_err(&format!(
+            "a file cut at {cut} of {} bytes loaded",
+            bytes.len()
+        ));
         assert_eq!(err.source, "cut.bpk");
         assert!(
             err.to_string().starts_with("weights file 'cut.bpk': "),
@@ -68,9 +73,12 @@ fn truncated_files_are_reported_not_panicked_on() {
 #[test]
 fn a_file_that_is_not_burnpack_is_named_in_the_error() {
     let device = Device::flex();
-    let err = HNet::from_weights_bytes(b"PNG\r\n this is not a model", &device, "photo.png")
-        .unwrap_err();
-    assert!(matches!(err.problem, WeightsProblem::NotBurnpack(_)), "{err}");
+    let err =
+        HNet::from_weights_bytes(b"PNG\r\n this is not a model", &device, "photo.png").unwrap_err();
+    assert!(
+        matches!(err.problem, WeightsProblem::NotBurnpack(_)),
+        "{err}"
+    );
     assert!(err.to_string().contains("photo.png"), "{err}");
 }
 
@@ -79,7 +87,12 @@ fn a_burnpack_file_from_elsewhere_is_rejected() {
     let device = Device::flex();
     // A plain Burn record without H-Net Studio's metadata.
     use burn::module::Module;
-    let bytes = config().init(&device).unwrap().into_record().into_bytes().unwrap();
+    let bytes = config()
+        .init(&device)
+        .unwrap()
+        .into_record()
+        .into_bytes()
+        .unwrap();
     let err = HNet::from_weights_bytes(&bytes, &device, "plain.bpk").unwrap_err();
     assert_eq!(err.problem, WeightsProblem::NotHNetStudio);
 }
@@ -120,8 +133,11 @@ fn weights_of_another_architecture_are_rejected() {
 
 #[test]
 fn a_missing_file_is_an_io_error_naming_it() {
-    let err = HNet::load_weights(std::path::Path::new("/nonexistent/model.bpk"), &Device::flex())
-        .unwrap_err();
+    let err = HNet::load_weights(
+        std::path::Path::new("/nonexistent/model.bpk"),
+        &Device::flex(),
+    )
+    .unwrap_err();
     assert!(matches!(err.problem, WeightsProblem::Io(_)));
     assert!(err.to_string().contains("/nonexistent/model.bpk"));
 }

@@ -1,0 +1,723 @@
+//! The on-disk dataset format (version 1), shared by `hnet simulate`, `hnet import`, the browser
+//! app's export and the training loader.
+//!
+//! ```text
+//! DIR/dataset.json            header: format, version, image size, where the data came from
+//! DIR/manifest.csv            one row per stereo pair: id,split,fx,fy,fz[,parameters...]
+//! DIR/samples/<id>/view_a.png view A image (8-bit grey or RGB)
+//! DIR/samples/<id>/view_b.png view B image
+//! DIR/samples/<id>/mask_a.png view A catheter mask (8-bit, 255 = catheter; soft edges allowed)
+//! DIR/samples/<id>/mask_b.png view B catheter mask
+//! DIR/samples/<id>/sample.json the pair's record: its manifest row and, for simulated pairs,
+//!                             the 3D centreline (mm) and both camera matrices
+//! ```
+//!
+//! Forces are the tip force in newtons. `split` is `train`, `val` or `test`. Ids are made of
+//! ASCII letters, digits, `-`, `_` and `.` so that they are safe file names.
+//!
+//! Writing is crash-safe: a sample's files are written into a hidden folder that is renamed into
+//! place only when complete, and the manifest is written last (also via a rename). A generation
+//! that was killed resumes by skipping the samples already in place.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+/// `format` field of `dataset.json`.
+pub const FORMAT: &str = "hnet-dataset";
+/// Version of the layout described above.
+pub const VERSION: u32 = 1;
+/// Name of the header file.
+pub const HEADER_FILE: &str = "dataset.json";
+/// Name of the manifest.
+pub const MANIFEST_FILE: &str = "manifest.csv";
+/// Folder of the samples.
+pub const SAMPLES_DIR: &str = "samples";
+/// File names inside a sample folder, in the order view A, view B, mask A, mask B.
+pub const SAMPLE_IMAGES: [&str; 4] = ["view_a.png", "view_b.png", "mask_a.png", "mask_b.png"];
+/// The sample's record.
+pub const SAMPLE_RECORD: &str = "sample.json";
+
+/// Which part of the data a pair belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Split {
+    /// Training.
+    Train,
+    /// Validation (early stopping, model selection).
+    Val,
+    /// Test (the reported numbers).
+    Test,
+}
+
+impl Split {
+    /// `train`, `val` or `test`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Split::Train => "train",
+            Split::Val => "val",
+            Split::Test => "test",
+        }
+    }
+
+    /// Parses a split name.
+    pub fn parse(name: &str) -> Option<Self> {
+        match name {
+            "train" => Some(Split::Train),
+            "val" => Some(Split::Val),
+            "test" => Some(Split::Test),
+            _ => None,
+        }
+    }
+}
+
+/// The seeded 80/10/10 split of `n` pairs: a seeded shuffle of the indices, the first 80 % train,
+/// the next 10 % validation, the rest test.
+pub fn assign_splits(n: usize, seed: u64) -> Vec<Split> {
+    use rand::{RngExt, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x5EED_5B11_7000_0001);
+    let mut order: Vec<usize> = (0..n).collect();
+    for i in (1..n).rev() {
+        order.swap(i, rng.random_range(0..=i));
+    }
+    let n_train = (n as f64 * 0.8).round() as usize;
+    let n_val = (n as f64 * 0.1).round() as usize;
+    let mut splits = vec![Split::Test; n];
+    for (rank, &index) in order.iter().enumerate() {
+        splits[index] = if rank < n_train {
+            Split::Train
+        } else if rank < n_train + n_val {
+            Split::Val
+        } else {
+            Split::Test
+        };
+    }
+    splits
+}
+
+/// One line of the manifest.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ManifestRow {
+    /// The pair's id (its folder name).
+    pub id: String,
+    /// Its split.
+    pub split: Split,
+    /// Tip force `(Fx, Fy, Fz)` in newtons.
+    pub force_n: [f64; 3],
+    /// Further columns (the pair's parameters), in column order.
+    pub extra: Vec<(String, String)>,
+}
+
+/// `dataset.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DatasetHeader {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// Layout version, [`VERSION`].
+    pub version: u32,
+    /// Image size `[width, height]` in pixels, the same for every image.
+    pub image_size: [usize; 2],
+    /// Number of pairs.
+    pub samples: usize,
+    /// What made the data and with which settings (free-form JSON: the twin's configuration, the
+    /// import's inputs, ...).
+    pub source: serde_json::Value,
+}
+
+impl DatasetHeader {
+    /// A header for `samples` pairs of `image_size` made by `source`.
+    pub fn new(image_size: [usize; 2], samples: usize, source: serde_json::Value) -> Self {
+        Self {
+            format: FORMAT.into(),
+            version: VERSION,
+            image_size,
+            samples,
+            source,
+        }
+    }
+}
+
+/// A dataset could not be read or written.
+#[derive(Debug)]
+pub struct DatasetError {
+    /// The file or folder concerned.
+    pub path: PathBuf,
+    /// What is wrong with it.
+    pub problem: String,
+}
+
+impl fmt::Display for DatasetError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}: {}", self.path.display(), self.problem)
+    }
+}
+
+impl std::error::Error for DatasetError {}
+
+impl DatasetError {
+    /// An error about `path`.
+    pub fn new(path: impl Into<PathBuf>, problem: impl fmt::Display) -> Self {
+        Self {
+            path: path.into(),
+            problem: problem.to_string(),
+        }
+    }
+}
+
+/// Whether `id` is usable as a sample id (and folder name).
+pub fn is_valid_id(id: &str) -> bool {
+    !id.is_empty()
+        && id.len() <= 128
+        && !id.starts_with('.')
+        && id
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+}
+
+/// The manifest as CSV bytes. All rows must have the same extra columns.
+pub fn manifest_csv(rows: &[ManifestRow]) -> Vec<u8> {
+    let mut out = String::from("id,split,fx,fy,fz");
+    if let Some(first) = rows.first() {
+        for (name, _) in &first.extra {
+            out.push(',');
+            out.push_str(&csv_field(name));
+        }
+    }
+    out.push('\n');
+    for row in rows {
+        out.push_str(&csv_field(&row.id));
+        out.push(',');
+        out.push_str(row.split.name());
+        for f in row.force_n {
+            out.push(',');
+            out.push_str(&f.to_string());
+        }
+        for (_, value) in &row.extra {
+            out.push(',');
+            out.push_str(&csv_field(value));
+        }
+        out.push('\n');
+    }
+    out.into_bytes()
+}
+
+fn csv_field(value: &str) -> String {
+    if value.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", value.replace('"', "\"\""))
+    } else {
+        value.to_string()
+    }
+}
+
+/// Parses a manifest; `path` names it in errors. Errors name the offending line.
+pub fn parse_manifest(bytes: &[u8], path: &Path) -> Result<Vec<ManifestRow>, DatasetError> {
+    let mut reader = csv::ReaderBuilder::new().from_reader(bytes);
+    let headers = reader
+        .headers()
+        .map_err(|e| DatasetError::new(path, format!("unreadable header line: {e}")))?
+        .clone();
+    let column = |name: &str| {
+        headers
+            .iter()
+            .position(|h| h == name)
+            .ok_or_else(|| DatasetError::new(path, format!("missing column `{name}`")))
+    };
+    let (id, split) = (column("id")?, column("split")?);
+    let forces = [column("fx")?, column("fy")?, column("fz")?];
+    let known = [id, split, forces[0], forces[1], forces[2]];
+    let mut rows = Vec::new();
+    let mut seen = std::collections::HashSet::new();
+    for (n, record) in reader.records().enumerate() {
+        let line = n + 2;
+        let record = record.map_err(|e| DatasetError::new(path, format!("line {line}: {e}")))?;
+        let row_id = record.get(id).unwrap_or_default().to_string();
+        if !is_valid_id(&row_id) {
+            return Err(DatasetError::new(
+                path,
+                format!("line {line}: invalid id `{row_id}` (letters, digits, '-', '_', '.')"),
+            ));
+        }
+        if !seen.insert(row_id.clone()) {
+            return Err(DatasetError::new(
+                path,
+                format!("line {line}: duplicate id `{row_id}`"),
+            ));
+        }
+        let split_name = record.get(split).unwrap_or_default();
+        let split = Split::parse(split_name).ok_or_else(|| {
+            DatasetError::new(
+                path,
+                format!("line {line}: split `{split_name}` is not train, val or test"),
+            )
+        })?;
+        let mut force_n = [0.0; 3];
+        for (axis, (&col, value)) in forces.iter().zip(force_n.iter_mut()).enumerate() {
+            let text = record.get(col).unwrap_or_default();
+            *value = text
+                .trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| {
+                    DatasetError::new(
+                        path,
+                        format!(
+                            "line {line}: f{} = `{text}` is not a finite number of newtons",
+                            ["x", "y", "z"][axis]
+                        ),
+                    )
+                })?;
+        }
+        let extra = headers
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !known.contains(i))
+            .map(|(i, name)| {
+                (
+                    name.to_string(),
+                    record.get(i).unwrap_or_default().to_string(),
+                )
+            })
+            .collect();
+        rows.push(ManifestRow {
+            id: row_id,
+            split,
+            force_n,
+            extra,
+        });
+    }
+    Ok(rows)
+}
+
+/// Pixels of one image to store.
+#[derive(Debug, Clone, Copy)]
+pub struct ImageRef<'a> {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// 1 (grey) or 3 (RGB).
+    pub channels: usize,
+    /// `width·height·channels` bytes, row-major.
+    pub pixels: &'a [u8],
+}
+
+/// Encodes an 8-bit grey or RGB image as PNG (fast deflate; deterministic).
+pub fn encode_png(image: ImageRef<'_>) -> Vec<u8> {
+    assert_eq!(
+        image.pixels.len(),
+        image.width * image.height * image.channels,
+        "pixel buffer does not match the image size"
+    );
+    let mut out = Vec::with_capacity(image.pixels.len() / 2 + 1024);
+    {
+        let mut encoder = png::Encoder::new(&mut out, image.width as u32, image.height as u32);
+        encoder.set_color(if image.channels == 3 {
+            png::ColorType::Rgb
+        } else {
+            png::ColorType::Grayscale
+        });
+        encoder.set_depth(png::BitDepth::Eight);
+        encoder.set_compression(png::Compression::Fast);
+        let mut writer = encoder.write_header().expect("writing to memory");
+        writer
+            .write_image_data(image.pixels)
+            .expect("writing to memory");
+    }
+    out
+}
+
+/// The files of one pair: relative paths (inside the dataset folder) and contents.
+pub fn sample_files(
+    row: &ManifestRow,
+    images: [ImageRef<'_>; 4],
+    record: &serde_json::Value,
+) -> Vec<(String, Vec<u8>)> {
+    let mut files: Vec<(String, Vec<u8>)> = SAMPLE_IMAGES
+        .iter()
+        .zip(images)
+        .map(|(name, image)| {
+            (
+                format!("{SAMPLES_DIR}/{}/{name}", row.id),
+                encode_png(image),
+            )
+        })
+        .collect();
+    let record = serde_json::json!({ "manifest": row, "record": record });
+    files.push((
+        format!("{SAMPLES_DIR}/{}/{SAMPLE_RECORD}", row.id),
+        serde_json::to_vec_pretty(&record).expect("JSON of plain data"),
+    ));
+    files
+}
+
+/// `dataset.json` bytes.
+pub fn header_json(header: &DatasetHeader) -> Vec<u8> {
+    let mut bytes = serde_json::to_vec_pretty(header).expect("JSON of plain data");
+    bytes.push(b'\n');
+    bytes
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+mod folder {
+    use super::*;
+    use std::fs;
+    use std::io::Write;
+
+    fn io(path: &Path, e: std::io::Error) -> DatasetError {
+        DatasetError::new(path, e)
+    }
+
+    /// Writes `bytes` to `path` through a temporary file and a rename.
+    fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), DatasetError> {
+        let tmp = path.with_extension("partial");
+        let mut file = fs::File::create(&tmp).map_err(|e| io(&tmp, e))?;
+        file.write_all(bytes).map_err(|e| io(&tmp, e))?;
+        file.sync_all().map_err(|e| io(&tmp, e))?;
+        fs::rename(&tmp, path).map_err(|e| io(path, e))
+    }
+
+    /// Writes a dataset folder sample by sample, crash-safely, and resumes an interrupted one.
+    #[derive(Debug)]
+    pub struct DatasetWriter {
+        root: PathBuf,
+    }
+
+    impl DatasetWriter {
+        /// Opens `root` for writing the dataset described by `header`.
+        ///
+        /// A missing or empty folder is created. A folder holding the same dataset (an equal
+        /// header) is resumed. Anything else is refused, so that nothing already there is
+        /// overwritten.
+        pub fn create_or_resume(root: &Path, header: &DatasetHeader) -> Result<Self, DatasetError> {
+            let header_path = root.join(HEADER_FILE);
+            if header_path.exists() {
+                let bytes = fs::read(&header_path).map_err(|e| io(&header_path, e))?;
+                let existing: DatasetHeader = serde_json::from_slice(&bytes).map_err(|e| {
+                    DatasetError::new(&header_path, format!("not a dataset header: {e}"))
+                })?;
+                if &existing != header {
+                    return Err(DatasetError::new(
+                        root,
+                        "holds a dataset made with other settings; choose another output \
+                         folder, or repeat the original command to resume it",
+                    ));
+                }
+            } else {
+                if root.exists() {
+                    let mut entries = fs::read_dir(root).map_err(|e| io(root, e))?;
+                    if entries.next().is_some() {
+                        return Err(DatasetError::new(
+                            root,
+                            "exists and is not empty (and is not a dataset); refusing to write into it",
+                        ));
+                    }
+                }
+                fs::create_dir_all(root.join(SAMPLES_DIR)).map_err(|e| io(root, e))?;
+                write_atomically(&header_path, &header_json(header))?;
+            }
+            fs::create_dir_all(root.join(SAMPLES_DIR)).map_err(|e| io(root, e))?;
+            Ok(Self {
+                root: root.to_path_buf(),
+            })
+        }
+
+        /// The dataset folder.
+        pub fn root(&self) -> &Path {
+            &self.root
+        }
+
+        /// Whether the pair `id` is already complete (written by an earlier run).
+        pub fn has_sample(&self, id: &str) -> bool {
+            self.root
+                .join(SAMPLES_DIR)
+                .join(id)
+                .join(SAMPLE_RECORD)
+                .is_file()
+        }
+
+        /// Writes one pair's files (from [`sample_files`]) atomically.
+        pub fn write_sample(
+            &self,
+            id: &str,
+            files: &[(String, Vec<u8>)],
+        ) -> Result<(), DatasetError> {
+            let samples = self.root.join(SAMPLES_DIR);
+            let staging = samples.join(format!(".partial-{id}"));
+            if staging.exists() {
+                fs::remove_dir_all(&staging).map_err(|e| io(&staging, e))?;
+            }
+            fs::create_dir_all(&staging).map_err(|e| io(&staging, e))?;
+            let prefix = format!("{SAMPLES_DIR}/{id}/");
+            for (path, bytes) in files {
+                let name = path.strip_prefix(&prefix).ok_or_else(|| {
+                    DatasetError::new(&staging, format!("file `{path}` is not in sample `{id}`"))
+                })?;
+                let target = staging.join(name);
+                let mut file = fs::File::create(&target).map_err(|e| io(&target, e))?;
+                file.write_all(bytes).map_err(|e| io(&target, e))?;
+                file.sync_all().map_err(|e| io(&target, e))?;
+            }
+            let target = samples.join(id);
+            if target.exists() {
+                fs::remove_dir_all(&target).map_err(|e| io(&target, e))?;
+            }
+            fs::rename(&staging, &target).map_err(|e| io(&target, e))
+        }
+
+        /// Writes the manifest from every complete sample's record, sorted by id, and clears
+        /// leftovers of interrupted writes. Returns the rows.
+        pub fn finish(&self) -> Result<Vec<ManifestRow>, DatasetError> {
+            let samples = self.root.join(SAMPLES_DIR);
+            let mut rows = Vec::new();
+            let mut entries: Vec<_> = fs::read_dir(&samples)
+                .map_err(|e| io(&samples, e))?
+                .collect::<Result<_, _>>()
+                .map_err(|e| io(&samples, e))?;
+            entries.sort_by_key(|e| e.file_name());
+            for entry in entries {
+                let name = entry.file_name().to_string_lossy().into_owned();
+                if name.starts_with(".partial-") {
+                    fs::remove_dir_all(entry.path()).map_err(|e| io(&entry.path(), e))?;
+                    continue;
+                }
+                let record_path = entry.path().join(SAMPLE_RECORD);
+                let bytes = fs::read(&record_path).map_err(|e| io(&record_path, e))?;
+                let record: SampleRecordManifest = serde_json::from_slice(&bytes).map_err(|e| {
+                    DatasetError::new(&record_path, format!("not a sample record: {e}"))
+                })?;
+                rows.push(record.manifest);
+            }
+            write_atomically(&self.root.join(MANIFEST_FILE), &manifest_csv(&rows))?;
+            Ok(rows)
+        }
+    }
+
+    #[derive(Deserialize)]
+    struct SampleRecordManifest {
+        manifest: ManifestRow,
+    }
+
+    /// A dataset opened for reading.
+    #[derive(Debug, Clone)]
+    pub struct Dataset {
+        /// Its folder.
+        pub root: PathBuf,
+        /// `dataset.json`.
+        pub header: DatasetHeader,
+        /// `manifest.csv`.
+        pub rows: Vec<ManifestRow>,
+    }
+
+    /// One pair's decoded images as 8-bit RGB and its masks as probabilities.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct LoadedPair {
+        /// `[width, height]`.
+        pub size: [usize; 2],
+        /// View A, RGB.
+        pub view_a: Vec<u8>,
+        /// View B, RGB.
+        pub view_b: Vec<u8>,
+        /// Mask A in `[0, 1]`.
+        pub mask_a: Vec<f32>,
+        /// Mask B in `[0, 1]`.
+        pub mask_b: Vec<f32>,
+    }
+
+    impl Dataset {
+        /// Opens the dataset in `root`, checking its header and manifest.
+        pub fn open(root: &Path) -> Result<Self, DatasetError> {
+            let header_path = root.join(HEADER_FILE);
+            let bytes = fs::read(&header_path).map_err(|e| {
+                DatasetError::new(
+                    &header_path,
+                    format!("{e} (is {} an H-Net Studio dataset?)", root.display()),
+                )
+            })?;
+            let header: DatasetHeader = serde_json::from_slice(&bytes).map_err(|e| {
+                DatasetError::new(&header_path, format!("not a dataset header: {e}"))
+            })?;
+            if header.format != FORMAT {
+                return Err(DatasetError::new(
+                    &header_path,
+                    format!("format is `{}`, expected `{FORMAT}`", header.format),
+                ));
+            }
+            if header.version != VERSION {
+                return Err(DatasetError::new(
+                    &header_path,
+                    format!(
+                        "format version {} is not supported (this build reads version {VERSION})",
+                        header.version
+                    ),
+                ));
+            }
+            let manifest_path = root.join(MANIFEST_FILE);
+            let bytes = fs::read(&manifest_path).map_err(|e| {
+                DatasetError::new(
+                    &manifest_path,
+                    format!("{e} (an interrupted generation writes it when resumed and finished)"),
+                )
+            })?;
+            let rows = parse_manifest(&bytes, &manifest_path)?;
+            Ok(Self {
+                root: root.to_path_buf(),
+                header,
+                rows,
+            })
+        }
+
+        /// The rows of one split.
+        pub fn split(&self, split: Split) -> impl Iterator<Item = &ManifestRow> {
+            self.rows.iter().filter(move |r| r.split == split)
+        }
+
+        /// Path of one of a pair's files.
+        pub fn file(&self, id: &str, name: &str) -> PathBuf {
+            self.root.join(SAMPLES_DIR).join(id).join(name)
+        }
+
+        /// Decodes a pair, resized to `size` (`[width, height]`) when given.
+        pub fn load_pair(
+            &self,
+            row: &ManifestRow,
+            size: Option<[usize; 2]>,
+        ) -> Result<LoadedPair, DatasetError> {
+            let load = |name: &str| -> Result<image::DynamicImage, DatasetError> {
+                let path = self.file(&row.id, name);
+                let bytes = fs::read(&path).map_err(|e| io(&path, e))?;
+                image::load_from_memory(&bytes)
+                    .map_err(|e| DatasetError::new(&path, format!("unreadable image: {e}")))
+            };
+            let [a, b, ma, mb] = SAMPLE_IMAGES.map(load);
+            let (a, b, ma, mb) = (a?, b?, ma?, mb?);
+            let first = [a.width() as usize, a.height() as usize];
+            for (name, img) in SAMPLE_IMAGES.iter().zip([&a, &b, &ma, &mb]) {
+                let found = [img.width() as usize, img.height() as usize];
+                if found != first {
+                    return Err(DatasetError::new(
+                        self.file(&row.id, name),
+                        format!(
+                            "is {}x{} but {} is {}x{}",
+                            found[0], found[1], SAMPLE_IMAGES[0], first[0], first[1]
+                        ),
+                    ));
+                }
+            }
+            let target = size.unwrap_or(first);
+            let resize = |img: image::DynamicImage| {
+                if [img.width() as usize, img.height() as usize] == target {
+                    img
+                } else {
+                    img.resize_exact(
+                        target[0] as u32,
+                        target[1] as u32,
+                        image::imageops::FilterType::Triangle,
+                    )
+                }
+            };
+            let mask = |img: image::DynamicImage| -> Vec<f32> {
+                resize(img)
+                    .to_luma8()
+                    .into_raw()
+                    .into_iter()
+                    .map(|v| f32::from(v) / 255.0)
+                    .collect()
+            };
+            Ok(LoadedPair {
+                size: target,
+                view_a: resize(a).to_rgb8().into_raw(),
+                view_b: resize(b).to_rgb8().into_raw(),
+                mask_a: mask(ma),
+                mask_b: mask(mb),
+            })
+        }
+    }
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+pub use folder::{Dataset, DatasetWriter, LoadedPair};
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(id: &str, split: Split) -> ManifestRow {
+        ManifestRow {
+            id: id.into(),
+            split,
+            force_n: [0.1, -0.25, 1e-3],
+            extra: vec![("note".into(), "a, \"quoted\" value".into())],
+        }
+    }
+
+    #[test]
+    fn splits_are_80_10_10_and_seeded() {
+        let s = assign_splits(1000, 42);
+        let count = |split| s.iter().filter(|&&x| x == split).count();
+        assert_eq!(
+            (count(Split::Train), count(Split::Val), count(Split::Test)),
+            (800, 100, 100)
+        );
+        assert_eq!(s, assign_splits(1000, 42));
+        assert_ne!(s, assign_splits(1000, 43));
+    }
+
+    #[test]
+    fn the_manifest_round_trips() {
+        let rows = vec![row("000001", Split::Train), row("000002", Split::Test)];
+        let bytes = manifest_csv(&rows);
+        let back = parse_manifest(&bytes, Path::new("m.csv")).unwrap();
+        assert_eq!(back, rows);
+    }
+
+    #[test]
+    fn bad_manifest_lines_are_named() {
+        let cases = [
+            ("id,split,fx,fy,fz\na,train,0,0,nan\n", "line 2: fz = `nan`"),
+            (
+                "id,split,fx,fy,fz\na,train,0,0,0\nb,later,0,0,0\n",
+                "line 3: split `later`",
+            ),
+            (
+                "id,split,fx,fy,fz\n../x,train,0,0,0\n",
+                "line 2: invalid id `../x`",
+            ),
+            (
+                "id,split,fx,fy,fz\na,train,0,0,0\na,val,0,0,0\n",
+                "line 3: duplicate id `a`",
+            ),
+            ("id,split,fx,fy\na,train,0,0\n", "missing column `fz`"),
+        ];
+        for (text, expected) in cases {
+            let err = parse_manifest(text.as_bytes(), Path::new("m.csv")).unwrap_err();
+            assert!(err.to_string().starts_with("m.csv: "), "{err}");
+            assert!(
+                err.to_string().contains(expected),
+                "{err} should contain {expected}"
+            );
+        }
+    }
+
+    #[test]
+    fn png_encoding_round_trips() {
+        let pixels: Vec<u8> = (0..6 * 4 * 3).map(|v| (v * 7) as u8).collect();
+        let png = encode_png(ImageRef {
+            width: 6,
+            height: 4,
+            channels: 3,
+            pixels: &pixels,
+        });
+        let back = image::load_from_memory(&png).unwrap().to_rgb8();
+        assert_eq!(back.into_raw(), pixels);
+    }
+
+    #[test]
+    fn ids_are_safe_file_names() {
+        assert!(is_valid_id("000123") && is_valid_id("frame_01.b"));
+        for bad in ["", ".hidden", "a/b", "a b", "..", "é"] {
+            assert!(!is_valid_id(bad), "{bad}");
+        }
+    }
+}

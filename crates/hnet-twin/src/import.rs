@@ -1,0 +1,358 @@
+//! Importing real recordings: two folders of images (one per view, matching file names) and a CSV
+//! of tip forces become a dataset in the same format as simulated data, with masks made by
+//! thresholding as the paper did.
+//!
+//! The forces CSV has a header with a column naming the image file (`image`, `file`, `frame` or
+//! `name`; with or without extension) and the columns `fx`, `fy`, `fz` in newtons.
+
+use std::collections::HashSet;
+use std::path::{Path, PathBuf};
+
+use serde_json::json;
+
+use crate::dataset::{
+    DatasetError, DatasetHeader, DatasetWriter, ImageRef, ManifestRow, assign_splits, is_valid_id,
+    sample_files,
+};
+use crate::scene::{luma, otsu_threshold, threshold_mask};
+
+/// How masks are made from the recorded images.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MaskThreshold {
+    /// Pixels at or below this grey level (0-255) are catheter.
+    Level(u8),
+    /// Otsu's level, per image.
+    Otsu,
+}
+
+/// What to import and how.
+#[derive(Debug, Clone)]
+pub struct ImportOptions {
+    /// Folder of view A images.
+    pub view_a: PathBuf,
+    /// Folder of view B images.
+    pub view_b: PathBuf,
+    /// The forces CSV.
+    pub forces: PathBuf,
+    /// Output dataset folder.
+    pub out: PathBuf,
+    /// Mask rule.
+    pub threshold: MaskThreshold,
+    /// Whether the catheter is brighter than the background (the masks take the pixels above
+    /// the level instead).
+    pub bright_catheter: bool,
+    /// Resize every image to this square size; otherwise all must share the first one's size.
+    pub size: Option<usize>,
+    /// Report bad rows and go on instead of stopping at the first.
+    pub skip_bad: bool,
+    /// Seed of the 80/10/10 split.
+    pub seed: u64,
+}
+
+/// What an import did.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct ImportReport {
+    /// Pairs written.
+    pub imported: usize,
+    /// One message per skipped row (with `skip_bad`).
+    pub skipped: Vec<String>,
+}
+
+const IMAGE_EXTENSIONS: [&str; 6] = ["png", "jpg", "jpeg", "bmp", "tif", "tiff"];
+
+/// A good row of the forces CSV.
+struct ForceRow {
+    line: usize,
+    name: String,
+    force_n: [f64; 3],
+}
+
+fn read_forces(path: &Path) -> Result<Vec<Result<ForceRow, DatasetError>>, DatasetError> {
+    let bytes = std::fs::read(path).map_err(|e| DatasetError::new(path, e))?;
+    let mut reader = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .from_reader(bytes.as_slice());
+    let headers: Vec<String> = reader
+        .headers()
+        .map_err(|e| DatasetError::new(path, format!("unreadable header line: {e}")))?
+        .iter()
+        .map(|h| h.to_ascii_lowercase())
+        .collect();
+    let find = |names: &[&str]| headers.iter().position(|h| names.contains(&h.as_str()));
+    let name_column = find(&["image", "file", "frame", "name"]).ok_or_else(|| {
+        DatasetError::new(
+            path,
+            "no image column: the header needs one of `image`, `file`, `frame` or `name`",
+        )
+    })?;
+    let mut force_columns = [0; 3];
+    for (axis, column) in ["fx", "fy", "fz"].iter().zip(force_columns.iter_mut()) {
+        *column = find(&[axis])
+            .ok_or_else(|| DatasetError::new(path, format!("missing column `{axis}` (newtons)")))?;
+    }
+    let mut rows = Vec::new();
+    for (n, record) in reader.records().enumerate() {
+        let line = n + 2;
+        let row = record
+            .map_err(|e| DatasetError::new(path, format!("line {line}: {e}")))
+            .and_then(|record| {
+                let name = record.get(name_column).unwrap_or_default().to_string();
+                if name.is_empty() {
+                    return Err(DatasetError::new(path, format!("line {line}: empty image name")));
+                }
+                let mut force_n = [0.0; 3];
+                for ((axis, &column), value) in
+                    ["fx", "fy", "fz"].iter().zip(&force_columns).zip(force_n.iter_mut())
+                {
+                    let text = record.get(column).unwrap_or_default();
+                    *value = text
+                        .parse::<f64>()
+                        .ok()
+                        .filter(|v| v.is_finite())
+                        .ok_or_else(|| {
+                            DatasetError::new(
+                                path,
+                                format!("line {line}: {axis} = `{text}` is not a finite number of newtons"),
+                            )
+                        })?;
+                }
+                Ok(ForceRow {
+                    line,
+                    name,
+                    force_n,
+                })
+            });
+        rows.push(row);
+    }
+    Ok(rows)
+}
+
+/// The file of `name` in `folder`: the name itself, or the name with an image extension.
+fn find_image(folder: &Path, name: &str) -> Option<PathBuf> {
+    let direct = folder.join(name);
+    if direct.is_file() {
+        return Some(direct);
+    }
+    IMAGE_EXTENSIONS
+        .iter()
+        .map(|ext| folder.join(format!("{name}.{ext}")))
+        .find(|p| p.is_file())
+}
+
+/// An id for the file name: its stem with characters outside the id alphabet replaced.
+fn id_for(name: &str) -> String {
+    let stem = Path::new(name)
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let id: String = stem
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '-' | '_') {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    if is_valid_id(&id) {
+        id
+    } else {
+        format!("x{id}")
+    }
+}
+
+struct Decoded {
+    image: image::DynamicImage,
+    path: PathBuf,
+}
+
+fn decode(path: &Path) -> Result<Decoded, DatasetError> {
+    let bytes = std::fs::read(path).map_err(|e| DatasetError::new(path, e))?;
+    let image = image::load_from_memory(&bytes)
+        .map_err(|e| DatasetError::new(path, format!("unreadable image: {e}")))?;
+    Ok(Decoded {
+        image,
+        path: path.to_path_buf(),
+    })
+}
+
+/// Grey or RGB pixels of an image at the dataset's size, and its channel count.
+fn pixels(image: &image::DynamicImage, size: [usize; 2]) -> (usize, Vec<u8>) {
+    let image = if [image.width() as usize, image.height() as usize] == size {
+        image.clone()
+    } else {
+        image.resize_exact(
+            size[0] as u32,
+            size[1] as u32,
+            image::imageops::FilterType::Triangle,
+        )
+    };
+    if image.color().has_color() {
+        (3, image.to_rgb8().into_raw())
+    } else {
+        (1, image.to_luma8().into_raw())
+    }
+}
+
+fn mask_of(channels: usize, pixels: &[u8], options: &ImportOptions) -> Vec<u8> {
+    let mut grey = if channels == 3 {
+        luma(pixels)
+    } else {
+        pixels.to_vec()
+    };
+    if options.bright_catheter {
+        grey.iter_mut().for_each(|v| *v = 255 - *v);
+    }
+    let level = match options.threshold {
+        MaskThreshold::Level(level) if options.bright_catheter => 255 - level,
+        MaskThreshold::Level(level) => level,
+        MaskThreshold::Otsu => otsu_threshold(&grey),
+    };
+    threshold_mask(&grey, level)
+}
+
+/// Imports recordings into a dataset. Errors name the file or CSV line; with `skip_bad` bad rows
+/// are reported in the result instead and the import goes on.
+pub fn import_recordings(
+    options: &ImportOptions,
+    progress: &dyn Fn(usize, usize),
+) -> Result<ImportReport, DatasetError> {
+    for folder in [&options.view_a, &options.view_b] {
+        if !folder.is_dir() {
+            return Err(DatasetError::new(folder, "is not a folder of images"));
+        }
+    }
+    let rows = read_forces(&options.forces)?;
+    let mut report = ImportReport::default();
+    let mut good = Vec::new();
+    let mut ids = HashSet::new();
+    let mut size = options.size.map(|s| [s, s]);
+    let mut size_source: Option<PathBuf> = None;
+    let total = rows.len();
+    for row in rows {
+        let checked = row.and_then(|row| {
+            let id = id_for(&row.name);
+            if !ids.insert(id.clone()) {
+                return Err(DatasetError::new(
+                    &options.forces,
+                    format!(
+                        "line {}: `{}` appears twice (id `{id}`)",
+                        row.line, row.name
+                    ),
+                ));
+            }
+            let [a, b] = [&options.view_a, &options.view_b].map(|folder| {
+                find_image(folder, &row.name).ok_or_else(|| {
+                    DatasetError::new(
+                        folder.join(&row.name),
+                        format!(
+                            "missing (named on line {} of {})",
+                            row.line,
+                            options.forces.display()
+                        ),
+                    )
+                })
+            });
+            let (a, b) = (decode(&a?)?, decode(&b?)?);
+            let dims = |d: &Decoded| [d.image.width() as usize, d.image.height() as usize];
+            if dims(&a) != dims(&b) {
+                return Err(DatasetError::new(
+                    &b.path,
+                    format!(
+                        "is {}x{} but {} is {}x{}",
+                        dims(&b)[0],
+                        dims(&b)[1],
+                        a.path.display(),
+                        dims(&a)[0],
+                        dims(&a)[1]
+                    ),
+                ));
+            }
+            match (size, &size_source) {
+                (Some(s), Some(first)) if options.size.is_none() && s != dims(&a) => {
+                    return Err(DatasetError::new(
+                        &a.path,
+                        format!(
+                            "is {}x{} but {} is {}x{} (pass --size to resize all images)",
+                            dims(&a)[0],
+                            dims(&a)[1],
+                            first.display(),
+                            s[0],
+                            s[1]
+                        ),
+                    ));
+                }
+                (None, _) => {
+                    size = Some(dims(&a));
+                    size_source = Some(a.path.clone());
+                }
+                _ => {}
+            }
+            Ok((row, id, a, b))
+        });
+        match checked {
+            Ok(item) => good.push(item),
+            Err(e) if options.skip_bad => report.skipped.push(e.to_string()),
+            Err(e) => return Err(e),
+        }
+    }
+    if good.is_empty() {
+        return Err(DatasetError::new(
+            &options.forces,
+            "no usable rows: nothing to import",
+        ));
+    }
+    let size = size.expect("set by the first good row");
+    let header = DatasetHeader::new(
+        size,
+        good.len(),
+        json!({
+            "generator": "hnet import",
+            "view_a": options.view_a,
+            "view_b": options.view_b,
+            "forces": options.forces,
+            "threshold": match options.threshold {
+                MaskThreshold::Level(l) => json!(l),
+                MaskThreshold::Otsu => json!("otsu"),
+            },
+            "bright_catheter": options.bright_catheter,
+            "seed": options.seed,
+        }),
+    );
+    let writer = DatasetWriter::create_or_resume(&options.out, &header)?;
+    let splits = assign_splits(good.len(), options.seed);
+    for (n, ((row, id, a, b), split)) in good.into_iter().zip(splits).enumerate() {
+        if !writer.has_sample(&id) {
+            let (ca, pa) = pixels(&a.image, size);
+            let (cb, pb) = pixels(&b.image, size);
+            let (ma, mb) = (mask_of(ca, &pa, options), mask_of(cb, &pb, options));
+            let [width, height] = size;
+            let manifest = ManifestRow {
+                id: id.clone(),
+                split,
+                force_n: row.force_n,
+                extra: vec![
+                    ("source_a".into(), a.path.display().to_string()),
+                    ("source_b".into(), b.path.display().to_string()),
+                ],
+            };
+            let record = json!({ "csv_line": row.line, "image": row.name });
+            let files = sample_files(
+                &manifest,
+                [(ca, &pa), (cb, &pb), (1, &ma), (1, &mb)].map(|(channels, pixels)| ImageRef {
+                    width,
+                    height,
+                    channels,
+                    pixels,
+                }),
+                &record,
+            );
+            writer.write_sample(&id, &files)?;
+        }
+        report.imported += 1;
+        progress(n + 1, total);
+    }
+    writer.finish()?;
+    Ok(report)
+}

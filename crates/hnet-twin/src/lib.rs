@@ -1,0 +1,30 @@
+//! The catheter digital twin: a faithful simulation of the H-Net paper's bench and of its
+//! synthetic X-ray generator, producing stereo image pairs with exact masks and tip-force labels.
+//!
+//! - [`rod`]: the catheter's flexible section as a Kirchhoff rod under a tip force;
+//! - [`carm`]: two perspective views (a biplane C-arm, or the bench's two cameras);
+//! - [`render`]: the catheter's exact anti-aliased mask, X-ray attenuation and camera look;
+//! - [`phantom`] and [`synthetic_xray`]: chest radiograph backgrounds cut into shuffled patches;
+//! - [`scene`]: random scenes and complete stereo samples;
+//! - [`dataset`]: the on-disk format; natively also [`simulate`] and [`import`].
+//!
+//! Units: millimetres, newtons, degrees for angles. World frame: `x` towards the patient's left,
+//! `y` anterior, `z` cranial, origin at the C-arm's isocentre.
+//!
+//! Everything compiles for wasm32 (the browser app runs the twin live) except the folder
+//! writing, which uses threads (rayon) natively.
+
+pub mod carm;
+pub mod catheter;
+pub mod dataset;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod import;
+pub mod phantom;
+pub mod raster;
+pub mod render;
+pub mod rod;
+pub mod scene;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod simulate;
+pub mod synthetic_xray;
+pub mod vec3;

@@ -1,0 +1,385 @@
+//! Drawing the catheter into one view: its exact anti-aliased mask, its X-ray attenuation
+//! (Beer-Lambert) and its look under the bench's lights.
+//!
+//! The catheter is a tube of constant diameter around the solved centreline. Each centreline
+//! segment projects to a 2D capsule whose radius follows the perspective scale at its ends; a
+//! pixel's coverage is `clamp(0.5 - d, 0, 1)` where `d` is the signed distance in pixels from the
+//! pixel centre to the tube's outline (a one-pixel box filter of the exact outline).
+
+use rand::{Rng, RngExt};
+
+use crate::carm::CArm;
+use crate::catheter::CatheterDesign;
+use crate::raster::{GreyImage, RgbImage};
+use crate::rod::RodShape;
+
+/// The catheter as seen by one view.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TubeRaster {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Fraction of each pixel covered by the catheter: the exact anti-aliased mask.
+    pub coverage: Vec<f32>,
+    /// X-ray attenuation `μ·chord` (dimensionless) along the ray through each pixel centre.
+    pub attenuation: Vec<f32>,
+    /// For pixels the catheter touches: signed position across the nearest visible tube,
+    /// -1 at one silhouette edge, 0 on the axis, 1 at the other; NaN elsewhere.
+    pub across: Vec<f32>,
+    /// Whether the visible surface at the pixel is an electrode.
+    pub electrode: Vec<bool>,
+    depth: Vec<f32>,
+}
+
+impl TubeRaster {
+    fn empty(width: usize, height: usize) -> Self {
+        let n = width * height;
+        Self {
+            width,
+            height,
+            coverage: vec![0.0; n],
+            attenuation: vec![0.0; n],
+            across: vec![f32::NAN; n],
+            electrode: vec![false; n],
+            depth: vec![f32::INFINITY; n],
+        }
+    }
+
+    /// Whether the catheter's outline reaches the pixel at `index`.
+    pub fn is_touched(&self, index: usize) -> bool {
+        !self.across[index].is_nan()
+    }
+}
+
+/// Length of the stiff proximal shaft drawn behind the flexible section's base, mm: enough to
+/// leave any field of view, as the real catheter does.
+pub const PROXIMAL_SHAFT_MM: f64 = 250.0;
+
+/// Projects and rasterises the catheter of `shape` (diameter `diameter_mm`) in `view`: the
+/// flexible section and, straight behind its clamped base, the proximal shaft.
+pub fn rasterize_catheter(
+    shape: &RodShape,
+    diameter_mm: f64,
+    design: &CatheterDesign,
+    view: &CArm,
+) -> TubeRaster {
+    let [width, height] = view.image_size;
+    let mut raster = TubeRaster::empty(width, height);
+    let radius_mm = diameter_mm / 2.0;
+    let focal = view.focal_px();
+    let source = view.source_mm();
+    let length = *shape.arc_mm.last().unwrap_or(&0.0);
+    let mut points = Vec::with_capacity(shape.points_mm.len() + 1);
+    let mut arcs = Vec::with_capacity(shape.points_mm.len() + 1);
+    if let (Some(base), Some(axis)) = (shape.points_mm.first(), shape.tangents.first()) {
+        points.push(*base - *axis * PROXIMAL_SHAFT_MM);
+        arcs.push(-PROXIMAL_SHAFT_MM);
+    }
+    points.extend_from_slice(&shape.points_mm);
+    arcs.extend_from_slice(&shape.arc_mm);
+    let projected: Vec<_> = points.iter().map(|p| view.project(*p)).collect();
+
+    for i in 0..projected.len().saturating_sub(1) {
+        let (a, b) = (projected[i], projected[i + 1]);
+        // Skip what lies behind the source.
+        if a.depth_mm <= 1.0 || b.depth_mm <= 1.0 {
+            continue;
+        }
+        let (ra, rb) = (
+            radius_mm * focal / a.depth_mm,
+            radius_mm * focal / b.depth_mm,
+        );
+        let (pa, pb) = (points[i], points[i + 1]);
+        let tangent = (pb - pa).normalized();
+        let ray = (((pa + pb) * 0.5) - source).normalized();
+        // Rays nearly along the tube see a longer path; cap the growth where the segment is
+        // seen end-on (its projection there is a disc and the cap stands in for the bend).
+        let obliquity = tangent.cross(ray).norm().max(0.25);
+        let (sa, sb) = (arcs[i], arcs[i + 1]);
+        let reach = ra.max(rb) + 1.0;
+        let x_min = (a.u.min(b.u) - reach).floor().max(0.0) as usize;
+        let x_max = ((a.u.max(b.u) + reach).ceil() as isize).min(width as isize - 1);
+        let y_min = (a.v.min(b.v) - reach).floor().max(0.0) as usize;
+        let y_max = ((a.v.max(b.v) + reach).ceil() as isize).min(height as isize - 1);
+        if x_max < 0 || y_max < 0 {
+            continue;
+        }
+        let (du, dv) = (b.u - a.u, b.v - a.v);
+        let len2 = du * du + dv * dv;
+        for y in y_min..=y_max as usize {
+            for x in x_min..=x_max as usize {
+                let (cu, cv) = (x as f64 + 0.5, y as f64 + 0.5);
+                let t = if len2 > 0.0 {
+                    (((cu - a.u) * du + (cv - a.v) * dv) / len2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                let (qu, qv) = (a.u + t * du, a.v + t * dv);
+                let dist = ((cu - qu).powi(2) + (cv - qv).powi(2)).sqrt();
+                let rho = ra + t * (rb - ra);
+                let coverage = (0.5 - (dist - rho)).clamp(0.0, 1.0) as f32;
+                if coverage <= 0.0 {
+                    continue;
+                }
+                let index = y * width + x;
+                let px = &mut raster.coverage[index];
+                *px = px.max(coverage);
+                let from_tip = length - (sa + t * (sb - sa));
+                if dist < rho {
+                    let chord = 2.0 * radius_mm * (1.0 - (dist / rho).powi(2)).sqrt() / obliquity;
+                    let att = (design.attenuation_per_mm(from_tip) * chord) as f32;
+                    let px = &mut raster.attenuation[index];
+                    *px = px.max(att);
+                }
+                let depth = (a.depth_mm + t * (b.depth_mm - a.depth_mm)) as f32;
+                if depth < raster.depth[index] {
+                    raster.depth[index] = depth;
+                    let side = (du * (cv - a.v) - dv * (cu - a.u)).signum();
+                    raster.across[index] = (side * (dist / rho).min(1.0)) as f32;
+                    raster.electrode[index] = design.is_electrode(from_tip);
+                }
+            }
+        }
+    }
+    raster
+}
+
+/// Detector physics of the X-ray renderer.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct XRayDetector {
+    /// Photons per pixel reaching the detector where nothing attenuates; quantum noise has a
+    /// relative standard deviation of `1/sqrt(photons · transmission)`.
+    pub photons_per_pixel: f64,
+    /// Standard deviation of the detector's Gaussian blur, pixels.
+    pub blur_px: f64,
+}
+
+impl Default for XRayDetector {
+    fn default() -> Self {
+        Self {
+            photons_per_pixel: 2500.0,
+            blur_px: 0.6,
+        }
+    }
+}
+
+/// A standard normal deviate, approximated by the sum of four uniforms (Irwin-Hall), which is
+/// fast, deterministic across platforms and plenty for image noise.
+pub fn normal(rng: &mut impl Rng) -> f32 {
+    let bits: u64 = rng.next_u64();
+    let sum: u32 = (0..4).map(|i| ((bits >> (16 * i)) & 0xFFFF) as u32).sum();
+    // Four uniforms on [0, 1) have mean 2 and variance 1/3.
+    ((sum as f32 / 65536.0) - 2.0) * 3.0f32.sqrt()
+}
+
+/// An X-ray frame in the fluoroscopy display convention: the grey value is the relative
+/// transmitted intensity, so the catheter shows dark on the background's transmission map.
+///
+/// `T = T_background · exp(-μL)` (Beer-Lambert), then Poisson quantum noise (Gaussian
+/// approximation), then the detector blur.
+pub fn render_xray(
+    background_transmission: &GreyImage,
+    tube: &TubeRaster,
+    detector: &XRayDetector,
+    rng: &mut impl Rng,
+) -> GreyImage {
+    let n = detector.photons_per_pixel as f32;
+    let data = background_transmission
+        .data
+        .iter()
+        .zip(&tube.attenuation)
+        .map(|(&t, &att)| {
+            let t = t * (-att).exp();
+            (t + (t.max(0.0) / n).sqrt() * normal(rng)).clamp(0.0, 1.0)
+        })
+        .collect();
+    GreyImage {
+        width: tube.width,
+        height: tube.height,
+        data,
+    }
+    .blurred(detector.blur_px)
+}
+
+/// The bench's background: a matte board under two soft lights, with paper grain and a faint
+/// 10 mm grid, as a camera sees it.
+pub fn bench_background(view: &CArm, rng: &mut impl Rng) -> RgbImage {
+    let [width, height] = view.image_size;
+    // Board tint and light placement vary a little from shot to shot.
+    let tint = [
+        0.80 + 0.04 * rng.random::<f32>(),
+        0.78 + 0.04 * rng.random::<f32>(),
+        0.72 + 0.05 * rng.random::<f32>(),
+    ];
+    let light = [rng.random::<f32>(), rng.random::<f32>()];
+    let grid_px = 10.0 / view.isocentre_mm_per_px();
+    let grid_phase = [rng.random::<f64>() * grid_px, rng.random::<f64>() * grid_px];
+    let mut data = Vec::with_capacity(width * height * 3);
+    for y in 0..height {
+        for x in 0..width {
+            let (fx, fy) = (x as f32 / width as f32, y as f32 / height as f32);
+            let lit = 0.82 + 0.18 * (1.0 - ((fx - light[0]).powi(2) + (fy - light[1]).powi(2)));
+            let vignette = 1.0 - 0.12 * ((fx - 0.5).powi(2) + (fy - 0.5).powi(2)) * 4.0;
+            let on_grid = |c: f64, phase: f64| {
+                let d = ((c + phase) % grid_px).min(grid_px - (c + phase) % grid_px);
+                (1.0 - d as f32).clamp(0.0, 1.0)
+            };
+            let grid =
+                on_grid(x as f64 + 0.5, grid_phase[0]).max(on_grid(y as f64 + 0.5, grid_phase[1]));
+            let grain = 0.015 * normal(rng);
+            for c in 0..3 {
+                let line = if c == 1 { 0.93 } else { 0.90 };
+                let v = tint[c] * lit * vignette * (1.0 - (1.0 - line) * grid) + grain;
+                data.push(v);
+            }
+        }
+    }
+    RgbImage {
+        width,
+        height,
+        data,
+    }
+}
+
+/// A bench-camera photograph: the catheter shaded as a glossy tube (Lambertian plus a specular
+/// highlight) over `background`, with camera noise and a slight optical blur.
+pub fn render_bench(
+    background: &RgbImage,
+    tube: &TubeRaster,
+    design: &CatheterDesign,
+    rng: &mut impl Rng,
+) -> RgbImage {
+    let mut data = background.data.clone();
+    // Light from the upper left of the tube's cross-section.
+    let light_across = -0.45f32;
+    for (i, &coverage) in tube.coverage.iter().enumerate() {
+        if coverage <= 0.0 || !tube.is_touched(i) {
+            continue;
+        }
+        let across = tube.across[i];
+        let facing = (1.0 - across * across).max(0.0).sqrt();
+        let (colour, gloss, sharpness) = if tube.electrode[i] {
+            (design.electrode_colour, 0.55, 12)
+        } else {
+            (design.shaft_colour, 0.30, 20)
+        };
+        let diffuse = 0.30 + 0.70 * facing * (1.0 - 0.35 * (across - light_across).abs());
+        let highlight = gloss
+            * (1.0 - (across - light_across).abs())
+                .max(0.0)
+                .powi(sharpness);
+        for c in 0..3 {
+            let tube_value = colour[c] * diffuse + highlight;
+            let px = &mut data[i * 3 + c];
+            *px = *px * (1.0 - coverage) + tube_value * coverage;
+        }
+    }
+    for v in &mut data {
+        *v += 0.008 * normal(rng);
+    }
+    RgbImage {
+        width: background.width,
+        height: background.height,
+        data,
+    }
+    .blurred(0.45)
+}
+
+/// Centre of mass of a mask in pixel coordinates, or `None` if it is empty.
+pub fn mask_centroid(coverage: &[f32], width: usize) -> Option<[f64; 2]> {
+    let (mut sx, mut sy, mut total) = (0.0, 0.0, 0.0);
+    for (i, &c) in coverage.iter().enumerate() {
+        let c = f64::from(c);
+        sx += c * ((i % width) as f64 + 0.5);
+        sy += c * ((i / width) as f64 + 0.5);
+        total += c;
+    }
+    (total > 0.0).then(|| [sx / total, sy / total])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rod::{RodBase, RodConfig, solve};
+    use crate::vec3::Vec3;
+    use rand::SeedableRng;
+
+    fn straight_catheter() -> RodShape {
+        // The flexible 50 mm from z = -25 mm to +25 mm through the isocentre, the proximal shaft
+        // below.
+        let base = RodBase {
+            position_mm: Vec3::new(0.0, 0.0, -25.0),
+            ..RodBase::default()
+        };
+        solve(&RodConfig::default(), &base, Vec3::ZERO).unwrap()
+    }
+
+    #[test]
+    fn the_mask_covers_the_projected_tube_and_nothing_else() {
+        let view = CArm::cardiac(0.0, 0.0, 224);
+        let shape = straight_catheter();
+        let tube = rasterize_catheter(&shape, 2.33, &CatheterDesign::default(), &view);
+        // The tube's projected width at the isocentre, in pixels.
+        let width_px = 2.33 / view.isocentre_mm_per_px();
+        // Area: from the tip (with its round cap) down to the image's bottom edge.
+        let tip_v = view.project(Vec3::new(0.0, 0.0, 25.0)).v;
+        let length_px = 224.0 - tip_v;
+        let rect = length_px * width_px;
+        let r = width_px / 2.0;
+        let cap = std::f64::consts::PI * r * r / 2.0;
+        let area: f64 = tube.coverage.iter().map(|&c| f64::from(c)).sum();
+        assert!(
+            (area - rect - cap).abs() / (rect + cap) < 0.03,
+            "{area} vs {}",
+            rect + cap
+        );
+        // It is vertical and centred in the frontal view; its centroid is that of the shaft
+        // and the tip's half-disc.
+        let c = mask_centroid(&tube.coverage, 224).unwrap();
+        assert!((c[0] - 112.0).abs() < 0.05, "{c:?}");
+        let cap_centroid = tip_v - 4.0 * r / (3.0 * std::f64::consts::PI);
+        let expected_v = (rect * (tip_v + 224.0) / 2.0 + cap * cap_centroid) / (rect + cap);
+        assert!((c[1] - expected_v).abs() < 0.3, "{c:?} vs {expected_v}");
+        // Pixels far from the axis are untouched.
+        assert_eq!(tube.coverage[112 * 224 + 112 + 10], 0.0);
+        assert_eq!(tube.coverage[112 * 224 + 112], 1.0);
+    }
+
+    #[test]
+    fn electrodes_attenuate_far_more_than_the_shaft() {
+        let view = CArm::cardiac(0.0, 0.0, 224);
+        let tube = rasterize_catheter(
+            &straight_catheter(),
+            2.33,
+            &CatheterDesign::default(),
+            &view,
+        );
+        let row_of = |z: f64| view.project(Vec3::new(0.0, 0.0, z)).v as usize;
+        // Tip electrode near z = +24 mm, shaft at z = 0.
+        let tip = tube.attenuation[row_of(23.5) * 224 + 112];
+        let shaft = tube.attenuation[row_of(0.0) * 224 + 112];
+        assert!(
+            tip > 2.0 && shaft < 0.3 && shaft > 0.1,
+            "tip {tip}, shaft {shaft}"
+        );
+        assert!(tube.electrode[row_of(23.5) * 224 + 112]);
+    }
+
+    #[test]
+    fn xray_frames_show_the_catheter_dark() {
+        let view = CArm::cardiac(0.0, 0.0, 64);
+        let tube = rasterize_catheter(
+            &straight_catheter(),
+            2.33,
+            &CatheterDesign::default(),
+            &view,
+        );
+        let background = GreyImage::filled(64, 64, 0.7);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let frame = render_xray(&background, &tube, &XRayDetector::default(), &mut rng);
+        let row = view.project(Vec3::new(0.0, 0.0, 23.5)).v as usize;
+        assert!(frame.data[row * 64 + 32] < 0.3);
+        assert!((frame.data[5 * 64 + 5] - 0.7).abs() < 0.1);
+    }
+}

@@ -1,0 +1,646 @@
+//! Static shape of the catheter's flexible distal section: an inextensible, unshearable
+//! Kirchhoff rod clamped at its base and loaded by a point force at its tip.
+//!
+//! Units: millimetres, newtons, N·mm for moments, N/mm² (MPa) for moduli, N·mm² for bending
+//! stiffness. Positions and forces are in the world frame.
+//!
+//! Equations (arc length `s` from the base, `R(s)` the cross-section frame whose third column is
+//! the unit tangent):
+//!
+//! ```text
+//! p' = R e3                          (inextensible, unshearable)
+//! R' = R [u]×,  u = K⁻¹ Rᵀ m + u*    (K = diag(EI, EI, GJ), u* the intrinsic pre-curvature)
+//! n(s) = F + w (L - s)               (internal force: tip force plus the weight beyond s)
+//! m' = -p' × n                       (moment balance)
+//! ```
+//!
+//! with `p(0)`, `R(0)` given (clamped base) and `m(L) = 0` (no moment at the tip). The unknown base
+//! moment `m(0)` is found by shooting: RK4 integration along `s` and Newton's method on
+//! `m(L)(m(0)) = 0` with a finite-difference Jacobian and a backtracking line search; large loads
+//! are approached by load continuation. A solve that does not reach the tolerance is an error,
+//! never a silently wrong shape.
+
+use core::f64::consts::PI;
+
+use serde::{Deserialize, Serialize};
+
+use crate::vec3::{Mat3, Quat, Vec3};
+
+/// Mechanical and numerical settings of the rod.
+///
+/// Defaults describe a 7 Fr (2.33 mm) ablation catheter's 50 mm flexible section with a bending
+/// stiffness of 0.6 x 10⁻³ N·m² (= 600 N·mm², inside the 0.4-0.9 x 10⁻³ N·m² reported for
+/// commercial catheters), straight at rest, without gravity.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RodConfig {
+    /// Length of the flexible section in mm.
+    pub length_mm: f64,
+    /// Outer diameter in mm (7 Fr = 2.33 mm).
+    pub diameter_mm: f64,
+    /// Effective Young's modulus in N/mm² (MPa).
+    pub youngs_modulus_mpa: f64,
+    /// Effective shear modulus in N/mm² (MPa).
+    pub shear_modulus_mpa: f64,
+    /// Intrinsic curvature of the unloaded rod about the cross-section's x and y axes, 1/mm.
+    pub precurvature_per_mm: [f64; 2],
+    /// Arc length from the base where the pre-curved part begins, in mm.
+    pub precurve_start_mm: f64,
+    /// Mass per length in kg/m (for gravity).
+    pub linear_density_kg_per_m: f64,
+    /// Gravitational acceleration in m/s² in the world frame; `None` ignores the rod's weight.
+    pub gravity_m_per_s2: Option<Vec3>,
+    /// RK4 steps along the rod.
+    pub steps: usize,
+    /// Newton iterations allowed per load step.
+    pub max_newton_iterations: usize,
+}
+
+impl Default for RodConfig {
+    fn default() -> Self {
+        let diameter_mm: f64 = 2.33;
+        let second_moment = PI * diameter_mm.powi(4) / 64.0;
+        let youngs_modulus_mpa = 600.0 / second_moment;
+        Self {
+            length_mm: 50.0,
+            diameter_mm,
+            youngs_modulus_mpa,
+            // Poisson's ratio 0.4, typical of the polymer shaft.
+            shear_modulus_mpa: youngs_modulus_mpa / (2.0 * 1.4),
+            precurvature_per_mm: [0.0, 0.0],
+            precurve_start_mm: 0.0,
+            // Polymer shaft with braid and lumen: about 1.1 g/cm³ over the full section.
+            linear_density_kg_per_m: 1100.0 * PI * (diameter_mm * 1e-3 / 2.0).powi(2),
+            gravity_m_per_s2: None,
+            steps: 200,
+            max_newton_iterations: 40,
+        }
+    }
+}
+
+impl RodConfig {
+    /// Second moment of area of the circular section, mm⁴.
+    pub fn second_moment_mm4(&self) -> f64 {
+        PI * self.diameter_mm.powi(4) / 64.0
+    }
+
+    /// Bending stiffness EI in N·mm² (1 N·mm² = 10⁻⁶ N·m²).
+    pub fn bending_stiffness_n_mm2(&self) -> f64 {
+        self.youngs_modulus_mpa * self.second_moment_mm4()
+    }
+
+    /// Torsional stiffness GJ in N·mm² (J = 2I for a circular section).
+    pub fn torsional_stiffness_n_mm2(&self) -> f64 {
+        self.shear_modulus_mpa * 2.0 * self.second_moment_mm4()
+    }
+
+    /// The same rod with Young's modulus (and the shear modulus, keeping their ratio) set so that
+    /// the bending stiffness is `ei_n_mm2`.
+    pub fn with_bending_stiffness(mut self, ei_n_mm2: f64) -> Self {
+        let ratio = self.shear_modulus_mpa / self.youngs_modulus_mpa;
+        self.youngs_modulus_mpa = ei_n_mm2 / self.second_moment_mm4();
+        self.shear_modulus_mpa = ratio * self.youngs_modulus_mpa;
+        self
+    }
+
+    fn validate(&self) -> Result<(), RodError> {
+        let positive = [
+            ("length_mm", self.length_mm),
+            ("diameter_mm", self.diameter_mm),
+            ("youngs_modulus_mpa", self.youngs_modulus_mpa),
+            ("shear_modulus_mpa", self.shear_modulus_mpa),
+        ];
+        for (name, value) in positive {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(RodError::InvalidConfig(format!(
+                    "{name} must be a positive number, got {value}"
+                )));
+            }
+        }
+        if self.steps < 2 || self.max_newton_iterations == 0 {
+            return Err(RodError::InvalidConfig(
+                "steps must be at least 2 and max_newton_iterations at least 1".into(),
+            ));
+        }
+        if !self.precurvature_per_mm.iter().all(|k| k.is_finite())
+            || !self.linear_density_kg_per_m.is_finite()
+            || self
+                .gravity_m_per_s2
+                .is_some_and(|g| !g.0.iter().all(|v| v.is_finite()))
+        {
+            return Err(RodError::InvalidConfig(
+                "pre-curvature, density and gravity must be finite".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Weight per length in N/mm in the world frame (zero without gravity).
+    fn weight_per_mm(&self) -> Vec3 {
+        match self.gravity_m_per_s2 {
+            // kg/m · m/s² = N/m, and 1 N/m = 10⁻³ N/mm.
+            Some(g) => g * (self.linear_density_kg_per_m * 1e-3),
+            None => Vec3::ZERO,
+        }
+    }
+
+    fn intrinsic_curvature(&self, s: f64) -> Vec3 {
+        if s >= self.precurve_start_mm {
+            Vec3::new(
+                self.precurvature_per_mm[0],
+                self.precurvature_per_mm[1],
+                0.0,
+            )
+        } else {
+            Vec3::ZERO
+        }
+    }
+}
+
+/// The clamped base: position in mm and orientation (columns: the cross-section's x and y axes
+/// and the tangent, in the world frame).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RodBase {
+    /// Base position in mm.
+    pub position_mm: Vec3,
+    /// Base frame; its third column is the direction the rod leaves the base.
+    pub orientation: Mat3,
+}
+
+impl Default for RodBase {
+    fn default() -> Self {
+        Self {
+            position_mm: Vec3::ZERO,
+            orientation: Mat3::IDENTITY,
+        }
+    }
+}
+
+/// The solved centreline.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RodShape {
+    /// Arc length of each point from the base, mm.
+    pub arc_mm: Vec<f64>,
+    /// Centreline points, mm, from base to tip.
+    pub points_mm: Vec<Vec3>,
+    /// Unit tangents at the points.
+    pub tangents: Vec<Vec3>,
+    /// Reaction moment at the clamp, N·mm.
+    pub base_moment_n_mm: Vec3,
+    /// Newton iterations used over all load steps.
+    pub newton_iterations: usize,
+    /// Remaining tip moment |m(L)| in N·mm (the tolerance it met).
+    pub residual_n_mm: f64,
+}
+
+impl RodShape {
+    /// The tip position in mm.
+    pub fn tip_mm(&self) -> Vec3 {
+        *self
+            .points_mm
+            .last()
+            .expect("a shape has at least two points")
+    }
+}
+
+/// Why the rod could not be solved.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RodError {
+    /// A setting or the load is not usable.
+    #[error("invalid rod settings: {0}")]
+    InvalidConfig(String),
+    /// Newton's method did not reach the tolerance, even with load continuation.
+    #[error(
+        "rod solver did not converge: tip moment {residual_n_mm:.3e} N·mm after {iterations} Newton iterations (tolerance {tolerance_n_mm:.1e} N·mm)"
+    )]
+    NotConverged {
+        /// Newton iterations spent.
+        iterations: usize,
+        /// Smallest tip moment reached, N·mm.
+        residual_n_mm: f64,
+        /// The tolerance, N·mm.
+        tolerance_n_mm: f64,
+    },
+}
+
+/// One integration state: position, orientation, internal moment (world frame).
+#[derive(Clone, Copy)]
+struct State {
+    p: Vec3,
+    q: [f64; 4],
+    m: Vec3,
+}
+
+struct Derivative {
+    p: Vec3,
+    q: [f64; 4],
+    m: Vec3,
+}
+
+impl State {
+    fn advanced(&self, d: &Derivative, h: f64) -> State {
+        let mut q = self.q;
+        for (qi, di) in q.iter_mut().zip(d.q) {
+            *qi += h * di;
+        }
+        State {
+            p: self.p + d.p * h,
+            q,
+            m: self.m + d.m * h,
+        }
+    }
+}
+
+struct Problem<'a> {
+    config: &'a RodConfig,
+    base: &'a RodBase,
+    tip_force: Vec3,
+    weight: Vec3,
+    stiffness: Vec3,
+}
+
+impl Problem<'_> {
+    fn derivative(&self, s: f64, y: &State) -> Derivative {
+        let q = Quat(y.q);
+        let rotation = q.to_matrix();
+        let tangent = rotation.column(2);
+        let n = self.tip_force + self.weight * (self.config.length_mm - s);
+        let m_body = rotation.transpose() * y.m;
+        let u = Vec3::new(
+            m_body[0] / self.stiffness[0],
+            m_body[1] / self.stiffness[1],
+            m_body[2] / self.stiffness[2],
+        ) + self.config.intrinsic_curvature(s);
+        Derivative {
+            p: tangent,
+            q: q.derivative(u),
+            m: -tangent.cross(n),
+        }
+    }
+
+    /// Integrates from the base with base moment `m0`; returns the tip moment and, if asked, the
+    /// centreline.
+    fn shoot(&self, m0: Vec3, record: bool) -> (Vec3, Option<RodShape>) {
+        let steps = self.config.steps;
+        let h = self.config.length_mm / steps as f64;
+        let mut y = State {
+            p: self.base.position_mm,
+            q: Quat::from_matrix(&self.base.orientation).0,
+            m: m0,
+        };
+        let mut shape = record.then(|| RodShape {
+            arc_mm: Vec::with_capacity(steps + 1),
+            points_mm: Vec::with_capacity(steps + 1),
+            tangents: Vec::with_capacity(steps + 1),
+            base_moment_n_mm: m0,
+            newton_iterations: 0,
+            residual_n_mm: 0.0,
+        });
+        let push = |shape: &mut Option<RodShape>, s: f64, y: &State| {
+            if let Some(shape) = shape {
+                shape.arc_mm.push(s);
+                shape.points_mm.push(y.p);
+                shape.tangents.push(Quat(y.q).to_matrix().column(2));
+            }
+        };
+        push(&mut shape, 0.0, &y);
+        for i in 0..steps {
+            let s = i as f64 * h;
+            let k1 = self.derivative(s, &y);
+            let k2 = self.derivative(s + h / 2.0, &y.advanced(&k1, h / 2.0));
+            let k3 = self.derivative(s + h / 2.0, &y.advanced(&k2, h / 2.0));
+            let k4 = self.derivative(s + h, &y.advanced(&k3, h));
+            y.p += (k1.p + k2.p * 2.0 + k3.p * 2.0 + k4.p) * (h / 6.0);
+            y.m += (k1.m + k2.m * 2.0 + k3.m * 2.0 + k4.m) * (h / 6.0);
+            for j in 0..4 {
+                y.q[j] += h / 6.0 * (k1.q[j] + 2.0 * k2.q[j] + 2.0 * k3.q[j] + k4.q[j]);
+            }
+            y.q = Quat(y.q).normalized().0;
+            push(&mut shape, s + h, &y);
+        }
+        (y.m, shape)
+    }
+}
+
+/// Solves `a x = b` for a 3x3 system by Gaussian elimination with partial pivoting.
+fn solve3(a: [[f64; 3]; 3], b: Vec3) -> Option<Vec3> {
+    let mut m = [[0.0; 4]; 3];
+    for i in 0..3 {
+        m[i][..3].copy_from_slice(&a[i]);
+        m[i][3] = b[i];
+    }
+    for col in 0..3 {
+        let pivot = (col..3).max_by(|&i, &j| m[i][col].abs().total_cmp(&m[j][col].abs()))?;
+        if m[pivot][col].abs() < 1e-300 {
+            return None;
+        }
+        m.swap(col, pivot);
+        for row in col + 1..3 {
+            let f = m[row][col] / m[col][col];
+            for k in col..4 {
+                m[row][k] -= f * m[col][k];
+            }
+        }
+    }
+    let mut x = [0.0; 3];
+    for i in (0..3).rev() {
+        let tail: f64 = (i + 1..3).map(|k| m[i][k] * x[k]).sum();
+        x[i] = (m[i][3] - tail) / m[i][i];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(Vec3(x))
+}
+
+/// Newton's method on the base moment for one load. Returns the base moment, the iterations
+/// used, and the final residual; `Err` carries the best residual when it fails.
+fn newton(
+    problem: &Problem<'_>,
+    mut m0: Vec3,
+    tolerance: f64,
+    scale: f64,
+) -> Result<(Vec3, usize, f64), (usize, f64)> {
+    let mut residual = problem.shoot(m0, false).0;
+    let mut norm = residual.norm();
+    for iteration in 0..problem.config.max_newton_iterations {
+        if !norm.is_finite() {
+            return Err((iteration, norm));
+        }
+        if norm <= tolerance {
+            return Ok((m0, iteration, norm));
+        }
+        let h = 1e-7 * m0.max_abs().max(scale);
+        let mut jacobian = [[0.0; 3]; 3];
+        for j in 0..3 {
+            let mut probe = m0;
+            probe.0[j] += h;
+            let column = (problem.shoot(probe, false).0 - residual) / h;
+            for (i, row) in jacobian.iter_mut().enumerate() {
+                row[j] = column[i];
+            }
+        }
+        let Some(step) = solve3(jacobian, -residual) else {
+            return Err((iteration, norm));
+        };
+        let mut alpha = 1.0;
+        loop {
+            let candidate = m0 + step * alpha;
+            let r = problem.shoot(candidate, false).0;
+            let n = r.norm();
+            if n.is_finite() && n < (1.0 - 1e-4 * alpha) * norm {
+                m0 = candidate;
+                residual = r;
+                norm = n;
+                break;
+            }
+            alpha /= 2.0;
+            if alpha < 1e-6 {
+                return Err((iteration + 1, norm));
+            }
+        }
+    }
+    if norm <= tolerance {
+        Ok((m0, problem.config.max_newton_iterations, norm))
+    } else {
+        Err((problem.config.max_newton_iterations, norm))
+    }
+}
+
+/// Solves the static shape of the rod clamped at `base` under `tip_force_n` (N, world frame).
+pub fn solve(config: &RodConfig, base: &RodBase, tip_force_n: Vec3) -> Result<RodShape, RodError> {
+    config.validate()?;
+    if !tip_force_n.0.iter().all(|f| f.is_finite()) {
+        return Err(RodError::InvalidConfig(format!(
+            "tip force must be finite, got {:?} N",
+            tip_force_n.0
+        )));
+    }
+    let ei = config.bending_stiffness_n_mm2();
+    let stiffness = Vec3::new(ei, ei, config.torsional_stiffness_n_mm2());
+    let weight = config.weight_per_mm();
+    let length = config.length_mm;
+    let scale = (tip_force_n.norm() * length)
+        .max(ei / length)
+        .max(weight.norm() * length * length);
+    let tolerance = 1e-10 * scale;
+
+    // The unloaded shape gives the first guess: the moment of the loads about the base for a
+    // rigid rod of that shape, m(0) = ∫ p' × n ds.
+    let at_load = |fraction: f64| Problem {
+        config,
+        base,
+        tip_force: tip_force_n * fraction,
+        weight: weight * fraction,
+        stiffness,
+    };
+    let rest = at_load(0.0).shoot(Vec3::ZERO, true).1.expect("recorded");
+    let guess = |fraction: f64| {
+        let problem = at_load(fraction);
+        let h = length / config.steps as f64;
+        rest.tangents
+            .windows(2)
+            .enumerate()
+            .fold(Vec3::ZERO, |acc, (i, t)| {
+                let s = (i as f64 + 0.5) * h;
+                let n = problem.tip_force + problem.weight * (length - s);
+                acc + ((t[0] + t[1]) * 0.5).cross(n) * h
+            })
+    };
+
+    let mut total_iterations = 0;
+    let mut best_residual = f64::INFINITY;
+    // Full load first; then load continuation in ever finer steps.
+    for load_steps in [1usize, 4, 16, 64] {
+        let mut m0 = guess(1.0 / load_steps as f64);
+        let mut previous = Vec3::ZERO;
+        let mut solved = None;
+        for step in 1..=load_steps {
+            let fraction = step as f64 / load_steps as f64;
+            let problem = at_load(fraction);
+            match newton(&problem, m0, tolerance, scale) {
+                Ok((m, iterations, residual)) => {
+                    total_iterations += iterations;
+                    // Extrapolate linearly to the next load step.
+                    let next = m + (m - previous);
+                    previous = m;
+                    m0 = next;
+                    if step == load_steps {
+                        solved = Some((m, residual));
+                    }
+                }
+                Err((iterations, residual)) => {
+                    total_iterations += iterations;
+                    best_residual = best_residual.min(residual);
+                    break;
+                }
+            }
+        }
+        if let Some((m, residual)) = solved {
+            let mut shape = at_load(1.0).shoot(m, true).1.expect("recorded");
+            shape.newton_iterations = total_iterations;
+            shape.residual_n_mm = residual;
+            return Ok(shape);
+        }
+    }
+    Err(RodError::NotConverged {
+        iterations: total_iterations,
+        residual_n_mm: best_residual,
+        tolerance_n_mm: tolerance,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 100 mm rod with EI = 1000 N·mm², clamped at the origin pointing along +z.
+    fn beam() -> RodConfig {
+        RodConfig {
+            length_mm: 100.0,
+            ..RodConfig::default()
+        }
+        .with_bending_stiffness(1000.0)
+    }
+
+    fn relative_error(actual: f64, expected: f64) -> f64 {
+        ((actual - expected) / expected).abs()
+    }
+
+    #[test]
+    fn default_stiffness_is_in_the_clinical_range() {
+        let ei = RodConfig::default().bending_stiffness_n_mm2();
+        // 0.4-0.9 x 10⁻³ N·m² = 400-900 N·mm².
+        assert!((400.0..=900.0).contains(&ei), "{ei}");
+        assert!((ei - 600.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn small_loads_match_linear_beam_theory() {
+        let config = beam();
+        let ei = config.bending_stiffness_n_mm2();
+        let l = config.length_mm;
+        // FL²/EI = 0.01: the linear regime.
+        let f = 0.01 * ei / (l * l);
+        let shape = solve(&config, &RodBase::default(), Vec3::new(f, 0.0, 0.0)).unwrap();
+        let expected = f * l.powi(3) / (3.0 * ei);
+        let tip = shape.tip_mm();
+        assert!(
+            relative_error(tip.x(), expected) < 0.01,
+            "tip deflection {} mm, FL³/3EI = {expected} mm",
+            tip.x()
+        );
+        assert!(tip.y().abs() < 1e-9);
+    }
+
+    #[test]
+    fn large_deflections_match_the_elastica() {
+        // Bisshopp & Drucker (1945): a cantilever under a dead end load P perpendicular to its
+        // undeformed axis. PL²/EI = 1: tip deflection 0.302 L, shortening 0.0566 L;
+        // PL²/EI = 2: 0.494 L and 0.161 L.
+        let config = beam();
+        let ei = config.bending_stiffness_n_mm2();
+        let l = config.length_mm;
+        for (alpha, deflection, shortening) in [(1.0, 0.302, 0.0566), (2.0, 0.494, 0.161)] {
+            let f = alpha * ei / (l * l);
+            let tip = solve(&config, &RodBase::default(), Vec3::new(f, 0.0, 0.0))
+                .unwrap()
+                .tip_mm();
+            let d = tip.x() / l;
+            let s = (l - tip.z()) / l;
+            assert!(
+                relative_error(d, deflection) < 0.01,
+                "PL²/EI = {alpha}: deflection {d} L, expected {deflection} L"
+            );
+            assert!(
+                relative_error(s, shortening) < 0.01,
+                "PL²/EI = {alpha}: shortening {s} L, expected {shortening} L"
+            );
+        }
+    }
+
+    #[test]
+    fn zero_force_gives_the_precurved_rest_shape() {
+        let kappa = 1.0 / 40.0;
+        let config = RodConfig {
+            precurvature_per_mm: [kappa, 0.0],
+            ..RodConfig::default()
+        };
+        let shape = solve(&config, &RodBase::default(), Vec3::ZERO).unwrap();
+        // A circular arc: bending about the section's x axis turns the tangent towards -y.
+        for (s, p) in shape.arc_mm.iter().zip(&shape.points_mm) {
+            let expected = Vec3::new(
+                0.0,
+                -(1.0 - (kappa * s).cos()) / kappa,
+                (kappa * s).sin() / kappa,
+            );
+            assert!(
+                (*p - expected).max_abs() < 1e-6,
+                "at s = {s}: {p:?} vs {expected:?}"
+            );
+        }
+        assert!(shape.base_moment_n_mm.norm() < 1e-9);
+    }
+
+    #[test]
+    fn a_rotated_base_rotates_the_shape() {
+        let config = beam();
+        let force = Vec3::new(0.05, 0.0, 0.0);
+        let straight = solve(&config, &RodBase::default(), force).unwrap();
+        let turn = Mat3::rotation(Vec3::Z, 0.9);
+        let base = RodBase {
+            position_mm: Vec3::new(1.0, 2.0, 3.0),
+            orientation: turn,
+        };
+        let turned = solve(&config, &base, turn * force).unwrap();
+        let expected = turn * straight.tip_mm() + base.position_mm;
+        assert!((turned.tip_mm() - expected).max_abs() < 1e-6);
+    }
+
+    #[test]
+    fn gravity_bends_a_horizontal_rod_downwards() {
+        let config = RodConfig {
+            gravity_m_per_s2: Some(Vec3::new(0.0, 0.0, -9.81)),
+            ..RodConfig::default()
+        };
+        // Base pointing along +x: the rod's weight acts across it.
+        let base = RodBase {
+            position_mm: Vec3::ZERO,
+            orientation: Mat3::rotation(Vec3::Y, core::f64::consts::FRAC_PI_2),
+        };
+        let shape = solve(&config, &base, Vec3::ZERO).unwrap();
+        let w = config.linear_density_kg_per_m * 9.81 * 1e-3;
+        let l = config.length_mm;
+        // Uniform load: δ = wL⁴ / 8EI.
+        let expected = w * l.powi(4) / (8.0 * config.bending_stiffness_n_mm2());
+        assert!(relative_error(-shape.tip_mm().z(), expected) < 0.01);
+    }
+
+    #[test]
+    fn failing_to_converge_is_an_error_not_a_shape() {
+        let config = RodConfig {
+            max_newton_iterations: 1,
+            ..beam()
+        };
+        let f = 2.0 * config.bending_stiffness_n_mm2() / config.length_mm.powi(2);
+        let err = solve(&config, &RodBase::default(), Vec3::new(f, 0.0, 0.0)).unwrap_err();
+        assert!(matches!(err, RodError::NotConverged { .. }), "{err}");
+        assert!(err.to_string().contains("did not converge"));
+    }
+
+    #[test]
+    fn bad_inputs_are_rejected() {
+        let config = RodConfig {
+            length_mm: -1.0,
+            ..RodConfig::default()
+        };
+        assert!(matches!(
+            solve(&config, &RodBase::default(), Vec3::ZERO),
+            Err(RodError::InvalidConfig(_))
+        ));
+        assert!(matches!(
+            solve(
+                &RodConfig::default(),
+                &RodBase::default(),
+                Vec3::new(f64::NAN, 0.0, 0.0)
+            ),
+            Err(RodError::InvalidConfig(_))
+        ));
+    }
+}

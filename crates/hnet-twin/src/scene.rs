@@ -1,0 +1,582 @@
+//! One stereo sample of the twin: sampled mechanics, the solved catheter and both rendered views
+//! with their exact masks.
+//!
+//! Every random choice of sample `index` comes from its own generator seeded by `(seed, index)`,
+//! so samples can be generated in any order or in parallel and still be identical.
+
+use rand::{Rng, RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::carm::{Biplane, CArm, CameraMatrix};
+use crate::catheter::CatheterDesign;
+use crate::raster::GreyImage;
+use crate::render::{self, TubeRaster, XRayDetector};
+use crate::rod::{self, RodBase, RodConfig, RodError, RodShape};
+use crate::synthetic_xray::{self, Anatomy, BackgroundSource, PatchLayout, PatchRule};
+use crate::vec3::{Mat3, Vec3};
+
+/// What the images look like.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Modality {
+    /// The paper's bench: two colour cameras.
+    Rgb,
+    /// Synthetic X-ray on consistently bright patches (easy).
+    Xray1,
+    /// Synthetic X-ray on mixed dark and bright patches (hard).
+    Xray2,
+}
+
+impl Modality {
+    /// The name used on the command line and in files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Modality::Rgb => "rgb",
+            Modality::Xray1 => "xray1",
+            Modality::Xray2 => "xray2",
+        }
+    }
+
+    /// Parses `rgb`, `xray1` or `xray2`.
+    pub fn parse(name: &str) -> Option<Self> {
+        [Modality::Rgb, Modality::Xray1, Modality::Xray2]
+            .into_iter()
+            .find(|m| m.name() == name)
+    }
+
+    /// Whether the images are X-ray frames (grey) rather than camera photographs (colour).
+    pub fn is_xray(self) -> bool {
+        self != Modality::Rgb
+    }
+}
+
+/// How scenes are drawn at random.
+///
+/// Defaults: tip forces of clinical size, uniform in magnitude up to 0.4 N, pointing back
+/// against the catheter within 80° of its base axis (a contact force); bending stiffness
+/// 0.4-0.9 x 10⁻³ N·m²; flexible length 40-60 mm; pre-curvature up to 1/35 mm⁻¹ (a bend radius
+/// down to 35 mm) in a random plane; base 35 mm caudal of the isocentre pointing cranially, moved
+/// by up to 6 mm and tilted by up to 25°.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SceneSampling {
+    /// Range of the tip force magnitude, N.
+    pub force_magnitude_n: [f64; 2],
+    /// Largest angle between the force and the direction opposing the base axis, degrees.
+    pub force_cone_deg: f64,
+    /// Range of the bending stiffness EI, N·m².
+    pub bending_stiffness_n_m2: [f64; 2],
+    /// Range of the flexible length, mm.
+    pub length_mm: [f64; 2],
+    /// Range of the intrinsic curvature, 1/mm.
+    pub precurvature_per_mm: [f64; 2],
+    /// Nominal base position, mm.
+    pub base_position_mm: Vec3,
+    /// Largest shift of the base along each axis, mm.
+    pub base_jitter_mm: f64,
+    /// Largest tilt of the base axis away from +z (cranial), degrees.
+    pub base_tilt_deg: f64,
+}
+
+impl Default for SceneSampling {
+    fn default() -> Self {
+        Self {
+            force_magnitude_n: [0.0, 0.4],
+            force_cone_deg: 80.0,
+            bending_stiffness_n_m2: [0.4e-3, 0.9e-3],
+            length_mm: [40.0, 60.0],
+            precurvature_per_mm: [0.0, 1.0 / 35.0],
+            base_position_mm: Vec3::new(0.0, 0.0, -35.0),
+            base_jitter_mm: 6.0,
+            base_tilt_deg: 25.0,
+        }
+    }
+}
+
+/// The drawn parameters of one scene. Forces are in the world frame, newtons.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SceneParams {
+    /// Tip force `(Fx, Fy, Fz)`, N (x: patient left, y: anterior, z: cranial).
+    pub tip_force_n: Vec3,
+    /// Bending stiffness EI, N·m².
+    pub bending_stiffness_n_m2: f64,
+    /// Flexible length, mm.
+    pub length_mm: f64,
+    /// Intrinsic curvature about the section's x axis, 1/mm.
+    pub precurvature_per_mm: f64,
+    /// Base position, mm.
+    pub base_position_mm: Vec3,
+    /// Tilt of the base axis from +z, degrees.
+    pub base_tilt_deg: f64,
+    /// Direction of that tilt around z, degrees.
+    pub base_azimuth_deg: f64,
+    /// Rotation of the section about the base axis (sets the pre-curve's plane), degrees.
+    pub base_roll_deg: f64,
+}
+
+impl SceneParams {
+    /// The base frame: rolled about its axis, tilted away from +z, and the tilt turned to its
+    /// azimuth about z.
+    pub fn base_frame(&self) -> Mat3 {
+        Mat3::rotation(Vec3::Z, self.base_azimuth_deg.to_radians())
+            * Mat3::rotation(Vec3::X, self.base_tilt_deg.to_radians())
+            * Mat3::rotation(Vec3::Z, self.base_roll_deg.to_radians())
+    }
+
+    /// The rod to solve: `template` with this scene's length, stiffness and pre-curvature.
+    pub fn rod(&self, template: &RodConfig) -> (RodConfig, RodBase) {
+        let config = RodConfig {
+            length_mm: self.length_mm,
+            precurvature_per_mm: [self.precurvature_per_mm, 0.0],
+            ..template.clone()
+        }
+        .with_bending_stiffness(self.bending_stiffness_n_m2 * 1e6);
+        let base = RodBase {
+            position_mm: self.base_position_mm,
+            orientation: self.base_frame(),
+        };
+        (config, base)
+    }
+}
+
+fn uniform(rng: &mut impl Rng, range: [f64; 2]) -> f64 {
+    range[0] + (range[1] - range[0]) * rng.random::<f64>()
+}
+
+impl SceneSampling {
+    /// Draws one scene.
+    pub fn sample(&self, rng: &mut impl Rng) -> SceneParams {
+        let mut jitter = || self.base_jitter_mm * (2.0 * rng.random::<f64>() - 1.0);
+        let base_position_mm = self.base_position_mm + Vec3::new(jitter(), jitter(), jitter());
+        // Uniform over the spherical cap of the tilt cone.
+        let cos_tilt = 1.0 - (1.0 - self.base_tilt_deg.to_radians().cos()) * rng.random::<f64>();
+        let base_tilt_deg = cos_tilt.acos().to_degrees();
+        let base_azimuth_deg = 360.0 * rng.random::<f64>();
+        let base_roll_deg = 360.0 * rng.random::<f64>();
+        let mut params = SceneParams {
+            tip_force_n: Vec3::ZERO,
+            bending_stiffness_n_m2: uniform(rng, self.bending_stiffness_n_m2),
+            length_mm: uniform(rng, self.length_mm),
+            precurvature_per_mm: uniform(rng, self.precurvature_per_mm),
+            base_position_mm,
+            base_tilt_deg,
+            base_azimuth_deg,
+            base_roll_deg,
+        };
+        // The force: uniform direction within the cone around -axis, uniform magnitude.
+        let axis = params.base_frame().column(2);
+        let cos_cone = self.force_cone_deg.to_radians().cos();
+        let cos_theta = 1.0 - (1.0 - cos_cone) * rng.random::<f64>();
+        let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+        let phi = std::f64::consts::TAU * rng.random::<f64>();
+        let e1 = axis.any_perpendicular();
+        let e2 = axis.cross(e1);
+        let direction = -axis * cos_theta + (e1 * phi.cos() + e2 * phi.sin()) * sin_theta;
+        params.tip_force_n = direction * uniform(rng, self.force_magnitude_n);
+        params
+    }
+}
+
+/// How the masks are made.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase", tag = "kind", content = "level")]
+pub enum MaskSource {
+    /// Exact anti-aliased coverage from the geometry.
+    Geometry,
+    /// The paper's way: threshold the rendered image (catheter darker than the level, 0-255).
+    Threshold(u8),
+    /// Threshold at Otsu's level of each image.
+    Otsu,
+}
+
+/// Everything that defines the twin's output, saved with a dataset.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TwinConfig {
+    /// The look of the images.
+    pub modality: Modality,
+    /// Side of the square images, pixels.
+    pub image_size: usize,
+    /// Random scene parameters.
+    pub scene: SceneSampling,
+    /// The rod's fixed properties (length, stiffness and pre-curvature come from the scene).
+    pub rod: RodConfig,
+    /// The catheter's design.
+    pub catheter: CatheterDesign,
+    /// The two views.
+    pub views: Biplane,
+    /// X-ray detector physics (X-ray modalities).
+    pub detector: XRayDetector,
+    /// Background patch rule (X-ray modalities).
+    pub patches: PatchRule,
+    /// Regions to crop backgrounds around (X-ray modalities).
+    pub anatomies: Vec<Anatomy>,
+    /// How masks are made.
+    pub mask: MaskSource,
+}
+
+impl TwinConfig {
+    /// The defaults for a modality at an image size: bench cameras for `rgb`, a biplane cardiac
+    /// C-arm for the X-ray modalities.
+    pub fn new(modality: Modality, image_size: usize) -> Self {
+        Self {
+            modality,
+            image_size,
+            scene: SceneSampling::default(),
+            rod: RodConfig::default(),
+            catheter: CatheterDesign::default(),
+            views: if modality.is_xray() {
+                Biplane::cardiac(image_size)
+            } else {
+                Biplane::bench(image_size)
+            },
+            detector: XRayDetector::default(),
+            patches: if modality == Modality::Xray2 {
+                PatchRule::xray2()
+            } else {
+                PatchRule::xray1()
+            },
+            anatomies: Anatomy::ALL.to_vec(),
+            mask: MaskSource::Geometry,
+        }
+    }
+}
+
+/// The radiographs that X-ray backgrounds are cut from, per view.
+#[derive(Debug, Clone, Default)]
+pub struct Backgrounds {
+    /// Sources for view A and view B; a sample picks one per view at random.
+    pub per_view: [Vec<BackgroundSource>; 2],
+}
+
+impl Backgrounds {
+    /// The built-in phantom, rendered in each view's direction.
+    pub fn phantom(views: &Biplane) -> Self {
+        Self {
+            per_view: [
+                vec![BackgroundSource::phantom(&views.a, 512)],
+                vec![BackgroundSource::phantom(&views.b, 512)],
+            ],
+        }
+    }
+
+    /// The same chest radiographs for both views.
+    pub fn files(sources: Vec<BackgroundSource>) -> Self {
+        Self {
+            per_view: [sources.clone(), sources],
+        }
+    }
+}
+
+/// One view's pixels.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ViewPixels {
+    /// 8-bit grey (X-ray).
+    Grey(Vec<u8>),
+    /// 8-bit RGB (camera).
+    Rgb(Vec<u8>),
+}
+
+impl ViewPixels {
+    /// 1 for grey, 3 for RGB.
+    pub fn channels(&self) -> usize {
+        match self {
+            ViewPixels::Grey(_) => 1,
+            ViewPixels::Rgb(_) => 3,
+        }
+    }
+
+    /// The bytes, row-major.
+    pub fn bytes(&self) -> &[u8] {
+        match self {
+            ViewPixels::Grey(b) | ViewPixels::Rgb(b) => b,
+        }
+    }
+}
+
+/// One rendered view of a sample.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ViewSample {
+    /// The image.
+    pub pixels: ViewPixels,
+    /// The catheter mask, 8-bit coverage (255 = fully catheter).
+    pub mask: Vec<u8>,
+    /// Projection matrix of the view.
+    pub camera: CameraMatrix,
+    /// The background's source and layout (X-ray modalities).
+    pub background: Option<(String, PatchLayout)>,
+}
+
+/// A complete stereo sample.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StereoSample {
+    /// Position in the generated sequence.
+    pub index: u64,
+    /// The scene.
+    pub params: SceneParams,
+    /// The solved catheter.
+    pub shape: RodShape,
+    /// View A and view B.
+    pub views: [ViewSample; 2],
+}
+
+/// Why a sample could not be made.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TwinError {
+    /// The rod solver failed for every draw.
+    #[error("sample {index}: {attempts} scenes drawn, none solved: {last}")]
+    Unsolvable {
+        /// The sample.
+        index: u64,
+        /// Draws tried.
+        attempts: usize,
+        /// The last solver error.
+        last: RodError,
+    },
+    /// An X-ray modality without a background for a view.
+    #[error("no background radiograph for view {0}")]
+    NoBackground(char),
+}
+
+/// The generator of sample `index` of the run seeded `seed`.
+pub fn sample_rng(seed: u64, index: u64) -> ChaCha8Rng {
+    // SplitMix64 finaliser of the pair: well-separated seeds for neighbouring indices.
+    let mut z = seed ^ index.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    ChaCha8Rng::seed_from_u64(z ^ (z >> 31))
+}
+
+/// Otsu's threshold of 8-bit grey values: the level that best separates two classes.
+pub fn otsu_threshold(grey: &[u8]) -> u8 {
+    let mut histogram = [0u64; 256];
+    for &v in grey {
+        histogram[v as usize] += 1;
+    }
+    let total = grey.len() as f64;
+    let sum_all: f64 = histogram
+        .iter()
+        .enumerate()
+        .map(|(v, &c)| v as f64 * c as f64)
+        .sum();
+    let (mut weight_below, mut sum_below) = (0.0, 0.0);
+    let (mut best, mut best_level) = (-1.0, 0u8);
+    for (level, &count) in histogram.iter().enumerate() {
+        weight_below += count as f64;
+        sum_below += level as f64 * count as f64;
+        let weight_above = total - weight_below;
+        if weight_below == 0.0 || weight_above == 0.0 {
+            continue;
+        }
+        let mean_below = sum_below / weight_below;
+        let mean_above = (sum_all - sum_below) / weight_above;
+        let between = weight_below * weight_above * (mean_below - mean_above).powi(2);
+        if between > best {
+            best = between;
+            best_level = level as u8;
+        }
+    }
+    best_level
+}
+
+/// A binary mask (255 = catheter) of the pixels at or below `level`: the catheter is darker than
+/// its surroundings in both bench photographs and fluoroscopy frames.
+pub fn threshold_mask(grey: &[u8], level: u8) -> Vec<u8> {
+    grey.iter()
+        .map(|&v| if v <= level { 255 } else { 0 })
+        .collect()
+}
+
+/// Luma of 8-bit RGB pixels (ITU-R BT.601 weights).
+pub fn luma(rgb: &[u8]) -> Vec<u8> {
+    rgb.chunks_exact(3)
+        .map(|p| {
+            ((299 * u32::from(p[0]) + 587 * u32::from(p[1]) + 114 * u32::from(p[2]) + 500) / 1000)
+                as u8
+        })
+        .collect()
+}
+
+/// Renders one view of a solved catheter.
+pub fn render_view(
+    config: &TwinConfig,
+    shape: &RodShape,
+    view: &CArm,
+    background: Option<(&BackgroundSource, PatchLayout)>,
+    rng: &mut impl Rng,
+) -> ViewSample {
+    let tube: TubeRaster =
+        render::rasterize_catheter(shape, config.rod.diameter_mm, &config.catheter, view);
+    let [width, height] = view.image_size;
+    let (pixels, background) = match background {
+        Some((source, layout)) => {
+            let transmission =
+                synthetic_xray::compose(source, &layout, &config.patches, width, height);
+            let frame = render::render_xray(&transmission, &tube, &config.detector, rng);
+            (
+                ViewPixels::Grey(frame.to_u8()),
+                Some((source.name.clone(), layout)),
+            )
+        }
+        None => {
+            let board = render::bench_background(view, rng);
+            let photo = render::render_bench(&board, &tube, &config.catheter, rng);
+            (ViewPixels::Rgb(photo.to_u8()), None)
+        }
+    };
+    let mask = match config.mask {
+        MaskSource::Geometry => GreyImage {
+            width,
+            height,
+            data: tube.coverage,
+        }
+        .to_u8(),
+        MaskSource::Threshold(level) => threshold_mask(&grey_of(&pixels), level),
+        MaskSource::Otsu => {
+            let grey = grey_of(&pixels);
+            threshold_mask(&grey, otsu_threshold(&grey))
+        }
+    };
+    ViewSample {
+        pixels,
+        mask,
+        camera: view.camera_matrix(),
+        background,
+    }
+}
+
+fn grey_of(pixels: &ViewPixels) -> Vec<u8> {
+    match pixels {
+        ViewPixels::Grey(g) => g.clone(),
+        ViewPixels::Rgb(rgb) => luma(rgb),
+    }
+}
+
+/// Scene draws tried before a sample is reported unsolvable.
+const MAX_DRAWS: usize = 8;
+
+/// Generates sample `index` of the run seeded `seed`.
+pub fn generate(
+    config: &TwinConfig,
+    backgrounds: &Backgrounds,
+    seed: u64,
+    index: u64,
+) -> Result<StereoSample, TwinError> {
+    let mut rng = sample_rng(seed, index);
+    let mut last = None;
+    for _ in 0..MAX_DRAWS {
+        let params = config.scene.sample(&mut rng);
+        let (rod_config, base) = params.rod(&config.rod);
+        match rod::solve(&rod_config, &base, params.tip_force_n) {
+            Ok(shape) => {
+                let views = [(&config.views.a, 0usize, 'A'), (&config.views.b, 1, 'B')].map(
+                    |(view, i, name)| -> Result<ViewSample, TwinError> {
+                        let background = if config.modality.is_xray() {
+                            let sources = &backgrounds.per_view[i];
+                            if sources.is_empty() {
+                                return Err(TwinError::NoBackground(name));
+                            }
+                            let source = &sources[rng.random_range(0..sources.len())];
+                            let layout = PatchLayout::random(
+                                source,
+                                &config.anatomies,
+                                &config.patches,
+                                &mut rng,
+                            );
+                            Some((source, layout))
+                        } else {
+                            None
+                        };
+                        Ok(render_view(config, &shape, view, background, &mut rng))
+                    },
+                );
+                let [a, b] = views;
+                return Ok(StereoSample {
+                    index,
+                    params,
+                    shape,
+                    views: [a?, b?],
+                });
+            }
+            Err(e) => last = Some(e),
+        }
+    }
+    Err(TwinError::Unsolvable {
+        index,
+        attempts: MAX_DRAWS,
+        last: last.expect("at least one draw"),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_same_seed_and_index_give_the_same_sample() {
+        let config = TwinConfig::new(Modality::Xray2, 64);
+        let backgrounds = Backgrounds::phantom(&config.views);
+        let a = generate(&config, &backgrounds, 7, 3).unwrap();
+        let b = generate(&config, &backgrounds, 7, 3).unwrap();
+        assert_eq!(a, b);
+        let c = generate(&config, &backgrounds, 7, 4).unwrap();
+        assert_ne!(a.params, c.params);
+    }
+
+    #[test]
+    fn sampled_forces_are_of_clinical_size_and_push_back_on_the_tip() {
+        let sampling = SceneSampling::default();
+        let mut rng = sample_rng(1, 0);
+        for _ in 0..500 {
+            let p = sampling.sample(&mut rng);
+            let f = p.tip_force_n.norm();
+            assert!(f <= 0.4 + 1e-12);
+            let axis = p.base_frame().column(2);
+            if f > 1e-9 {
+                let angle = (-p.tip_force_n.dot(axis) / f).acos().to_degrees();
+                assert!(angle <= 80.0 + 1e-9, "{angle}");
+            }
+            assert!(p.base_tilt_deg <= 25.0 + 1e-9);
+            assert!((0.4e-3..=0.9e-3).contains(&p.bending_stiffness_n_m2));
+            assert!((40.0..=60.0).contains(&p.length_mm));
+        }
+    }
+
+    #[test]
+    fn masks_match_the_catheter_in_the_images() {
+        for modality in [Modality::Rgb, Modality::Xray1] {
+            let config = TwinConfig::new(modality, 96);
+            let backgrounds = Backgrounds::phantom(&config.views);
+            let sample = generate(&config, &backgrounds, 11, 0).unwrap();
+            for view in &sample.views {
+                let grey = grey_of(&view.pixels);
+                let (mut inside, mut n_in, mut outside, mut n_out) = (0.0, 0, 0.0, 0);
+                for (g, m) in grey.iter().zip(&view.mask) {
+                    if *m >= 200 {
+                        inside += f64::from(*g);
+                        n_in += 1;
+                    } else if *m == 0 {
+                        outside += f64::from(*g);
+                        n_out += 1;
+                    }
+                }
+                assert!(n_in > 50, "{modality:?}: mask too small ({n_in} px)");
+                // The catheter is darker than what surrounds it.
+                assert!(
+                    inside / n_in as f64 + 15.0 < outside / n_out as f64,
+                    "{modality:?}: catheter {} vs background {}",
+                    inside / n_in as f64,
+                    outside / n_out as f64
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn otsu_separates_two_levels() {
+        let grey: Vec<u8> = (0..100).map(|i| if i < 30 { 40 } else { 200 }).collect();
+        let t = otsu_threshold(&grey);
+        assert!((40..200).contains(&t));
+        let mask = threshold_mask(&grey, t);
+        assert_eq!(mask.iter().filter(|&&m| m == 255).count(), 30);
+    }
+}
