@@ -4,7 +4,12 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod bench;
+mod contact_sheet;
+mod import;
 mod info;
+mod progress;
+mod simulate;
 
 /// H-Net Studio: stereo catheter segmentation and 3D tip-force estimation.
 #[derive(Parser, Debug)]
@@ -18,12 +23,24 @@ struct Cli {
 enum Command {
     /// Describe the network of a configuration: parameter counts, input and output shapes.
     Info(info::InfoArgs),
+    /// Generate a stereo dataset with the catheter digital twin.
+    Simulate(simulate::SimulateArgs),
+    /// Turn real recordings (two image folders and a forces CSV) into a dataset.
+    Import(import::ImportArgs),
+    /// Draw a dataset's first pairs (both views and masks) into one PNG.
+    ContactSheet(contact_sheet::ContactSheetArgs),
+    /// Measure throughput (see docs/benchmarks.md).
+    Bench(bench::BenchArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Info(args) => info::run(&args),
+        Command::Simulate(args) => simulate::run(&args),
+        Command::Import(args) => import::run(&args),
+        Command::ContactSheet(args) => contact_sheet::run(&args),
+        Command::Bench(args) => bench::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -4,20 +4,22 @@
 //! ```text
 //! DIR/dataset.json            header: format, version, image size, where the data came from
 //! DIR/manifest.csv            one row per stereo pair: id,split,fx,fy,fz[,parameters...]
-//! DIR/samples/<id>/view_a.png view A image (8-bit grey or RGB)
-//! DIR/samples/<id>/view_b.png view B image
-//! DIR/samples/<id>/mask_a.png view A catheter mask (8-bit, 255 = catheter; soft edges allowed)
-//! DIR/samples/<id>/mask_b.png view B catheter mask
-//! DIR/samples/<id>/sample.json the pair's record: its manifest row and, for simulated pairs,
+//! DIR/samples/<id>_view_a.png view A image (8-bit grey or RGB)
+//! DIR/samples/<id>_view_b.png view B image
+//! DIR/samples/<id>_mask_a.png view A catheter mask (8-bit, 255 = catheter; soft edges allowed)
+//! DIR/samples/<id>_mask_b.png view B catheter mask
+//! DIR/samples/<id>.json       the pair's record: its manifest row and, for simulated pairs,
 //!                             the 3D centreline (mm) and both camera matrices
 //! ```
 //!
 //! Forces are the tip force in newtons. `split` is `train`, `val` or `test`. Ids are made of
 //! ASCII letters, digits, `-`, `_` and `.` so that they are safe file names.
 //!
-//! Writing is crash-safe: a sample's files are written into a hidden folder that is renamed into
-//! place only when complete, and the manifest is written last (also via a rename). A generation
-//! that was killed resumes by skipping the samples already in place.
+//! Writing is crash-safe without slowing generation down: a pair's record is written after its
+//! four images, and a pair counts as complete only when its record parses and each image ends
+//! with PNG's closing chunk, so a pair cut short by a kill (or a power loss) is simply made
+//! again. The manifest, which readers require, is written last, through a temporary file and a
+//! rename. A generation that was killed resumes by skipping the pairs already complete.
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -34,10 +36,21 @@ pub const HEADER_FILE: &str = "dataset.json";
 pub const MANIFEST_FILE: &str = "manifest.csv";
 /// Folder of the samples.
 pub const SAMPLES_DIR: &str = "samples";
-/// File names inside a sample folder, in the order view A, view B, mask A, mask B.
-pub const SAMPLE_IMAGES: [&str; 4] = ["view_a.png", "view_b.png", "mask_a.png", "mask_b.png"];
-/// The sample's record.
-pub const SAMPLE_RECORD: &str = "sample.json";
+/// The four images of a pair, in the order view A, view B, mask A, mask B.
+pub const SAMPLE_IMAGES: [&str; 4] = ["view_a", "view_b", "mask_a", "mask_b"];
+
+/// Path of one of pair `id`'s images (`kind` from [`SAMPLE_IMAGES`]) relative to the dataset.
+pub fn image_path(id: &str, kind: &str) -> String {
+    format!("{SAMPLES_DIR}/{id}_{kind}.png")
+}
+
+/// Path of pair `id`'s record relative to the dataset.
+pub fn record_path(id: &str) -> String {
+    format!("{SAMPLES_DIR}/{id}.json")
+}
+
+/// The last 12 bytes of every PNG file: the empty `IEND` chunk and its CRC.
+const PNG_END: [u8; 12] = [0, 0, 0, 0, b'I', b'E', b'N', b'D', 0xAE, 0x42, 0x60, 0x82];
 
 /// Which part of the data a pair belongs to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -328,7 +341,8 @@ pub fn encode_png(image: ImageRef<'_>) -> Vec<u8> {
     out
 }
 
-/// The files of one pair: relative paths (inside the dataset folder) and contents.
+/// The files of one pair: relative paths (inside the dataset folder) and contents, the record
+/// last.
 pub fn sample_files(
     row: &ManifestRow,
     images: [ImageRef<'_>; 4],
@@ -337,16 +351,11 @@ pub fn sample_files(
     let mut files: Vec<(String, Vec<u8>)> = SAMPLE_IMAGES
         .iter()
         .zip(images)
-        .map(|(name, image)| {
-            (
-                format!("{SAMPLES_DIR}/{}/{name}", row.id),
-                encode_png(image),
-            )
-        })
+        .map(|(kind, image)| (image_path(&row.id, kind), encode_png(image)))
         .collect();
     let record = serde_json::json!({ "manifest": row, "record": record });
     files.push((
-        format!("{SAMPLES_DIR}/{}/{SAMPLE_RECORD}", row.id),
+        record_path(&row.id),
         serde_json::to_vec_pretty(&record).expect("JSON of plain data"),
     ));
     files
@@ -369,13 +378,42 @@ mod folder {
         DatasetError::new(path, e)
     }
 
-    /// Writes `bytes` to `path` through a temporary file and a rename.
+    /// Writes `bytes` to `path` through a synced temporary file (`<path>.partial`) and a rename.
     fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), DatasetError> {
-        let tmp = path.with_extension("partial");
+        let mut tmp = path.as_os_str().to_owned();
+        tmp.push(".partial");
+        let tmp = PathBuf::from(tmp);
         let mut file = fs::File::create(&tmp).map_err(|e| io(&tmp, e))?;
         file.write_all(bytes).map_err(|e| io(&tmp, e))?;
         file.sync_all().map_err(|e| io(&tmp, e))?;
         fs::rename(&tmp, path).map_err(|e| io(path, e))
+    }
+
+    /// Whether the file at `path` is a PNG that was written to its end.
+    fn png_is_complete(path: &Path) -> bool {
+        use std::io::{Read, Seek, SeekFrom};
+        let Ok(mut file) = fs::File::open(path) else {
+            return false;
+        };
+        let mut tail = [0u8; 12];
+        file.seek(SeekFrom::End(-12)).is_ok()
+            && file.read_exact(&mut tail).is_ok()
+            && tail == PNG_END
+    }
+
+    #[derive(Deserialize)]
+    struct SampleRecordManifest {
+        manifest: ManifestRow,
+    }
+
+    /// The manifest row of pair `id` in `root` if the pair is complete.
+    fn complete_row(root: &Path, id: &str) -> Option<ManifestRow> {
+        let bytes = fs::read(root.join(record_path(id))).ok()?;
+        let record: SampleRecordManifest = serde_json::from_slice(&bytes).ok()?;
+        SAMPLE_IMAGES
+            .iter()
+            .all(|kind| png_is_complete(&root.join(image_path(id, kind))))
+            .then_some(record.manifest)
     }
 
     /// Writes a dataset folder sample by sample, crash-safely, and resumes an interrupted one.
@@ -430,73 +468,87 @@ mod folder {
 
         /// Whether the pair `id` is already complete (written by an earlier run).
         pub fn has_sample(&self, id: &str) -> bool {
-            self.root
-                .join(SAMPLES_DIR)
-                .join(id)
-                .join(SAMPLE_RECORD)
-                .is_file()
+            complete_row(&self.root, id).is_some()
         }
 
-        /// Writes one pair's files (from [`sample_files`]) atomically.
+        /// Writes one pair's files (from [`sample_files`]: its images, then its record).
         pub fn write_sample(
             &self,
             id: &str,
             files: &[(String, Vec<u8>)],
         ) -> Result<(), DatasetError> {
-            let samples = self.root.join(SAMPLES_DIR);
-            let staging = samples.join(format!(".partial-{id}"));
-            if staging.exists() {
-                fs::remove_dir_all(&staging).map_err(|e| io(&staging, e))?;
+            let record = record_path(id);
+            if files.last().map(|(path, _)| path) != Some(&record) {
+                return Err(DatasetError::new(
+                    self.root.join(&record),
+                    "a pair's record must be its last file",
+                ));
             }
-            fs::create_dir_all(&staging).map_err(|e| io(&staging, e))?;
-            let prefix = format!("{SAMPLES_DIR}/{id}/");
+            // An earlier, interrupted attempt must not pass for complete while this one writes.
+            let record_file = self.root.join(&record);
+            if record_file.exists() {
+                fs::remove_file(&record_file).map_err(|e| io(&record_file, e))?;
+            }
+            let prefix = format!("{SAMPLES_DIR}/{id}");
             for (path, bytes) in files {
-                let name = path.strip_prefix(&prefix).ok_or_else(|| {
-                    DatasetError::new(&staging, format!("file `{path}` is not in sample `{id}`"))
-                })?;
-                let target = staging.join(name);
-                let mut file = fs::File::create(&target).map_err(|e| io(&target, e))?;
-                file.write_all(bytes).map_err(|e| io(&target, e))?;
-                file.sync_all().map_err(|e| io(&target, e))?;
+                if !path.starts_with(&prefix) || path.contains("..") {
+                    return Err(DatasetError::new(
+                        self.root.join(path),
+                        format!("is not a file of pair `{id}`"),
+                    ));
+                }
+                let target = self.root.join(path);
+                fs::write(&target, bytes).map_err(|e| io(&target, e))?;
             }
-            let target = samples.join(id);
-            if target.exists() {
-                fs::remove_dir_all(&target).map_err(|e| io(&target, e))?;
-            }
-            fs::rename(&staging, &target).map_err(|e| io(&target, e))
+            Ok(())
         }
 
-        /// Writes the manifest from every complete sample's record, sorted by id, and clears
-        /// leftovers of interrupted writes. Returns the rows.
+        /// Writes the manifest from every complete pair, sorted by id, and removes what
+        /// incomplete pairs left behind. Returns the rows.
         pub fn finish(&self) -> Result<Vec<ManifestRow>, DatasetError> {
             let samples = self.root.join(SAMPLES_DIR);
-            let mut rows = Vec::new();
-            let mut entries: Vec<_> = fs::read_dir(&samples)
+            let mut names: Vec<String> = fs::read_dir(&samples)
                 .map_err(|e| io(&samples, e))?
+                .map(|e| e.map(|e| e.file_name().to_string_lossy().into_owned()))
                 .collect::<Result<_, _>>()
                 .map_err(|e| io(&samples, e))?;
-            entries.sort_by_key(|e| e.file_name());
-            for entry in entries {
-                let name = entry.file_name().to_string_lossy().into_owned();
-                if name.starts_with(".partial-") {
-                    fs::remove_dir_all(entry.path()).map_err(|e| io(&entry.path(), e))?;
-                    continue;
+            names.sort();
+            for name in names.iter().filter(|n| n.ends_with(".partial")) {
+                let path = samples.join(name);
+                fs::remove_file(&path).map_err(|e| io(&path, e))?;
+            }
+            let ids: std::collections::BTreeSet<String> = names
+                .iter()
+                .filter_map(|n| {
+                    n.strip_suffix(".json").map(str::to_string).or_else(|| {
+                        SAMPLE_IMAGES
+                            .iter()
+                            .find_map(|k| n.strip_suffix(&format!("_{k}.png")))
+                            .map(str::to_string)
+                    })
+                })
+                .collect();
+            let mut rows = Vec::new();
+            for id in ids {
+                match complete_row(&self.root, &id) {
+                    Some(row) => rows.push(row),
+                    None => {
+                        for path in SAMPLE_IMAGES
+                            .iter()
+                            .map(|k| image_path(&id, k))
+                            .chain([record_path(&id)])
+                        {
+                            let path = self.root.join(path);
+                            if path.exists() {
+                                fs::remove_file(&path).map_err(|e| io(&path, e))?;
+                            }
+                        }
+                    }
                 }
-                let record_path = entry.path().join(SAMPLE_RECORD);
-                let bytes = fs::read(&record_path).map_err(|e| io(&record_path, e))?;
-                let record: SampleRecordManifest = serde_json::from_slice(&bytes).map_err(|e| {
-                    DatasetError::new(&record_path, format!("not a sample record: {e}"))
-                })?;
-                rows.push(record.manifest);
             }
             write_atomically(&self.root.join(MANIFEST_FILE), &manifest_csv(&rows))?;
             Ok(rows)
         }
-    }
-
-    #[derive(Deserialize)]
-    struct SampleRecordManifest {
-        manifest: ManifestRow,
     }
 
     /// A dataset opened for reading.
@@ -573,9 +625,14 @@ mod folder {
             self.rows.iter().filter(move |r| r.split == split)
         }
 
-        /// Path of one of a pair's files.
-        pub fn file(&self, id: &str, name: &str) -> PathBuf {
-            self.root.join(SAMPLES_DIR).join(id).join(name)
+        /// Path of one of a pair's images (`kind` from [`SAMPLE_IMAGES`]).
+        pub fn image_file(&self, id: &str, kind: &str) -> PathBuf {
+            self.root.join(image_path(id, kind))
+        }
+
+        /// Path of a pair's record.
+        pub fn record_file(&self, id: &str) -> PathBuf {
+            self.root.join(record_path(id))
         }
 
         /// Decodes a pair, resized to `size` (`[width, height]`) when given.
@@ -584,8 +641,8 @@ mod folder {
             row: &ManifestRow,
             size: Option<[usize; 2]>,
         ) -> Result<LoadedPair, DatasetError> {
-            let load = |name: &str| -> Result<image::DynamicImage, DatasetError> {
-                let path = self.file(&row.id, name);
+            let load = |kind: &str| -> Result<image::DynamicImage, DatasetError> {
+                let path = self.image_file(&row.id, kind);
                 let bytes = fs::read(&path).map_err(|e| io(&path, e))?;
                 image::load_from_memory(&bytes)
                     .map_err(|e| DatasetError::new(&path, format!("unreadable image: {e}")))
@@ -593,14 +650,18 @@ mod folder {
             let [a, b, ma, mb] = SAMPLE_IMAGES.map(load);
             let (a, b, ma, mb) = (a?, b?, ma?, mb?);
             let first = [a.width() as usize, a.height() as usize];
-            for (name, img) in SAMPLE_IMAGES.iter().zip([&a, &b, &ma, &mb]) {
+            for (kind, img) in SAMPLE_IMAGES.iter().zip([&a, &b, &ma, &mb]) {
                 let found = [img.width() as usize, img.height() as usize];
                 if found != first {
                     return Err(DatasetError::new(
-                        self.file(&row.id, name),
+                        self.image_file(&row.id, kind),
                         format!(
                             "is {}x{} but {} is {}x{}",
-                            found[0], found[1], SAMPLE_IMAGES[0], first[0], first[1]
+                            found[0],
+                            found[1],
+                            image_path(&row.id, SAMPLE_IMAGES[0]),
+                            first[0],
+                            first[1]
                         ),
                     ));
                 }

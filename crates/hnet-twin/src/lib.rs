@@ -19,6 +19,7 @@ pub mod catheter;
 pub mod dataset;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod import;
+pub mod noise;
 pub mod phantom;
 pub mod raster;
 pub mod render;

@@ -83,25 +83,44 @@ impl GreyImage {
     /// averages the source over each output pixel (box filter) so that it does not alias.
     pub fn crop_resampled(&self, rect: Rect, width: usize, height: usize) -> GreyImage {
         let [x0, y0, x1, y1] = rect.0;
-        let sx = (x1 - x0) * self.width as f64 / width as f64;
-        let sy = (y1 - y0) * self.height as f64 / height as f64;
-        // Sub-samples per output pixel along each axis when shrinking.
-        let nx = sx.ceil().max(1.0) as usize;
-        let ny = sy.ceil().max(1.0) as usize;
-        let mut data = Vec::with_capacity(width * height);
+        // Bilinear taps `(low index, high index, weight of high)` of every sub-sample along
+        // one axis, `n` sub-samples per output pixel when shrinking.
+        let taps = |start: f64, extent: f64, source: usize, out: usize| {
+            let step = extent * source as f64 / out as f64;
+            let n = step.ceil().max(1.0) as usize;
+            let mut taps = Vec::with_capacity(out * n);
+            for i in 0..out {
+                for a in 0..n {
+                    let c = start * source as f64 + (i as f64 + (a as f64 + 0.5) / n as f64) * step;
+                    let f = (c - 0.5).clamp(0.0, (source - 1) as f64);
+                    let low = f.floor() as usize;
+                    taps.push((low, (low + 1).min(source - 1), (f - low as f64) as f32));
+                }
+            }
+            (taps, n)
+        };
+        let (xs, nx) = taps(x0, x1 - x0, self.width, width);
+        let (ys, ny) = taps(y0, y1 - y0, self.height, height);
+        let norm = 1.0 / (nx * ny) as f32;
+        let mut data = vec![0.0f32; width * height];
+        let mut row = vec![0.0f32; width];
         for j in 0..height {
-            for i in 0..width {
-                let mut sum = 0.0;
-                for b in 0..ny {
-                    for a in 0..nx {
-                        let x =
-                            x0 * self.width as f64 + (i as f64 + (a as f64 + 0.5) / nx as f64) * sx;
-                        let y = y0 * self.height as f64
-                            + (j as f64 + (b as f64 + 0.5) / ny as f64) * sy;
-                        sum += self.sample(x, y);
+            row.iter_mut().for_each(|v| *v = 0.0);
+            for &(ylo, yhi, ty) in &ys[j * ny..(j + 1) * ny] {
+                let (top, bottom) = (
+                    &self.data[ylo * self.width..(ylo + 1) * self.width],
+                    &self.data[yhi * self.width..(yhi + 1) * self.width],
+                );
+                for (i, acc) in row.iter_mut().enumerate() {
+                    for &(xlo, xhi, tx) in &xs[i * nx..(i + 1) * nx] {
+                        let t = top[xlo] + (top[xhi] - top[xlo]) * tx;
+                        let b = bottom[xlo] + (bottom[xhi] - bottom[xlo]) * tx;
+                        *acc += t + (b - t) * ty;
                     }
                 }
-                data.push(sum / (nx * ny) as f32);
+            }
+            for (out, v) in data[j * width..(j + 1) * width].iter_mut().zip(&row) {
+                *out = v * norm;
             }
         }
         GreyImage {
@@ -148,6 +167,35 @@ impl RgbImage {
         self.data.iter().map(|&v| to_byte(v)).collect()
     }
 
+    /// Blurs the pixels in `[min, max)` (`[x, y]` corners) in place, reading beyond the region's
+    /// edges where the image continues.
+    pub fn blur_region(&mut self, min: [usize; 2], max: [usize; 2], sigma_px: f64) {
+        let kernel = gaussian_kernel(sigma_px);
+        let r = kernel.len() / 2;
+        // Work on the region plus the kernel's reach, then copy the region's interior back.
+        let (ex0, ey0) = (min[0].saturating_sub(r), min[1].saturating_sub(r));
+        let (ex1, ey1) = ((max[0] + r).min(self.width), (max[1] + r).min(self.height));
+        let (w, h) = (ex1 - ex0, ey1 - ey0);
+        let mut patch = Vec::with_capacity(w * h * 3);
+        for y in ey0..ey1 {
+            patch.extend_from_slice(
+                &self.data[(y * self.width + ex0) * 3..(y * self.width + ex1) * 3],
+            );
+        }
+        let blurred = RgbImage {
+            width: w,
+            height: h,
+            data: patch,
+        }
+        .blurred(sigma_px);
+        for y in min[1]..max[1] {
+            let src = ((y - ey0) * w + (min[0] - ex0)) * 3;
+            let dst = (y * self.width + min[0]) * 3;
+            let n = (max[0] - min[0]) * 3;
+            self.data[dst..dst + n].copy_from_slice(&blurred.data[src..src + n]);
+        }
+    }
+
     /// Separable Gaussian blur of every channel.
     pub fn blurred(&self, sigma_px: f64) -> RgbImage {
         let kernel = gaussian_kernel(sigma_px);
@@ -180,7 +228,8 @@ fn gaussian_kernel(sigma: f64) -> Vec<f32> {
     weights.iter().map(|w| (w / sum) as f32).collect()
 }
 
-/// One pass of a 1D convolution along rows (`horizontal`) or columns, clamping at the borders.
+/// One pass of a 1D convolution along rows (`horizontal`) or columns of each channel,
+/// replicating the border pixels.
 fn convolve(
     data: &[f32],
     width: usize,
@@ -189,28 +238,24 @@ fn convolve(
     kernel: &[f32],
     horizontal: bool,
 ) -> Vec<f32> {
-    let radius = (kernel.len() / 2) as isize;
+    let radius = kernel.len() / 2;
+    let (lines, length, along, across) = if horizontal {
+        (height, width, channels, width * channels)
+    } else {
+        (width, height, width * channels, channels)
+    };
     let mut out = vec![0.0; data.len()];
-    for y in 0..height {
-        for x in 0..width {
-            for c in 0..channels {
-                let mut acc = 0.0;
-                for (k, w) in kernel.iter().enumerate() {
-                    let offset = k as isize - radius;
-                    let (sx, sy) = if horizontal {
-                        (
-                            (x as isize + offset).clamp(0, width as isize - 1) as usize,
-                            y,
-                        )
-                    } else {
-                        (
-                            x,
-                            (y as isize + offset).clamp(0, height as isize - 1) as usize,
-                        )
-                    };
-                    acc += w * data[(sy * width + sx) * channels + c];
-                }
-                out[(y * width + x) * channels + c] = acc;
+    let mut padded = vec![0.0f32; length + 2 * radius];
+    for line in 0..lines {
+        for c in 0..channels {
+            let start = line * across + c;
+            for (i, p) in padded.iter_mut().enumerate() {
+                let source = i.saturating_sub(radius).min(length - 1);
+                *p = data[start + source * along];
+            }
+            for i in 0..length {
+                let window = &padded[i..i + kernel.len()];
+                out[start + i * along] = window.iter().zip(kernel).map(|(v, k)| v * k).sum();
             }
         }
     }
@@ -235,6 +280,27 @@ mod tests {
         let b = point.blurred(1.0);
         assert!((b.data.iter().sum::<f32>() - 1.0).abs() < 1e-5);
         assert!(b.data[4 * 9 + 4] < 0.2 && b.data[4 * 9 + 5] > 0.05);
+    }
+
+    #[test]
+    fn blurring_a_region_matches_blurring_everything_inside_it() {
+        let mut image = RgbImage {
+            width: 12,
+            height: 10,
+            data: (0..360).map(|v| ((v * 37) % 101) as f32 / 100.0).collect(),
+        };
+        let whole = image.blurred(0.8);
+        image.blur_region([3, 2], [9, 7], 0.8);
+        for y in 0..10 {
+            for x in 0..12 {
+                for c in 0..3 {
+                    let i = (y * 12 + x) * 3 + c;
+                    if (3..9).contains(&x) && (2..7).contains(&y) {
+                        assert!((image.data[i] - whole.data[i]).abs() < 1e-6);
+                    }
+                }
+            }
+        }
     }
 
     #[test]

@@ -10,6 +10,7 @@ use rand::{Rng, RngExt};
 
 use crate::carm::CArm;
 use crate::catheter::CatheterDesign;
+use crate::noise::Noise;
 use crate::raster::{GreyImage, RgbImage};
 use crate::rod::RodShape;
 
@@ -164,15 +165,6 @@ impl Default for XRayDetector {
     }
 }
 
-/// A standard normal deviate, approximated by the sum of four uniforms (Irwin-Hall), which is
-/// fast, deterministic across platforms and plenty for image noise.
-pub fn normal(rng: &mut impl Rng) -> f32 {
-    let bits: u64 = rng.next_u64();
-    let sum: u32 = (0..4).map(|i| ((bits >> (16 * i)) & 0xFFFF) as u32).sum();
-    // Four uniforms on [0, 1) have mean 2 and variance 1/3.
-    ((sum as f32 / 65536.0) - 2.0) * 3.0f32.sqrt()
-}
-
 /// An X-ray frame in the fluoroscopy display convention: the grey value is the relative
 /// transmitted intensity, so the catheter shows dark on the background's transmission map.
 ///
@@ -184,14 +176,15 @@ pub fn render_xray(
     detector: &XRayDetector,
     rng: &mut impl Rng,
 ) -> GreyImage {
-    let n = detector.photons_per_pixel as f32;
+    let inverse_photons = 1.0 / detector.photons_per_pixel as f32;
+    let mut noise = Noise::from_rng(rng);
     let data = background_transmission
         .data
         .iter()
         .zip(&tube.attenuation)
         .map(|(&t, &att)| {
-            let t = t * (-att).exp();
-            (t + (t.max(0.0) / n).sqrt() * normal(rng)).clamp(0.0, 1.0)
+            let t = if att > 0.0 { t * (-att).exp() } else { t };
+            (t + (t.max(0.0) * inverse_photons).sqrt() * noise.normal()).clamp(0.0, 1.0)
         })
         .collect();
     GreyImage {
@@ -202,8 +195,8 @@ pub fn render_xray(
     .blurred(detector.blur_px)
 }
 
-/// The bench's background: a matte board under two soft lights, with paper grain and a faint
-/// 10 mm grid, as a camera sees it.
+/// The bench's background: a matte board under a soft light with a faint 10 mm grid, as the
+/// camera's optics see it (noise is added by [`render_bench`]).
 pub fn bench_background(view: &CArm, rng: &mut impl Rng) -> RgbImage {
     let [width, height] = view.image_size;
     // Board tint and light placement vary a little from shot to shot.
@@ -214,25 +207,34 @@ pub fn bench_background(view: &CArm, rng: &mut impl Rng) -> RgbImage {
     ];
     let light = [rng.random::<f32>(), rng.random::<f32>()];
     let grid_px = 10.0 / view.isocentre_mm_per_px();
-    let grid_phase = [rng.random::<f64>() * grid_px, rng.random::<f64>() * grid_px];
+    let phase = [rng.random::<f64>() * grid_px, rng.random::<f64>() * grid_px];
+    // Light falloff, vignetting and the grid are separable: tabulate them per column and row.
+    let line = |c: usize, phase: f64| {
+        let m = (c as f64 + 0.5 + phase).rem_euclid(grid_px);
+        (1.0 - m.min(grid_px - m) as f32).clamp(0.0, 1.0)
+    };
+    let axis = |n: usize, light: f32, phase: f64| -> Vec<(f32, f32, f32)> {
+        (0..n)
+            .map(|i| {
+                let f = (i as f32 + 0.5) / n as f32;
+                ((f - light).powi(2), (f - 0.5).powi(2), line(i, phase))
+            })
+            .collect()
+    };
+    let (columns, rows) = (
+        axis(width, light[0], phase[0]),
+        axis(height, light[1], phase[1]),
+    );
     let mut data = Vec::with_capacity(width * height * 3);
-    for y in 0..height {
-        for x in 0..width {
-            let (fx, fy) = (x as f32 / width as f32, y as f32 / height as f32);
-            let lit = 0.82 + 0.18 * (1.0 - ((fx - light[0]).powi(2) + (fy - light[1]).powi(2)));
-            let vignette = 1.0 - 0.12 * ((fx - 0.5).powi(2) + (fy - 0.5).powi(2)) * 4.0;
-            let on_grid = |c: f64, phase: f64| {
-                let d = ((c + phase) % grid_px).min(grid_px - (c + phase) % grid_px);
-                (1.0 - d as f32).clamp(0.0, 1.0)
-            };
-            let grid =
-                on_grid(x as f64 + 0.5, grid_phase[0]).max(on_grid(y as f64 + 0.5, grid_phase[1]));
-            let grain = 0.015 * normal(rng);
-            for c in 0..3 {
-                let line = if c == 1 { 0.93 } else { 0.90 };
-                let v = tint[c] * lit * vignette * (1.0 - (1.0 - line) * grid) + grain;
-                data.push(v);
-            }
+    for &(light_y, vignette_y, grid_y) in &rows {
+        for &(light_x, vignette_x, grid_x) in &columns {
+            let lit = 0.82 + 0.18 * (1.0 - (light_x + light_y));
+            let vignette = 1.0 - 0.48 * (vignette_x + vignette_y);
+            let grid = grid_x.max(grid_y);
+            let shade = lit * vignette;
+            data.push(tint[0] * shade * (1.0 - 0.10 * grid));
+            data.push(tint[1] * shade * (1.0 - 0.07 * grid));
+            data.push(tint[2] * shade * (1.0 - 0.10 * grid));
         }
     }
     RgbImage {
@@ -243,20 +245,24 @@ pub fn bench_background(view: &CArm, rng: &mut impl Rng) -> RgbImage {
 }
 
 /// A bench-camera photograph: the catheter shaded as a glossy tube (Lambertian plus a specular
-/// highlight) over `background`, with camera noise and a slight optical blur.
+/// highlight) over `background`, the optics' slight blur, then the sensor's noise.
 pub fn render_bench(
     background: &RgbImage,
     tube: &TubeRaster,
     design: &CatheterDesign,
     rng: &mut impl Rng,
 ) -> RgbImage {
-    let mut data = background.data.clone();
+    const BLUR_PX: f64 = 0.45;
+    let mut photo = background.clone();
     // Light from the upper left of the tube's cross-section.
     let light_across = -0.45f32;
+    let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
     for (i, &coverage) in tube.coverage.iter().enumerate() {
         if coverage <= 0.0 || !tube.is_touched(i) {
             continue;
         }
+        let (x, y) = (i % tube.width, i / tube.width);
+        (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
         let across = tube.across[i];
         let facing = (1.0 - across * across).max(0.0).sqrt();
         let (colour, gloss, sharpness) = if tube.electrode[i] {
@@ -271,19 +277,31 @@ pub fn render_bench(
                 .powi(sharpness);
         for c in 0..3 {
             let tube_value = colour[c] * diffuse + highlight;
-            let px = &mut data[i * 3 + c];
+            let px = &mut photo.data[i * 3 + c];
             *px = *px * (1.0 - coverage) + tube_value * coverage;
         }
     }
-    for v in &mut data {
-        *v += 0.008 * normal(rng);
+    // The board is smooth, so the blur only changes the image around the catheter.
+    if x0 <= x1 {
+        let margin = 3;
+        photo.blur_region(
+            [x0.saturating_sub(margin), y0.saturating_sub(margin)],
+            [
+                (x1 + margin + 1).min(photo.width),
+                (y1 + margin + 1).min(photo.height),
+            ],
+            BLUR_PX,
+        );
     }
-    RgbImage {
-        width: background.width,
-        height: background.height,
-        data,
+    // Sensor noise, after the optics: mostly luminance, a little per channel.
+    let mut noise = Noise::from_rng(rng);
+    for px in photo.data.chunks_exact_mut(3) {
+        let luminance = 0.012 * noise.normal();
+        for v in px {
+            *v += luminance;
+        }
     }
-    .blurred(0.45)
+    photo
 }
 
 /// Centre of mass of a mask in pixel coordinates, or `None` if it is empty.

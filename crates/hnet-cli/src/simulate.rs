@@ -1,0 +1,164 @@
+//! `hnet simulate`: a stereo dataset from the catheter digital twin.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use hnet_twin::raster::GreyImage;
+use hnet_twin::scene::{Backgrounds, MaskSource, Modality, TwinConfig};
+use hnet_twin::simulate::simulate_dataset;
+use hnet_twin::synthetic_xray::BackgroundSource;
+
+use crate::progress;
+
+#[derive(clap::Args, Debug)]
+pub struct SimulateArgs {
+    /// Image look: `rgb` (bench cameras), `xray1` (bright patches) or `xray2` (mixed patches).
+    #[arg(long, value_parser = parse_modality, default_value = "xray2")]
+    pub modality: Modality,
+    /// Number of stereo pairs.
+    #[arg(long)]
+    pub samples: usize,
+    /// Side of the square images in pixels.
+    #[arg(long, default_value_t = 224)]
+    pub size: usize,
+    /// Seed of every random choice: the same seed gives byte-identical output.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Output folder (created; an interrupted generation there is resumed).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Chest radiographs (PNG/JPEG files, or folders of them) to cut X-ray backgrounds from;
+    /// the built-in thorax phantom when none is given.
+    #[arg(long = "background")]
+    pub backgrounds: Vec<PathBuf>,
+    /// How masks are made: `geometry` (exact), `otsu`, or a grey level 0-255 to threshold at.
+    #[arg(long, default_value = "geometry", value_parser = parse_mask)]
+    pub mask: MaskSource,
+}
+
+pub fn parse_modality(text: &str) -> Result<Modality, String> {
+    Modality::parse(text).ok_or_else(|| format!("`{text}` is not rgb, xray1 or xray2"))
+}
+
+fn parse_mask(text: &str) -> Result<MaskSource, String> {
+    match text {
+        "geometry" => Ok(MaskSource::Geometry),
+        "otsu" => Ok(MaskSource::Otsu),
+        level => level
+            .parse::<u8>()
+            .map(MaskSource::Threshold)
+            .map_err(|_| format!("`{text}` is not geometry, otsu or a grey level 0-255")),
+    }
+}
+
+const IMAGE_EXTENSIONS: [&str; 5] = ["png", "jpg", "jpeg", "bmp", "tif"];
+
+/// The image files named by `paths` (folders expand to the images in them, sorted).
+fn background_files(paths: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    for path in paths {
+        if path.is_dir() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(path)
+                .with_context(|| format!("cannot list background folder '{}'", path.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| {
+                    p.extension().and_then(|e| e.to_str()).is_some_and(|e| {
+                        IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str())
+                    })
+                })
+                .collect();
+            found.sort();
+            if found.is_empty() {
+                bail!("background folder '{}' holds no images", path.display());
+            }
+            files.extend(found);
+        } else {
+            files.push(path.clone());
+        }
+    }
+    Ok(files)
+}
+
+/// Loads a chest radiograph as a background source.
+pub fn load_radiograph(path: &Path) -> anyhow::Result<BackgroundSource> {
+    let image = image::open(path)
+        .with_context(|| format!("background '{}' is not a readable image", path.display()))?
+        .to_luma8();
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| path.display().to_string());
+    Ok(BackgroundSource::chest_radiograph(
+        name,
+        GreyImage::from_u8(
+            image.width() as usize,
+            image.height() as usize,
+            image.as_raw(),
+        ),
+    ))
+}
+
+/// The backgrounds of a run and their names (recorded in the dataset header).
+pub fn backgrounds(
+    config: &TwinConfig,
+    paths: &[PathBuf],
+) -> anyhow::Result<(Backgrounds, Vec<String>)> {
+    if !config.modality.is_xray() {
+        return Ok((Backgrounds::default(), Vec::new()));
+    }
+    if paths.is_empty() {
+        let backgrounds = Backgrounds::phantom(&config.views);
+        let names = backgrounds
+            .per_view
+            .iter()
+            .flatten()
+            .map(|s| s.name.clone())
+            .collect();
+        return Ok((backgrounds, names));
+    }
+    let sources = background_files(paths)?
+        .iter()
+        .map(|p| load_radiograph(p))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let names = sources.iter().map(|s| s.name.clone()).collect();
+    Ok((Backgrounds::files(sources), names))
+}
+
+pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
+    if args.samples == 0 {
+        bail!("--samples must be at least 1");
+    }
+    if args.size < 16 {
+        bail!("--size must be at least 16 pixels");
+    }
+    let mut config = TwinConfig::new(args.modality, args.size);
+    config.mask = args.mask;
+    let (backgrounds, names) = backgrounds(&config, &args.backgrounds)?;
+    let bar = progress::bar(args.samples as u64, "simulating");
+    let start = Instant::now();
+    let report = simulate_dataset(
+        &config,
+        &backgrounds,
+        &names,
+        args.samples,
+        args.seed,
+        &args.out,
+        &|done| bar.set_position(done as u64),
+    )?;
+    bar.finish_and_clear();
+    let seconds = start.elapsed().as_secs_f64();
+    eprintln!(
+        "{} stereo pairs in {} ({} generated in {seconds:.1} s{}, {} already there)",
+        args.samples,
+        args.out.display(),
+        report.generated,
+        if report.generated > 0 {
+            format!(", {:.0}/s", report.generated as f64 / seconds)
+        } else {
+            String::new()
+        },
+        report.resumed
+    );
+    Ok(())
+}
