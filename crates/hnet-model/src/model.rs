@@ -99,7 +99,7 @@ impl HNetConfig {
             u32::try_from(self.depth)
                 .ok()
                 .and_then(|depth| 1usize.checked_shl(depth))
-                .is_some_and(|divisor| divisor <= size && size % divisor == 0)
+                .is_some_and(|divisor| divisor <= size && size.is_multiple_of(divisor))
         };
         if !divisible(self.image_size[0]) || !divisible(self.image_size[1]) {
             return Err(HNetConfigError::ImageSizeNotDivisible {

@@ -275,9 +275,8 @@ pub fn render_bench(
             * (1.0 - (across - light_across).abs())
                 .max(0.0)
                 .powi(sharpness);
-        for c in 0..3 {
-            let tube_value = colour[c] * diffuse + highlight;
-            let px = &mut photo.data[i * 3 + c];
+        for (px, channel) in photo.data[i * 3..i * 3 + 3].iter_mut().zip(colour) {
+            let tube_value = channel * diffuse + highlight;
             *px = *px * (1.0 - coverage) + tube_value * coverage;
         }
     }

@@ -334,10 +334,11 @@ fn solve3(a: [[f64; 3]; 3], b: Vec3) -> Option<Vec3> {
             return None;
         }
         m.swap(col, pivot);
-        for row in col + 1..3 {
-            let f = m[row][col] / m[col][col];
-            for k in col..4 {
-                m[row][k] -= f * m[col][k];
+        let pivot_row = m[col];
+        for row in m.iter_mut().skip(col + 1) {
+            let f = row[col] / pivot_row[col];
+            for (value, pivot_value) in row.iter_mut().zip(pivot_row).skip(col) {
+                *value -= f * pivot_value;
             }
         }
     }
