@@ -8,6 +8,7 @@ use hnet_twin::scene::{Modality, TwinConfig};
 use hnet_twin::simulate::simulate_dataset;
 use serde::Serialize;
 
+use crate::backend::BackendChoice;
 use crate::simulate::{backgrounds, parse_modality};
 
 #[derive(clap::Args, Debug)]
@@ -20,6 +21,129 @@ pub struct BenchArgs {
 enum BenchCommand {
     /// Stereo samples per second of `hnet simulate`, PNG writing included.
     Simulate(SimulateBench),
+    /// H-Net training step time (batch of stereo pairs) and inference latency (one pair).
+    Model(ModelBench),
+}
+
+#[derive(clap::Args, Debug)]
+struct ModelBench {
+    /// Backends to measure.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "flex")]
+    backend: Vec<BackendChoice>,
+    /// Image side in pixels.
+    #[arg(long, default_value_t = 96)]
+    size: usize,
+    /// Pairs per training batch.
+    #[arg(long, default_value_t = 32)]
+    batch: usize,
+    /// Timed training steps (after one warm-up step).
+    #[arg(long, default_value_t = 5)]
+    steps: usize,
+    /// Timed inferences (after one warm-up).
+    #[arg(long, default_value_t = 20)]
+    runs: usize,
+    /// Print JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Serialize)]
+struct ModelResult {
+    backend: &'static str,
+    params: usize,
+    size: usize,
+    batch: usize,
+    threads: usize,
+    train_step_s: f64,
+    infer_pair_s: f64,
+}
+
+fn model(args: &ModelBench) -> anyhow::Result<()> {
+    use burn::module::Module;
+    use burn::optim::{GradientsParams, RmsPropConfig};
+    use burn::tensor::{Distribution, Tensor};
+    use hnet_model::{HNetConfig, HNetLossConfig};
+
+    let mut results = Vec::new();
+    for backend in &args.backend {
+        let device = backend.device()?;
+        let train_device = device.clone().autodiff();
+        let config = HNetConfig::new().with_image_size([args.size, args.size]);
+        let mut net = config.init(&train_device)?;
+        let params = net.num_params();
+        let loss = HNetLossConfig::new().init();
+        let mut optimizer = RmsPropConfig::new()
+            .with_alpha(0.9)
+            .with_momentum(0.0)
+            .with_epsilon(1e-7)
+            .init();
+        let shape = [args.batch, 3, args.size, args.size];
+        let mask = [args.batch, 1, args.size, args.size];
+        let a = Tensor::random(shape, Distribution::Default, &train_device);
+        let b = Tensor::random(shape, Distribution::Default, &train_device);
+        let ma = Tensor::random(mask, Distribution::Bernoulli(0.1), &train_device);
+        let mb = Tensor::random(mask, Distribution::Bernoulli(0.1), &train_device);
+        let f = Tensor::random(
+            [args.batch, 3],
+            Distribution::Uniform(-0.4, 0.4),
+            &train_device,
+        );
+        let mut step = |net: hnet_model::HNet| {
+            let out = net.forward(a.clone(), b.clone());
+            let terms = loss.forward(&out, ma.clone(), mb.clone(), f.clone());
+            let grads = GradientsParams::from_grads(terms.total.backward(), &net);
+            let net = optimizer.step(1e-4, net, grads);
+            // Wait for the device so that the time is the step's.
+            let _ = terms.total.into_scalar::<f32>();
+            net
+        };
+        net = step(net);
+        let start = Instant::now();
+        for _ in 0..args.steps {
+            net = step(net);
+        }
+        let train_step_s = start.elapsed().as_secs_f64() / args.steps as f64;
+
+        let net = net.valid();
+        let pixels = vec![128u8; args.size * args.size * 3];
+        let pair = [hnet_model::inference::StereoPair {
+            view_a: &pixels,
+            view_b: &pixels,
+        }];
+        net.predict(&pair, [args.size, args.size], &device)?;
+        let start = Instant::now();
+        for _ in 0..args.runs {
+            net.predict(&pair, [args.size, args.size], &device)?;
+        }
+        let infer_pair_s = start.elapsed().as_secs_f64() / args.runs as f64;
+        results.push(ModelResult {
+            backend: backend.name(),
+            params,
+            size: args.size,
+            batch: args.batch,
+            threads: rayon::current_num_threads(),
+            train_step_s,
+            infer_pair_s,
+        });
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&results)?);
+    } else {
+        for r in &results {
+            println!(
+                "{}: H-Net ({} parameters) at {}x{}: training step (batch {}) {:.1} ms, inference per stereo pair {:.1} ms, {} threads",
+                r.backend,
+                r.params,
+                r.size,
+                r.size,
+                r.batch,
+                r.train_step_s * 1e3,
+                r.infer_pair_s * 1e3,
+                r.threads
+            );
+        }
+    }
+    Ok(())
 }
 
 #[derive(clap::Args, Debug)]
@@ -122,5 +246,6 @@ fn simulate(args: &SimulateBench) -> anyhow::Result<()> {
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     match &args.what {
         BenchCommand::Simulate(a) => simulate(a),
+        BenchCommand::Model(a) => model(a),
     }
 }

@@ -4,12 +4,19 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod allocator;
+mod backend;
 mod bench;
 mod contact_sheet;
+mod data;
+mod evaluation;
 mod import;
 mod info;
 mod progress;
+mod progress_renderer;
+mod report;
 mod simulate;
+mod training;
 
 /// H-Net Studio: stereo catheter segmentation and 3D tip-force estimation.
 #[derive(Parser, Debug)]
@@ -27,6 +34,12 @@ enum Command {
     Simulate(simulate::SimulateArgs),
     /// Turn real recordings (two image folders and a forces CSV) into a dataset.
     Import(import::ImportArgs),
+    /// Train H-Net (or a baseline) on a dataset.
+    Train(training::TrainArgs),
+    /// The paper's Tables I and II for a trained run on a dataset split.
+    Eval(evaluation::EvalArgs),
+    /// The paper's figures (SVG and PNG) for a trained run.
+    Report(report::ReportArgs),
     /// Draw a dataset's first pairs (both views and masks) into one PNG.
     ContactSheet(contact_sheet::ContactSheetArgs),
     /// Measure throughput (see docs/benchmarks.md).
@@ -34,11 +47,15 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    allocator::tune();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Info(args) => info::run(&args),
         Command::Simulate(args) => simulate::run(&args),
         Command::Import(args) => import::run(&args),
+        Command::Train(args) => training::run(&args),
+        Command::Eval(args) => evaluation::run(&args),
+        Command::Report(args) => report::run(&args),
         Command::ContactSheet(args) => contact_sheet::run(&args),
         Command::Bench(args) => bench::run(&args),
     };

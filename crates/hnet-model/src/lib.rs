@@ -13,7 +13,9 @@
 //!   they need no backend;
 //! - [`inference`]: turning RGB pixel buffers into input tensors and outputs into masks and a
 //!   tip force;
-//! - [`weights`]: saving and loading trained weights as a single self-describing burnpack file.
+//! - [`weights`]: saving and loading trained weights as a single self-describing burnpack file;
+//! - [`baselines`] and [`architectures`]: the networks H-Net is compared with, and one type for
+//!   all of them so that training and evaluation are written once.
 //!
 //! The code has no backend type parameter: Burn 0.22 picks the backend from the [`Device`]
 //! (`Device::flex()` on the CPU, `Device::wgpu(..)` on a GPU or in the browser).
@@ -26,6 +28,8 @@
 
 extern crate alloc;
 
+pub mod architectures;
+pub mod baselines;
 pub mod inference;
 pub mod loss;
 pub mod metrics;

@@ -12,7 +12,7 @@
 //! A value that is undefined for the data, such as R² of a constant target, is `None` (`null` in
 //! JSON) rather than NaN.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Probability at or above which a pixel counts as catheter, in predictions and in targets.
 pub const MASK_THRESHOLD: f32 = 0.5;
@@ -70,7 +70,7 @@ impl AxisSums {
 }
 
 /// Force errors of one axis (or their summary over the three axes), in newtons.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct AxisMetrics {
     /// Mean absolute error (N).
     pub mae: f64,
@@ -87,7 +87,7 @@ pub struct AxisMetrics {
 }
 
 /// Force metrics of a set (the paper's Table I).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ForceMetrics {
     /// Number of stereo pairs.
     pub samples: u64,
@@ -154,7 +154,7 @@ impl ForceAccumulator {
 }
 
 /// IoU and Dice of one class.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ClassMetrics {
     /// Intersection over union. 1 when the class is absent from both prediction and target.
     pub iou: f64,
@@ -163,7 +163,7 @@ pub struct ClassMetrics {
 }
 
 /// Segmentation metrics of one head over a set (the paper's Table II).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SegmentationMetrics {
     /// Number of pixels compared.
     pub pixels: u64,

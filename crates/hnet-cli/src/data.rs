@@ -1,0 +1,154 @@
+//! Datasets on disk to batches of tensors.
+//!
+//! A split is decoded, resized to the model's input size and kept in memory as bytes (about
+//! `2·(3+1)·H·W` bytes per pair), so that epochs after the first cost no PNG decoding.
+
+use std::sync::Arc;
+
+use anyhow::Context;
+use burn::data::dataloader::batcher::Batcher;
+use burn::data::dataset::{Dataset as BurnDataset, DatasetError};
+use burn::tensor::{Device, Tensor, TensorData};
+use hnet_twin::dataset::{Dataset, ManifestRow, Split};
+use rayon::prelude::*;
+
+/// One stereo pair at the model's input size.
+#[derive(Debug, Clone)]
+pub struct StereoItem {
+    /// View A, RGB bytes, `H·W·3`.
+    pub view_a: Arc<[u8]>,
+    /// View B, RGB bytes.
+    pub view_b: Arc<[u8]>,
+    /// Mask A, coverage bytes (255 = catheter), `H·W`.
+    pub mask_a: Arc<[u8]>,
+    /// Mask B.
+    pub mask_b: Arc<[u8]>,
+    /// Tip force in newtons.
+    pub force_n: [f32; 3],
+    /// The pair's id.
+    pub id: Arc<str>,
+}
+
+/// The pairs of one split, in memory.
+#[derive(Debug, Clone)]
+pub struct StereoSplit {
+    /// The pairs, in manifest order.
+    pub items: Vec<StereoItem>,
+}
+
+impl StereoSplit {
+    /// Loads `split` of `dataset` at `size` (`[height, width]`), at most `limit` pairs.
+    pub fn load(
+        dataset: &Dataset,
+        split: Split,
+        size: [usize; 2],
+        limit: Option<usize>,
+    ) -> anyhow::Result<Self> {
+        let rows: Vec<&ManifestRow> = dataset
+            .split(split)
+            .take(limit.unwrap_or(usize::MAX))
+            .collect();
+        let items = rows
+            .par_iter()
+            .map(|row| -> anyhow::Result<StereoItem> {
+                let pair = dataset.load_pair(row, Some([size[1], size[0]]))?;
+                let mask = |m: &[f32]| -> Arc<[u8]> {
+                    m.iter().map(|v| (v * 255.0).round() as u8).collect()
+                };
+                Ok(StereoItem {
+                    view_a: pair.view_a.into(),
+                    view_b: pair.view_b.into(),
+                    mask_a: mask(&pair.mask_a),
+                    mask_b: mask(&pair.mask_b),
+                    force_n: row.force_n.map(|f| f as f32),
+                    id: row.id.as_str().into(),
+                })
+            })
+            .collect::<anyhow::Result<Vec<_>>>()
+            .with_context(|| {
+                format!(
+                    "loading the {} split of {}",
+                    split.name(),
+                    dataset.root.display()
+                )
+            })?;
+        Ok(Self { items })
+    }
+}
+
+impl BurnDataset<StereoItem> for StereoSplit {
+    fn get(&self, index: usize) -> Result<StereoItem, DatasetError> {
+        self.items.get(index).cloned().ok_or_else(|| {
+            DatasetError::new(std::io::Error::other(format!(
+                "pair {index} of {} requested",
+                self.items.len()
+            )))
+        })
+    }
+
+    fn len(&self) -> usize {
+        self.items.len()
+    }
+}
+
+/// A batch of `B` pairs as tensors.
+#[derive(Debug, Clone)]
+pub struct StereoBatch {
+    /// View A images `[B, 3, H, W]` in `[0, 1]`.
+    pub view_a: Tensor<4>,
+    /// View B images.
+    pub view_b: Tensor<4>,
+    /// View A masks `[B, 1, H, W]` in `[0, 1]`.
+    pub mask_a: Tensor<4>,
+    /// View B masks.
+    pub mask_b: Tensor<4>,
+    /// Tip forces `[B, 3]` in newtons.
+    pub force: Tensor<2>,
+}
+
+/// Turns pairs into [`StereoBatch`]es.
+#[derive(Debug, Clone)]
+pub struct StereoBatcher {
+    /// `[height, width]`.
+    pub size: [usize; 2],
+}
+
+fn planar(pixels: &[u8], out: &mut Vec<f32>) {
+    for channel in 0..3 {
+        out.extend(
+            pixels
+                .iter()
+                .skip(channel)
+                .step_by(3)
+                .map(|&v| f32::from(v) / 255.0),
+        );
+    }
+}
+
+impl Batcher<StereoItem, StereoBatch> for StereoBatcher {
+    fn batch(&self, items: Vec<StereoItem>, device: &Device) -> StereoBatch {
+        let [h, w] = self.size;
+        let n = items.len();
+        let mut a = Vec::with_capacity(n * 3 * h * w);
+        let mut b = Vec::with_capacity(n * 3 * h * w);
+        let mut ma = Vec::with_capacity(n * h * w);
+        let mut mb = Vec::with_capacity(n * h * w);
+        let mut f = Vec::with_capacity(n * 3);
+        for item in &items {
+            planar(&item.view_a, &mut a);
+            planar(&item.view_b, &mut b);
+            ma.extend(item.mask_a.iter().map(|&v| f32::from(v) / 255.0));
+            mb.extend(item.mask_b.iter().map(|&v| f32::from(v) / 255.0));
+            f.extend_from_slice(&item.force_n);
+        }
+        let image = |data| Tensor::from_data(TensorData::new(data, [n, 3, h, w]), device);
+        let mask = |data| Tensor::from_data(TensorData::new(data, [n, 1, h, w]), device);
+        StereoBatch {
+            view_a: image(a),
+            view_b: image(b),
+            mask_a: mask(ma),
+            mask_b: mask(mb),
+            force: Tensor::from_data(TensorData::new(f, [n, 3]), device),
+        }
+    }
+}

@@ -1,0 +1,344 @@
+//! `hnet eval`: the paper's Table I (force) and Table II (segmentation) for a trained run on a
+//! dataset split, as JSON and markdown, with the per-pair predictions kept for `hnet report`.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use burn::module::Module;
+use burn::tensor::{Device, Tensor};
+use hnet_model::architectures::{ModelSpec, StereoModel};
+use hnet_model::metrics::{
+    AXES, AxisMetrics, ForceAccumulator, ForceMetrics, SegmentationAccumulator, SegmentationMetrics,
+};
+use hnet_twin::dataset::{Dataset, Split};
+use serde::{Deserialize, Serialize};
+
+use crate::backend::BackendChoice;
+use crate::data::{StereoBatcher, StereoItem, StereoSplit};
+
+#[derive(clap::Args, Debug)]
+pub struct EvalArgs {
+    /// Run folder of `hnet train` (its `model.bpk` is evaluated).
+    #[arg(long)]
+    run: PathBuf,
+    /// Dataset folder (the one the run was trained on by default).
+    #[arg(long)]
+    data: Option<PathBuf>,
+    /// Which split.
+    #[arg(long, default_value = "test", value_parser = parse_split)]
+    split: Split,
+    /// Print JSON instead of markdown.
+    #[arg(long)]
+    json: bool,
+    /// Where to compute.
+    #[arg(long, value_enum, default_value = "flex")]
+    backend: BackendChoice,
+    /// Pairs per batch.
+    #[arg(long, default_value_t = 16)]
+    batch_size: usize,
+}
+
+pub fn parse_split(text: &str) -> Result<Split, String> {
+    Split::parse(text).ok_or_else(|| format!("`{text}` is not train, val or test"))
+}
+
+/// The paper's two tables for one model on one split.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Evaluation {
+    /// Architecture name.
+    pub architecture: String,
+    /// Parameter count.
+    pub params: usize,
+    /// Dataset folder.
+    pub data: PathBuf,
+    /// Split evaluated.
+    pub split: String,
+    /// Input size `[height, width]`.
+    pub image_size: [usize; 2],
+    /// Table I, for networks with a force head.
+    pub force: Option<ForceMetrics>,
+    /// Table II per head (view A, view B), for networks that segment.
+    pub segmentation: Option<[SegmentationMetrics; 2]>,
+    /// Table II over both heads together.
+    pub segmentation_mean: Option<SegmentationMetrics>,
+}
+
+/// One pair's true and predicted force, for `hnet report`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ForcePrediction {
+    /// The pair's id.
+    pub id: String,
+    /// True force (N).
+    pub truth: [f32; 3],
+    /// Predicted force (N).
+    pub predicted: [f32; 3],
+}
+
+/// A trained model loaded from a run folder.
+pub struct TrainedModel {
+    /// The network.
+    pub net: StereoModel,
+    /// Its settings.
+    pub spec: ModelSpec,
+    /// Input size `[height, width]` it was trained at.
+    pub image_size: [usize; 2],
+}
+
+/// Loads `run/model.bpk` (and the training config for the input size).
+pub fn load_run(run: &Path, device: &Device) -> anyhow::Result<TrainedModel> {
+    let path = run.join("model.bpk");
+    let bytes = std::fs::read(&path).with_context(|| {
+        format!(
+            "cannot read '{}' (has `hnet train --out {}` finished?)",
+            path.display(),
+            run.display()
+        )
+    })?;
+    let (net, spec, _) =
+        StereoModel::from_weights_bytes(&bytes, device, &path.display().to_string())?;
+    let config = crate::training::TrainingConfig::load(&run.join("config.json"))?;
+    Ok(TrainedModel {
+        net,
+        spec,
+        image_size: config.image_size,
+    })
+}
+
+/// The dataset a run was trained on.
+pub fn run_data(run: &Path) -> anyhow::Result<PathBuf> {
+    let path = run.join("run.json");
+    let info: crate::training::RunInfo = serde_json::from_slice(
+        &std::fs::read(&path).with_context(|| format!("cannot read '{}'", path.display()))?,
+    )?;
+    Ok(info.data)
+}
+
+/// Runs `model` on `items` in batches; calls `visit` with each pair and its outputs.
+pub fn predict(
+    model: &TrainedModel,
+    items: &[StereoItem],
+    batch_size: usize,
+    device: &Device,
+    mut visit: impl FnMut(&StereoItem, Option<[Vec<f32>; 2]>, Option<[f32; 3]>),
+) -> anyhow::Result<()> {
+    use burn::data::dataloader::batcher::Batcher;
+    let batcher = StereoBatcher {
+        size: model.image_size,
+    };
+    let to_vec = |t: Tensor<4>| -> anyhow::Result<Vec<f32>> {
+        t.into_data()
+            .try_into_vec::<f32>()
+            .map_err(|e| anyhow::anyhow!("{e:?}"))
+    };
+    let pixels = model.image_size[0] * model.image_size[1];
+    for chunk in items.chunks(batch_size.max(1)) {
+        let batch = batcher.batch(chunk.to_vec(), device);
+        let out = model
+            .net
+            .forward([batch.view_a, batch.view_b], [batch.mask_a, batch.mask_b]);
+        let masks = match out.mask_logits {
+            Some([a, b]) => Some([
+                to_vec(burn::tensor::activation::sigmoid(a))?,
+                to_vec(burn::tensor::activation::sigmoid(b))?,
+            ]),
+            None => None,
+        };
+        let forces = match out.force {
+            Some(f) => Some(
+                f.into_data()
+                    .try_into_vec::<f32>()
+                    .map_err(|e| anyhow::anyhow!("{e:?}"))?,
+            ),
+            None => None,
+        };
+        for (i, item) in chunk.iter().enumerate() {
+            let item_masks = masks.as_ref().map(|[a, b]| {
+                [
+                    a[i * pixels..(i + 1) * pixels].to_vec(),
+                    b[i * pixels..(i + 1) * pixels].to_vec(),
+                ]
+            });
+            let force = forces
+                .as_ref()
+                .map(|f| [f[i * 3], f[i * 3 + 1], f[i * 3 + 2]]);
+            visit(item, item_masks, force);
+        }
+    }
+    Ok(())
+}
+
+/// Evaluates a run on a split; returns the tables and the per-pair forces.
+pub fn evaluate(
+    run: &Path,
+    data: &Path,
+    split: Split,
+    backend: BackendChoice,
+    batch_size: usize,
+) -> anyhow::Result<(Evaluation, Vec<ForcePrediction>)> {
+    let device = backend.device()?;
+    let model = load_run(run, &device)?;
+    let dataset = Dataset::open(data)?;
+    let pairs = StereoSplit::load(&dataset, split, model.image_size, None)?;
+    anyhow::ensure!(
+        !pairs.items.is_empty(),
+        "{} has no pairs in its {} split",
+        data.display(),
+        split.name()
+    );
+    let mut heads = [
+        SegmentationAccumulator::new(),
+        SegmentationAccumulator::new(),
+    ];
+    let mut forces = ForceAccumulator::new();
+    let mut predictions = Vec::new();
+    let mut error = None;
+    predict(
+        &model,
+        &pairs.items,
+        batch_size,
+        &device,
+        |item, masks, force| {
+            if let Some(masks) = masks {
+                for ((head, predicted), target) in heads
+                    .iter_mut()
+                    .zip(masks)
+                    .zip([&item.mask_a, &item.mask_b])
+                {
+                    let target: Vec<f32> = target.iter().map(|&v| f32::from(v) / 255.0).collect();
+                    if let Err(e) = head.push(&predicted, &target) {
+                        error.get_or_insert(e.to_string());
+                    }
+                }
+            }
+            if let Some(force) = force {
+                forces.push(force, item.force_n);
+                predictions.push(ForcePrediction {
+                    id: item.id.to_string(),
+                    truth: item.force_n,
+                    predicted: force,
+                });
+            }
+        },
+    )?;
+    if let Some(e) = error {
+        anyhow::bail!("{e}");
+    }
+    let (segments, force_head) = model.spec.heads();
+    let segmentation = segments.then(|| heads.map(|h| h.finish().expect("pairs were seen")));
+    let segmentation_mean = segments.then(|| {
+        let mut both = heads[0];
+        both.merge(&heads[1]);
+        both.finish().expect("pairs were seen")
+    });
+    Ok((
+        Evaluation {
+            architecture: model.spec.name().to_string(),
+            params: model.net.num_params(),
+            data: data.to_path_buf(),
+            split: split.name().to_string(),
+            image_size: model.image_size,
+            force: if force_head { forces.finish() } else { None },
+            segmentation,
+            segmentation_mean,
+        },
+        predictions,
+    ))
+}
+
+fn number(v: Option<f64>) -> String {
+    v.map_or_else(|| "n/a".to_string(), |v| format!("{v:.4}"))
+}
+
+/// The two tables as markdown.
+pub fn markdown(e: &Evaluation) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "{} on the {} split of {} ({}x{}, {} parameters)\n",
+        e.architecture,
+        e.split,
+        e.data.display(),
+        e.image_size[1],
+        e.image_size[0],
+        e.params
+    );
+    if let Some(f) = &e.force {
+        let _ = writeln!(s, "Table I: tip force, {} pairs (N, N², N)\n", f.samples);
+        let _ = writeln!(s, "| axis | MAE | MSE | RMSE | R² | R/M | RMSE/range |");
+        let _ = writeln!(s, "| --- | --- | --- | --- | --- | --- | --- |");
+        let row = |s: &mut String, name: &str, m: &AxisMetrics| {
+            let _ = writeln!(
+                s,
+                "| {name} | {:.4} | {:.5} | {:.4} | {} | {} | {} |",
+                m.mae,
+                m.mse,
+                m.rmse,
+                number(m.r2),
+                number(m.r_over_m),
+                number(m.r_over_range)
+            );
+        };
+        for (axis, m) in AXES.iter().zip(&f.axes) {
+            row(&mut s, &format!("F{axis}"), m);
+        }
+        row(&mut s, "mean", &f.overall);
+        s.push('\n');
+    }
+    if let (Some(heads), Some(mean)) = (&e.segmentation, &e.segmentation_mean) {
+        let _ = writeln!(s, "Table II: segmentation\n");
+        let _ = writeln!(
+            s,
+            "| head | params | accuracy | mIoU | mDice | IoU catheter | Dice catheter |"
+        );
+        let _ = writeln!(s, "| --- | --- | --- | --- | --- | --- | --- |");
+        for (name, m) in [("view A", &heads[0]), ("view B", &heads[1]), ("mean", mean)] {
+            let _ = writeln!(
+                s,
+                "| {name} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} |",
+                e.params, m.accuracy, m.miou, m.mdice, m.catheter.iou, m.catheter.dice
+            );
+        }
+    }
+    s
+}
+
+pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
+    let data = match &args.data {
+        Some(d) => d.clone(),
+        None => run_data(&args.run)?,
+    };
+    let (evaluation, predictions) =
+        evaluate(&args.run, &data, args.split, args.backend, args.batch_size)?;
+    let stem = format!("eval-{}", args.split.name());
+    std::fs::write(
+        args.run.join(format!("{stem}.json")),
+        serde_json::to_vec_pretty(&evaluation)?,
+    )?;
+    std::fs::write(args.run.join(format!("{stem}.md")), markdown(&evaluation))?;
+    let mut csv = String::from("id,fx,fy,fz,fx_pred,fy_pred,fz_pred\n");
+    for p in &predictions {
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{},{},{}",
+            p.id,
+            p.truth[0],
+            p.truth[1],
+            p.truth[2],
+            p.predicted[0],
+            p.predicted[1],
+            p.predicted[2]
+        );
+    }
+    std::fs::write(
+        args.run
+            .join(format!("predictions-{}.csv", args.split.name())),
+        csv,
+    )?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&evaluation)?);
+    } else {
+        print!("{}", markdown(&evaluation));
+    }
+    Ok(())
+}
