@@ -351,15 +351,15 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     let (_, predictions) = evaluate(&args.run, &data, Split::Test, args.backend, 16)?;
     let mut written = Vec::new();
     if !predictions.is_empty() {
-        for axis in 0..3 {
-            let stem = format!("fig4-force-{}", AXES[axis]);
+        for (axis, name) in AXES.iter().enumerate() {
+            let stem = format!("fig4-force-{name}");
             Figure::Force {
                 axis,
                 predictions: &predictions,
             }
             .save(&out, &stem, (900, 420))?;
             written.push(stem);
-            let stem = format!("fig5-error-{}", AXES[axis]);
+            let stem = format!("fig5-error-{name}");
             Figure::Errors {
                 axis,
                 predictions: &predictions,

@@ -110,6 +110,9 @@ impl fmt::Display for ModelSpec {
 }
 
 /// Any of the networks.
+// One value per training run or page, never in a collection: the size of the largest variant
+// (H-Net's layer records) costs nothing, and Burn's `Module` derive does not see through a `Box`.
+#[allow(clippy::large_enum_variant)]
 #[derive(Module, Debug)]
 pub enum StereoModel {
     /// H-Net.
