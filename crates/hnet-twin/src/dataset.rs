@@ -94,8 +94,15 @@ pub fn assign_splits(n: usize, seed: u64) -> Vec<Split> {
     for i in (1..n).rev() {
         order.swap(i, rng.random_range(0..=i));
     }
-    let n_train = (n as f64 * 0.8).round() as usize;
-    let n_val = (n as f64 * 0.1).round() as usize;
+    let mut n_val = (n as f64 * 0.1).round() as usize;
+    let mut n_test = n - ((n as f64 * 0.8).round() as usize) - n_val;
+    // Small sets (such as a few pairs labeled in the app) still get one validation and one test
+    // pair, so that training can stop early and evaluation has something to measure.
+    if n >= 3 {
+        n_val = n_val.max(1);
+        n_test = n_test.max(1);
+    }
+    let n_train = n - n_val - n_test;
     let mut splits = vec![Split::Test; n];
     for (rank, &index) in order.iter().enumerate() {
         splits[index] = if rank < n_train {
@@ -723,6 +730,17 @@ mod tests {
         );
         assert_eq!(s, assign_splits(1000, 42));
         assert_ne!(s, assign_splits(1000, 43));
+    }
+
+    #[test]
+    fn small_sets_keep_a_validation_and_a_test_pair() {
+        let count = |n, split| assign_splits(n, 7).iter().filter(|&&x| x == split).count();
+        for n in 3..12 {
+            assert!(count(n, Split::Val) >= 1 && count(n, Split::Test) >= 1, "{n}");
+            assert!(count(n, Split::Train) >= n / 3, "{n}");
+        }
+        assert_eq!(count(2, Split::Train), 2);
+        assert_eq!(count(1, Split::Train), 1);
     }
 
     #[test]

@@ -14,6 +14,7 @@
 //! Everything compiles for wasm32 (the browser app runs the twin live) except the folder
 //! writing, which uses threads (rayon) natively.
 
+pub mod archive;
 pub mod carm;
 pub mod catheter;
 pub mod dataset;

@@ -1,0 +1,246 @@
+//! The `hnet` command end to end: simulate, train (killed and resumed), evaluate, report, and
+//! clear errors for bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+fn hnet() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_hnet"))
+}
+
+fn run(args: &[&str]) -> Output {
+    let output = hnet().args(args).output().expect("hnet runs");
+    assert!(
+        output.status.success(),
+        "hnet {} failed:\n{}",
+        args.join(" "),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    output
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("hnet-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A small H-Net config (32x32, 8 filters, 2 levels) for tests.
+fn tiny_config(dir: &Path, architecture: &str, epochs: usize) -> PathBuf {
+    let model = match architecture {
+        "hnet" => r#"{"architecture": "hnet", "in_channels": 3, "filters": 8, "depth": 2,
+                      "image_size": [32, 32], "share_weights": true, "force_hidden": [16, 8]}"#
+            .to_string(),
+        "unet" => r#"{"architecture": "unet", "base_filters": 4, "depth": 2}"#.to_string(),
+        "fcn" => r#"{"architecture": "fcn", "base_filters": 4}"#.to_string(),
+        "hrnet" => r#"{"architecture": "hrnet", "width": 4}"#.to_string(),
+        "ynet" => r#"{"architecture": "ynet", "base_filters": 4, "hidden": [16, 8]}"#.to_string(),
+        other => panic!("{other}"),
+    };
+    let path = dir.join(format!("{architecture}.json"));
+    std::fs::write(
+        &path,
+        format!(
+            r#"{{"name": "tiny", "model": {model}, "image_size": [32, 32],
+              "loss": {{"beta_a": 1.0, "beta_b": 1.0, "beta_force": 1.0}},
+              "learning_rate": 0.001, "rmsprop_alpha": 0.9, "rmsprop_momentum": 0.0,
+              "rmsprop_epsilon": 1e-7, "batch_size": 8, "epochs": {epochs}, "patience": 20,
+              "seed": 1, "max_train_samples": null, "max_valid_samples": null,
+              "num_workers": 1}}"#
+        ),
+    )
+    .unwrap();
+    path
+}
+
+fn simulate(dir: &Path, samples: usize) -> PathBuf {
+    let data = dir.join("data");
+    run(&[
+        "simulate",
+        "--modality",
+        "xray2",
+        "--samples",
+        &samples.to_string(),
+        "--size",
+        "32",
+        "--seed",
+        "5",
+        "--out",
+        data.to_str().unwrap(),
+    ]);
+    data
+}
+
+#[test]
+fn info_reports_both_parameter_counts() {
+    let out = run(&["info", "--json"]);
+    let info: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(info["params"], 254_724);
+    assert_eq!(info["params_unshared"], 486_725);
+    assert_eq!(info["input"], serde_json::json!([3, 224, 224]));
+}
+
+#[test]
+fn a_training_killed_mid_run_resumes_and_finishes() {
+    let dir = scratch("resume");
+    let data = simulate(&dir, 400);
+    let config = tiny_config(&dir, "hnet", 8);
+    let runs = dir.join("run");
+    let mut child = hnet()
+        .args(["train", "--data", data.to_str().unwrap(), "--out"])
+        .arg(&runs)
+        .args(["--config", config.to_str().unwrap()])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // Kill it (SIGKILL) as soon as the first epoch's checkpoint is complete.
+    let start = Instant::now();
+    while !runs.join("checkpoint/scheduler-1.bpk").exists() {
+        assert!(start.elapsed() < Duration::from_secs(120), "no checkpoint");
+        assert!(child.try_wait().unwrap().is_none(), "training ended early");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(
+        !runs.join("model.bpk").exists(),
+        "the run was not cut short"
+    );
+
+    // A plain second start refuses to overwrite the run.
+    let again = hnet()
+        .args(["train", "--data", data.to_str().unwrap(), "--out"])
+        .arg(&runs)
+        .args(["--config", config.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(!again.status.success());
+    assert!(String::from_utf8_lossy(&again.stderr).contains("--resume"));
+
+    run(&["train", "--resume", "--out", runs.to_str().unwrap()]);
+    let metrics = std::fs::read_to_string(runs.join("metrics.csv")).unwrap();
+    for epoch in 1..=8 {
+        for split in ["train", "valid"] {
+            assert!(
+                metrics.contains(&format!("\n{epoch},{split},")),
+                "epoch {epoch} {split} missing:\n{metrics}"
+            );
+        }
+    }
+    assert!(runs.join("model.bpk").is_file());
+
+    // The tables, as JSON, from the saved model.
+    let out = run(&["eval", "--run", runs.to_str().unwrap(), "--json"]);
+    let eval: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(eval["architecture"], "hnet");
+    assert_eq!(eval["force"]["samples"], 40);
+    assert!(eval["force"]["axes"][2]["rmse"].as_f64().unwrap() >= 0.0);
+    assert!(eval["segmentation"][1]["mdice"].as_f64().unwrap() > 0.0);
+    assert!(runs.join("eval-test.md").is_file());
+
+    run(&["report", "--run", runs.to_str().unwrap()]);
+    for figure in [
+        "fig3-samples.png",
+        "fig4-force-z.svg",
+        "fig4-force-z.png",
+        "fig5-error-x.png",
+        "fig5-loss.svg",
+        "fig5-miou.png",
+    ] {
+        assert!(runs.join("report").join(figure).is_file(), "{figure}");
+    }
+    std::fs::remove_dir_all(dir).ok();
+}
+
+#[test]
+fn every_baseline_trains_and_evaluates_in_the_same_harness() {
+    let dir = scratch("baselines");
+    let data = simulate(&dir, 60);
+    for (architecture, segments, force) in [
+        ("unet", true, false),
+        ("fcn", true, false),
+        ("hrnet", true, false),
+        ("ynet", false, true),
+    ] {
+        let config = tiny_config(&dir, architecture, 1);
+        let runs = dir.join(architecture);
+        run(&[
+            "train",
+            "--data",
+            data.to_str().unwrap(),
+            "--out",
+            runs.to_str().unwrap(),
+            "--config",
+            config.to_str().unwrap(),
+        ]);
+        let out = run(&["eval", "--run", runs.to_str().unwrap(), "--json"]);
+        let eval: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(eval["architecture"], architecture);
+        assert_eq!(!eval["segmentation"].is_null(), segments, "{architecture}");
+        assert_eq!(!eval["force"].is_null(), force, "{architecture}");
+    }
+    std::fs::remove_dir_all(dir).ok();
+}
+
+#[test]
+fn bad_input_gets_a_clear_error_naming_the_file() {
+    let dir = scratch("errors");
+    // Not a dataset.
+    let out = hnet()
+        .args(["train", "--out"])
+        .arg(dir.join("run"))
+        .args(["--data"])
+        .arg(dir.join("nowhere"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("nowhere") && err.contains("dataset.json"),
+        "{err}"
+    );
+
+    // A corrupt weights file.
+    let run_dir = dir.join("corrupt");
+    std::fs::create_dir_all(&run_dir).unwrap();
+    std::fs::write(run_dir.join("model.bpk"), b"not weights").unwrap();
+    let out = hnet()
+        .args(["eval", "--run"])
+        .arg(&run_dir)
+        .args(["--data"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("model.bpk"), "{err}");
+
+    // A forces CSV with a NaN.
+    let (a, b) = (dir.join("a"), dir.join("b"));
+    std::fs::create_dir_all(&a).unwrap();
+    std::fs::create_dir_all(&b).unwrap();
+    image::GrayImage::new(8, 8).save(a.join("f.png")).unwrap();
+    image::GrayImage::new(8, 8).save(b.join("f.png")).unwrap();
+    std::fs::write(dir.join("forces.csv"), "image,fx,fy,fz\nf.png,0,NaN,0\n").unwrap();
+    let out = hnet()
+        .args(["import", "--view-a"])
+        .arg(&a)
+        .arg("--view-b")
+        .arg(&b)
+        .arg("--forces")
+        .arg(dir.join("forces.csv"))
+        .arg("--out")
+        .arg(dir.join("imported"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("forces.csv") && err.contains("line 2"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(dir).ok();
+}

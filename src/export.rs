@@ -1,0 +1,202 @@
+//! The labeled pairs as a dataset zip, in exactly the format `hnet train` reads
+//! (`docs/dataset-format.md`), built with the twin crate's [`DatasetArchive`].
+
+use hnet_twin::archive::{ArchiveError, DatasetArchive};
+use hnet_twin::dataset::{DatasetHeader, ImageRef, ManifestRow, assign_splits};
+
+use crate::imaging::WORK_SIZE;
+use crate::workspace::{LabeledPair, PairSource};
+
+/// Name of the dataset folder inside the zip (and of the zip file, with `.zip`).
+pub const DATASET_NAME: &str = "hnet-studio-labels";
+
+/// Seed of the exported pairs' 80/10/10 split.
+pub const SPLIT_SEED: u64 = 0;
+
+/// A built dataset zip.
+#[derive(Debug, Clone)]
+pub struct Export {
+    /// The zip's bytes.
+    pub zip: Vec<u8>,
+    /// Ids of the exported pairs.
+    pub exported: Vec<String>,
+    /// Pairs left out, with why.
+    pub skipped: Vec<(String, &'static str)>,
+}
+
+/// Why nothing could be exported.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ExportError {
+    /// No pair has both masks labeled and a force label.
+    NothingComplete,
+    /// The archive could not be built.
+    Archive(String),
+}
+
+impl std::fmt::Display for ExportError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ExportError::NothingComplete => f.write_str(
+                "no pair is complete yet: a pair needs its masks labeled and a force label",
+            ),
+            ExportError::Archive(e) => e.fmt(f),
+        }
+    }
+}
+
+impl From<ArchiveError> for ExportError {
+    fn from(e: ArchiveError) -> Self {
+        ExportError::Archive(e.to_string())
+    }
+}
+
+/// A square image at the working size.
+fn image(pixels: &[u8], channels: usize) -> ImageRef<'_> {
+    ImageRef {
+        width: WORK_SIZE,
+        height: WORK_SIZE,
+        channels,
+        pixels,
+    }
+}
+
+/// The pair's manifest columns beyond id, split and force, and its record.
+fn describe(pair: &LabeledPair) -> (Vec<(String, String)>, serde_json::Value) {
+    match &pair.source {
+        PairSource::Upload { view_a, view_b } => (
+            vec![
+                ("source".into(), "upload".into()),
+                ("view_a_file".into(), view_a.clone()),
+                ("view_b_file".into(), view_b.clone()),
+            ],
+            serde_json::json!({ "source": "upload", "view_a_file": view_a, "view_b_file": view_b }),
+        ),
+        PairSource::Twin {
+            true_force_n,
+            tip_mm,
+            views,
+            settings,
+        } => (
+            vec![("source".into(), "twin".into())],
+            serde_json::json!({
+                "source": "twin",
+                "true_force_n": true_force_n,
+                "tip_mm": tip_mm,
+                "views": {
+                    "a": { "carm": views.a, "camera_matrix": views.a.camera_matrix() },
+                    "b": { "carm": views.b, "camera_matrix": views.b.camera_matrix() },
+                },
+                "twin": settings,
+            }),
+        ),
+    }
+}
+
+/// Builds the dataset zip of every complete pair (masks labeled and a force label); the others
+/// are listed in [`Export::skipped`]. Pairs keep their ids; the split is the seeded 80/10/10 of
+/// the dataset format.
+pub fn dataset_zip(pairs: &[LabeledPair]) -> Result<Export, ExportError> {
+    let mut skipped = Vec::new();
+    let complete: Vec<&LabeledPair> = pairs
+        .iter()
+        .filter(|p| {
+            let why = if !p.masks_labeled {
+                Some("masks not labeled")
+            } else if p.force_n.is_none() {
+                Some("no force label")
+            } else {
+                None
+            };
+            if let Some(why) = why {
+                skipped.push((p.id.clone(), why));
+            }
+            why.is_none()
+        })
+        .collect();
+    if complete.is_empty() {
+        return Err(ExportError::NothingComplete);
+    }
+    let splits = assign_splits(complete.len(), SPLIT_SEED);
+    let mut archive = DatasetArchive::new(DATASET_NAME);
+    for (pair, split) in complete.iter().zip(splits) {
+        let (extra, record) = describe(pair);
+        let force = pair.force_n.unwrap_or_default().map(f64::from);
+        let row = ManifestRow {
+            id: pair.id.clone(),
+            split,
+            force_n: force,
+            extra,
+        };
+        archive.add_pair(
+            row,
+            [
+                image(&pair.view_a, 3),
+                image(&pair.view_b, 3),
+                image(&pair.mask_a, 1),
+                image(&pair.mask_b, 1),
+            ],
+            &record,
+        )?;
+    }
+    let header = DatasetHeader::new(
+        [WORK_SIZE, WORK_SIZE],
+        complete.len(),
+        serde_json::json!({
+            "generator": "hnet-studio",
+            "version": env!("CARGO_PKG_VERSION"),
+            "masks": "labeled in the browser app (0 background, 255 catheter)",
+        }),
+    );
+    Ok(Export {
+        zip: archive.finish(&header)?,
+        exported: complete.iter().map(|p| p.id.clone()).collect(),
+        skipped,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::twin_live::{TwinControls, XrayBackground};
+    use crate::workspace::Workspace;
+
+    #[test]
+    fn complete_pairs_export_and_incomplete_ones_are_listed() {
+        let mut ws = Workspace::default();
+        let background = XrayBackground::phantom();
+        for fx in [0.1, -0.1, 0.2] {
+            let controls = TwinControls {
+                force_n: [fx, 0.0, -0.1],
+                ..TwinControls::default()
+            };
+            ws.add(controls.render(ws.next_id(), &background).unwrap());
+        }
+        let id = ws.pairs[1].id.clone();
+        ws.set_force(&id, None);
+
+        let export = dataset_zip(&ws.pairs).unwrap();
+        assert_eq!(export.exported, vec!["pair-0001", "pair-0003"]);
+        assert_eq!(export.skipped, vec![(id, "no force label")]);
+
+        let dir = std::env::temp_dir().join(format!("hnet-studio-export-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut zip = zip_reader(&export.zip);
+        zip.extract(&dir).unwrap();
+        let dataset = hnet_twin::dataset::Dataset::open(&dir.join(DATASET_NAME)).unwrap();
+        assert_eq!(dataset.rows.len(), 2);
+        let row = &dataset.rows[0];
+        assert_eq!(row.force_n, [0.1f32 as f64, 0.0, -0.1f32 as f64]);
+        let loaded = dataset.load_pair(row, None).unwrap();
+        assert_eq!(loaded.size, [WORK_SIZE, WORK_SIZE]);
+        let catheter = loaded.mask_a.iter().filter(|&&m| m > 0.5).count();
+        assert_eq!(catheter, ws.pairs[0].labeled_pixels(crate::workspace::View::A));
+        std::fs::remove_dir_all(dir).ok();
+
+        let none: Vec<LabeledPair> = Vec::new();
+        assert_eq!(dataset_zip(&none).unwrap_err(), ExportError::NothingComplete);
+    }
+
+    fn zip_reader(bytes: &[u8]) -> zip::ZipArchive<std::io::Cursor<&[u8]>> {
+        zip::ZipArchive::new(std::io::Cursor::new(bytes)).unwrap()
+    }
+}

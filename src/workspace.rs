@@ -1,0 +1,647 @@
+//! The labeling work: stereo pairs with their (corrected) masks and force labels, and undo and
+//! redo per brush stroke. Plain data, so it can be stored in the browser and exported.
+//!
+//! Images and masks are square, [`WORK_SIZE`] pixels per side, row-major; pixel `(x, y)` covers
+//! `[x, x+1) x [y, y+1)` in image coordinates (origin at the top-left corner, `y` down).
+
+use hnet_twin::carm::Biplane;
+use serde::{Deserialize, Serialize};
+
+use crate::imaging::WORK_SIZE;
+
+/// Where a pair came from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum PairSource {
+    /// Two image files.
+    Upload {
+        /// View A's file name.
+        view_a: String,
+        /// View B's file name.
+        view_b: String,
+    },
+    /// The live digital twin, with its ground truth.
+    Twin {
+        /// The true tip force `(Fx, Fy, Fz)` in newtons, world frame.
+        true_force_n: [f32; 3],
+        /// The true tip position in millimetres, world frame.
+        tip_mm: [f64; 3],
+        /// The views it was rendered with (at [`WORK_SIZE`]).
+        views: Biplane,
+        /// The twin's settings, as recorded with exported pairs.
+        settings: serde_json::Value,
+    },
+}
+
+/// One stereo pair being labeled, at [`WORK_SIZE`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LabeledPair {
+    /// Stable id (also the exported id): ASCII letters, digits, `-`, `_`, `.`.
+    pub id: String,
+    /// Where it came from.
+    pub source: PairSource,
+    /// View A, RGB bytes.
+    pub view_a: Vec<u8>,
+    /// View B, RGB bytes.
+    pub view_b: Vec<u8>,
+    /// Label mask of view A (0 background, 255 catheter).
+    pub mask_a: Vec<u8>,
+    /// Label mask of view B.
+    pub mask_b: Vec<u8>,
+    /// Whether the masks hold a label yet (H-Net's pre-labels, the twin's exact masks or the
+    /// user's strokes).
+    pub masks_labeled: bool,
+    /// The force label `(Fx, Fy, Fz)` in newtons, once entered, imported or accepted.
+    pub force_n: Option<[f32; 3]>,
+}
+
+/// The two views.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum View {
+    /// View A (the frontal view of the default biplane).
+    A,
+    /// View B (the lateral view).
+    B,
+}
+
+impl View {
+    /// Both views, A first.
+    pub const BOTH: [View; 2] = [View::A, View::B];
+
+    /// `"A"` or `"B"`.
+    pub fn letter(self) -> &'static str {
+        match self {
+            View::A => "A",
+            View::B => "B",
+        }
+    }
+}
+
+impl LabeledPair {
+    /// A pair with empty masks and no force label.
+    pub fn new(id: String, source: PairSource, view_a: Vec<u8>, view_b: Vec<u8>) -> Self {
+        let pixels = WORK_SIZE * WORK_SIZE;
+        Self {
+            id,
+            source,
+            view_a,
+            view_b,
+            mask_a: vec![0; pixels],
+            mask_b: vec![0; pixels],
+            masks_labeled: false,
+            force_n: None,
+        }
+    }
+
+    /// A view's label mask.
+    pub fn mask(&self, view: View) -> &[u8] {
+        match view {
+            View::A => &self.mask_a,
+            View::B => &self.mask_b,
+        }
+    }
+
+    fn mask_mut(&mut self, view: View) -> &mut Vec<u8> {
+        match view {
+            View::A => &mut self.mask_a,
+            View::B => &mut self.mask_b,
+        }
+    }
+
+    /// A view's image (RGB).
+    pub fn image(&self, view: View) -> &[u8] {
+        match view {
+            View::A => &self.view_a,
+            View::B => &self.view_b,
+        }
+    }
+
+    /// The true force in newtons, for twin pairs.
+    pub fn true_force(&self) -> Option<[f32; 3]> {
+        match &self.source {
+            PairSource::Twin { true_force_n, .. } => Some(*true_force_n),
+            PairSource::Upload { .. } => None,
+        }
+    }
+
+    /// Whether the pair can be exported: both masks labeled and a force label.
+    pub fn is_complete(&self) -> bool {
+        self.masks_labeled && self.force_n.is_some()
+    }
+
+    /// Catheter pixels of a view's label mask.
+    pub fn labeled_pixels(&self, view: View) -> usize {
+        self.mask(view).iter().filter(|&&m| m >= 128).count()
+    }
+}
+
+/// What a stroke paints.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Tool {
+    /// Adds catheter (255).
+    Brush,
+    /// Removes catheter (0).
+    Eraser,
+}
+
+/// Paints a disc of `radius` pixels centred at `(x, y)` (image coordinates) into a `size` x
+/// `size` mask; returns whether anything changed.
+pub fn paint_disc(mask: &mut [u8], size: usize, x: f64, y: f64, radius: f64, tool: Tool) -> bool {
+    let value = match tool {
+        Tool::Brush => 255,
+        Tool::Eraser => 0,
+    };
+    let r = radius.max(0.5);
+    let last = size as f64 - 1.0;
+    let (x0, x1) = ((x - r).floor().max(0.0), (x + r).ceil().min(last));
+    let (y0, y1) = ((y - r).floor().max(0.0), (y + r).ceil().min(last));
+    if x1 < x0 || y1 < y0 {
+        return false;
+    }
+    let mut changed = false;
+    for py in y0 as usize..=y1 as usize {
+        for px in x0 as usize..=x1 as usize {
+            let (dx, dy) = (px as f64 + 0.5 - x, py as f64 + 0.5 - y);
+            if dx * dx + dy * dy <= r * r {
+                let m = &mut mask[py * size + px];
+                if *m != value {
+                    *m = value;
+                    changed = true;
+                }
+            }
+        }
+    }
+    changed
+}
+
+/// Paints a stroke segment from `from` to `to` (image coordinates) with discs every half radius.
+pub fn paint_segment(
+    mask: &mut [u8],
+    size: usize,
+    from: [f64; 2],
+    to: [f64; 2],
+    radius: f64,
+    tool: Tool,
+) -> bool {
+    let length = ((to[0] - from[0]).powi(2) + (to[1] - from[1]).powi(2)).sqrt();
+    let steps = (length / (radius * 0.5).max(0.5)).ceil().max(1.0) as usize;
+    let mut changed = false;
+    for i in 0..=steps {
+        let t = i as f64 / steps as f64;
+        let (x, y) = (
+            from[0] + t * (to[0] - from[0]),
+            from[1] + t * (to[1] - from[1]),
+        );
+        changed |= paint_disc(mask, size, x, y, radius, tool);
+    }
+    changed
+}
+
+/// One undoable change of a pair's masks: each changed view's mask before and after.
+#[derive(Debug, Clone, PartialEq)]
+struct Edit {
+    pair: String,
+    masks: Vec<(View, Vec<u8>, Vec<u8>)>,
+    labeled_before: bool,
+}
+
+/// The workspace: pairs, the one on screen, and the stroke history.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Workspace {
+    /// All pairs, in the order they were added.
+    pub pairs: Vec<LabeledPair>,
+    /// Index of the pair on screen.
+    pub current: Option<usize>,
+    undo: Vec<Edit>,
+    redo: Vec<Edit>,
+    /// The stroke in progress: pair, view, and its mask before the stroke.
+    stroke_start: Option<(String, View, Vec<u8>, bool)>,
+}
+
+/// Undo steps kept.
+const HISTORY: usize = 100;
+
+impl Workspace {
+    /// A workspace holding `pairs` (restored from storage), the last one on screen.
+    pub fn from_pairs(pairs: Vec<LabeledPair>) -> Self {
+        let current = pairs.len().checked_sub(1);
+        Self {
+            pairs,
+            current,
+            ..Self::default()
+        }
+    }
+
+    /// The pair on screen.
+    pub fn current(&self) -> Option<&LabeledPair> {
+        self.current.and_then(|i| self.pairs.get(i))
+    }
+
+    /// The pair on screen, to change.
+    pub fn current_mut(&mut self) -> Option<&mut LabeledPair> {
+        self.current.and_then(|i| self.pairs.get_mut(i))
+    }
+
+    /// The pair with `id`.
+    pub fn pair(&self, id: &str) -> Option<&LabeledPair> {
+        self.pairs.iter().find(|p| p.id == id)
+    }
+
+    /// A fresh id (`pair-0001`, `pair-0002`, ...), never one in use.
+    pub fn next_id(&self) -> String {
+        let n = self
+            .pairs
+            .iter()
+            .filter_map(|p| p.id.strip_prefix("pair-")?.parse::<usize>().ok())
+            .max()
+            .map_or(1, |n| n + 1);
+        format!("pair-{n:04}")
+    }
+
+    /// Adds a pair and shows it.
+    pub fn add(&mut self, pair: LabeledPair) {
+        self.pairs.push(pair);
+        self.current = Some(self.pairs.len() - 1);
+    }
+
+    /// Shows pair `index` (ignored when out of range).
+    pub fn select(&mut self, index: usize) {
+        if index < self.pairs.len() {
+            self.current = Some(index);
+        }
+    }
+
+    /// Shows the next (`step` = 1) or previous (`step` = -1) pair, wrapping around.
+    pub fn step(&mut self, step: isize) {
+        let n = self.pairs.len() as isize;
+        if n > 0 {
+            let i = self.current.map_or(0, |i| i as isize);
+            self.current = Some((i + step).rem_euclid(n) as usize);
+        }
+    }
+
+    /// Removes the pair on screen and its history; returns its id.
+    pub fn remove_current(&mut self) -> Option<String> {
+        let i = self.current?;
+        let id = self.pairs.remove(i).id;
+        self.undo.retain(|e| e.pair != id);
+        self.redo.retain(|e| e.pair != id);
+        self.current = if self.pairs.is_empty() {
+            None
+        } else {
+            Some(i.min(self.pairs.len() - 1))
+        };
+        Some(id)
+    }
+
+    /// Starts a stroke on `view` of the pair on screen.
+    pub fn begin_stroke(&mut self, view: View) {
+        if let Some(pair) = self.current() {
+            self.stroke_start = Some((
+                pair.id.clone(),
+                view,
+                pair.mask(view).to_vec(),
+                pair.masks_labeled,
+            ));
+        }
+    }
+
+    /// Paints part of the stroke in progress (image coordinates, radius in pixels).
+    pub fn stroke_to(&mut self, from: [f64; 2], to: [f64; 2], radius: f64, tool: Tool) {
+        let Some((id, view, _, _)) = &self.stroke_start else {
+            return;
+        };
+        let (id, view) = (id.clone(), *view);
+        if let Some(pair) = self.pairs.iter_mut().find(|p| p.id == id)
+            && paint_segment(pair.mask_mut(view), WORK_SIZE, from, to, radius, tool)
+        {
+            pair.masks_labeled = true;
+        }
+    }
+
+    /// Whether a stroke is in progress.
+    pub fn is_stroking(&self) -> bool {
+        self.stroke_start.is_some()
+    }
+
+    /// Ends the stroke: one undo step if it changed the mask. Returns the changed pair's id.
+    pub fn end_stroke(&mut self) -> Option<String> {
+        let (id, view, before, labeled_before) = self.stroke_start.take()?;
+        let pair = self.pair(&id)?;
+        let after = pair.mask(view).to_vec();
+        if after == before {
+            return None;
+        }
+        self.push_edit(Edit {
+            pair: id.clone(),
+            masks: vec![(view, before, after)],
+            labeled_before,
+        });
+        Some(id)
+    }
+
+    fn push_edit(&mut self, edit: Edit) {
+        self.undo.push(edit);
+        if self.undo.len() > HISTORY {
+            self.undo.remove(0);
+        }
+        self.redo.clear();
+    }
+
+    /// Replaces both label masks of the pair on screen (H-Net's pre-labels) as one undo step.
+    /// Returns the pair's id when something changed.
+    pub fn set_masks(&mut self, masks: [Vec<u8>; 2]) -> Option<String> {
+        let pair = self.current_mut()?;
+        let labeled_before = pair.masks_labeled;
+        let mut changes = Vec::new();
+        for (view, mask) in View::BOTH.into_iter().zip(masks) {
+            if pair.mask(view) != mask.as_slice() {
+                let before = std::mem::replace(pair.mask_mut(view), mask.clone());
+                changes.push((view, before, mask));
+            }
+        }
+        pair.masks_labeled = true;
+        let id = pair.id.clone();
+        if changes.is_empty() {
+            return (!labeled_before).then_some(id);
+        }
+        self.push_edit(Edit {
+            pair: id.clone(),
+            masks: changes,
+            labeled_before,
+        });
+        Some(id)
+    }
+
+    /// Sets (or clears) the force label of pair `id`; returns whether there is such a pair.
+    pub fn set_force(&mut self, id: &str, force_n: Option<[f32; 3]>) -> bool {
+        match self.pairs.iter_mut().find(|p| p.id == id) {
+            Some(pair) => {
+                pair.force_n = force_n;
+                true
+            }
+            None => false,
+        }
+    }
+
+    fn apply(&mut self, edit: &Edit, forward: bool) -> Option<String> {
+        let index = self.pairs.iter().position(|p| p.id == edit.pair)?;
+        let pair = &mut self.pairs[index];
+        for (view, before, after) in &edit.masks {
+            *pair.mask_mut(*view) = if forward { after } else { before }.clone();
+        }
+        pair.masks_labeled = forward || edit.labeled_before;
+        self.current = Some(index);
+        Some(edit.pair.clone())
+    }
+
+    /// Undoes the last step and shows its pair; returns that pair's id.
+    pub fn undo(&mut self) -> Option<String> {
+        let edit = self.undo.pop()?;
+        let id = self.apply(&edit, false);
+        self.redo.push(edit);
+        id
+    }
+
+    /// Redoes the last undone step and shows its pair; returns that pair's id.
+    pub fn redo(&mut self) -> Option<String> {
+        let edit = self.redo.pop()?;
+        let id = self.apply(&edit, true);
+        self.undo.push(edit);
+        id
+    }
+
+    /// Whether there is something to undo, and to redo.
+    pub fn can_undo_redo(&self) -> (bool, bool) {
+        (!self.undo.is_empty(), !self.redo.is_empty())
+    }
+
+    /// Applies force labels read from a CSV file (see [`parse_force_labels`]) to the pairs with
+    /// those ids. Returns how many were applied and the ids that match no pair.
+    pub fn apply_force_labels(&mut self, labels: &[(String, [f32; 3])]) -> (usize, Vec<String>) {
+        let mut applied = 0;
+        let mut unknown = Vec::new();
+        for (id, force) in labels {
+            if self.set_force(id, Some(*force)) {
+                applied += 1;
+            } else {
+                unknown.push(id.clone());
+            }
+        }
+        (applied, unknown)
+    }
+}
+
+/// Why a force-label file cannot be used: the file, the line (1-based, when it is one line's
+/// fault) and the problem.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ForceLabelError {
+    /// The file's name.
+    pub file: String,
+    /// The line of the file, when one line is at fault.
+    pub line: Option<u64>,
+    /// What is wrong.
+    pub problem: String,
+}
+
+impl std::fmt::Display for ForceLabelError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.line {
+            Some(line) => write!(f, "{}, line {line}: {}", self.file, self.problem),
+            None => write!(f, "{}: {}", self.file, self.problem),
+        }
+    }
+}
+
+/// Reads force labels from a CSV file with a header naming the columns `id`, `fx`, `fy` and `fz`
+/// (newtons; other columns are ignored, so a dataset's `manifest.csv` works too). Every value must
+/// be a finite number; the first bad line is reported and nothing is applied.
+pub fn parse_force_labels(
+    file: &str,
+    bytes: &[u8],
+) -> Result<Vec<(String, [f32; 3])>, ForceLabelError> {
+    let error = |line: Option<u64>, problem: String| ForceLabelError {
+        file: file.to_string(),
+        line,
+        problem,
+    };
+    let mut reader = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .flexible(true)
+        .from_reader(bytes);
+    let headers = reader
+        .headers()
+        .map_err(|e| error(Some(1), format!("cannot read the header: {e}")))?
+        .clone();
+    let column = |name: &str| {
+        headers
+            .iter()
+            .position(|h| h.eq_ignore_ascii_case(name))
+            .ok_or_else(|| {
+                error(
+                    Some(1),
+                    format!("no `{name}` column (the header needs id, fx, fy, fz)"),
+                )
+            })
+    };
+    let columns = [column("id")?, column("fx")?, column("fy")?, column("fz")?];
+    let mut labels = Vec::new();
+    for record in reader.records() {
+        let record = record.map_err(|e| {
+            error(
+                e.position().map(|p| p.line()),
+                format!("cannot be read: {e}"),
+            )
+        })?;
+        let line = record.position().map(|p| p.line());
+        let field = |i: usize| record.get(columns[i]).unwrap_or("");
+        let id = field(0);
+        if id.is_empty() {
+            return Err(error(line, "the id is empty".into()));
+        }
+        let mut force = [0.0f32; 3];
+        for (axis, value) in force.iter_mut().enumerate() {
+            let text = field(axis + 1);
+            *value = text
+                .parse::<f32>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| {
+                    error(
+                        line,
+                        format!(
+                            "f{} of `{id}` is `{text}`, not a finite number of newtons",
+                            ["x", "y", "z"][axis]
+                        ),
+                    )
+                })?;
+        }
+        labels.push((id.to_string(), force));
+    }
+    if labels.is_empty() {
+        return Err(error(None, "holds no force labels".into()));
+    }
+    Ok(labels)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pair(ws: &Workspace) -> LabeledPair {
+        let rgb = vec![0u8; WORK_SIZE * WORK_SIZE * 3];
+        LabeledPair::new(
+            ws.next_id(),
+            PairSource::Upload {
+                view_a: "a.png".into(),
+                view_b: "b.png".into(),
+            },
+            rgb.clone(),
+            rgb,
+        )
+    }
+
+    fn stroke(ws: &mut Workspace, view: View, from: [f64; 2], to: [f64; 2], r: f64, tool: Tool) {
+        ws.begin_stroke(view);
+        ws.stroke_to(from, to, r, tool);
+        ws.end_stroke();
+    }
+
+    #[test]
+    fn strokes_undo_and_redo_one_at_a_time() {
+        let mut ws = Workspace::default();
+        ws.add(pair(&ws));
+        stroke(&mut ws, View::A, [10.0, 10.0], [40.0, 10.0], 3.0, Tool::Brush);
+        let painted = ws.current().unwrap().mask_a.clone();
+        // A 30 px long, 6 px wide stroke with round ends.
+        let n = painted.iter().filter(|&&m| m == 255).count();
+        assert!((180..=230).contains(&n), "{n}");
+        assert!(ws.current().unwrap().masks_labeled);
+        stroke(&mut ws, View::A, [20.0, 10.0], [20.0, 10.0], 5.0, Tool::Eraser);
+        assert!(ws.current().unwrap().labeled_pixels(View::A) < n);
+
+        assert!(ws.undo().is_some());
+        assert_eq!(ws.current().unwrap().mask_a, painted);
+        assert!(ws.undo().is_some());
+        assert!(ws.current().unwrap().mask_a.iter().all(|&m| m == 0));
+        assert!(!ws.current().unwrap().masks_labeled);
+        assert!(ws.undo().is_none());
+        assert!(ws.redo().is_some());
+        assert_eq!(ws.current().unwrap().mask_a, painted);
+        // A new stroke clears what could be redone.
+        stroke(&mut ws, View::B, [5.0, 5.0], [6.0, 6.0], 2.0, Tool::Brush);
+        assert!(ws.redo().is_none());
+        assert_eq!(ws.can_undo_redo(), (true, false));
+    }
+
+    #[test]
+    fn a_stroke_that_changes_nothing_is_no_undo_step() {
+        let mut ws = Workspace::default();
+        ws.add(pair(&ws));
+        stroke(&mut ws, View::A, [10.0, 10.0], [12.0, 10.0], 2.0, Tool::Eraser);
+        assert_eq!(ws.can_undo_redo(), (false, false));
+    }
+
+    #[test]
+    fn pre_labels_are_one_undo_step_for_both_views() {
+        let mut ws = Workspace::default();
+        ws.add(pair(&ws));
+        let full = vec![255u8; WORK_SIZE * WORK_SIZE];
+        assert!(ws.set_masks([full.clone(), full.clone()]).is_some());
+        assert_eq!(ws.current().unwrap().mask_b, full);
+        ws.undo();
+        let p = ws.current().unwrap();
+        assert!(p.mask_a.iter().chain(&p.mask_b).all(|&m| m == 0));
+        assert_eq!(ws.can_undo_redo(), (false, true));
+    }
+
+    #[test]
+    fn painting_at_the_border_stays_inside() {
+        let mut mask = vec![0u8; 16 * 16];
+        assert!(paint_disc(&mut mask, 16, 0.0, 15.9, 3.0, Tool::Brush));
+        assert!(paint_disc(&mut mask, 16, 15.9, 0.0, 3.0, Tool::Brush));
+        assert!(!paint_disc(&mut mask, 16, -20.0, -20.0, 3.0, Tool::Brush));
+        assert!(!paint_disc(&mut mask, 16, 40.0, 8.0, 3.0, Tool::Brush));
+        assert_eq!(mask[15 * 16], 255);
+        assert_eq!(mask[15], 255);
+    }
+
+    #[test]
+    fn ids_do_not_repeat_after_removal() {
+        let mut ws = Workspace::default();
+        ws.add(pair(&ws));
+        ws.add(pair(&ws));
+        assert_eq!(ws.pairs[1].id, "pair-0002");
+        ws.select(0);
+        assert_eq!(ws.remove_current().as_deref(), Some("pair-0001"));
+        assert_eq!(ws.next_id(), "pair-0003");
+        ws.step(1);
+        assert_eq!(ws.current, Some(0));
+    }
+
+    #[test]
+    fn force_labels_come_from_csv_with_clear_errors() {
+        let labels =
+            parse_force_labels("f.csv", b"id,fx,fy,fz\npair-0001, 0.1,-0.2,0.05\n").unwrap();
+        assert_eq!(labels, vec![("pair-0001".to_string(), [0.1, -0.2, 0.05])]);
+        // A dataset's manifest (extra columns, other order) works too.
+        let manifest = b"id,split,fx,fy,fz,source\np1,train,1,2,3,x\n";
+        assert_eq!(parse_force_labels("m.csv", manifest).unwrap()[0].1, [1.0, 2.0, 3.0]);
+
+        let err = parse_force_labels("f.csv", b"id,fx,fy,fz\np1,0,0,0\np2,0,NaN,0\n").unwrap_err();
+        assert_eq!(err.line, Some(3));
+        assert!(err.to_string().contains("f.csv, line 3"), "{err}");
+        assert!(err.problem.contains("fy of `p2`"), "{err}");
+        let err = parse_force_labels("g.csv", b"name,fx,fy,fz\n").unwrap_err();
+        assert!(err.problem.contains("`id`"), "{err}");
+        assert!(parse_force_labels("e.csv", b"id,fx,fy,fz\n").is_err());
+
+        let mut ws = Workspace::default();
+        ws.add(pair(&ws));
+        let (applied, unknown) = ws.apply_force_labels(&[
+            ("pair-0001".into(), [0.1, 0.0, 0.0]),
+            ("pair-0099".into(), [0.0; 3]),
+        ]);
+        assert_eq!((applied, unknown), (1, vec!["pair-0099".to_string()]));
+        assert_eq!(ws.pairs[0].force_n, Some([0.1, 0.0, 0.0]));
+    }
+}
