@@ -8,7 +8,7 @@ Measures, on the CPU with a fixed thread count:
   - a training step (forward, backward, optimizer) on a batch of B stereo pairs,
   - inference latency of one stereo pair.
 
-Usage: python bench/pytorch_hnet.py --size 96 --batch 32 --threads 2 [--json]
+Usage: python bench/pytorch_hnet.py --size 64 --batch 8 --threads 2 [--json]
 """
 
 import argparse
@@ -74,7 +74,7 @@ class HNet(nn.Module):
 
 def main():
     parser = argparse.ArgumentParser()
-    parser.add_argument("--size", type=int, default=96)
+    parser.add_argument("--size", type=int, default=64)
     parser.add_argument("--batch", type=int, default=32)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--steps", type=int, default=10)

@@ -68,3 +68,12 @@ export async function openPage(context, url) {
   await page.goto(url);
   return { page, requests, errors };
 }
+
+/** Waits until the page's model is ready (it fails the test if loading failed). */
+export async function waitForModel(page) {
+  await page.waitForSelector("#model-status [data-state=ready], #model-status [data-state=failed]", {
+    timeout: 180_000,
+  });
+  const failed = await page.$("#model-status [data-state=failed]");
+  if (failed) throw new Error(`the model did not load: ${await failed.textContent()}`);
+}

@@ -1,7 +1,16 @@
-//! Where H-Net runs in the browser: WebGPU when the browser offers an adapter, the CPU
-//! (Burn's flex backend, compiled to WebAssembly with SIMD) otherwise.
+//! Where H-Net runs in the browser: WebGPU when the browser offers an adapter, the CPU (Burn's
+//! flex backend, compiled to WebAssembly with SIMD) otherwise or when the user asks for it.
 
 use burn::tensor::Device;
+
+/// What the user asked for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BackendChoice {
+    /// WebGPU if the browser has an adapter, else the CPU.
+    Auto,
+    /// The CPU.
+    Cpu,
+}
 
 /// The backend the page settled on.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -10,7 +19,7 @@ pub enum Backend {
     WebGpu,
     /// Burn's flex CPU backend (WebAssembly).
     Cpu {
-        /// Why WebGPU was not used.
+        /// Why WebGPU is not used.
         reason: String,
     },
 }
@@ -21,6 +30,14 @@ impl Backend {
         match self {
             Backend::WebGpu => "WebGPU",
             Backend::Cpu { .. } => "CPU (WebAssembly)",
+        }
+    }
+
+    /// Why the CPU is used, if it is.
+    pub fn reason(&self) -> Option<&str> {
+        match self {
+            Backend::WebGpu => None,
+            Backend::Cpu { reason } => Some(reason),
         }
     }
 }
@@ -35,31 +52,17 @@ fn has_webgpu() -> bool {
         .unwrap_or(false)
 }
 
-/// Picks the device: WebGPU if an adapter can be had, the CPU otherwise.
-pub async fn select_device(prefer_cpu: bool) -> (Device, Backend) {
-    if prefer_cpu {
-        return (
-            Device::flex(),
-            Backend::Cpu {
-                reason: "CPU chosen".into(),
-            },
-        );
+/// Picks the device: WebGPU if asked for (`Auto`) and an adapter can be had, the CPU otherwise.
+pub async fn select_device(choice: BackendChoice) -> (Device, Backend) {
+    let cpu = |reason: String| (Device::flex(), Backend::Cpu { reason });
+    if choice == BackendChoice::Cpu {
+        return cpu("CPU chosen".into());
     }
     if !has_webgpu() {
-        return (
-            Device::flex(),
-            Backend::Cpu {
-                reason: "this browser has no WebGPU".into(),
-            },
-        );
+        return cpu("this browser has no WebGPU".into());
     }
     match Device::wgpu_options().init_async().await {
         Ok(device) => (device, Backend::WebGpu),
-        Err(e) => (
-            Device::flex(),
-            Backend::Cpu {
-                reason: format!("no WebGPU adapter: {e}"),
-            },
-        ),
+        Err(e) => cpu(format!("no WebGPU adapter: {e}")),
     }
 }

@@ -120,7 +120,11 @@ pub fn dataset_zip(pairs: &[LabeledPair]) -> Result<Export, ExportError> {
     let mut archive = DatasetArchive::new(DATASET_NAME);
     for (pair, split) in complete.iter().zip(splits) {
         let (extra, record) = describe(pair);
-        let force = pair.force_n.unwrap_or_default().map(f64::from);
+        // The label's shortest decimal form (0.12, not 0.11999999731779099).
+        let force = pair
+            .force_n
+            .unwrap_or_default()
+            .map(|f| f.to_string().parse::<f64>().unwrap_or(f64::from(f)));
         let row = ManifestRow {
             id: pair.id.clone(),
             split,
@@ -154,7 +158,8 @@ pub fn dataset_zip(pairs: &[LabeledPair]) -> Result<Export, ExportError> {
     })
 }
 
-#[cfg(test)]
+// Native tests (`cargo test`); the browser tests are in tests/web.rs.
+#[cfg(all(test, not(target_arch = "wasm32")))]
 mod tests {
     use super::*;
     use crate::twin_live::{TwinControls, XrayBackground};
@@ -185,15 +190,21 @@ mod tests {
         let dataset = hnet_twin::dataset::Dataset::open(&dir.join(DATASET_NAME)).unwrap();
         assert_eq!(dataset.rows.len(), 2);
         let row = &dataset.rows[0];
-        assert_eq!(row.force_n, [0.1f32 as f64, 0.0, -0.1f32 as f64]);
+        assert_eq!(row.force_n, [0.1, 0.0, -0.1]);
         let loaded = dataset.load_pair(row, None).unwrap();
         assert_eq!(loaded.size, [WORK_SIZE, WORK_SIZE]);
         let catheter = loaded.mask_a.iter().filter(|&&m| m > 0.5).count();
-        assert_eq!(catheter, ws.pairs[0].labeled_pixels(crate::workspace::View::A));
+        assert_eq!(
+            catheter,
+            ws.pairs[0].labeled_pixels(crate::workspace::View::A)
+        );
         std::fs::remove_dir_all(dir).ok();
 
         let none: Vec<LabeledPair> = Vec::new();
-        assert_eq!(dataset_zip(&none).unwrap_err(), ExportError::NothingComplete);
+        assert_eq!(
+            dataset_zip(&none).unwrap_err(),
+            ExportError::NothingComplete
+        );
     }
 
     fn zip_reader(bytes: &[u8]) -> zip::ZipArchive<std::io::Cursor<&[u8]>> {

@@ -78,7 +78,9 @@ fn decode(file: &str, bytes: &[u8]) -> Result<image::DynamicImage, ImageError> {
     let format = image::guess_format(bytes)
         .map_err(|_| error("not an image (PNG or JPEG expected)".into()))?;
     if !matches!(format, image::ImageFormat::Png | image::ImageFormat::Jpeg) {
-        return Err(error(format!("{format:?} images are not supported; use PNG or JPEG")));
+        return Err(error(format!(
+            "{format:?} images are not supported; use PNG or JPEG"
+        )));
     }
     let reader = || image::ImageReader::with_format(std::io::Cursor::new(bytes), format);
     let (width, height) = reader()
@@ -103,7 +105,11 @@ fn decode(file: &str, bytes: &[u8]) -> Result<image::DynamicImage, ImageError> {
 /// `image` as `size` x `size` RGB bytes (triangle filter).
 pub fn resize_rgb(image: &image::DynamicImage, size: usize) -> Vec<u8> {
     image
-        .resize_exact(size as u32, size as u32, image::imageops::FilterType::Triangle)
+        .resize_exact(
+            size as u32,
+            size as u32,
+            image::imageops::FilterType::Triangle,
+        )
         .to_rgb8()
         .into_raw()
 }
@@ -115,8 +121,13 @@ pub fn rescale_rgb(rgb: &[u8], from: usize, to: usize) -> Vec<u8> {
     }
     let image = image::RgbImage::from_raw(from as u32, from as u32, rgb.to_vec())
         .expect("buffer of the stated size");
-    image::imageops::resize(&image, to as u32, to as u32, image::imageops::FilterType::Triangle)
-        .into_raw()
+    image::imageops::resize(
+        &image,
+        to as u32,
+        to as u32,
+        image::imageops::FilterType::Triangle,
+    )
+    .into_raw()
 }
 
 /// Resizes a square mask of probabilities from `from` to `to` pixels per side (bilinear).
@@ -146,7 +157,11 @@ pub fn binarize(probabilities: &[f32]) -> Vec<u8> {
 /// of the catheter pixels, the one farthest from where the catheter enters the image (its pixel
 /// nearest to the border). `None` when the mask is empty. Anchors the force arrow when the 3D
 /// geometry is unknown (uploaded pairs). Image coordinates, pixels.
-pub fn estimate_tip<T: Copy + PartialOrd>(mask: &[T], size: usize, threshold: T) -> Option<[f64; 2]> {
+pub fn estimate_tip<T: Copy + PartialOrd>(
+    mask: &[T],
+    size: usize,
+    threshold: T,
+) -> Option<[f64; 2]> {
     let pixels: Vec<(f64, f64)> = mask
         .iter()
         .enumerate()
@@ -196,8 +211,8 @@ pub fn magnitude(force_n: [f32; 3]) -> f32 {
     force_n.iter().map(|f| f * f).sum::<f32>().sqrt()
 }
 
-/// RGBA pixels of an RGB image with a coloured overlay: `coverage` (one value in `[0, 1]` per
-/// pixel) blended in `colour` at `opacity`.
+/// An RGB image with a coloured overlay: `coverage` (one value in `[0, 1]` per pixel) blended
+/// in `colour` at `opacity`. Overlays chain: the result is RGB again.
 pub fn overlay(
     rgb: &[u8],
     coverage: impl Iterator<Item = f32>,
@@ -207,21 +222,36 @@ pub fn overlay(
     rgb.chunks_exact(3)
         .zip(coverage)
         .flat_map(|(p, c)| {
-            let a = (c.clamp(0.0, 1.0) * opacity.clamp(0.0, 1.0)).min(1.0);
+            let a = c.clamp(0.0, 1.0) * opacity.clamp(0.0, 1.0);
             let mix = |v: u8, k: u8| (f32::from(v) * (1.0 - a) + f32::from(k) * a).round() as u8;
-            [mix(p[0], colour[0]), mix(p[1], colour[1]), mix(p[2], colour[2]), 255]
+            [
+                mix(p[0], colour[0]),
+                mix(p[1], colour[1]),
+                mix(p[2], colour[2]),
+            ]
         })
         .collect()
 }
 
-#[cfg(test)]
+/// RGBA pixels of an RGB image, opaque (for a canvas).
+pub fn rgba(rgb: &[u8]) -> Vec<u8> {
+    rgb.chunks_exact(3)
+        .flat_map(|p| [p[0], p[1], p[2], 255])
+        .collect()
+}
+
+// Native tests (`cargo test`); the browser tests are in tests/web.rs.
+#[cfg(all(test, not(target_arch = "wasm32")))]
 mod tests {
     use super::*;
 
     fn png(width: u32, height: u32) -> Vec<u8> {
         let mut bytes = Vec::new();
         image::RgbImage::from_pixel(width, height, image::Rgb([10, 200, 30]))
-            .write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
+            .write_to(
+                &mut std::io::Cursor::new(&mut bytes),
+                image::ImageFormat::Png,
+            )
             .unwrap();
         bytes
     }
@@ -247,7 +277,10 @@ mod tests {
     fn huge_images_are_refused_before_decoding() {
         let mut bytes = Vec::new();
         image::GrayImage::new(MAX_UPLOAD_SIDE + 1, 1)
-            .write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
+            .write_to(
+                &mut std::io::Cursor::new(&mut bytes),
+                image::ImageFormat::Png,
+            )
             .unwrap();
         let err = decode_to_rgb("wide.png", &bytes, 32).unwrap_err();
         assert!(err.problem.contains("8193 x 1 pixels"), "{err}");
@@ -262,14 +295,15 @@ mod tests {
             mask[10 * size + x] = 255;
         }
         assert_eq!(estimate_tip(&mask, size, 128), Some([12.5, 10.5]));
-        assert_eq!(estimate_tip(&vec![0.0f32; 4], 2, 0.5), None);
+        assert_eq!(estimate_tip(&[0.0f32; 4], 2, 0.5), None);
     }
 
     #[test]
     fn overlays_blend_by_coverage_and_opacity() {
         let rgb = [100u8, 100, 100, 100, 100, 100];
         let out = overlay(&rgb, [0.0, 1.0].into_iter(), [200, 0, 0], 0.5);
-        assert_eq!(out, vec![100, 100, 100, 255, 150, 50, 50, 255]);
+        assert_eq!(out, vec![100, 100, 100, 150, 50, 50]);
+        assert_eq!(rgba(&out), vec![100, 100, 100, 255, 150, 50, 50, 255]);
         assert_eq!(binarize(&[0.2, 0.5, 0.9]), vec![0, 255, 255]);
     }
 }

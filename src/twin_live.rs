@@ -88,11 +88,7 @@ impl TwinControls {
 
     /// Solves the rod and renders both views (X-ray modalities on `background`), with the
     /// twin's exact masks and the true force as the labels.
-    pub fn render(
-        &self,
-        id: String,
-        background: &XrayBackground,
-    ) -> Result<LabeledPair, RodError> {
+    pub fn render(&self, id: String, background: &XrayBackground) -> Result<LabeledPair, RodError> {
         let mut config = TwinConfig::new(self.modality, WORK_SIZE);
         config.views = self.views();
         config.patches = background.rule();
@@ -106,7 +102,7 @@ impl TwinControls {
             let bg = self
                 .modality
                 .is_xray()
-                .then(|| (&background.source, layout));
+                .then_some((&background.source, layout));
             views.push(render_view(&config, &shape, view, bg, &mut rng));
         }
         let rgb = |p: &ViewPixels| match p {
@@ -163,6 +159,14 @@ impl XrayStyle {
         }
     }
 
+    /// The twin's modality of this style.
+    pub fn modality(self) -> Modality {
+        match self {
+            XrayStyle::Xray1 => Modality::Xray1,
+            XrayStyle::Xray2 => Modality::Xray2,
+        }
+    }
+
     /// The patch rule behind the style (the same rules `hnet simulate` uses).
     pub fn rule(self) -> PatchRule {
         match self {
@@ -203,9 +207,7 @@ impl XrayBackground {
     }
 
     fn on_heart(source: BackgroundSource) -> Self {
-        let centre = source
-            .region_centre(Anatomy::Heart)
-            .unwrap_or([0.5, 0.5]);
+        let centre = source.region_centre(Anatomy::Heart).unwrap_or([0.5, 0.5]);
         let region = source.square_region(centre, DEFAULT_REGION_SIDE);
         Self {
             source,
@@ -270,7 +272,8 @@ impl XrayBackground {
     }
 }
 
-#[cfg(test)]
+// Native tests (`cargo test`); the browser tests are in tests/web.rs.
+#[cfg(all(test, not(target_arch = "wasm32")))]
 mod tests {
     use super::*;
 

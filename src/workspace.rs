@@ -523,7 +523,8 @@ pub fn parse_force_labels(
     Ok(labels)
 }
 
-#[cfg(test)]
+// Native tests (`cargo test`); the browser tests are in tests/web.rs.
+#[cfg(all(test, not(target_arch = "wasm32")))]
 mod tests {
     use super::*;
 
@@ -550,13 +551,27 @@ mod tests {
     fn strokes_undo_and_redo_one_at_a_time() {
         let mut ws = Workspace::default();
         ws.add(pair(&ws));
-        stroke(&mut ws, View::A, [10.0, 10.0], [40.0, 10.0], 3.0, Tool::Brush);
+        stroke(
+            &mut ws,
+            View::A,
+            [10.0, 10.0],
+            [40.0, 10.0],
+            3.0,
+            Tool::Brush,
+        );
         let painted = ws.current().unwrap().mask_a.clone();
         // A 30 px long, 6 px wide stroke with round ends.
         let n = painted.iter().filter(|&&m| m == 255).count();
         assert!((180..=230).contains(&n), "{n}");
         assert!(ws.current().unwrap().masks_labeled);
-        stroke(&mut ws, View::A, [20.0, 10.0], [20.0, 10.0], 5.0, Tool::Eraser);
+        stroke(
+            &mut ws,
+            View::A,
+            [20.0, 10.0],
+            [20.0, 10.0],
+            5.0,
+            Tool::Eraser,
+        );
         assert!(ws.current().unwrap().labeled_pixels(View::A) < n);
 
         assert!(ws.undo().is_some());
@@ -577,7 +592,14 @@ mod tests {
     fn a_stroke_that_changes_nothing_is_no_undo_step() {
         let mut ws = Workspace::default();
         ws.add(pair(&ws));
-        stroke(&mut ws, View::A, [10.0, 10.0], [12.0, 10.0], 2.0, Tool::Eraser);
+        stroke(
+            &mut ws,
+            View::A,
+            [10.0, 10.0],
+            [12.0, 10.0],
+            2.0,
+            Tool::Eraser,
+        );
         assert_eq!(ws.can_undo_redo(), (false, false));
     }
 
@@ -625,7 +647,10 @@ mod tests {
         assert_eq!(labels, vec![("pair-0001".to_string(), [0.1, -0.2, 0.05])]);
         // A dataset's manifest (extra columns, other order) works too.
         let manifest = b"id,split,fx,fy,fz,source\np1,train,1,2,3,x\n";
-        assert_eq!(parse_force_labels("m.csv", manifest).unwrap()[0].1, [1.0, 2.0, 3.0]);
+        assert_eq!(
+            parse_force_labels("m.csv", manifest).unwrap()[0].1,
+            [1.0, 2.0, 3.0]
+        );
 
         let err = parse_force_labels("f.csv", b"id,fx,fy,fz\np1,0,0,0\np2,0,NaN,0\n").unwrap_err();
         assert_eq!(err.line, Some(3));

@@ -1,22 +1,189 @@
-//! Browser tests: run in headless Chromium by `wasm-bindgen-test-runner`.
+//! Browser tests, run in headless Chromium by `wasm-bindgen-test-runner` (see DEVELOPERS.md):
+//! H-Net on the CPU and WebGPU backends, the backend fallback, the browser storage, inference
+//! on a twin pair, and the page's components.
 #![cfg(target_arch = "wasm32")]
 
-use burn::tensor::{Device, Tensor};
-use hnet_model::HNetConfig;
+use std::collections::BTreeMap;
+use std::rc::Rc;
+
+use burn::tensor::{Device, Tensor, TensorData};
+use hnet_model::{HNet, HNetConfig};
+use hnet_studio::browser::yield_to_browser;
+use hnet_studio::compute::{Backend, BackendChoice, select_device};
+use hnet_studio::engine::{Engine, WeightsOrigin};
+use hnet_studio::imaging::WORK_SIZE;
+use hnet_studio::storage;
+use hnet_studio::twin_live::{TwinControls, XrayBackground};
+use wasm_bindgen::JsCast;
 use wasm_bindgen_test::*;
 
 wasm_bindgen_test_configure!(run_in_browser);
 
+fn small_hnet(device: &Device) -> (HNet, HNetConfig) {
+    let config = HNetConfig::new().with_image_size([32, 32]);
+    (config.init(device).unwrap(), config)
+}
+
 #[wasm_bindgen_test]
 fn hnet_forward_pass_on_the_cpu_backend() {
     let device = Device::flex();
-    let model = HNetConfig::new()
-        .with_image_size([32, 32])
-        .init(&device)
-        .unwrap();
+    let (model, _) = small_hnet(&device);
     let a = Tensor::zeros([1, 3, 32, 32], &device);
     let b = Tensor::ones([1, 3, 32, 32], &device);
     let out = model.forward(a, b);
     assert_eq!(out.mask_a().dims(), [1, 1, 32, 32]);
     assert_eq!(out.force.dims(), [1, 3]);
+}
+
+/// Deterministic test images in `[0, 1]`.
+fn ramp(device: &Device, phase: f32) -> Tensor<4> {
+    let values: Vec<f32> = (0..3 * 32 * 32)
+        .map(|i| ((i as f32 * 0.37 + phase).sin() + 1.0) / 2.0)
+        .collect();
+    Tensor::from_data(TensorData::new(values, [1, 3, 32, 32]), device)
+}
+
+#[wasm_bindgen_test]
+async fn asking_for_the_cpu_gives_the_cpu() {
+    let (_, backend) = select_device(BackendChoice::Cpu).await;
+    assert_eq!(backend.label(), "CPU (WebAssembly)");
+    assert_eq!(backend.reason(), Some("CPU chosen"));
+}
+
+/// With `--enable-unsafe-webgpu` headless Chromium offers a software WebGPU adapter: the page
+/// picks it, and H-Net computes there what it computes on the CPU. Without an adapter the page
+/// falls back to the CPU and says why.
+#[wasm_bindgen_test]
+async fn webgpu_when_available_computes_what_the_cpu_computes() {
+    let (device, backend) = select_device(BackendChoice::Auto).await;
+    let cpu = Device::flex();
+    let (model, config) = small_hnet(&cpu);
+    let bytes = model.to_weights_bytes(&config, &BTreeMap::new()).unwrap();
+    let (on_device, _, _) = HNet::from_weights_bytes(&bytes, &device, "test").unwrap();
+    let expected = model.forward(ramp(&cpu, 0.0), ramp(&cpu, 1.0));
+    let got = on_device.forward(ramp(&device, 0.0), ramp(&device, 1.0));
+    let read = |t: Tensor<2>| async move {
+        t.into_data_async()
+            .await
+            .unwrap()
+            .try_to_vec::<f32>()
+            .unwrap()
+    };
+    let (e, g) = (read(expected.force).await, read(got.force).await);
+    for (e, g) in e.iter().zip(&g) {
+        assert!((e - g).abs() < 1e-4, "{backend:?}: {e} vs {g}");
+    }
+    match backend {
+        Backend::WebGpu => {}
+        Backend::Cpu { reason } => assert!(!reason.is_empty()),
+    }
+}
+
+#[wasm_bindgen_test]
+async fn the_engine_runs_on_a_twin_pair_at_the_working_size() {
+    let (device, backend) = select_device(BackendChoice::Cpu).await;
+    let cpu = Device::flex();
+    let (model, config) = small_hnet(&cpu);
+    let bytes = model.to_weights_bytes(&config, &BTreeMap::new()).unwrap();
+    let engine = Rc::new(
+        Engine::from_weights(
+            Rc::from(bytes),
+            "small.bpk",
+            WeightsOrigin::File,
+            device,
+            backend,
+        )
+        .unwrap(),
+    );
+    let pair = TwinControls::default()
+        .render("pair-0001".into(), &XrayBackground::phantom())
+        .unwrap();
+    let prediction = engine.infer(&pair.view_a, &pair.view_b).await.unwrap();
+    assert_eq!(prediction.mask_a.len(), WORK_SIZE * WORK_SIZE);
+    assert!(prediction.mask_b.iter().all(|p| (0.0..=1.0).contains(p)));
+    assert!(prediction.force_n.iter().all(|f| f.is_finite()));
+}
+
+#[wasm_bindgen_test]
+async fn weights_of_another_network_are_refused_by_name() {
+    let (device, backend) = select_device(BackendChoice::Cpu).await;
+    let err = Engine::from_weights(
+        Rc::from(&b"not a weights file"[..]),
+        "junk.bpk",
+        WeightsOrigin::File,
+        device,
+        backend,
+    )
+    .err()
+    .unwrap();
+    assert!(err.contains("junk.bpk"), "{err}");
+}
+
+#[wasm_bindgen_test]
+async fn pairs_survive_in_the_browser_storage() {
+    let mut pair = TwinControls::default()
+        .render("test-storage-1".into(), &XrayBackground::phantom())
+        .unwrap();
+    pair.mask_a[0] = 255;
+    storage::save_pair(&pair).await.unwrap();
+    let (pairs, damaged) = storage::load_pairs().await.unwrap();
+    assert!(damaged.is_empty(), "{damaged:?}");
+    let back = pairs.iter().find(|p| p.id == pair.id).expect("saved pair");
+    assert_eq!(back, &pair);
+    storage::delete_pair(&pair.id).await.unwrap();
+    let (pairs, _) = storage::load_pairs().await.unwrap();
+    assert!(pairs.iter().all(|p| p.id != pair.id));
+}
+
+/// Polls the document until `selector` matches (the page works asynchronously).
+async fn wait_for(selector: &str) -> web_sys::Element {
+    let document = web_sys::window().unwrap().document().unwrap();
+    for _ in 0..2000 {
+        if let Ok(Some(element)) = document.query_selector(selector) {
+            return element;
+        }
+        yield_to_browser().await;
+    }
+    panic!("{selector} never appeared");
+}
+
+fn click(selector: &str) {
+    web_sys::window()
+        .unwrap()
+        .document()
+        .unwrap()
+        .query_selector(selector)
+        .unwrap()
+        .unwrap_or_else(|| panic!("no {selector}"))
+        .dyn_into::<web_sys::HtmlElement>()
+        .unwrap()
+        .click();
+}
+
+#[wasm_bindgen_test]
+async fn the_page_loads_a_model_and_renders_the_live_twin() {
+    leptos::mount::mount_to_body(hnet_studio::App);
+    let ready = wait_for("#model-status [data-state=ready]").await;
+    let backend = wait_for("#backend").await.text_content().unwrap();
+    assert!(
+        backend == "WebGPU" || backend == "CPU (WebAssembly)",
+        "{backend}"
+    );
+    assert!(ready.text_content().unwrap().contains("Parameters"));
+
+    // The twin tab renders a pair with its exact labels into both views.
+    click("#tab-twin");
+    let labeled = wait_for("#view-a:not([data-label-pixels='0'])")
+        .await
+        .get_attribute("data-label-pixels")
+        .unwrap()
+        .parse::<usize>()
+        .unwrap();
+    assert!(labeled > 200, "{labeled} labeled pixels");
+    wait_for("#keep-draft").await;
+    // H-Net runs on it and fills the force table.
+    wait_for("#force-verdict").await;
+    click("#keep-draft");
+    let item = wait_for("#pairs li[data-id]").await;
+    assert!(item.get_attribute("data-id").unwrap().starts_with("pair-"));
 }

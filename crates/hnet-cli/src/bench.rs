@@ -31,7 +31,7 @@ struct ModelBench {
     #[arg(long, value_enum, value_delimiter = ',', default_value = "flex")]
     backend: Vec<BackendChoice>,
     /// Image side in pixels.
-    #[arg(long, default_value_t = 96)]
+    #[arg(long, default_value_t = 64)]
     size: usize,
     /// Pairs per training batch.
     #[arg(long, default_value_t = 32)]

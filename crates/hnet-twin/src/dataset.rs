@@ -50,6 +50,7 @@ pub fn record_path(id: &str) -> String {
 }
 
 /// The last 12 bytes of every PNG file: the empty `IEND` chunk and its CRC.
+#[cfg(not(target_arch = "wasm32"))]
 const PNG_END: [u8; 12] = [0, 0, 0, 0, b'I', b'E', b'N', b'D', 0xAE, 0x42, 0x60, 0x82];
 
 /// Which part of the data a pair belongs to.
@@ -736,7 +737,10 @@ mod tests {
     fn small_sets_keep_a_validation_and_a_test_pair() {
         let count = |n, split| assign_splits(n, 7).iter().filter(|&&x| x == split).count();
         for n in 3..12 {
-            assert!(count(n, Split::Val) >= 1 && count(n, Split::Test) >= 1, "{n}");
+            assert!(
+                count(n, Split::Val) >= 1 && count(n, Split::Test) >= 1,
+                "{n}"
+            );
             assert!(count(n, Split::Train) >= n / 3, "{n}");
         }
         assert_eq!(count(2, Split::Train), 2);

@@ -1,0 +1,46 @@
+// Inference time per stereo pair in headless Chromium, on the CPU backend (WebAssembly) and on
+// WebGPU where the browser offers an adapter (here: SwiftShader, a software adapter).
+// Usage, after `trunk build`: node end2end/bench.mjs [runs]   (docs/benchmarks.md)
+import { statSync, readdirSync } from "node:fs";
+import { join, resolve } from "node:path";
+import { serveDist, launchBrowser, openPage, waitForModel } from "./harness.mjs";
+
+const runs = Number(process.argv[2] ?? 10);
+const server = await serveDist();
+const context = await launchBrowser();
+const results = [];
+try {
+  for (const choice of ["cpu", "auto"]) {
+    const { page } = await openPage(context, server.url);
+    await waitForModel(page);
+    await page.selectOption("#backend-choice", choice);
+    await waitForModel(page);
+    const backend = await page.textContent("#backend");
+    await page.click("#tab-twin");
+    await page.waitForSelector("#force-verdict", { timeout: 120_000 });
+    const times = [];
+    for (let i = 0; i < runs; i++) {
+      await page.waitForFunction(() => !document.querySelector("#busy"));
+      await page.click("#run-model");
+      await page.waitForFunction(() => !document.querySelector("#busy"));
+      const text = await page.textContent("#inference-time");
+      times.push(Number(text.match(/(\d+) ms/)[1]));
+    }
+    times.sort((a, b) => a - b);
+    results.push({
+      backend,
+      weights: await page.textContent("#weights"),
+      input: await page.textContent("#input-size"),
+      runs,
+      median_ms: times[Math.floor(times.length / 2)],
+      min_ms: times[0],
+    });
+    await page.close();
+  }
+} finally {
+  await context.close();
+  await server.close();
+}
+const dist = resolve(new URL("..", import.meta.url).pathname, "dist");
+const wasm = readdirSync(dist).filter((f) => f.endsWith(".wasm"));
+console.log(JSON.stringify({ results, wasm: wasm.map((f) => ({ file: f, bytes: statSync(join(dist, f)).size })) }, null, 2));

@@ -1,0 +1,186 @@
+//! The tip force: H-Net's estimate in newtons, its magnitude against the ablation band, the true
+//! force and the error for twin pairs; and the pair's force label (typed, accepted from the
+//! estimate or the truth, or imported from a CSV file).
+
+use leptos::prelude::*;
+
+use crate::app::Studio;
+use crate::browser::{files, read_file};
+use crate::imaging::magnitude;
+use crate::workspace::parse_force_labels;
+
+/// Contact forces of ablation within this band (newtons) are considered effective and safe.
+pub const ABLATION_BAND_N: [f32; 2] = [0.1, 0.3];
+/// Full scale of the magnitude gauge, newtons.
+const GAUGE_MAX_N: f32 = 0.5;
+const AXES: [&str; 3] = ["Fx", "Fy", "Fz"];
+
+/// Where a magnitude stands against the ablation band.
+pub fn band_verdict(magnitude_n: f32) -> &'static str {
+    if magnitude_n < ABLATION_BAND_N[0] {
+        "below the 0.1–0.3 N ablation band"
+    } else if magnitude_n <= ABLATION_BAND_N[1] {
+        "within the 0.1–0.3 N ablation band"
+    } else {
+        "above the 0.1–0.3 N ablation band"
+    }
+}
+
+/// The force panel.
+#[component]
+pub fn ForcePanel() -> impl IntoView {
+    let studio = expect_context::<Studio>();
+    let estimate = move || {
+        let id = studio.shown_id()?;
+        studio.predictions.with(|p| p.get(&id).map(|p| p.force_n))
+    };
+    let truth = move || studio.with_shown(|p| p.and_then(|p| p.true_force()));
+    let label = move || studio.with_shown(|p| p.and_then(|p| p.force_n));
+    // The label being typed, per axis.
+    let typed = RwSignal::new([String::new(), String::new(), String::new()]);
+    Effect::new(move |_| {
+        let values = label().map(|f| f.map(|v| format!("{v:.3}")));
+        typed.set(values.unwrap_or_default());
+    });
+
+    let set_label = move |force: Option<[f32; 3]>| {
+        if studio.showing_draft() {
+            studio.keep_draft();
+        }
+        let Some(id) = studio
+            .workspace
+            .with_untracked(|ws| ws.current().map(|p| p.id.clone()))
+        else {
+            return;
+        };
+        studio.edit(|ws| ws.set_force(&id, force).then_some(id.clone()));
+    };
+    let save_typed = move |_| {
+        let values = typed.get_untracked();
+        let mut force = [0.0f32; 3];
+        for (axis, text) in values.iter().enumerate() {
+            match text.trim().parse::<f32>() {
+                Ok(v) if v.is_finite() => force[axis] = v,
+                _ => {
+                    studio.error(format!(
+                        "{} is `{text}`: enter a number of newtons",
+                        AXES[axis]
+                    ));
+                    return;
+                }
+            }
+        }
+        set_label(Some(force));
+        studio.info("force label saved");
+    };
+    let on_import = move |ev: leptos::ev::Event| {
+        let input: web_sys::HtmlInputElement = event_target(&ev);
+        let Some(file) = files(input.files()).into_iter().next() else {
+            return;
+        };
+        input.set_value("");
+        leptos::task::spawn_local(async move {
+            let labels = match read_file(&file).await {
+                Ok(bytes) => parse_force_labels(&file.name(), &bytes).map_err(|e| e.to_string()),
+                Err(e) => Err(e),
+            };
+            match labels {
+                Ok(labels) => {
+                    let mut result = (0, Vec::new());
+                    studio
+                        .workspace
+                        .update(|ws| result = ws.apply_force_labels(&labels));
+                    for (id, _) in &labels {
+                        studio.persist(Some(id.clone()));
+                    }
+                    let (applied, unknown) = result;
+                    if unknown.is_empty() {
+                        studio.info(format!("{}: {applied} force label(s) applied", file.name()));
+                    } else {
+                        studio.error(format!(
+                            "{}: {applied} force label(s) applied; no pair has the id(s) {}",
+                            file.name(),
+                            unknown.join(", ")
+                        ));
+                    }
+                }
+                Err(e) => studio.error(e),
+            }
+        });
+    };
+
+    let row = move |name: &'static str, values: Option<[f32; 3]>, class: &'static str| {
+        view! {
+            <tr class=class>
+                <th scope="row">{name}</th>
+                {(0..3).map(|i| view! {
+                    <td>{values.map(|v| format!("{:+.3}", v[i])).unwrap_or_else(|| "–".into())}</td>
+                }).collect_view()}
+                <td>{values.map(|v| format!("{:.3}", magnitude(v))).unwrap_or_else(|| "–".into())}</td>
+            </tr>
+        }
+    };
+
+    view! {
+        <section class="force" aria-labelledby="force-title">
+            <h2 id="force-title">"Tip force"</h2>
+            <table id="force-table">
+                <thead><tr><th></th><th>"Fx (N)"</th><th>"Fy (N)"</th><th>"Fz (N)"</th><th>"|F| (N)"</th></tr></thead>
+                <tbody>
+                    {move || row("H-Net", estimate(), "estimate")}
+                    {move || truth().map(|t| row("True (twin)", Some(t), "truth"))}
+                    {move || match (estimate(), truth()) {
+                        (Some(e), Some(t)) => Some(row("Error", Some([e[0] - t[0], e[1] - t[1], e[2] - t[2]]), "error")),
+                        _ => None,
+                    }}
+                </tbody>
+            </table>
+            {move || estimate().map(|e| {
+                let m = magnitude(e);
+                let pct = |v: f32| format!("{:.1}%", (v / GAUGE_MAX_N).clamp(0.0, 1.0) * 100.0);
+                view! {
+                    <div class="gauge" id="force-gauge" role="img"
+                        aria-label=format!("{m:.3} N, {}", band_verdict(m))>
+                        <div class="band" style:left=pct(ABLATION_BAND_N[0])
+                            style:width=pct(ABLATION_BAND_N[1] - ABLATION_BAND_N[0])></div>
+                        <div class="marker" style:left=pct(m)></div>
+                        {truth().map(|t| view! { <div class="marker truth" style:left=pct(magnitude(t))></div> })}
+                    </div>
+                    <p class="verdict" id="force-verdict">{format!("|F| = {m:.3} N: {}", band_verdict(m))}</p>
+                }
+            })}
+            <fieldset class="label-force">
+                <legend>"Force label of this pair"</legend>
+                {(0..3).map(|i| view! {
+                    <label>{AXES[i]}
+                        <input id=format!("label-f{}", ["x", "y", "z"][i]) type="number" step="0.001"
+                            prop:value=move || typed.with(|t| t[i].clone())
+                            on:input=move |ev| typed.update(|t| t[i] = event_target_value(&ev))/>
+                        " N"
+                    </label>
+                }).collect_view()}
+                <div class="actions">
+                    <button id="label-save" class="primary" disabled=move || studio.shown_id().is_none()
+                        on:click=save_typed>"Save label"</button>
+                    <button id="label-from-estimate" disabled=move || estimate().is_none()
+                        on:click=move |_| set_label(estimate())>"Use H-Net's estimate"</button>
+                    <button id="label-from-truth" disabled=move || truth().is_none()
+                        on:click=move |_| set_label(truth())>"Use the true force"</button>
+                    <button id="label-clear" disabled=move || label().is_none()
+                        on:click=move |_| set_label(None)>"Clear"</button>
+                    <label class="file-button">"Import CSV…"
+                        <input id="label-import" type="file" accept=".csv,text/csv" on:change=on_import/>
+                    </label>
+                </div>
+                <p class="hint">
+                    "CSV: a header with id, fx, fy, fz (newtons); other columns are ignored, so a "
+                    "dataset's manifest.csv works. "
+                    {move || match label() {
+                        Some(_) => "This pair has a force label.",
+                        None => "This pair has no force label yet.",
+                    }}
+                </p>
+            </fieldset>
+        </section>
+    }
+}

@@ -1,0 +1,123 @@
+//! The model's status: backend, weights and their provenance, the last inference time; choosing
+//! the backend and loading other weights.
+
+use std::rc::Rc;
+
+use leptos::prelude::*;
+
+use crate::app::{ModelState, Studio, load_model};
+use crate::browser::{files, read_file};
+use crate::compute::BackendChoice;
+use crate::engine::WeightsOrigin;
+
+/// The model bar.
+#[component]
+pub fn ModelBar() -> impl IntoView {
+    let studio = expect_context::<Studio>();
+    let last_millis = move || {
+        let id = studio.shown_id()?;
+        studio.predictions.with(|p| {
+            p.get(&id)
+                .map(|p| format!("{:.0} ms on {}", p.millis, p.backend))
+        })
+    };
+    let on_backend = move |ev: leptos::ev::Event| {
+        let choice = match event_target_value(&ev).as_str() {
+            "cpu" => BackendChoice::Cpu,
+            _ => BackendChoice::Auto,
+        };
+        studio.backend_choice.set(choice);
+        // The same weights on the other device.
+        let weights = match studio.model.get_untracked() {
+            ModelState::Ready(engine) => engine
+                .weights
+                .clone()
+                .map(|bytes| (bytes, engine.weights_name.clone(), engine.origin.clone())),
+            _ => None,
+        };
+        load_model(studio, weights);
+    };
+    let on_weights = move |ev: leptos::ev::Event| {
+        let input: web_sys::HtmlInputElement = event_target(&ev);
+        let Some(file) = files(input.files()).into_iter().next() else {
+            return;
+        };
+        input.set_value("");
+        leptos::task::spawn_local(async move {
+            match read_file(&file).await {
+                Ok(bytes) => load_model(
+                    studio,
+                    Some((Rc::<[u8]>::from(bytes), file.name(), WeightsOrigin::File)),
+                ),
+                Err(e) => studio.error(e),
+            }
+        });
+    };
+
+    view! {
+        <section id="model-status" class="model-bar" aria-live="polite">
+            {move || match studio.model.get() {
+                ModelState::Loading(text) => view! {
+                    <p data-state="loading"><span class="spinner"></span>{text}</p>
+                }.into_any(),
+                ModelState::Failed(message) => view! {
+                    <p data-state="failed" class="error">"H-Net could not be loaded: "{message}</p>
+                }.into_any(),
+                ModelState::Ready(engine) => {
+                    let provenance = match engine.origin {
+                        WeightsOrigin::Untrained => {
+                            "untrained: this build ships no weights (see assets/MODEL.md)".to_string()
+                        }
+                        _ => engine.header.as_ref().map(|h| {
+                            h.provenance.iter()
+                                .filter(|(k, _)| k.as_str() != "command")
+                                .map(|(k, v)| format!("{k}: {v}"))
+                                .collect::<Vec<_>>()
+                                .join(" · ")
+                        }).unwrap_or_default(),
+                    };
+                    view! {
+                        <dl data-state="ready">
+                            <div>
+                                <dt>"Backend"</dt>
+                                <dd id="backend" title=engine.backend.reason().unwrap_or("").to_string()>
+                                    {engine.backend.label()}
+                                </dd>
+                            </div>
+                            <div><dt>"Parameters"</dt><dd id="params">{engine.params}</dd></div>
+                            <div>
+                                <dt>"Input"</dt>
+                                <dd id="input-size">{format!("{} × {} px", engine.input[1], engine.input[0])}</dd>
+                            </div>
+                            <div>
+                                <dt>"Weights"</dt>
+                                <dd id="weights" title=provenance>{engine.weights_name.clone()}</dd>
+                            </div>
+                            <div>
+                                <dt>"Last inference"</dt>
+                                <dd id="inference-time">{move || last_millis().unwrap_or_else(|| "–".into())}</dd>
+                            </div>
+                        </dl>
+                    }.into_any()
+                }
+            }}
+            <div class="model-actions">
+                <label>
+                    "Run on "
+                    <select id="backend-choice" on:change=on_backend>
+                        <option value="auto" selected=move || studio.backend_choice.get() == BackendChoice::Auto>
+                            "WebGPU if available"
+                        </option>
+                        <option value="cpu" selected=move || studio.backend_choice.get() == BackendChoice::Cpu>
+                            "CPU"
+                        </option>
+                    </select>
+                </label>
+                <label class="file-button">
+                    "Load weights…"
+                    <input id="weights-file" type="file" accept=".bpk" on:change=on_weights/>
+                </label>
+            </div>
+        </section>
+    }
+}

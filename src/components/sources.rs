@@ -1,0 +1,253 @@
+//! Where pairs come from: two image files (picked or dropped), or the live digital twin with its
+//! sliders; and the synthetic X-ray background composer.
+
+use hnet_twin::scene::Modality;
+use leptos::prelude::*;
+
+use crate::app::{SourceTab, Studio};
+use crate::browser::{files, read_file};
+use crate::components::composer::Composer;
+use crate::imaging::{WORK_SIZE, decode_to_rgb};
+use crate::twin_live::TwinControls;
+use crate::workspace::{LabeledPair, PairSource};
+
+/// The tabbed source panel.
+#[component]
+pub fn Sources() -> impl IntoView {
+    let studio = expect_context::<Studio>();
+    let tab = studio.tab;
+    let tab_button = move |which: SourceTab, id: &'static str, label: &'static str| {
+        view! {
+            <button id=id role="tab" class="tab" aria-selected=move || (tab.get() == which).to_string()
+                on:click=move |_| {
+                    tab.set(which);
+                    if which == SourceTab::Background {
+                        // Show the catheter on the background being composed.
+                        let xray = studio.background.with_untracked(|bg| bg.style.modality());
+                        studio.twin.update(|t| t.modality = xray);
+                    }
+                    if which != SourceTab::Images {
+                        studio.render_twin();
+                        studio.run_model();
+                    }
+                }>
+                {label}
+            </button>
+        }
+    };
+    view! {
+        <nav class="tabs" role="tablist">
+            {tab_button(SourceTab::Images, "tab-images", "Images")}
+            {tab_button(SourceTab::Twin, "tab-twin", "Digital twin")}
+            {tab_button(SourceTab::Background, "tab-background", "X-ray background")}
+        </nav>
+        <div class="tab-panel">
+            {move || match tab.get() {
+                SourceTab::Images => view! { <UploadPair/> }.into_any(),
+                SourceTab::Twin => view! { <TwinSliders/> }.into_any(),
+                SourceTab::Background => view! { <Composer/> }.into_any(),
+            }}
+        </div>
+    }
+}
+
+/// Reads two image files into a pair, view A first (or, with `by_name`, the first by name).
+/// Every problem names its file; nothing is added unless both images are good.
+async fn pair_from_files(
+    studio: Studio,
+    mut picked: Vec<web_sys::File>,
+    by_name: bool,
+) -> Result<LabeledPair, String> {
+    if picked.len() != 2 {
+        return Err(format!(
+            "a stereo pair is two images (view A and view B); {} file{} given",
+            picked.len(),
+            if picked.len() == 1 { " was" } else { "s were" }
+        ));
+    }
+    if by_name {
+        picked.sort_by_key(|f| f.name());
+    }
+    let mut views = Vec::with_capacity(2);
+    for file in &picked {
+        let bytes = read_file(file).await?;
+        views.push(decode_to_rgb(&file.name(), &bytes, WORK_SIZE).map_err(|e| e.to_string())?);
+    }
+    let view_b = views.pop().unwrap_or_default();
+    let view_a = views.pop().unwrap_or_default();
+    let id = studio.workspace.with_untracked(|ws| ws.next_id());
+    Ok(LabeledPair::new(
+        id,
+        PairSource::Upload {
+            view_a: picked[0].name(),
+            view_b: picked[1].name(),
+        },
+        view_a,
+        view_b,
+    ))
+}
+
+fn load_files(studio: Studio, picked: Vec<web_sys::File>, by_name: bool) {
+    leptos::task::spawn_local(async move {
+        match pair_from_files(studio, picked, by_name).await {
+            Ok(pair) => {
+                studio.info(format!("{} loaded", pair.id));
+                studio.add_pair(pair);
+            }
+            Err(e) => studio.error(e),
+        }
+    });
+}
+
+/// Two file pickers and a drop zone.
+#[component]
+fn UploadPair() -> impl IntoView {
+    let studio = expect_context::<Studio>();
+    let picked_a = StoredValue::new_local(None::<web_sys::File>);
+    let picked_b = StoredValue::new_local(None::<web_sys::File>);
+    let dragging = RwSignal::new(false);
+    let pick = move |slot: StoredValue<Option<web_sys::File>, LocalStorage>| {
+        move |ev: leptos::ev::Event| {
+            let input: web_sys::HtmlInputElement = event_target(&ev);
+            slot.set_value(files(input.files()).into_iter().next());
+            input.set_value("");
+            if let (Some(a), Some(b)) = (picked_a.get_value(), picked_b.get_value()) {
+                picked_a.set_value(None);
+                picked_b.set_value(None);
+                load_files(studio, vec![a, b], false);
+            }
+        }
+    };
+    let on_drop = move |ev: leptos::ev::DragEvent| {
+        ev.prevent_default();
+        dragging.set(false);
+        let dropped = files(ev.data_transfer().and_then(|d| d.files()));
+        load_files(studio, dropped, true);
+    };
+    view! {
+        <div class="upload">
+            <p class="hint">
+                "Two simultaneous images of the catheter (PNG or JPEG, any size; resized to "
+                {WORK_SIZE}" px). They stay on this machine."
+            </p>
+            <label class="file-button">"View A…"
+                <input id="file-view-a" type="file" accept="image/png,image/jpeg" on:change=pick(picked_a)/>
+            </label>
+            <label class="file-button">"View B…"
+                <input id="file-view-b" type="file" accept="image/png,image/jpeg" on:change=pick(picked_b)/>
+            </label>
+            <div id="drop-zone" class="drop-zone" class:dragging=move || dragging.get()
+                on:dragover=move |ev: leptos::ev::DragEvent| { ev.prevent_default(); dragging.set(true); }
+                on:dragleave=move |_| dragging.set(false)
+                on:drop=on_drop>
+                "…or drop both images here (the first by name is view A)"
+            </div>
+            <label class="file-button">"Pick both…"
+                <input id="file-pair" type="file" multiple accept="image/png,image/jpeg"
+                    on:change=move |ev| {
+                        let input: web_sys::HtmlInputElement = event_target(&ev);
+                        let picked = files(input.files());
+                        input.set_value("");
+                        load_files(studio, picked, true);
+                    }/>
+            </label>
+        </div>
+    }
+}
+
+/// One labelled slider bound to a field of the twin's controls. Moving it re-renders the twin;
+/// releasing it runs H-Net.
+fn slider(
+    studio: Studio,
+    id: &'static str,
+    label: &'static str,
+    unit: &'static str,
+    range: [f64; 3],
+    get: fn(&TwinControls) -> f64,
+    set: fn(&mut TwinControls, f64),
+) -> impl IntoView {
+    let twin = studio.twin;
+    view! {
+        <label class="slider">
+            <span>{label}</span>
+            <input id=id type="range" min=range[0] max=range[1] step=range[2]
+                prop:value=move || twin.with(get).to_string()
+                on:input=move |ev| {
+                    if let Ok(v) = event_target_value(&ev).parse::<f64>() {
+                        twin.update(|t| set(t, v));
+                        studio.render_twin();
+                    }
+                }
+                on:change=move |_| studio.run_model()/>
+            <output>{move || format!("{:.2} {unit}", twin.with(get))}</output>
+        </label>
+    }
+}
+
+/// The twin's sliders.
+#[component]
+fn TwinSliders() -> impl IntoView {
+    let studio = expect_context::<Studio>();
+    let twin = studio.twin;
+    let modality = move |ev: leptos::ev::Event| {
+        let xray = studio.background.with_untracked(|bg| bg.style.modality());
+        twin.update(|t| {
+            t.modality = if event_target_value(&ev) == "rgb" {
+                Modality::Rgb
+            } else {
+                xray
+            }
+        });
+        studio.render_twin();
+        studio.run_model();
+    };
+    view! {
+        <div class="twin">
+            <p class="hint">
+                "A Kirchhoff rod under a tip force, seen by two C-arm views (world frame: x patient "
+                "left, y anterior, z cranial). The twin's masks and force are exact labels."
+            </p>
+            <fieldset>
+                <legend>"Tip force"</legend>
+                {slider(studio, "twin-fx", "Fx", "N", [-0.4, 0.4, 0.01], |t| t.force_n[0], |t, v| t.force_n[0] = v)}
+                {slider(studio, "twin-fy", "Fy", "N", [-0.4, 0.4, 0.01], |t| t.force_n[1], |t, v| t.force_n[1] = v)}
+                {slider(studio, "twin-fz", "Fz", "N", [-0.4, 0.4, 0.01], |t| t.force_n[2], |t, v| t.force_n[2] = v)}
+            </fieldset>
+            <fieldset>
+                <legend>"Catheter"</legend>
+                {slider(studio, "twin-stiffness", "Stiffness EI", "mN·m²", [0.3, 1.2, 0.05], |t| t.stiffness_mn_m2, |t, v| t.stiffness_mn_m2 = v)}
+                {slider(studio, "twin-length", "Flexible length", "mm", [30.0, 70.0, 1.0], |t| t.length_mm, |t, v| t.length_mm = v)}
+                {slider(studio, "twin-precurve", "Pre-curve radius (0: straight)", "mm", [0.0, 150.0, 5.0], |t| t.precurve_radius_mm, |t, v| t.precurve_radius_mm = v)}
+            </fieldset>
+            <fieldset>
+                <legend>"C-arm"</legend>
+                {slider(studio, "twin-a-primary", "View A LAO/RAO", "°", [-90.0, 90.0, 1.0], |t| t.view_a_deg[0], |t, v| t.view_a_deg[0] = v)}
+                {slider(studio, "twin-a-secondary", "View A cranial/caudal", "°", [-40.0, 40.0, 1.0], |t| t.view_a_deg[1], |t, v| t.view_a_deg[1] = v)}
+                {slider(studio, "twin-b-primary", "View B LAO/RAO", "°", [-90.0, 180.0, 1.0], |t| t.view_b_deg[0], |t, v| t.view_b_deg[0] = v)}
+                {slider(studio, "twin-b-secondary", "View B cranial/caudal", "°", [-40.0, 40.0, 1.0], |t| t.view_b_deg[1], |t, v| t.view_b_deg[1] = v)}
+                <label class="slider">
+                    <span>"Images"</span>
+                    <select id="twin-modality" on:change=modality>
+                        <option value="xray" selected=move || twin.with(|t| t.modality.is_xray())>
+                            "X-ray (background from the composer)"
+                        </option>
+                        <option value="rgb" selected=move || twin.with(|t| !t.modality.is_xray())>
+                            "Bench camera (RGB)"
+                        </option>
+                    </select>
+                </label>
+            </fieldset>
+            <div class="actions">
+                <button id="twin-keep" class="primary" disabled=move || !studio.showing_draft()
+                    on:click=move |_| studio.keep_draft()>
+                    "Keep this pair"
+                </button>
+                <button id="twin-reset" on:click=move |_| {
+                    twin.set(TwinControls::default());
+                    studio.render_twin();
+                    studio.run_model();
+                }>"Reset"</button>
+            </div>
+        </div>
+    }
+}

@@ -1,0 +1,417 @@
+//! The two views side by side: the images with H-Net's masks and the label masks overlaid, the
+//! tip force as arrows, and the brush, eraser, zoom and pan that correct the labels.
+
+use hnet_twin::carm::{Biplane, CArm};
+use leptos::prelude::*;
+use wasm_bindgen::{Clamped, JsCast};
+
+use crate::app::{CANVAS_SIDE, PointerTool, Studio, ViewTransform, view_index};
+use crate::imaging::{WORK_SIZE, estimate_tip, force_arrow, overlay, project, rgba};
+use crate::workspace::{PairSource, View};
+
+/// Colour of H-Net's masks.
+const PREDICTION_COLOUR: [u8; 3] = [0, 200, 255];
+/// Colour of the label masks.
+const LABEL_COLOUR: [u8; 3] = [255, 110, 0];
+/// Colour of the estimated force arrow.
+const ESTIMATE_ARROW: &str = "#ffd400";
+/// Colour of the true force arrow (twin pairs).
+const TRUE_ARROW: &str = "#3ddc84";
+
+/// The toolbar and both views.
+#[component]
+pub fn StereoView() -> impl IntoView {
+    let studio = expect_context::<Studio>();
+    let tool_button = move |tool: PointerTool,
+                            id: &'static str,
+                            label: &'static str,
+                            key: &'static str| {
+        view! {
+            <button id=id class="tool" aria-pressed=move || (studio.tool.get() == tool).to_string()
+                title=format!("{label} ({key})") on:click=move |_| studio.tool.set(tool)>
+                {label}
+            </button>
+        }
+    };
+    let can = move || studio.workspace.with(|ws| ws.can_undo_redo());
+    let has_prediction = move || {
+        studio
+            .shown_id()
+            .is_some_and(|id| studio.predictions.with(|p| p.contains_key(&id)))
+    };
+    view! {
+        <div class="toolbar" role="toolbar" aria-label="Labeling tools">
+            <button id="run-model" class="primary" title="Run H-Net (R)"
+                disabled=move || studio.busy.get().is_some() || studio.shown_id().is_none()
+                on:click=move |_| studio.run_model()>"Run H-Net"</button>
+            <button id="accept-masks" title="Use H-Net's masks as the labels (A)"
+                disabled=move || !has_prediction()
+                on:click=move |_| studio.accept_predicted_masks()>"Use H-Net masks as labels"</button>
+            <span class="group">
+                {tool_button(PointerTool::Brush, "tool-brush", "Brush", "B")}
+                {tool_button(PointerTool::Eraser, "tool-eraser", "Eraser", "E")}
+                {tool_button(PointerTool::Pan, "tool-pan", "Pan", "H")}
+            </span>
+            <label class="slider compact">"Size"
+                <input id="brush-size" type="range" min="1" max="20" step="0.5"
+                    prop:value=move || studio.brush_radius.get().to_string()
+                    on:input=move |ev| {
+                        if let Ok(r) = event_target_value(&ev).parse::<f64>() {
+                            studio.brush_radius.set(r);
+                        }
+                    }/>
+                <output>{move || format!("{:.1} px", studio.brush_radius.get())}</output>
+            </label>
+            <span class="group">
+                <button id="undo" title="Undo (Ctrl+Z)" disabled=move || !can().0
+                    on:click=move |_| studio.undo_redo(false)>"Undo"</button>
+                <button id="redo" title="Redo (Ctrl+Shift+Z)" disabled=move || !can().1
+                    on:click=move |_| studio.undo_redo(true)>"Redo"</button>
+            </span>
+            <span class="group">
+                <label><input id="show-prediction" type="checkbox"
+                    prop:checked=move || studio.show_prediction.get()
+                    on:change=move |ev| studio.show_prediction.set(event_target_checked(&ev))/>
+                    <span class="swatch prediction"></span>"H-Net masks"</label>
+                <label><input id="show-label" type="checkbox"
+                    prop:checked=move || studio.show_label.get()
+                    on:change=move |ev| studio.show_label.set(event_target_checked(&ev))/>
+                    <span class="swatch label"></span>"Labels"</label>
+            </span>
+            <label class="slider compact">"Opacity"
+                <input id="opacity" type="range" min="0" max="1" step="0.05"
+                    prop:value=move || studio.opacity.get().to_string()
+                    on:input=move |ev| {
+                        if let Ok(o) = event_target_value(&ev).parse::<f64>() {
+                            studio.opacity.set(o);
+                        }
+                    }/>
+            </label>
+            <button id="reset-zoom" title="Reset zoom (0)" on:click=move |_| {
+                for t in studio.transforms { t.set(ViewTransform::default()); }
+            }>"Fit"</button>
+        </div>
+        {move || studio.showing_draft().then(|| view! {
+            <p class="draft-note">
+                "Live twin pair (not kept yet). "
+                <button id="keep-draft" class="primary" on:click=move |_| studio.keep_draft()>"Keep this pair"</button>
+            </p>
+        })}
+        <div class="views">
+            <ViewCanvas view=View::A/>
+            <ViewCanvas view=View::B/>
+        </div>
+        <p class="legend">
+            <span class="arrow estimate"></span>"H-Net's force estimate "
+            <span class="arrow truth"></span>"true force (twin) · arrows: "
+            {crate::imaging::ARROW_PX_PER_NEWTON}" px per N, projected on each view"
+        </p>
+    }
+}
+
+fn context_2d(canvas: &web_sys::HtmlCanvasElement) -> Option<web_sys::CanvasRenderingContext2d> {
+    canvas.get_context("2d").ok()??.dyn_into().ok()
+}
+
+/// Draws an arrow from `from` to `to` (canvas pixels).
+fn draw_arrow(
+    ctx: &web_sys::CanvasRenderingContext2d,
+    from: [f64; 2],
+    to: [f64; 2],
+    colour: &str,
+    dashed: bool,
+) {
+    let (dx, dy) = (to[0] - from[0], to[1] - from[1]);
+    let length = (dx * dx + dy * dy).sqrt();
+    ctx.set_stroke_style_str(colour);
+    ctx.set_fill_style_str(colour);
+    ctx.set_line_width(3.0);
+    let dash = js_sys::Array::new();
+    if dashed {
+        dash.push(&7.0.into());
+        dash.push(&5.0.into());
+    }
+    let _ = ctx.set_line_dash(&dash);
+    ctx.begin_path();
+    ctx.arc(from[0], from[1], 3.5, 0.0, std::f64::consts::TAU)
+        .ok();
+    ctx.fill();
+    if length < 2.0 {
+        return;
+    }
+    ctx.begin_path();
+    ctx.move_to(from[0], from[1]);
+    ctx.line_to(to[0], to[1]);
+    ctx.stroke();
+    let _ = ctx.set_line_dash(&js_sys::Array::new());
+    let (ux, uy) = (dx / length, dy / length);
+    let head = 12.0f64.min(length * 0.5);
+    ctx.begin_path();
+    ctx.move_to(to[0], to[1]);
+    ctx.line_to(
+        to[0] - head * ux + head * 0.5 * uy,
+        to[1] - head * uy - head * 0.5 * ux,
+    );
+    ctx.line_to(
+        to[0] - head * ux - head * 0.5 * uy,
+        to[1] - head * uy + head * 0.5 * ux,
+    );
+    ctx.close_path();
+    ctx.fill();
+}
+
+/// What the pointer is doing on a view.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Gesture {
+    /// Painting; the last image point.
+    Stroke([f64; 2]),
+    /// Panning; the last canvas point.
+    Pan([f64; 2]),
+}
+
+/// One view's canvas.
+#[component]
+fn ViewCanvas(view: View) -> impl IntoView {
+    let studio = expect_context::<Studio>();
+    let index = view_index(view);
+    let transform = studio.transforms[index];
+    let canvas = NodeRef::<leptos::html::Canvas>::new();
+    let pointer = RwSignal::new(None::<[f64; 2]>);
+    let gesture = StoredValue::new(None::<Gesture>);
+    // The composited image at its own size, drawn scaled onto the view.
+    let offscreen = StoredValue::new_local(
+        web_sys::window()
+            .and_then(|w| w.document())
+            .and_then(|d| d.create_element("canvas").ok())
+            .and_then(|c| c.dyn_into::<web_sys::HtmlCanvasElement>().ok())
+            .inspect(|c| {
+                c.set_width(WORK_SIZE as u32);
+                c.set_height(WORK_SIZE as u32);
+            }),
+    );
+
+    Effect::new(move |_| {
+        let Some(canvas) = canvas.get() else { return };
+        let Some(ctx) = context_2d(&canvas) else {
+            return;
+        };
+        let t = transform.get();
+        ctx.set_fill_style_str("#15181c");
+        ctx.fill_rect(0.0, 0.0, CANVAS_SIDE, CANVAS_SIDE);
+        let (show_prediction, show_label) = (studio.show_prediction.get(), studio.show_label.get());
+        let opacity = studio.opacity.get() as f32;
+        let arrows = studio.with_shown(|pair| {
+            let pair = pair?;
+            let prediction = studio.predictions.with(|p| p.get(&pair.id).cloned());
+            let mut rgb = pair.image(view).to_vec();
+            let predicted_mask = prediction.as_ref().map(|p| match view {
+                View::A => &p.mask_a,
+                View::B => &p.mask_b,
+            });
+            if show_prediction && let Some(mask) = predicted_mask {
+                rgb = overlay(&rgb, mask.iter().copied(), PREDICTION_COLOUR, opacity);
+            }
+            if show_label && pair.masks_labeled {
+                let label = pair.mask(view).iter().map(|&m| f32::from(m) / 255.0);
+                rgb = overlay(&rgb, label, LABEL_COLOUR, opacity);
+            }
+            let offscreen = offscreen.get_value()?;
+            let image = web_sys::ImageData::new_with_u8_clamped_array_and_sh(
+                Clamped(&rgba(&rgb)),
+                WORK_SIZE as u32,
+                WORK_SIZE as u32,
+            )
+            .ok()?;
+            context_2d(&offscreen)?
+                .put_image_data(&image, 0.0, 0.0)
+                .ok()?;
+            ctx.set_image_smoothing_enabled(false);
+            let side = WORK_SIZE as f64 * t.scale;
+            let _ = ctx.draw_image_with_html_canvas_element_and_dw_and_dh(
+                &offscreen,
+                t.offset[0],
+                t.offset[1],
+                side,
+                side,
+            );
+            // Where the tip is and how the view sees the world: exact for twin pairs; for
+            // uploads, the tip found in the masks and the default biplane's geometry.
+            let (tip, carm): (Option<[f64; 2]>, CArm) = match &pair.source {
+                PairSource::Twin { tip_mm, views, .. } => {
+                    let carm = if view == View::A { views.a } else { views.b };
+                    (Some(project(&carm, *tip_mm)), carm)
+                }
+                PairSource::Upload { .. } => {
+                    let default = Biplane::cardiac(WORK_SIZE);
+                    let carm = if view == View::A {
+                        default.a
+                    } else {
+                        default.b
+                    };
+                    let tip = if pair.masks_labeled {
+                        estimate_tip(pair.mask(view), WORK_SIZE, 128)
+                    } else {
+                        predicted_mask.and_then(|m| estimate_tip(m, WORK_SIZE, 0.5))
+                    };
+                    (tip, carm)
+                }
+            };
+            let tip = tip?;
+            Some([
+                prediction.map(|p| force_arrow(&carm, tip, p.force_n)),
+                pair.true_force().map(|f| force_arrow(&carm, tip, f)),
+            ])
+        });
+        for (arrow, colour, dashed) in arrows
+            .into_iter()
+            .flatten()
+            .zip([(ESTIMATE_ARROW, false), (TRUE_ARROW, true)])
+            .filter_map(|(a, (c, d))| a.map(|a| (a, c, d)))
+        {
+            draw_arrow(
+                &ctx,
+                t.to_canvas(arrow[0]),
+                t.to_canvas(arrow[1]),
+                colour,
+                dashed,
+            );
+        }
+        if let (Some(p), Some(_)) = (pointer.get(), studio.tool.get().mask_tool()) {
+            let r = studio.brush_radius.get() * t.scale;
+            ctx.set_line_width(1.5);
+            ctx.set_stroke_style_str("rgba(255,255,255,0.9)");
+            ctx.begin_path();
+            ctx.arc(p[0], p[1], r, 0.0, std::f64::consts::TAU).ok();
+            ctx.stroke();
+            ctx.set_stroke_style_str("rgba(0,0,0,0.7)");
+            ctx.begin_path();
+            ctx.arc(p[0], p[1], r + 1.5, 0.0, std::f64::consts::TAU)
+                .ok();
+            ctx.stroke();
+        }
+    });
+
+    let canvas_point = move |ev: &web_sys::MouseEvent| -> Option<[f64; 2]> {
+        let canvas = canvas.get_untracked()?;
+        let rect = canvas.get_bounding_client_rect();
+        let k = CANVAS_SIDE / rect.width().max(1.0);
+        Some([
+            (f64::from(ev.client_x()) - rect.left()) * k,
+            (f64::from(ev.client_y()) - rect.top()) * k,
+        ])
+    };
+    let on_down = move |ev: web_sys::PointerEvent| {
+        let Some(p) = canvas_point(&ev) else { return };
+        ev.prevent_default();
+        if let Some(c) = canvas.get_untracked() {
+            let _ = c.set_pointer_capture(ev.pointer_id());
+        }
+        let tool = studio.tool.get_untracked();
+        match tool.mask_tool() {
+            Some(mask_tool) if ev.button() == 0 => {
+                if studio.shown_id().is_none() {
+                    return;
+                }
+                if studio.showing_draft() {
+                    studio.keep_draft();
+                }
+                let at = transform.get_untracked().to_image(p);
+                let radius = studio.brush_radius.get_untracked();
+                studio.workspace.update(|ws| {
+                    ws.begin_stroke(view);
+                    ws.stroke_to(at, at, radius, mask_tool);
+                });
+                studio.show_label.set(true);
+                gesture.set_value(Some(Gesture::Stroke(at)));
+            }
+            _ => gesture.set_value(Some(Gesture::Pan(p))),
+        }
+    };
+    let on_move = move |ev: web_sys::PointerEvent| {
+        let Some(p) = canvas_point(&ev) else { return };
+        pointer.set(Some(p));
+        match gesture.get_value() {
+            Some(Gesture::Stroke(last)) => {
+                let at = transform.get_untracked().to_image(p);
+                let radius = studio.brush_radius.get_untracked();
+                if let Some(tool) = studio.tool.get_untracked().mask_tool() {
+                    studio
+                        .workspace
+                        .update(|ws| ws.stroke_to(last, at, radius, tool));
+                }
+                gesture.set_value(Some(Gesture::Stroke(at)));
+            }
+            Some(Gesture::Pan(last)) => {
+                transform.update(|t| {
+                    t.offset[0] += p[0] - last[0];
+                    t.offset[1] += p[1] - last[1];
+                });
+                gesture.set_value(Some(Gesture::Pan(p)));
+            }
+            None => {}
+        }
+    };
+    let on_up = move |_: web_sys::PointerEvent| {
+        if let Some(Gesture::Stroke(_)) = gesture.get_value() {
+            studio.edit(|ws| ws.end_stroke());
+        }
+        gesture.set_value(None);
+    };
+    let on_wheel = move |ev: web_sys::WheelEvent| {
+        let Some(p) = canvas_point(&ev) else { return };
+        ev.prevent_default();
+        let factor = (-ev.delta_y() * 0.002).exp();
+        transform.update(|t| *t = t.zoomed(factor, p));
+    };
+    let label_pixels = move || {
+        studio.with_shown(|p| {
+            p.map_or(0, |p| {
+                if p.masks_labeled {
+                    p.labeled_pixels(view)
+                } else {
+                    0
+                }
+            })
+        })
+    };
+    let predicted_pixels = move || {
+        let id = studio.shown_id()?;
+        studio.predictions.with(|p| {
+            p.get(&id).map(|p| {
+                let mask = if view == View::A {
+                    &p.mask_a
+                } else {
+                    &p.mask_b
+                };
+                mask.iter().filter(|&&m| m >= 0.5).count()
+            })
+        })
+    };
+
+    view! {
+        <figure class="view">
+            <canvas id=format!("view-{}", view.letter().to_lowercase())
+                width=CANVAS_SIDE height=CANVAS_SIDE node_ref=canvas
+                class:panning=move || studio.tool.get() == PointerTool::Pan
+                data-label-pixels=move || label_pixels().to_string()
+                data-predicted-pixels=move || predicted_pixels().map(|n| n.to_string()).unwrap_or_default()
+                on:pointerdown=on_down on:pointermove=on_move on:pointerup=on_up
+                on:pointercancel=on_up on:pointerleave=move |_| pointer.set(None)
+                on:wheel=on_wheel on:contextmenu=|ev| ev.prevent_default()></canvas>
+            <figcaption>
+                "View "{view.letter()}
+                {move || studio.with_shown(|p| p.map(|p| match &p.source {
+                    PairSource::Upload { view_a, view_b } => format!(" · {}", if view == View::A { view_a } else { view_b }),
+                    PairSource::Twin { views, .. } => {
+                        let c = if view == View::A { views.a } else { views.b };
+                        format!(" · C-arm {:+.0}° / {:+.0}°", c.primary_deg, c.secondary_deg)
+                    }
+                }))}
+                {move || {
+                    let z = transform.get().scale / ViewTransform::default().scale;
+                    (z > 1.001).then(|| format!(" · {z:.1}×"))
+                }}
+            </figcaption>
+        </figure>
+    }
+}

@@ -1,0 +1,157 @@
+//! The network in the page: H-Net with its weights on the chosen device, and inference on the
+//! stereo pair on screen.
+
+use std::rc::Rc;
+
+use burn::module::Module;
+use burn::tensor::Device;
+use hnet_model::architectures::{ModelSpec, StereoModel};
+use hnet_model::inference::StereoPair;
+use hnet_model::weights::WeightsHeader;
+use hnet_model::{HNet, HNetConfig};
+
+use crate::browser::{now_ms, yield_to_browser};
+use crate::compute::Backend;
+use crate::imaging::{WORK_SIZE, rescale_mask, rescale_rgb};
+
+/// Input size of the untrained network the page falls back to when it ships no weights, pixels.
+pub const FALLBACK_INPUT: usize = 64;
+
+/// Where the weights came from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum WeightsOrigin {
+    /// The weights bundled with the page.
+    Bundled,
+    /// A file the user loaded.
+    File,
+    /// None: freshly initialised weights (the page was built without bundled weights).
+    Untrained,
+}
+
+/// A loaded H-Net.
+pub struct Engine {
+    /// The device it runs on.
+    pub device: Device,
+    /// Which backend that is.
+    pub backend: Backend,
+    /// The network.
+    pub model: HNet,
+    /// Its input size `[height, width]`, pixels.
+    pub input: [usize; 2],
+    /// Parameter count.
+    pub params: usize,
+    /// The weights file's name.
+    pub weights_name: String,
+    /// Where the weights came from.
+    pub origin: WeightsOrigin,
+    /// The weights file's header (its provenance), when there is a file.
+    pub header: Option<WeightsHeader>,
+    /// The weights file, to rebuild the engine on another backend.
+    pub weights: Option<Rc<[u8]>>,
+}
+
+/// What H-Net says about one pair, at [`WORK_SIZE`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Prediction {
+    /// Catheter probability of each pixel of view A.
+    pub mask_a: Vec<f32>,
+    /// Catheter probability of each pixel of view B.
+    pub mask_b: Vec<f32>,
+    /// Tip force `(Fx, Fy, Fz)` in newtons.
+    pub force_n: [f32; 3],
+    /// Time of the forward pass and read-back, milliseconds.
+    pub millis: f64,
+    /// The backend it ran on.
+    pub backend: &'static str,
+}
+
+impl Engine {
+    /// An engine from a weights file's bytes; the file must hold H-Net weights for square
+    /// images.
+    pub fn from_weights(
+        bytes: Rc<[u8]>,
+        name: &str,
+        origin: WeightsOrigin,
+        device: Device,
+        backend: Backend,
+    ) -> Result<Self, String> {
+        let (model, spec, header) =
+            StereoModel::from_weights_bytes(&bytes, &device, name).map_err(|e| e.to_string())?;
+        let (StereoModel::Hnet(model), ModelSpec::Hnet(config)) = (model, spec) else {
+            return Err(format!(
+                "{name}: holds `{}` weights; the page runs H-Net",
+                header.architecture
+            ));
+        };
+        if config.image_size[0] != config.image_size[1] {
+            return Err(format!(
+                "{name}: the network takes {}x{} images; the page runs square inputs only",
+                config.image_size[0], config.image_size[1]
+            ));
+        }
+        Ok(Self {
+            params: model.num_params(),
+            device,
+            backend,
+            model,
+            input: config.image_size,
+            weights_name: name.to_string(),
+            origin,
+            header: Some(header),
+            weights: Some(bytes),
+        })
+    }
+
+    /// An untrained H-Net (paper architecture at [`FALLBACK_INPUT`] pixels).
+    pub fn untrained(device: Device, backend: Backend) -> Result<Self, String> {
+        let config = HNetConfig::new().with_image_size([FALLBACK_INPUT, FALLBACK_INPUT]);
+        let model = config.init(&device).map_err(|e| e.to_string())?;
+        Ok(Self {
+            params: model.num_params(),
+            device,
+            backend,
+            model,
+            input: config.image_size,
+            weights_name: "untrained".into(),
+            origin: WeightsOrigin::Untrained,
+            header: None,
+            weights: None,
+        })
+    }
+
+    /// Runs H-Net on two [`WORK_SIZE`] RGB images, resizing them to the network's input and
+    /// its masks back. Yields to the browser first so that the busy state is painted.
+    pub async fn infer(self: Rc<Self>, view_a: &[u8], view_b: &[u8]) -> Result<Prediction, String> {
+        let side = self.input[0];
+        let (a, b) = (
+            rescale_rgb(view_a, WORK_SIZE, side),
+            rescale_rgb(view_b, WORK_SIZE, side),
+        );
+        yield_to_browser().await;
+        let start = now_ms();
+        let out = self
+            .model
+            .predict_async(
+                &[StereoPair {
+                    view_a: &a,
+                    view_b: &b,
+                }],
+                self.input,
+                &self.device,
+            )
+            .await
+            .map_err(|e| e.to_string())?;
+        let millis = now_ms() - start;
+        let p = out
+            .into_iter()
+            .next()
+            .ok_or("H-Net returned no prediction")?;
+        Ok(Prediction {
+            mask_a: rescale_mask(&p.mask_a, side, WORK_SIZE),
+            mask_b: rescale_mask(&p.mask_b, side, WORK_SIZE),
+            force_n: p.force,
+            millis,
+            backend: self.backend.label(),
+        })
+    }
+}
