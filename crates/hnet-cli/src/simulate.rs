@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use hnet_twin::raster::GreyImage;
-use hnet_twin::scene::{Backgrounds, MaskSource, Modality, TwinConfig};
+use hnet_twin::scene::{Backgrounds, MaskSource, Modality, SceneSampling, TwinConfig};
 use hnet_twin::simulate::simulate_dataset;
 use hnet_twin::synthetic_xray::BackgroundSource;
 
@@ -35,6 +35,14 @@ pub struct SimulateArgs {
     /// How masks are made: `geometry` (exact), `otsu`, or a grey level 0-255 to threshold at.
     #[arg(long, default_value = "geometry", value_parser = parse_mask)]
     pub mask: MaskSource,
+    /// How scenes are drawn: `bench` (the paper's bench: one catheter on a fixed base, a random
+    /// tip force) or `varied` (random catheters and base poses too; see docs/twin.md).
+    #[arg(long, default_value = "bench", value_parser = parse_scenes)]
+    pub scenes: SceneSampling,
+}
+
+fn parse_scenes(text: &str) -> Result<SceneSampling, String> {
+    SceneSampling::preset(text).ok_or_else(|| format!("`{text}` is not bench or varied"))
 }
 
 pub fn parse_modality(text: &str) -> Result<Modality, String> {
@@ -134,6 +142,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     }
     let mut config = TwinConfig::new(args.modality, args.size);
     config.mask = args.mask;
+    config.scene = args.scenes.clone();
     let (backgrounds, names) = backgrounds(&config, &args.backgrounds)?;
     let bar = progress::bar(args.samples as u64, "simulating");
     let start = Instant::now();

@@ -51,13 +51,19 @@ impl Modality {
     }
 }
 
-/// How scenes are drawn at random.
+/// How scenes are drawn: the tip force, the catheter and its base pose. Two presets:
 ///
-/// Defaults: tip forces of clinical size, uniform in magnitude up to 0.4 N, pointing back
-/// against the catheter within 80° of its base axis (a contact force); bending stiffness
-/// 0.4-0.9 x 10⁻³ N·m²; flexible length 40-60 mm; pre-curvature up to 1/35 mm⁻¹ (a bend radius
-/// down to 35 mm) in a random plane; base 35 mm caudal of the isocentre pointing cranially, moved
-/// by up to 6 mm and tilted by up to 25°.
+/// - [`SceneSampling::bench`] (the default): the paper's bench. One catheter (7 Fr, EI 0.6 x
+///   10⁻³ N·m², 50 mm flexible, pre-curved to a 60 mm radius), its base clamped 35 mm caudal of
+///   the isocentre pointing cranially (within 1 mm and 2°, the fixture's play), and a random tip
+///   force. The shape then depends on the force alone, as on the bench the paper recorded.
+/// - [`SceneSampling::varied`]: domain randomisation over catheters and poses: bending stiffness
+///   0.4-0.9 x 10⁻³ N·m², flexible length 40-60 mm, pre-curvature up to 1/35 mm⁻¹ in a random
+///   plane, the base moved by up to 6 mm and tilted by up to 25°. The same shape can then come
+///   from different forces (a stiffer catheter bends less), so force from images is ambiguous.
+///
+/// In both, tip forces are of clinical size: uniform in magnitude up to 0.4 N, pointing back
+/// against the catheter within 80° of its base axis (a contact force).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SceneSampling {
     /// Range of the tip force magnitude, N.
@@ -76,19 +82,52 @@ pub struct SceneSampling {
     pub base_jitter_mm: f64,
     /// Largest tilt of the base axis away from +z (cranial), degrees.
     pub base_tilt_deg: f64,
+    /// Range of the rotation of the section about the base axis (the pre-curve's plane),
+    /// degrees.
+    pub base_roll_deg: [f64; 2],
 }
 
 impl Default for SceneSampling {
     fn default() -> Self {
+        Self::bench()
+    }
+}
+
+impl SceneSampling {
+    /// The paper's bench: one catheter on a fixed base, a random tip force.
+    pub fn bench() -> Self {
         Self {
             force_magnitude_n: [0.0, 0.4],
             force_cone_deg: 80.0,
+            bending_stiffness_n_m2: [0.6e-3, 0.6e-3],
+            length_mm: [50.0, 50.0],
+            precurvature_per_mm: [1.0 / 60.0, 1.0 / 60.0],
+            base_position_mm: Vec3::new(0.0, 0.0, -35.0),
+            base_jitter_mm: 1.0,
+            base_tilt_deg: 2.0,
+            base_roll_deg: [90.0, 90.0],
+        }
+    }
+
+    /// Domain randomisation over catheters and base poses.
+    pub fn varied() -> Self {
+        Self {
             bending_stiffness_n_m2: [0.4e-3, 0.9e-3],
             length_mm: [40.0, 60.0],
             precurvature_per_mm: [0.0, 1.0 / 35.0],
-            base_position_mm: Vec3::new(0.0, 0.0, -35.0),
             base_jitter_mm: 6.0,
             base_tilt_deg: 25.0,
+            base_roll_deg: [0.0, 360.0],
+            ..Self::bench()
+        }
+    }
+
+    /// A preset by name: `bench` or `varied`.
+    pub fn preset(name: &str) -> Option<Self> {
+        match name {
+            "bench" => Some(Self::bench()),
+            "varied" => Some(Self::varied()),
+            _ => None,
         }
     }
 }
@@ -152,7 +191,7 @@ impl SceneSampling {
         let cos_tilt = 1.0 - (1.0 - self.base_tilt_deg.to_radians().cos()) * rng.random::<f64>();
         let base_tilt_deg = cos_tilt.acos().to_degrees();
         let base_azimuth_deg = 360.0 * rng.random::<f64>();
-        let base_roll_deg = 360.0 * rng.random::<f64>();
+        let base_roll_deg = uniform(rng, self.base_roll_deg);
         let mut params = SceneParams {
             tip_force_n: Vec3::ZERO,
             bending_stiffness_n_m2: uniform(rng, self.bending_stiffness_n_m2),
@@ -524,21 +563,47 @@ mod tests {
 
     #[test]
     fn sampled_forces_are_of_clinical_size_and_push_back_on_the_tip() {
-        let sampling = SceneSampling::default();
-        let mut rng = sample_rng(1, 0);
-        for _ in 0..500 {
-            let p = sampling.sample(&mut rng);
-            let f = p.tip_force_n.norm();
-            assert!(f <= 0.4 + 1e-12);
-            let axis = p.base_frame().column(2);
-            if f > 1e-9 {
-                let angle = (-p.tip_force_n.dot(axis) / f).acos().to_degrees();
-                assert!(angle <= 80.0 + 1e-9, "{angle}");
+        for (sampling, tilt) in [
+            (SceneSampling::bench(), 2.0),
+            (SceneSampling::varied(), 25.0),
+        ] {
+            let mut rng = sample_rng(1, 0);
+            for _ in 0..500 {
+                let p = sampling.sample(&mut rng);
+                let f = p.tip_force_n.norm();
+                assert!(f <= 0.4 + 1e-12);
+                let axis = p.base_frame().column(2);
+                if f > 1e-9 {
+                    let angle = (-p.tip_force_n.dot(axis) / f).acos().to_degrees();
+                    assert!(angle <= 80.0 + 1e-9, "{angle}");
+                }
+                assert!(p.base_tilt_deg <= tilt + 1e-9);
+                assert!((0.4e-3..=0.9e-3).contains(&p.bending_stiffness_n_m2));
+                assert!((40.0..=60.0).contains(&p.length_mm));
             }
-            assert!(p.base_tilt_deg <= 25.0 + 1e-9);
-            assert!((0.4e-3..=0.9e-3).contains(&p.bending_stiffness_n_m2));
-            assert!((40.0..=60.0).contains(&p.length_mm));
         }
+    }
+
+    #[test]
+    fn the_bench_varies_only_the_force_and_the_fixtures_play() {
+        let sampling = SceneSampling::bench();
+        let mut rng = sample_rng(2, 0);
+        let nominal = sampling.base_position_mm;
+        let draws: Vec<SceneParams> = (0..100).map(|_| sampling.sample(&mut rng)).collect();
+        for p in &draws {
+            assert_eq!(p.bending_stiffness_n_m2, 0.6e-3);
+            assert_eq!(p.length_mm, 50.0);
+            assert_eq!(p.base_roll_deg, 90.0);
+            assert!((p.base_position_mm - nominal).norm() <= 3f64.sqrt() + 1e-9);
+        }
+        let distinct =
+            |f: fn(&SceneParams) -> f64| draws.windows(2).filter(|w| f(&w[0]) != f(&w[1])).count();
+        assert_eq!(distinct(|p| p.tip_force_n.0[0]), 99);
+        assert_eq!(
+            SceneSampling::preset("varied"),
+            Some(SceneSampling::varied())
+        );
+        assert_eq!(SceneSampling::preset("other"), None);
     }
 
     #[test]
