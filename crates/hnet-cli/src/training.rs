@@ -12,7 +12,9 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use burn::data::dataloader::DataLoaderBuilder;
 use burn::module::Module;
+use burn::module::ParamGroup;
 use burn::optim::RmsPropConfig;
+use burn::optim::lr_scheduler::module_lr_scheduler::ModuleLrScheduler;
 use burn::tensor::ExecutionError;
 use burn::tensor::{Device, Tensor, TensorReadError};
 use burn::train::metric::state::{FormatOptions, NumericMetricState};
@@ -25,10 +27,10 @@ use burn::train::{
     InferenceStep, Learner, MetricEarlyStoppingStrategy, StoppingCondition, SupervisedTraining,
     TrainOutput, TrainStep,
 };
-use hnet_model::HNetLossConfig;
 use hnet_model::architectures::{ModelSpec, StereoInput, StereoModel};
 use hnet_model::loss::binary_cross_entropy_with_logits;
 use hnet_model::metrics::{ForceAccumulator, SegmentationAccumulator};
+use hnet_model::{HNet, HNetLossConfig};
 use hnet_twin::dataset::{Dataset, Split};
 use serde::{Deserialize, Serialize};
 
@@ -48,6 +50,13 @@ pub struct TrainingConfig {
     pub loss: HNetLossConfig,
     /// RMSprop learning rate (the paper: 1e-4).
     pub learning_rate: f64,
+    /// Learning rate of H-Net's force head (its dense layers), when it differs from
+    /// `learning_rate`. The head reads globally pooled, all-positive features that vary little
+    /// between pairs, so RMSprop's nearly sign-sized steps at a large rate push whole hidden units
+    /// below zero for every input at once, where they stay (dead ReLUs). A smaller rate for the
+    /// head alone lets the encoder-decoder learn fast without losing the head.
+    #[serde(default)]
+    pub force_head_learning_rate: Option<f64>,
     /// RMSprop smoothing constant (Keras' default `rho`, 0.9).
     pub rmsprop_alpha: f32,
     /// RMSprop momentum (Keras' default, 0).
@@ -619,12 +628,24 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
     } else if request.resume {
         eprintln!("no complete checkpoint yet: starting from the first epoch");
     }
-    let result = training.launch(Learner::new(trainee, optimizer, config.learning_rate));
+    let result = training.launch(Learner::new(trainee, optimizer, learning_rates(config)));
     if let Some(error) = result.error {
         bail!("training failed: {error}");
     }
 
     export_best(request, &device, started)
+}
+
+/// The learning rate of every parameter: `learning_rate`, and `force_head_learning_rate` for
+/// H-Net's force head (matched by its parameters' path, which checkpoints keep).
+fn learning_rates(config: &TrainingConfig) -> ModuleLrScheduler {
+    let scheduler = ModuleLrScheduler::new(config.learning_rate);
+    match (config.force_head_learning_rate, &config.model) {
+        (Some(head), ModelSpec::Hnet(_)) => {
+            scheduler.with_group(ParamGroup::from_predicate(HNet::FORCE_HEAD_PATH), head)
+        }
+        _ => scheduler,
+    }
 }
 
 /// Per-epoch means of every logged metric, from burn-train's logs in the run folder.
@@ -851,4 +872,53 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
         resume: false,
         command,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::module::{ModuleVisitor, Param};
+
+    /// Collects each float parameter's path, joined as Burn's optimiser joins it.
+    #[derive(Default)]
+    struct Paths {
+        stack: Vec<String>,
+        found: Vec<(burn::module::ParamId, String)>,
+    }
+
+    impl ModuleVisitor for Paths {
+        fn enter_module(&mut self, name: &str, _container: &str) {
+            self.stack.push(name.to_string());
+        }
+        fn exit_module(&mut self, _name: &str, _container: &str) {
+            self.stack.pop();
+        }
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            self.found.push((param.id, self.stack.join(".")));
+        }
+    }
+
+    #[test]
+    fn the_force_head_alone_gets_its_own_learning_rate() {
+        let mut config = builtin_config("cpu").unwrap();
+        config.model = ModelSpec::Hnet(hnet_model::HNetConfig::new().with_image_size([32, 32]));
+        config.learning_rate = 1e-3;
+        config.force_head_learning_rate = Some(1e-4);
+        let device = Device::flex();
+        let net = config.model.init(&device).unwrap();
+        let trainee = StereoTrainee::new(net, &config.model, config.loss.clone());
+        let mut paths = Paths::default();
+        trainee.visit(&mut paths);
+        let rates = learning_rates(&config).step();
+        let mut head = 0;
+        for (id, path) in &paths.found {
+            let lr = rates.lr_from_param(*id, Some(path));
+            let in_head = path.contains(".force.");
+            assert_eq!(lr, if in_head { 1e-4 } else { 1e-3 }, "{path}");
+            head += usize::from(in_head);
+        }
+        // Three dense layers, weights and biases.
+        assert_eq!(head, 6);
+        assert!(paths.found.len() > 50);
+    }
 }

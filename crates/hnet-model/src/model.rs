@@ -297,6 +297,10 @@ impl HNetOutput {
 }
 
 impl HNet {
+    /// What the paths of the force head's parameters contain (`force.hidden1.weight`, ...), to
+    /// give the head its own optimiser settings.
+    pub const FORCE_HEAD_PATH: &'static str = "force.";
+
     /// Whether both views run through one set of encoder-decoder weights.
     pub fn shares_weights(&self) -> bool {
         self.segmentation_b.is_none()
