@@ -451,7 +451,17 @@ pub fn App() -> impl IntoView {
         match storage::load_pairs().await {
             Ok((pairs, damaged)) => {
                 if !pairs.is_empty() {
-                    studio.workspace.set(Workspace::from_pairs(pairs));
+                    // Pairs added while storage was being read stay, after the restored ones.
+                    studio.workspace.update(|ws| {
+                        let added = std::mem::take(&mut ws.pairs);
+                        let mut restored = Workspace::from_pairs(pairs);
+                        for pair in added {
+                            if restored.pair(&pair.id).is_none() {
+                                restored.add(pair);
+                            }
+                        }
+                        *ws = restored;
+                    });
                     studio.run_model();
                 }
                 if !damaged.is_empty() {
