@@ -539,7 +539,8 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
     std::fs::write(
         &info_path,
         serde_json::to_vec_pretty(&RunInfo {
-            data: request.data.clone(),
+            // Absolute, so that `hnet eval` and `hnet report` find it from any folder.
+            data: std::fs::canonicalize(&request.data).unwrap_or_else(|_| request.data.clone()),
             backend: request.backend.name().into(),
             command: request.command.clone(),
         })?,
