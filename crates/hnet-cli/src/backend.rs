@@ -38,7 +38,9 @@ impl BackendChoice {
         };
         match self {
             BackendChoice::Flex => Ok(Device::flex()),
+            // Deprecated upstream in favour of flex; kept only to measure the two side by side.
             #[cfg(feature = "ndarray")]
+            #[allow(deprecated)]
             BackendChoice::Ndarray => Ok(Device::ndarray()),
             #[cfg(not(feature = "ndarray"))]
             BackendChoice::Ndarray => missing("ndarray"),
