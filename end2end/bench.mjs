@@ -14,6 +14,14 @@ try {
     const { page } = await openPage(context, server.url);
     await waitForModel(page);
     await page.selectOption("#backend-choice", choice);
+    // The model reloads on the chosen device; wait until the model bar names it (a browser
+    // without a WebGPU adapter stays on the CPU: then "auto" is timed on the CPU).
+    const wanted = choice === "cpu" ? "CPU" : "WebGPU";
+    await page
+      .waitForFunction((w) => document.querySelector("#backend")?.textContent.includes(w), wanted, {
+        timeout: 60_000,
+      })
+      .catch(() => {});
     await waitForModel(page);
     const backend = await page.textContent("#backend");
     await page.click("#tab-twin");

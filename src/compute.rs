@@ -52,6 +52,12 @@ fn has_webgpu() -> bool {
         .unwrap_or(false)
 }
 
+thread_local! {
+    /// The WebGPU device, once set up: wgpu registers one runtime per device and page, so
+    /// switching back to WebGPU (after the CPU, or to load other weights) reuses it.
+    static WEBGPU: std::cell::RefCell<Option<Device>> = const { std::cell::RefCell::new(None) };
+}
+
 /// Picks the device: WebGPU if asked for (`Auto`) and an adapter can be had, the CPU otherwise.
 pub async fn select_device(choice: BackendChoice) -> (Device, Backend) {
     let cpu = |reason: String| (Device::flex(), Backend::Cpu { reason });
@@ -61,8 +67,14 @@ pub async fn select_device(choice: BackendChoice) -> (Device, Backend) {
     if !has_webgpu() {
         return cpu("this browser has no WebGPU".into());
     }
+    if let Some(device) = WEBGPU.with_borrow(|d| d.clone()) {
+        return (device, Backend::WebGpu);
+    }
     match Device::wgpu_options().init_async().await {
-        Ok(device) => (device, Backend::WebGpu),
+        Ok(device) => {
+            WEBGPU.set(Some(device.clone()));
+            (device, Backend::WebGpu)
+        }
         Err(e) => cpu(format!("no WebGPU adapter: {e}")),
     }
 }

@@ -79,6 +79,16 @@ async fn webgpu_when_available_computes_what_the_cpu_computes() {
     }
 }
 
+/// Switching to the CPU and back (or loading other weights) asks for WebGPU again: the page
+/// gets the device it set up the first time, not a failed second registration.
+#[wasm_bindgen_test]
+async fn asking_for_webgpu_again_gives_webgpu_again() {
+    let (_, first) = select_device(BackendChoice::Auto).await;
+    let _ = select_device(BackendChoice::Cpu).await;
+    let (_, again) = select_device(BackendChoice::Auto).await;
+    assert_eq!(first, again);
+}
+
 #[wasm_bindgen_test]
 async fn the_engine_runs_on_a_twin_pair_at_the_working_size() {
     let (device, backend) = select_device(BackendChoice::Cpu).await;
