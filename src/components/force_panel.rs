@@ -4,8 +4,10 @@
 
 use leptos::prelude::*;
 
-use crate::app::Studio;
+use crate::app::{ModelState, Studio};
 use crate::browser::{files, read_file};
+use crate::bundled::BUNDLED_FORCE_CAVEAT;
+use crate::engine::WeightsOrigin;
 use crate::imaging::magnitude;
 use crate::workspace::parse_force_labels;
 
@@ -135,6 +137,12 @@ pub fn ForcePanel() -> impl IntoView {
                     }}
                 </tbody>
             </table>
+            {move || {
+                let bundled = studio.model.with(|m| {
+                    matches!(m, ModelState::Ready(e) if e.origin == WeightsOrigin::Bundled)
+                });
+                bundled.then(|| view! { <p class="caveat" id="force-caveat">{BUNDLED_FORCE_CAVEAT}</p> })
+            }}
             {move || estimate().map(|e| {
                 let m = magnitude(e);
                 let pct = |v: f32| format!("{:.1}%", (v / GAUGE_MAX_N).clamp(0.0, 1.0) * 100.0);
