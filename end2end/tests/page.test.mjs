@@ -44,7 +44,8 @@ test("the page loads H-Net, says where it runs, and asks for nothing outside", a
   await waitForModel(page);
   assert.match(await page.textContent("#backend"), /WebGPU|CPU/);
   assert.match(await page.textContent("#params"), /^\d+$/);
-  assert.match(await page.textContent("#weights"), /hnet-cpu\.bpk|untrained/);
+  // The bundled weights load (a build without them would say "untrained").
+  assert.match(await page.textContent("#weights"), /hnet-cpu\.bpk/);
   const origin = new URL(server.url).origin;
   const foreign = requests.filter((u) => !u.startsWith(origin) && !u.startsWith("data:") && !u.startsWith("blob:"));
   assert.deepEqual(foreign, []);
@@ -161,8 +162,10 @@ test("the live twin bends the catheter with the sliders and composes X-ray backg
   const before = await page.evaluate(() => document.querySelector("#view-a").toDataURL());
   await page.locator("#twin-fx").fill("-0.35");
   await page.waitForFunction((b) => document.querySelector("#view-a").toDataURL() !== b, before);
-  // The true force is shown beside H-Net's estimate, with the error.
+  // The true force is shown beside H-Net's estimate, with the error, and the bundled weights'
+  // caveat beside it.
   await page.waitForSelector("#force-table tr.error");
+  assert.match(await page.textContent("#force-caveat"), /R² 0\.40/);
 
   await page.click("#tab-background");
   await page.waitForSelector("#background-source-canvas");
