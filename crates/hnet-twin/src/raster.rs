@@ -258,7 +258,8 @@ fn convolve(
         }
     } else {
         // Whole rows at a time: memory is read in order and the inner loop vectorises. Each
-        // pixel still sums its taps in kernel order, so the result is the same to the bit.
+        // pixel still sums its taps in kernel order, so the result is the same (up to the sign of
+        // a zero sum).
         for (y, target) in out.chunks_exact_mut(row).enumerate() {
             for (k, &weight) in kernel.iter().enumerate() {
                 let source = (y + k).saturating_sub(radius).min(height - 1);
