@@ -900,6 +900,21 @@ mod tests {
     }
 
     #[test]
+    fn every_checked_in_config_loads() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs");
+        let mut names = Vec::new();
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "json") {
+                let config = TrainingConfig::load(&path).unwrap_or_else(|e| panic!("{e:#}"));
+                names.push(config.name);
+            }
+        }
+        names.sort();
+        assert_eq!(names, ["cpu", "cpu-ynet", "paper"]);
+    }
+
+    #[test]
     fn the_force_head_alone_gets_its_own_learning_rate() {
         let mut config = builtin_config("cpu").unwrap();
         config.model = ModelSpec::Hnet(hnet_model::HNetConfig::new().with_image_size([32, 32]));
