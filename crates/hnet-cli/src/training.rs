@@ -347,6 +347,15 @@ impl Quantity {
         Quantity::ForceMae,
     ];
 
+    /// Whether a network with these heads (`(segments, estimates force)`, as
+    /// [`ModelSpec::heads`] gives them) produces this quantity.
+    pub fn applies_to(self, (segments, forces): (bool, bool)) -> bool {
+        match self {
+            Quantity::BceA | Quantity::BceB | Quantity::MIoU | Quantity::MDice => segments,
+            Quantity::Mse | Quantity::ForceMae => forces,
+        }
+    }
+
     /// The metric's name in logs.
     pub fn name(self) -> &'static str {
         match self {
@@ -618,7 +627,9 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
         ))
         .num_epochs(config.epochs)
         .renderer(Box::new(crate::progress_renderer::TrainingDisplay::new()));
-    for quantity in Quantity::ALL {
+    // A baseline without a head logs nothing for it (rather than NaN or zero every epoch).
+    let heads = config.model.heads();
+    for quantity in Quantity::ALL.into_iter().filter(|q| q.applies_to(heads)) {
         training = training
             .metric_train_numeric(StepMetric::new(quantity))
             .metric_valid_numeric(StepMetric::new(quantity));

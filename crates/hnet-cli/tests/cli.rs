@@ -181,6 +181,20 @@ fn every_baseline_trains_and_evaluates_in_the_same_harness() {
         assert_eq!(eval["architecture"], architecture);
         assert_eq!(!eval["segmentation"].is_null(), segments, "{architecture}");
         assert_eq!(!eval["force"].is_null(), force, "{architecture}");
+        // Each epoch logs the metrics of the heads the network has, and no others.
+        for split in ["train", "valid"] {
+            let logs = runs.join(split).join("epoch-1");
+            for (metric, logged) in [
+                ("Loss", true),
+                ("BCE_A", segments),
+                ("mIoU", segments),
+                ("Force_MSE", force),
+                ("Force_MAE", force),
+            ] {
+                let log = logs.join(format!("{metric}.log"));
+                assert_eq!(log.is_file(), logged, "{architecture}: {}", log.display());
+            }
+        }
     }
     std::fs::remove_dir_all(dir).ok();
 }
