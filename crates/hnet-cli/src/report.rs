@@ -281,11 +281,16 @@ where
 }
 
 /// Fig. 3: rows of (view A, view B, view A with its predicted mask, view B with its mask).
-fn sample_sheet(run: &Path, data: &Path, out: &Path, backend: BackendChoice) -> anyhow::Result<()> {
+fn sample_sheet(
+    run: &Path,
+    data: &Path,
+    out: &Path,
+    backend: BackendChoice,
+) -> anyhow::Result<Option<PathBuf>> {
     let device = backend.device()?;
     let model = load_run(run, &device)?;
     if !model.spec.heads().0 {
-        return Ok(());
+        return Ok(None);
     }
     let dataset = Dataset::open(data)?;
     let split = StereoSplit::load(&dataset, Split::Test, model.image_size, Some(4))?;
@@ -333,7 +338,8 @@ fn sample_sheet(run: &Path, data: &Path, out: &Path, backend: BackendChoice) -> 
     let path = out.join("fig3-samples.png");
     sheet
         .save(&path)
-        .with_context(|| format!("cannot write '{}'", path.display()))
+        .with_context(|| format!("cannot write '{}'", path.display()))?;
+    Ok(Some(path))
 }
 
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
@@ -383,10 +389,15 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
             written.push(stem.to_string());
         }
     }
-    sample_sheet(&args.run, &data, &out, args.backend)?;
+    let sheet = sample_sheet(&args.run, &data, &out, args.backend)?;
     eprintln!(
-        "wrote {} figures (SVG and PNG) and fig3-samples.png to {}",
+        "wrote {} figures (SVG and PNG){} to {}",
         written.len(),
+        if sheet.is_some() {
+            " and fig3-samples.png"
+        } else {
+            " (no fig3-samples.png: the network does not segment)"
+        },
         out.display()
     );
     Ok(())

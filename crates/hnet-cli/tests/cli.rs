@@ -195,6 +195,22 @@ fn every_baseline_trains_and_evaluates_in_the_same_harness() {
                 assert_eq!(log.is_file(), logged, "{architecture}: {}", log.display());
             }
         }
+        // The report draws what the network has: sample masks only for those that segment.
+        let out = run(&["report", "--run", runs.to_str().unwrap()]);
+        let report = runs.join("report");
+        assert!(report.join("fig5-loss.png").is_file(), "{architecture}");
+        assert_eq!(
+            report.join("fig3-samples.png").is_file(),
+            segments,
+            "{architecture}"
+        );
+        assert_eq!(
+            report.join("fig4-force-x.png").is_file(),
+            force,
+            "{architecture}"
+        );
+        let said = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(said.contains("and fig3-samples.png"), segments, "{said}");
     }
     std::fs::remove_dir_all(dir).ok();
 }
