@@ -697,9 +697,7 @@ pub fn epoch_metrics(run: &Path) -> anyhow::Result<Vec<EpochRow>> {
     Ok(rows)
 }
 
-/// Mean of a burn-train metric log (`value,count` per line), weighted by count. Values that are
-/// not finite are left out: runs logged before a network's missing heads were left out of its
-/// metrics hold a NaN force MAE for segmentation-only networks.
+/// Mean of a burn-train metric log (`value,count` per line), weighted by count.
 fn weighted_mean(log: &str) -> Option<f64> {
     let (mut sum, mut count) = (0.0, 0.0);
     for line in log.lines() {
@@ -707,9 +705,6 @@ fn weighted_mean(log: &str) -> Option<f64> {
         let Some(Ok(value)) = parts.next().map(str::parse::<f64>) else {
             continue;
         };
-        if !value.is_finite() {
-            continue;
-        }
         let weight = parts
             .next()
             .and_then(|c| c.parse::<f64>().ok())
@@ -913,14 +908,6 @@ mod tests {
         fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
             self.found.push((param.id, self.stack.join(".")));
         }
-    }
-
-    #[test]
-    fn metric_logs_average_by_count_and_leave_out_non_finite_values() {
-        assert_eq!(weighted_mean("1.0,1\n4.0,2\n"), Some(3.0));
-        assert_eq!(weighted_mean("NaN,8\n2.0,8\n"), Some(2.0));
-        assert_eq!(weighted_mean("NaN,8\n"), None);
-        assert_eq!(weighted_mean(""), None);
     }
 
     #[test]
