@@ -818,6 +818,10 @@ pub struct TrainArgs {
     /// Override the number of epochs.
     #[arg(long)]
     epochs: Option<usize>,
+    /// Override the config's seed (weight initialisation and shuffling), e.g. to repeat a run and
+    /// measure its spread.
+    #[arg(long)]
+    seed: Option<u64>,
     /// Where to compute.
     #[arg(long, value_enum, default_value = "flex")]
     backend: BackendChoice,
@@ -871,6 +875,9 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
     }
     if let Some(epochs) = args.epochs {
         config.epochs = epochs;
+    }
+    if let Some(seed) = args.seed {
+        config.seed = seed;
     }
     let data = args
         .data

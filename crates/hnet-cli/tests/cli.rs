@@ -175,7 +175,13 @@ fn every_baseline_trains_and_evaluates_in_the_same_harness() {
             runs.to_str().unwrap(),
             "--config",
             config.to_str().unwrap(),
+            "--seed",
+            "9",
         ]);
+        // The run folder keeps the settings it ran with, the seed override included.
+        let saved: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(runs.join("config.json")).unwrap()).unwrap();
+        assert_eq!(saved["seed"], 9, "{architecture}");
         let out = run(&["eval", "--run", runs.to_str().unwrap(), "--json"]);
         let eval: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
         assert_eq!(eval["architecture"], architecture);
