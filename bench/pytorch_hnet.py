@@ -8,7 +8,10 @@ Measures, on the CPU with a fixed thread count:
   - a training step (forward, backward, optimizer) on a batch of B stereo pairs,
   - inference latency of one stereo pair.
 
-Usage: python bench/pytorch_hnet.py --size 64 --batch 8 --threads 2 [--json]
+With --layers, instead times each convolution of the shared encoder-decoder at the shapes a
+training step gives it (forward, weight gradient, input gradient), as `hnet bench layers` does.
+
+Usage: python bench/pytorch_hnet.py --size 64 --batch 8 --threads 2 [--layers] [--json]
 """
 
 import argparse
@@ -72,16 +75,140 @@ class HNet(nn.Module):
         return logits[:batch], logits[batch:], self.force(features)
 
 
+def hnet_convolutions(size, filters=32, depth=4, in_channels=3):
+    """The list of `hnet_convolutions` in crates/hnet-cli/src/bench/layers.rs:
+    (name, transposed, channels_in, channels_out, kernel, input side, input gradient needed)."""
+    f = filters
+    layers = []
+    for level in range(depth):
+        cin = in_channels if level == 0 else f
+        layers.append((f"encoder{level + 1}.first", False, cin, f, 3, size >> level, level > 0))
+        layers.append((f"encoder{level + 1}.second", False, f, f, 3, size >> level, True))
+    layers.append(("bottleneck.first", False, f, f, 3, size >> depth, True))
+    layers.append(("bottleneck.second", False, f, f, 3, size >> depth, True))
+    for block in range(depth):
+        below = size >> (depth - block)
+        layers.append((f"decoder{block + 1}.up", True, f, f, 3, below, True))
+        layers.append((f"decoder{block + 1}.first", False, 2 * f, f, 3, 2 * below, True))
+        layers.append((f"decoder{block + 1}.second", False, f, f, 3, 2 * below, True))
+    layers.append(("head", False, f, 1, 1, size, True))
+    return layers
+
+
+def median_ms(runs, fn):
+    fn()
+    times = []
+    for _ in range(max(runs, 1)):
+        start = time.perf_counter()
+        fn()
+        times.append((time.perf_counter() - start) * 1e3)
+    return sorted(times)[len(times) // 2]
+
+
+def time_layers(args):
+    images = 2 * args.batch
+    rows = []
+    for name, transposed, cin, cout, k, side, input_grad in hnet_convolutions(args.size):
+        if transposed:
+            conv = nn.ConvTranspose2d(cin, cout, k, stride=2, padding=1, output_padding=1)
+            out_side = 2 * side
+        else:
+            conv = nn.Conv2d(cin, cout, k, padding=k // 2)
+            out_side = side
+        x = torch.rand(images, cin, side, side)
+        upstream = torch.rand(images, cout, out_side, out_side)
+
+        def forward():
+            with torch.no_grad():
+                conv(x)
+
+        def grad_of(tracked):
+            # Only the timed tensor is tracked, as in `hnet bench layers`.
+            conv.weight.requires_grad_(tracked == "weight")
+            conv.bias.requires_grad_(False)
+            xi = x.detach().requires_grad_(tracked == "input")
+            target = conv.weight if tracked == "weight" else xi
+            return lambda: torch.autograd.grad((conv(xi) * upstream).sum(), [target])
+
+        def loss_only():
+            y = torch.rand(images, cout, out_side, out_side, requires_grad=True)
+            torch.autograd.grad((y * upstream).sum(), [y])
+
+        loss_ms = median_ms(args.runs, loss_only) - median_ms(
+            args.runs, lambda: torch.rand(images, cout, out_side, out_side)
+        )
+        forward_ms = median_ms(args.runs, forward)
+        weight_ms = max(median_ms(args.runs, grad_of("weight")) - forward_ms - loss_ms, 0.0)
+        input_ms = (
+            max(median_ms(args.runs, grad_of("input")) - forward_ms - loss_ms, 0.0)
+            if input_grad
+            else None
+        )
+        rows.append(
+            {
+                "name": name,
+                "channels_in": cin,
+                "channels_out": cout,
+                "input_size": [side, side],
+                "forward_ms": forward_ms,
+                "weight_grad_ms": weight_ms,
+                "input_grad_ms": input_ms,
+            }
+        )
+    return rows
+
+
+def report_layers(args):
+    rows = time_layers(args)
+    totals = {
+        f"total_{key}": sum(r[key] or 0.0 for r in rows)
+        for key in ("forward_ms", "weight_grad_ms", "input_grad_ms")
+    }
+    framework = f"pytorch {torch.__version__}"
+    if args.json:
+        result = {"framework": framework, "size": args.size, "batch": args.batch,
+                  "threads": args.threads, "layers": rows, **totals}
+        print(json.dumps(result, indent=2))
+        return
+    print(f"{framework}: H-Net convolutions at {args.size}x{args.size}, {2 * args.batch} images "
+          f"each, {args.threads} threads, median of {args.runs} runs (ms)")
+    print(f"{'layer':<18} {'in -> out':>9} {'input':>11} {'forward':>8} {'weight grad':>12} "
+          f"{'input grad':>11}")
+    for r in rows:
+        channels = f"{r['channels_in']} -> {r['channels_out']}"
+        side = f"{r['input_size'][0]}x{r['input_size'][1]}"
+        grad_in = "-" if r["input_grad_ms"] is None else f"{r['input_grad_ms']:.2f}"
+        print(f"{r['name']:<18} {channels:>9} {side:>11} {r['forward_ms']:8.2f} "
+              f"{r['weight_grad_ms']:12.2f} {grad_in:>11}")
+    print(f"{'total':<40} {totals['total_forward_ms']:8.1f} {totals['total_weight_grad_ms']:12.1f} "
+          f"{totals['total_input_grad_ms']:11.1f}")
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--size", type=int, default=64)
     parser.add_argument("--batch", type=int, default=32)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--steps", type=int, default=10)
+    parser.add_argument("--runs", type=int, default=10)
+    parser.add_argument("--layers", action="store_true")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     torch.manual_seed(0)
+    if args.layers:
+        report_layers(args)
+        return
+        print(f"pytorch {torch.__version__}: H-Net convolutions at {args.size}x{args.size}, "
+              f"{2 * args.batch} images each, {args.threads} threads, median of {args.runs} runs (ms)")
+        for r in rows:
+            grad_in = "-" if r["input_grad_ms"] is None else f"{r['input_grad_ms']:.2f}"
+            print(f"{r['name']:<18} {r['channels_in']:>3} -> {r['channels_out']:<3} "
+                  f"{r['input_size'][0]:>3}x{r['input_size'][1]:<3} {r['forward_ms']:8.2f} "
+                  f"{r['weight_grad_ms']:12.2f} {grad_in:>11}")
+        print(f"{'total':<30} {totals['forward_ms']:8.1f} {totals['weight_grad_ms']:12.1f} "
+              f"{totals['input_grad_ms']:11.1f}")
+        return
     model = HNet()
     params = sum(p.numel() for p in model.parameters())
     optimizer = torch.optim.RMSprop(model.parameters(), lr=1e-4, alpha=0.9, eps=1e-7)

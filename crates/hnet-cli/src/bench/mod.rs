@@ -11,6 +11,8 @@ use serde::Serialize;
 use crate::backend::BackendChoice;
 use crate::simulate::{backgrounds, parse_modality};
 
+mod layers;
+
 #[derive(clap::Args, Debug)]
 pub struct BenchArgs {
     #[command(subcommand)]
@@ -23,6 +25,8 @@ enum BenchCommand {
     Simulate(SimulateBench),
     /// H-Net training step time (batch of stereo pairs) and inference latency (one pair).
     Model(ModelBench),
+    /// Forward and both backward passes of each H-Net convolution, layer by layer.
+    Layers(layers::LayersBench),
 }
 
 #[derive(clap::Args, Debug)]
@@ -247,5 +251,6 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     match &args.what {
         BenchCommand::Simulate(a) => simulate(a),
         BenchCommand::Model(a) => model(a),
+        BenchCommand::Layers(a) => layers::run(a),
     }
 }
