@@ -199,16 +199,6 @@ def main():
     if args.layers:
         report_layers(args)
         return
-        print(f"pytorch {torch.__version__}: H-Net convolutions at {args.size}x{args.size}, "
-              f"{2 * args.batch} images each, {args.threads} threads, median of {args.runs} runs (ms)")
-        for r in rows:
-            grad_in = "-" if r["input_grad_ms"] is None else f"{r['input_grad_ms']:.2f}"
-            print(f"{r['name']:<18} {r['channels_in']:>3} -> {r['channels_out']:<3} "
-                  f"{r['input_size'][0]:>3}x{r['input_size'][1]:<3} {r['forward_ms']:8.2f} "
-                  f"{r['weight_grad_ms']:12.2f} {grad_in:>11}")
-        print(f"{'total':<30} {totals['forward_ms']:8.1f} {totals['weight_grad_ms']:12.1f} "
-              f"{totals['input_grad_ms']:11.1f}")
-        return
     model = HNet()
     params = sum(p.numel() for p in model.parameters())
     optimizer = torch.optim.RMSprop(model.parameters(), lr=1e-4, alpha=0.9, eps=1e-7)

@@ -62,7 +62,7 @@ pub fn hnet_convolutions(config: &HNetConfig) -> Vec<ConvLayer> {
     let f = config.filters;
     let at = |level: usize| config.image_size.map(|s| s >> level);
     let same = |name: String, channels_in: usize, input_size: [usize; 2]| ConvLayer {
-        input_grad: name != "encoder1.first",
+        input_grad: true,
         name,
         kind: ConvKind::Same,
         channels_in,
@@ -72,9 +72,16 @@ pub fn hnet_convolutions(config: &HNetConfig) -> Vec<ConvLayer> {
     };
     let mut layers = Vec::new();
     for level in 0..config.depth {
-        let channels_in = if level == 0 { config.in_channels } else { f };
         let block = format!("encoder{}", level + 1);
-        layers.push(same(format!("{block}.first"), channels_in, at(level)));
+        if level == 0 {
+            // Its input is the images, which need no gradient.
+            layers.push(ConvLayer {
+                input_grad: false,
+                ..same(format!("{block}.first"), config.in_channels, at(0))
+            });
+        } else {
+            layers.push(same(format!("{block}.first"), f, at(level)));
+        }
         layers.push(same(format!("{block}.second"), f, at(level)));
     }
     layers.push(same("bottleneck.first".into(), f, at(config.depth)));
@@ -331,6 +338,7 @@ mod tests {
             assert!(t.forward_ms > 0.0, "{}", layer.name);
             assert!(t.weight_grad_ms >= 0.0);
             assert_eq!(t.input_grad_ms.is_some(), layer.name != "encoder1.first");
+            assert_eq!(layer.input_grad, layer.name != "encoder1.first");
         }
     }
 }
