@@ -9,6 +9,7 @@ use anyhow::Context;
 use burn::data::dataloader::batcher::Batcher;
 use burn::data::dataset::{Dataset as BurnDataset, DatasetError};
 use burn::tensor::{Device, Tensor, TensorData};
+use hnet_model::inference::push_planar;
 use hnet_twin::dataset::{Dataset, ManifestRow, Split};
 use rayon::prelude::*;
 
@@ -113,18 +114,6 @@ pub struct StereoBatcher {
     pub size: [usize; 2],
 }
 
-fn planar(pixels: &[u8], out: &mut Vec<f32>) {
-    for channel in 0..3 {
-        out.extend(
-            pixels
-                .iter()
-                .skip(channel)
-                .step_by(3)
-                .map(|&v| f32::from(v) / 255.0),
-        );
-    }
-}
-
 impl Batcher<StereoItem, StereoBatch> for StereoBatcher {
     fn batch(&self, items: Vec<StereoItem>, device: &Device) -> StereoBatch {
         let [h, w] = self.size;
@@ -135,8 +124,8 @@ impl Batcher<StereoItem, StereoBatch> for StereoBatcher {
         let mut mb = Vec::with_capacity(n * h * w);
         let mut f = Vec::with_capacity(n * 3);
         for item in &items {
-            planar(&item.view_a, &mut a);
-            planar(&item.view_b, &mut b);
+            push_planar(&item.view_a, &mut a);
+            push_planar(&item.view_b, &mut b);
             ma.extend(item.mask_a.iter().map(|&v| f32::from(v) / 255.0));
             mb.extend(item.mask_b.iter().map(|&v| f32::from(v) / 255.0));
             f.extend_from_slice(&item.force_n);
@@ -150,5 +139,69 @@ impl Batcher<StereoItem, StereoBatch> for StereoBatcher {
             mask_b: mask(mb),
             force: Tensor::from_data(TensorData::new(f, [n, 3]), device),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hnet_twin::dataset::{DatasetHeader, DatasetWriter, ImageRef, sample_files};
+
+    /// A non-square dataset (48 wide, 32 high) with one marked pixel reaches the network's
+    /// `[B, C, H, W]` tensors at the same place: the dataset's sizes are `[width, height]`, the
+    /// model's `[height, width]`, and nothing else in the suite uses other than square images.
+    #[test]
+    fn non_square_pairs_keep_their_orientation() {
+        let (width, height, marker) = (48usize, 32usize, (40usize, 5usize));
+        let root = std::env::temp_dir().join(format!("hnet-non-square-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let header = DatasetHeader::new([width, height], 1, serde_json::json!({}));
+        let writer = DatasetWriter::create_or_resume(&root, &header).unwrap();
+        let mut rgb = vec![0u8; width * height * 3];
+        let mut grey = vec![0u8; width * height];
+        let at = marker.1 * width + marker.0;
+        rgb[at * 3..at * 3 + 3].copy_from_slice(&[255, 255, 255]);
+        grey[at] = 255;
+        let rgb_image = ImageRef {
+            width,
+            height,
+            channels: 3,
+            pixels: &rgb,
+        };
+        let mask_image = ImageRef {
+            channels: 1,
+            pixels: &grey,
+            ..rgb_image
+        };
+        let row = ManifestRow {
+            id: "wide".into(),
+            split: Split::Train,
+            force_n: [0.1, 0.0, 0.0],
+            extra: Vec::new(),
+        };
+        let images = [rgb_image, rgb_image, mask_image, mask_image];
+        writer
+            .write_sample(&row.id, &sample_files(&row, images, &serde_json::json!({})))
+            .unwrap();
+        writer.finish().unwrap();
+
+        let dataset = Dataset::open(&root).unwrap();
+        let model_size = [height, width];
+        let split = StereoSplit::load(&dataset, Split::Train, model_size, None).unwrap();
+        assert_eq!(split.items[0].mask_a[at], 255);
+        let batch = StereoBatcher { size: model_size }.batch(split.items, &Device::flex());
+        assert_eq!(batch.view_a.dims(), [1, 3, height, width]);
+        let value = |t: &Tensor<4>, c: usize| {
+            let pixel = t.clone().slice([
+                0..1,
+                c..c + 1,
+                marker.1..marker.1 + 1,
+                marker.0..marker.0 + 1,
+            ]);
+            hnet_model::inference::host_values(pixel).unwrap()[0]
+        };
+        assert_eq!(value(&batch.view_a, 2), 1.0);
+        assert_eq!(value(&batch.mask_b, 0), 1.0);
+        std::fs::remove_dir_all(root).ok();
     }
 }

@@ -6,8 +6,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use burn::module::Module;
-use burn::tensor::{Device, Tensor};
+use burn::tensor::Device;
 use hnet_model::architectures::{ModelSpec, StereoModel};
+use hnet_model::inference::host_values;
 use hnet_model::metrics::{
     AXES, AxisMetrics, ForceAccumulator, ForceMetrics, SegmentationAccumulator, SegmentationMetrics,
 };
@@ -16,12 +17,22 @@ use serde::{Deserialize, Serialize};
 
 use crate::backend::BackendChoice;
 use crate::data::{StereoBatcher, StereoItem, StereoSplit};
+use crate::run_dir::RunDir;
 
 #[derive(clap::Args, Debug)]
+#[command(group(clap::ArgGroup::new("model").required(true).args(["run", "weights"])))]
 pub struct EvalArgs {
-    /// Run folder of `hnet train` (its `model.bpk` is evaluated).
+    /// Run folder of `hnet train` (its `model.bpk` is evaluated, and the tables and predictions
+    /// are saved there).
     #[arg(long)]
-    run: PathBuf,
+    run: Option<PathBuf>,
+    /// A weights file (`model.bpk`, or the page's bundled weights) to evaluate instead of a run;
+    /// needs `--data`. H-Net's weights know their input size; a baseline's need `--size`.
+    #[arg(long, requires = "data")]
+    weights: Option<PathBuf>,
+    /// Input size (pixels, square) of a baseline's weights given with `--weights`.
+    #[arg(long)]
+    size: Option<usize>,
     /// Dataset folder (the one the run was trained on by default).
     #[arg(long)]
     data: Option<PathBuf>,
@@ -85,33 +96,24 @@ pub struct TrainedModel {
     pub image_size: [usize; 2],
 }
 
-/// Loads `run/model.bpk` (and the training config for the input size).
-pub fn load_run(run: &Path, device: &Device) -> anyhow::Result<TrainedModel> {
-    let path = run.join("model.bpk");
+/// Loads a run's `model.bpk` (and its training config for the input size).
+pub fn load_run(run: &RunDir, device: &Device) -> anyhow::Result<TrainedModel> {
+    let path = run.model_file();
     let bytes = std::fs::read(&path).with_context(|| {
         format!(
             "cannot read '{}' (has `hnet train --out {}` finished?)",
             path.display(),
-            run.display()
+            run.root().display()
         )
     })?;
     let (net, spec, _) =
         StereoModel::from_weights_bytes(&bytes, device, &path.display().to_string())?;
-    let config = crate::training::TrainingConfig::load(&run.join("config.json"))?;
+    let config = run.read_config()?;
     Ok(TrainedModel {
         net,
         spec,
         image_size: config.image_size,
     })
-}
-
-/// The dataset a run was trained on.
-pub fn run_data(run: &Path) -> anyhow::Result<PathBuf> {
-    let path = run.join("run.json");
-    let info: crate::training::RunInfo = serde_json::from_slice(
-        &std::fs::read(&path).with_context(|| format!("cannot read '{}'", path.display()))?,
-    )?;
-    Ok(info.data)
 }
 
 /// Runs `model` on `items` in batches; calls `visit` with each pair and its outputs.
@@ -126,11 +128,6 @@ pub fn predict(
     let batcher = StereoBatcher {
         size: model.image_size,
     };
-    let to_vec = |t: Tensor<4>| -> anyhow::Result<Vec<f32>> {
-        t.into_data()
-            .try_into_vec::<f32>()
-            .map_err(|e| anyhow::anyhow!("{e:?}"))
-    };
     let pixels = model.image_size[0] * model.image_size[1];
     for chunk in items.chunks(batch_size.max(1)) {
         let batch = batcher.batch(chunk.to_vec(), device);
@@ -139,19 +136,12 @@ pub fn predict(
             .forward([batch.view_a, batch.view_b], [batch.mask_a, batch.mask_b]);
         let masks = match out.mask_logits {
             Some([a, b]) => Some([
-                to_vec(burn::tensor::activation::sigmoid(a))?,
-                to_vec(burn::tensor::activation::sigmoid(b))?,
+                host_values(burn::tensor::activation::sigmoid(a))?,
+                host_values(burn::tensor::activation::sigmoid(b))?,
             ]),
             None => None,
         };
-        let forces = match out.force {
-            Some(f) => Some(
-                f.into_data()
-                    .try_into_vec::<f32>()
-                    .map_err(|e| anyhow::anyhow!("{e:?}"))?,
-            ),
-            None => None,
-        };
+        let forces = out.force.map(host_values).transpose()?;
         for (i, item) in chunk.iter().enumerate() {
             let item_masks = masks.as_ref().map(|[a, b]| {
                 [
@@ -168,16 +158,57 @@ pub fn predict(
     Ok(())
 }
 
-/// Evaluates a run on a split; returns the tables and the per-pair forces.
+/// Loads a weights file on its own. H-Net's weights record their input size; a baseline's come
+/// at `size` (square, pixels).
+pub fn load_weights(
+    path: &Path,
+    size: Option<usize>,
+    device: &Device,
+) -> anyhow::Result<TrainedModel> {
+    let bytes = std::fs::read(path)
+        .with_context(|| format!("cannot read weights file '{}'", path.display()))?;
+    let (net, spec, _) =
+        StereoModel::from_weights_bytes(&bytes, device, &path.display().to_string())?;
+    let image_size = match (&spec, size) {
+        (ModelSpec::Hnet(config), None) => config.image_size,
+        (ModelSpec::Hnet(config), Some(size)) if [size, size] != config.image_size => {
+            anyhow::bail!(
+                "weights file '{}': this H-Net takes {}x{} images, not {size}x{size} (leave \
+                 --size out)",
+                path.display(),
+                config.image_size[1],
+                config.image_size[0]
+            )
+        }
+        (_, Some(size)) => [size, size],
+        (spec, None) => anyhow::bail!(
+            "weights file '{}' holds a `{}` network, whose input size is not recorded: give \
+             --size",
+            path.display(),
+            spec.name()
+        ),
+    };
+    let multiple = spec.size_multiple();
+    anyhow::ensure!(
+        image_size.iter().all(|s| *s > 0 && s % multiple == 0),
+        "--size must be a positive multiple of {multiple} for `{}`",
+        spec.name()
+    );
+    Ok(TrainedModel {
+        net,
+        spec,
+        image_size,
+    })
+}
+
+/// Evaluates a trained model on a split; returns the tables and the per-pair forces.
 pub fn evaluate(
-    run: &Path,
+    model: &TrainedModel,
     data: &Path,
     split: Split,
-    backend: BackendChoice,
+    device: &Device,
     batch_size: usize,
 ) -> anyhow::Result<(Evaluation, Vec<ForcePrediction>)> {
-    let device = backend.device()?;
-    let model = load_run(run, &device)?;
     let dataset = Dataset::open(data)?;
     let pairs = StereoSplit::load(&dataset, split, model.image_size, None)?;
     anyhow::ensure!(
@@ -194,10 +225,10 @@ pub fn evaluate(
     let mut predictions = Vec::new();
     let mut error = None;
     predict(
-        &model,
+        model,
         &pairs.items,
         batch_size,
-        &device,
+        device,
         |item, masks, force| {
             if let Some(masks) = masks {
                 for ((head, predicted), target) in heads
@@ -304,37 +335,44 @@ pub fn markdown(e: &Evaluation) -> String {
 }
 
 pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
-    let data = match &args.data {
-        Some(d) => d.clone(),
-        None => run_data(&args.run)?,
+    let device = args.backend.device()?;
+    let run = args.run.as_ref().map(RunDir::new);
+    let (model, data) = match (&run, &args.weights) {
+        (Some(run), _) => {
+            let data = match &args.data {
+                Some(d) => d.clone(),
+                None => run.read_info()?.data,
+            };
+            (load_run(run, &device)?, data)
+        }
+        (None, Some(weights)) => (
+            load_weights(weights, args.size, &device)?,
+            args.data.clone().context("--weights needs --data")?,
+        ),
+        (None, None) => anyhow::bail!("give --run or --weights"),
     };
-    let (evaluation, predictions) =
-        evaluate(&args.run, &data, args.split, args.backend, args.batch_size)?;
-    let stem = format!("eval-{}", args.split.name());
-    std::fs::write(
-        args.run.join(format!("{stem}.json")),
-        serde_json::to_vec_pretty(&evaluation)?,
-    )?;
-    std::fs::write(args.run.join(format!("{stem}.md")), markdown(&evaluation))?;
-    let mut csv = String::from("id,fx,fy,fz,fx_pred,fy_pred,fz_pred\n");
-    for p in &predictions {
-        let _ = writeln!(
-            csv,
-            "{},{},{},{},{},{},{}",
-            p.id,
-            p.truth[0],
-            p.truth[1],
-            p.truth[2],
-            p.predicted[0],
-            p.predicted[1],
-            p.predicted[2]
-        );
+    let (evaluation, predictions) = evaluate(&model, &data, args.split, &device, args.batch_size)?;
+    // A run keeps its tables and predictions; weights on their own are only printed.
+    if let Some(run) = &run {
+        let [json, md] = run.eval_files(args.split);
+        std::fs::write(json, serde_json::to_vec_pretty(&evaluation)?)?;
+        std::fs::write(md, markdown(&evaluation))?;
+        let mut csv = String::from("id,fx,fy,fz,fx_pred,fy_pred,fz_pred\n");
+        for p in &predictions {
+            let _ = writeln!(
+                csv,
+                "{},{},{},{},{},{},{}",
+                p.id,
+                p.truth[0],
+                p.truth[1],
+                p.truth[2],
+                p.predicted[0],
+                p.predicted[1],
+                p.predicted[2]
+            );
+        }
+        std::fs::write(run.predictions_file(args.split), csv)?;
     }
-    std::fs::write(
-        args.run
-            .join(format!("predictions-{}.csv", args.split.name())),
-        csv,
-    )?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&evaluation)?);
     } else {

@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 mod allocator;
 mod backend;
 mod bench;
+mod config;
 mod contact_sheet;
 mod data;
 mod evaluation;
@@ -15,6 +16,7 @@ mod info;
 mod progress;
 mod progress_renderer;
 mod report;
+mod run_dir;
 mod simulate;
 mod training;
 

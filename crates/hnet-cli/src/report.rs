@@ -8,6 +8,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
+use burn::tensor::Device;
 use hnet_model::metrics::AXES;
 use hnet_twin::dataset::{Dataset, Split};
 use image::{Rgb, RgbImage};
@@ -16,8 +17,9 @@ use plotters::prelude::*;
 
 use crate::backend::BackendChoice;
 use crate::data::StereoSplit;
-use crate::evaluation::{ForcePrediction, evaluate, load_run, predict, run_data};
-use crate::training::{EpochRow, epoch_metrics};
+use crate::evaluation::{ForcePrediction, TrainedModel, evaluate, load_run, predict};
+use crate::run_dir::{EpochRow, LOSS_METRIC, RunDir};
+use crate::training::metrics::Quantity;
 
 #[derive(clap::Args, Debug)]
 pub struct ReportArgs {
@@ -282,13 +284,11 @@ where
 
 /// Fig. 3: rows of (view A, view B, view A with its predicted mask, view B with its mask).
 fn sample_sheet(
-    run: &Path,
+    model: &TrainedModel,
     data: &Path,
     out: &Path,
-    backend: BackendChoice,
+    device: &Device,
 ) -> anyhow::Result<Option<PathBuf>> {
-    let device = backend.device()?;
-    let model = load_run(run, &device)?;
     if !model.spec.heads().0 {
         return Ok(None);
     }
@@ -303,7 +303,7 @@ fn sample_sheet(
         Rgb([255, 255, 255]),
     );
     let mut r = 0u32;
-    predict(&model, &split.items, 4, &device, |item, masks, _| {
+    predict(model, &split.items, 4, device, |item, masks, _| {
         let Some(masks) = masks else { return };
         let views = [&item.view_a, &item.view_b];
         for (c, tile) in (0..4).map(|c| (c, c % 2)) {
@@ -344,17 +344,20 @@ fn sample_sheet(
 
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     register_font()?;
+    let run = RunDir::new(&args.run);
     let data = match &args.data {
         Some(d) => d.clone(),
-        None => run_data(&args.run)?,
+        None => run.read_info()?.data,
     };
-    let out = args.out.clone().unwrap_or_else(|| args.run.join("report"));
+    let out = args.out.clone().unwrap_or_else(|| run.report_dir());
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create '{}'", out.display()))?;
-    let rows = epoch_metrics(&args.run)?;
+    let rows = run.epoch_metrics()?;
     if rows.is_empty() {
         bail!("'{}' has no training logs", args.run.display());
     }
-    let (_, predictions) = evaluate(&args.run, &data, Split::Test, args.backend, 16)?;
+    let device = args.backend.device()?;
+    let model = load_run(&run, &device)?;
+    let (_, predictions) = evaluate(&model, &data, Split::Test, &device, 16)?;
     let mut written = Vec::new();
     if !predictions.is_empty() {
         for (axis, name) in AXES.iter().enumerate() {
@@ -375,9 +378,9 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         }
     }
     for (metric, stem, title) in [
-        ("Loss", "fig5-loss", "Loss (eq. 7)"),
-        ("mIoU", "fig5-miou", "Segmentation mIoU"),
-        ("Force_MAE", "fig5-force-mae", "Force MAE (N)"),
+        (LOSS_METRIC, "fig5-loss", "Loss (eq. 7)"),
+        (Quantity::MIoU.name(), "fig5-miou", "Segmentation mIoU"),
+        (Quantity::ForceMae.name(), "fig5-force-mae", "Force MAE (N)"),
     ] {
         if rows.iter().any(|r| r.values.contains_key(metric)) {
             Figure::Curve {
@@ -389,7 +392,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
             written.push(stem.to_string());
         }
     }
-    let sheet = sample_sheet(&args.run, &data, &out, args.backend)?;
+    let sheet = sample_sheet(&model, &data, &out, &device)?;
     eprintln!(
         "wrote {} figures (SVG and PNG){} to {}",
         written.len(),

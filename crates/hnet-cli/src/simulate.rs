@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, bail};
+use hnet_twin::import::is_image_file;
 use hnet_twin::raster::GreyImage;
 use hnet_twin::scene::{Backgrounds, MaskSource, Modality, SceneSampling, TwinConfig};
 use hnet_twin::simulate::simulate_dataset;
@@ -60,8 +61,6 @@ fn parse_mask(text: &str) -> Result<MaskSource, String> {
     }
 }
 
-const IMAGE_EXTENSIONS: [&str; 5] = ["png", "jpg", "jpeg", "bmp", "tif"];
-
 /// The image files named by `paths` (folders expand to the images in them, sorted).
 fn background_files(paths: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
     let mut files = Vec::new();
@@ -70,11 +69,7 @@ fn background_files(paths: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
             let mut found: Vec<PathBuf> = std::fs::read_dir(path)
                 .with_context(|| format!("cannot list background folder '{}'", path.display()))?
                 .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| {
-                    p.extension().and_then(|e| e.to_str()).is_some_and(|e| {
-                        IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str())
-                    })
-                })
+                .filter(|p| is_image_file(p))
                 .collect();
             found.sort();
             if found.is_empty() {

@@ -141,6 +141,48 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
     assert!(eval["segmentation"][1]["mdice"].as_f64().unwrap() > 0.0);
     assert!(runs.join("eval-test.md").is_file());
 
+    // Any weights file on any data: the same tables from the weights alone.
+    let weights = runs.join("model.bpk");
+    let out = run(&[
+        "eval",
+        "--weights",
+        weights.to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+        "--json",
+    ]);
+    let alone: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(alone["force"], eval["force"]);
+    // Not weights, or weights of another size: named, and the run folder left as it was.
+    let files_before = std::fs::read_dir(&runs).unwrap().count();
+    for (args, message) in [
+        (
+            vec!["--weights", config.to_str().unwrap()],
+            "this is a text file",
+        ),
+        (
+            vec!["--weights", "/nonexistent/model.bpk"],
+            "cannot read weights file '/nonexistent/model.bpk'",
+        ),
+        (
+            vec!["--weights", weights.to_str().unwrap(), "--size", "64"],
+            "takes 32x32 images, not 64x64",
+        ),
+    ] {
+        let out = hnet()
+            .arg("eval")
+            .args(&args)
+            .args(["--data", data.to_str().unwrap()])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && stderr.contains(message),
+            "{stderr}"
+        );
+    }
+    assert_eq!(std::fs::read_dir(&runs).unwrap().count(), files_before);
+
     run(&["report", "--run", runs.to_str().unwrap()]);
     for figure in [
         "fig3-samples.png",
@@ -278,5 +320,47 @@ fn bad_input_gets_a_clear_error_naming_the_file() {
         err.contains("forces.csv") && err.contains("line 2"),
         "{err}"
     );
+    std::fs::remove_dir_all(dir).ok();
+}
+
+#[test]
+fn a_time_budget_ends_training_cleanly_with_the_best_checkpoint() {
+    let dir = scratch("time-budget");
+    let data = simulate(&dir, 60);
+    let config = tiny_config(&dir, "hnet", 5);
+    let runs = dir.join("run");
+    let out = run(&[
+        "train",
+        "--data",
+        data.to_str().unwrap(),
+        "--out",
+        runs.to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
+        "--time-budget",
+        "0s",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains(
+            "stopping after epoch 1: another epoch would not end within the time budget (0s)"
+        ),
+        "{stderr}"
+    );
+    let metrics = std::fs::read_to_string(runs.join("metrics.csv")).unwrap();
+    assert!(
+        metrics.contains("\n1,valid,") && !metrics.contains("\n2,"),
+        "{metrics}"
+    );
+    assert!(runs.join("model.bpk").is_file());
+    // A bad budget is refused before anything is written.
+    let bad = hnet()
+        .args(["train", "--data", data.to_str().unwrap(), "--out"])
+        .arg(dir.join("other"))
+        .args(["--time-budget", "ten minutes"])
+        .output()
+        .unwrap();
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("is not a duration"));
+    assert!(!dir.join("other").exists());
     std::fs::remove_dir_all(dir).ok();
 }

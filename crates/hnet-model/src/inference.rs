@@ -65,8 +65,10 @@ impl StereoPrediction {
     }
 }
 
-/// Appends an RGB image as planar channels scaled to `[0, 1]` (the `[3, H, W]` layout).
-fn push_planar(pixels: &[u8], out: &mut Vec<f32>) {
+/// Appends an interleaved 8-bit RGB image as planar channels scaled to `[0, 1]` (the network's
+/// `[3, H, W]` input layout). The one conversion of images to network input, used by inference
+/// here and by `hnet`'s training batches.
+pub fn push_planar(pixels: &[u8], out: &mut Vec<f32>) {
     for channel in 0..3 {
         out.extend(
             pixels
@@ -144,6 +146,12 @@ impl fmt::Display for ReadbackError {
 }
 
 impl core::error::Error for ReadbackError {}
+
+/// A tensor's values read back to the host as `f32`s (the one read-back of the model, the CLI
+/// and the page).
+pub fn host_values<const D: usize>(tensor: Tensor<D>) -> Result<Vec<f32>, ReadbackError> {
+    to_vec(tensor.into_data())
+}
 
 fn to_vec(data: TensorData) -> Result<Vec<f32>, ReadbackError> {
     data.try_into_vec::<f32>()

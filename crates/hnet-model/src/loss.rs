@@ -59,9 +59,38 @@ impl HNetLoss {
         mask_b: Tensor<4>,
         force: Tensor<2>,
     ) -> LossTerms {
-        let bce_a = binary_cross_entropy_with_logits(output.mask_logits_a.clone(), mask_a);
-        let bce_b = binary_cross_entropy_with_logits(output.mask_logits_b.clone(), mask_b);
-        let mse = (output.force.clone() - force).square().mean();
+        self.forward_heads(
+            Some([output.mask_logits_a.clone(), output.mask_logits_b.clone()]),
+            Some(output.force.clone()),
+            [mask_a, mask_b],
+            force,
+        )
+    }
+
+    /// The same loss for a network that may lack a head (the baselines: a segmentation-only
+    /// network has no force, Y-Net no masks): an absent head's terms are zero. `mask_logits`
+    /// are views A and B's logits, `masks` their targets.
+    pub fn forward_heads(
+        &self,
+        mask_logits: Option<[Tensor<4>; 2]>,
+        force: Option<Tensor<2>>,
+        masks: [Tensor<4>; 2],
+        target_force: Tensor<2>,
+    ) -> LossTerms {
+        let device = target_force.device();
+        let zero = || Tensor::<1>::zeros([1], &device);
+        let [mask_a, mask_b] = masks;
+        let (bce_a, bce_b) = match mask_logits {
+            Some([logits_a, logits_b]) => (
+                binary_cross_entropy_with_logits(logits_a, mask_a),
+                binary_cross_entropy_with_logits(logits_b, mask_b),
+            ),
+            None => (zero(), zero()),
+        };
+        let mse = match force {
+            Some(force) => (force - target_force).square().mean(),
+            None => zero(),
+        };
         let total = bce_a.clone().mul_scalar(self.config.beta_a)
             + bce_b.clone().mul_scalar(self.config.beta_b)
             + mse.clone().mul_scalar(self.config.beta_force);

@@ -3,7 +3,8 @@
 //! A weights file is a burnpack container (Burn's own record format, written through
 //! [`Module::into_record`]) whose metadata also carries the network's configuration as JSON, so
 //! that a file is enough to rebuild the network: the browser app can load any file that
-//! `hnet train` wrote without being told its sizes.
+//! `hnet train` wrote without being told its sizes. This module reads and writes the bytes;
+//! files are the caller's (`hnet` writes them atomically, the page reads the user's).
 //!
 //! Metadata keys: `hnet.format` ([`FORMAT_VERSION`]), `hnet.architecture` (`"hnet"` or a baseline's
 //! name), `hnet.config` (the architecture's configuration as JSON), and free-form provenance
@@ -43,7 +44,9 @@ const PROVENANCE_PREFIX: &str = "hnet.provenance.";
 pub enum WeightsProblem {
     /// The file could not be read or written.
     Io(String),
-    /// Not a burnpack container, or a damaged or truncated one.
+    /// Not a weights file at all: what the bytes look like instead.
+    NotWeights(&'static str),
+    /// A weights container, but damaged or cut short.
     NotBurnpack(String),
     /// A burnpack container without H-Net Studio's metadata.
     NotHNetStudio,
@@ -66,15 +69,17 @@ impl fmt::Display for WeightsProblem {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Self::Io(e) => write!(f, "{e}"),
-            Self::NotBurnpack(e) => {
-                write!(
-                    f,
-                    "not a readable burnpack weights file ({e}); is it truncated?"
-                )
-            }
+            Self::NotWeights(what) => write!(
+                f,
+                "not an H-Net weights file (.bpk, written by `hnet train`): this is {what}"
+            ),
+            Self::NotBurnpack(e) => write!(
+                f,
+                "a weights file, but damaged or cut short (a partial download?): {e}"
+            ),
             Self::NotHNetStudio => write!(
                 f,
-                "a burnpack file, but not written by H-Net Studio (no `{KEY_FORMAT}` metadata)"
+                "a Burn weights file, but not written by H-Net Studio (no `{KEY_FORMAT}` metadata)"
             ),
             Self::UnsupportedFormat(v) => write!(
                 f,
@@ -149,12 +154,41 @@ pub fn encode<M: Module>(
     Ok(bytes.to_vec())
 }
 
+/// The first bytes of every weights file (Burn's burnpack container).
+const WEIGHTS_MAGIC: &[u8; 4] = b"NRUB";
+
+/// Refuses bytes that are not a weights file at all, saying what they look like instead.
+fn check_magic(bytes: &[u8]) -> Result<(), WeightsProblem> {
+    if bytes.starts_with(WEIGHTS_MAGIC) {
+        return Ok(());
+    }
+    let what = if bytes.is_empty() {
+        "an empty file"
+    } else if bytes.starts_with(b"\x89PNG") {
+        "a PNG image"
+    } else if bytes.starts_with(&[0xFF, 0xD8, 0xFF]) {
+        "a JPEG image"
+    } else if bytes.starts_with(b"PK\x03\x04") {
+        "a zip archive"
+    } else if bytes.starts_with(b"DICM") || bytes.get(128..132) == Some(&b"DICM"[..]) {
+        "a DICOM file"
+    } else if bytes.starts_with(b"\x80") || bytes.starts_with(b"PK") {
+        "another program's model or archive"
+    } else if std::str::from_utf8(&bytes[..bytes.len().min(512)]).is_ok() {
+        "a text file"
+    } else {
+        "another kind of file"
+    };
+    Err(WeightsProblem::NotWeights(what))
+}
+
 /// Reads the header of a weights file's bytes.
 pub fn read_header(bytes: &[u8], source: &str) -> Result<WeightsHeader, WeightsError> {
     let error = |problem| WeightsError {
         source: source.to_string(),
         problem,
     };
+    check_magic(bytes).map_err(error)?;
     let reader = Reader::from_bytes(Bytes::from_bytes_vec(bytes.to_vec()))
         .map_err(|e| error(WeightsProblem::NotBurnpack(e.to_string())))?;
     let metadata = reader.metadata();
@@ -190,6 +224,7 @@ pub fn apply<M: Module>(module: M, bytes: &[u8], source: &str) -> Result<M, Weig
         source: source.to_string(),
         problem,
     };
+    check_magic(bytes).map_err(error)?;
     let record = ModuleRecord::from_bytes(Bytes::from_bytes_vec(bytes.to_vec()))
         .map_err(|e| error(WeightsProblem::NotBurnpack(record_message(e))))?;
     module
@@ -261,55 +296,3 @@ impl HNet {
         Ok((model, config, header))
     }
 }
-
-#[cfg(feature = "std")]
-mod file {
-    use super::*;
-    use std::path::Path;
-
-    fn io_error(path: &Path, e: std::io::Error) -> WeightsError {
-        WeightsError {
-            source: path.display().to_string(),
-            problem: WeightsProblem::Io(e.to_string()),
-        }
-    }
-
-    /// Writes `bytes` to `path` atomically: a crash leaves either the old file or the new one.
-    pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), WeightsError> {
-        let mut tmp = path.as_os_str().to_owned();
-        tmp.push(".partial");
-        let tmp = std::path::PathBuf::from(tmp);
-        std::fs::write(&tmp, bytes).map_err(|e| io_error(path, e))?;
-        std::fs::rename(&tmp, path).map_err(|e| io_error(path, e))
-    }
-
-    impl HNet {
-        /// Saves the network with its configuration and provenance to `path` (atomically).
-        pub fn save_weights(
-            &self,
-            path: &Path,
-            config: &HNetConfig,
-            provenance: &BTreeMap<String, String>,
-        ) -> Result<(), WeightsError> {
-            let bytes = self
-                .to_weights_bytes(config, provenance)
-                .map_err(|e| WeightsError {
-                    source: path.display().to_string(),
-                    problem: e.problem,
-                })?;
-            write_atomically(path, &bytes)
-        }
-
-        /// Loads a network saved with [`HNet::save_weights`] onto `device`.
-        pub fn load_weights(
-            path: &Path,
-            device: &Device,
-        ) -> Result<(HNet, HNetConfig, WeightsHeader), WeightsError> {
-            let bytes = std::fs::read(path).map_err(|e| io_error(path, e))?;
-            HNet::from_weights_bytes(&bytes, device, &path.display().to_string())
-        }
-    }
-}
-
-#[cfg(feature = "std")]
-pub use file::write_atomically;

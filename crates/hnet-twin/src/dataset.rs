@@ -117,6 +117,47 @@ pub fn assign_splits(n: usize, seed: u64) -> Vec<Split> {
     splits
 }
 
+/// The split of one more pair added to a set whose splits number `counts` (train, val, test),
+/// for sets that grow one pair at a time and whose pairs must keep their split (the page's
+/// export): from the third pair on, validation and then test get one pair first (so a small set
+/// can train with early stopping and be evaluated); after that, each pair goes to the split
+/// furthest below its 80/10/10 share. Ties go to train, then val.
+pub fn next_split(counts: [usize; 3]) -> Split {
+    let n = counts.iter().sum::<usize>() + 1;
+    if n >= 3 && counts[1] == 0 {
+        return Split::Val;
+    }
+    if n >= 3 && counts[2] == 0 {
+        return Split::Test;
+    }
+    let deficit = |i: usize, share: f64| share * n as f64 - counts[i] as f64;
+    let [train, val, test] = [deficit(0, 0.8), deficit(1, 0.1), deficit(2, 0.1)];
+    if train >= val && train >= test {
+        Split::Train
+    } else if val >= test {
+        Split::Val
+    } else {
+        Split::Test
+    }
+}
+
+/// Above this magnitude (newtons) a tip-force label is implausible for a cardiac catheter: the
+/// twin draws contact forces up to 0.4 N and ablation needs 0.1-0.3 N (the paper), so a larger
+/// value is most likely a typo or a value in other units (grams-force, millinewtons).
+pub const PLAUSIBLE_TIP_FORCE_MAX_N: f64 = 1.0;
+
+/// Why a tip-force label `(Fx, Fy, Fz)` in newtons is implausible, or `None` when it is not.
+pub fn implausible_tip_force(force_n: [f64; 3]) -> Option<String> {
+    let magnitude = force_n.iter().map(|f| f * f).sum::<f64>().sqrt();
+    (magnitude > PLAUSIBLE_TIP_FORCE_MAX_N).then(|| {
+        format!(
+            "|F| = {magnitude:.3} N is far above a catheter tip's contact forces (at most \
+             {PLAUSIBLE_TIP_FORCE_MAX_N} N is expected; ablation needs 0.1-0.3 N): are the \
+             values in newtons?"
+        )
+    })
+}
+
 /// One line of the manifest.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ManifestRow {
@@ -380,21 +421,14 @@ pub fn header_json(header: &DatasetHeader) -> Vec<u8> {
 mod folder {
     use super::*;
     use std::fs;
-    use std::io::Write;
 
     fn io(path: &Path, e: std::io::Error) -> DatasetError {
         DatasetError::new(path, e)
     }
 
-    /// Writes `bytes` to `path` through a synced temporary file (`<path>.partial`) and a rename.
+    /// Writes `bytes` to `path` atomically ([`crate::files::write_atomically`]).
     fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), DatasetError> {
-        let mut tmp = path.as_os_str().to_owned();
-        tmp.push(".partial");
-        let tmp = PathBuf::from(tmp);
-        let mut file = fs::File::create(&tmp).map_err(|e| io(&tmp, e))?;
-        file.write_all(bytes).map_err(|e| io(&tmp, e))?;
-        file.sync_all().map_err(|e| io(&tmp, e))?;
-        fs::rename(&tmp, path).map_err(|e| io(path, e))
+        crate::files::write_atomically(path, bytes).map_err(|e| io(path, e))
     }
 
     /// Whether the file at `path` is a PNG that was written to its end.
@@ -745,6 +779,40 @@ mod tests {
         }
         assert_eq!(count(2, Split::Train), 2);
         assert_eq!(count(1, Split::Train), 1);
+    }
+
+    #[test]
+    fn pairs_added_one_at_a_time_keep_near_80_10_10() {
+        let mut counts = [0usize; 3];
+        let mut order = Vec::new();
+        for _ in 0..1000 {
+            let split = next_split(counts);
+            order.push(split);
+            counts[split as usize] += 1;
+            let n = order.len();
+            if n >= 4 {
+                assert!(counts[1] >= 1 && counts[2] >= 1, "{n}: {counts:?}");
+            }
+            for (count, share) in counts.iter().zip([0.8, 0.1, 0.1]) {
+                assert!(
+                    (*count as f64 - share * n as f64).abs() <= 2.0,
+                    "{n}: {counts:?}"
+                );
+            }
+        }
+        assert_eq!(counts, [800, 100, 100]);
+        assert_eq!(
+            &order[..4],
+            [Split::Train, Split::Train, Split::Val, Split::Test]
+        );
+    }
+
+    #[test]
+    fn implausible_force_labels_are_named() {
+        assert_eq!(implausible_tip_force([0.3, -0.2, 0.1]), None);
+        assert_eq!(implausible_tip_force([0.0, 0.0, -1.0]), None);
+        let why = implausible_tip_force([5.0, 0.0, 0.0]).unwrap();
+        assert!(why.starts_with("|F| = 5.000 N is far above"), "{why}");
     }
 
     #[test]

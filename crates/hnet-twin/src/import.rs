@@ -14,6 +14,7 @@ use crate::dataset::{
     DatasetError, DatasetHeader, DatasetWriter, ImageRef, ManifestRow, assign_splits, is_valid_id,
     sample_files,
 };
+use crate::force_table::{ForceRow, read_force_table};
 use crate::scene::{luma, otsu_threshold, threshold_mask};
 
 /// How masks are made from the recorded images.
@@ -58,73 +59,26 @@ pub struct ImportReport {
     pub skipped: Vec<String>,
 }
 
-const IMAGE_EXTENSIONS: [&str; 6] = ["png", "jpg", "jpeg", "bmp", "tif", "tiff"];
+/// Extensions of the image files read from folders (recordings here, backgrounds in `hnet
+/// simulate`), lower case.
+pub const IMAGE_EXTENSIONS: [&str; 6] = ["png", "jpg", "jpeg", "bmp", "tif", "tiff"];
 
-/// A good row of the forces CSV.
-struct ForceRow {
-    line: usize,
-    name: String,
-    force_n: [f64; 3],
+/// Whether `path` names an image file by its extension (any case).
+pub fn is_image_file(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
 }
 
+/// The forces CSV's rows (the key is the image's name), each good or its error.
 fn read_forces(path: &Path) -> Result<Vec<Result<ForceRow, DatasetError>>, DatasetError> {
     let bytes = std::fs::read(path).map_err(|e| DatasetError::new(path, e))?;
-    let mut reader = csv::ReaderBuilder::new()
-        .trim(csv::Trim::All)
-        .from_reader(bytes.as_slice());
-    let headers: Vec<String> = reader
-        .headers()
-        .map_err(|e| DatasetError::new(path, format!("unreadable header line: {e}")))?
-        .iter()
-        .map(|h| h.to_ascii_lowercase())
-        .collect();
-    let find = |names: &[&str]| headers.iter().position(|h| names.contains(&h.as_str()));
-    let name_column = find(&["image", "file", "frame", "name"]).ok_or_else(|| {
-        DatasetError::new(
-            path,
-            "no image column: the header needs one of `image`, `file`, `frame` or `name`",
-        )
-    })?;
-    let mut force_columns = [0; 3];
-    for (axis, column) in ["fx", "fy", "fz"].iter().zip(force_columns.iter_mut()) {
-        *column = find(&[axis])
-            .ok_or_else(|| DatasetError::new(path, format!("missing column `{axis}` (newtons)")))?;
-    }
-    let mut rows = Vec::new();
-    for (n, record) in reader.records().enumerate() {
-        let line = n + 2;
-        let row = record
-            .map_err(|e| DatasetError::new(path, format!("line {line}: {e}")))
-            .and_then(|record| {
-                let name = record.get(name_column).unwrap_or_default().to_string();
-                if name.is_empty() {
-                    return Err(DatasetError::new(path, format!("line {line}: empty image name")));
-                }
-                let mut force_n = [0.0; 3];
-                for ((axis, &column), value) in
-                    ["fx", "fy", "fz"].iter().zip(&force_columns).zip(force_n.iter_mut())
-                {
-                    let text = record.get(column).unwrap_or_default();
-                    *value = text
-                        .parse::<f64>()
-                        .ok()
-                        .filter(|v| v.is_finite())
-                        .ok_or_else(|| {
-                            DatasetError::new(
-                                path,
-                                format!("line {line}: {axis} = `{text}` is not a finite number of newtons"),
-                            )
-                        })?;
-                }
-                Ok(ForceRow {
-                    line,
-                    name,
-                    force_n,
-                })
-            });
-        rows.push(row);
-    }
-    Ok(rows)
+    let rows = read_force_table(&bytes, &["image", "file", "frame", "name"])
+        .map_err(|e| DatasetError::new(path, e))?;
+    Ok(rows
+        .into_iter()
+        .map(|row| row.map_err(|e| DatasetError::new(path, e)))
+        .collect())
 }
 
 /// The file of `name` in `folder`: the name itself, or the name with an image extension.
@@ -232,20 +186,17 @@ pub fn import_recordings(
     let total = rows.len();
     for row in rows {
         let checked = row.and_then(|row| {
-            let id = id_for(&row.name);
+            let id = id_for(&row.key);
             if !ids.insert(id.clone()) {
                 return Err(DatasetError::new(
                     &options.forces,
-                    format!(
-                        "line {}: `{}` appears twice (id `{id}`)",
-                        row.line, row.name
-                    ),
+                    format!("line {}: `{}` appears twice (id `{id}`)", row.line, row.key),
                 ));
             }
             let [a, b] = [&options.view_a, &options.view_b].map(|folder| {
-                find_image(folder, &row.name).ok_or_else(|| {
+                find_image(folder, &row.key).ok_or_else(|| {
                     DatasetError::new(
-                        folder.join(&row.name),
+                        folder.join(&row.key),
                         format!(
                             "missing (named on line {} of {})",
                             row.line,
@@ -337,7 +288,7 @@ pub fn import_recordings(
                     ("source_b".into(), b.path.display().to_string()),
                 ],
             };
-            let record = json!({ "csv_line": row.line, "image": row.name });
+            let record = json!({ "csv_line": row.line, "image": row.key });
             let files = sample_files(
                 &manifest,
                 [(ca, &pa), (cb, &pb), (1, &ma), (1, &mb)].map(|(channels, pixels)| ImageRef {

@@ -6,7 +6,8 @@
 //! - [`render`]: the catheter's exact anti-aliased mask, X-ray attenuation and camera look;
 //! - [`phantom`] and [`synthetic_xray`]: chest radiograph backgrounds cut into shuffled patches;
 //! - [`scene`]: random scenes and complete stereo samples;
-//! - [`dataset`]: the on-disk format; natively also [`simulate`] and [`import`].
+//! - [`dataset`]: the on-disk format; [`force_table`]: force tables in CSV (imports and the page's
+//!   labels); natively also [`simulate`], [`import`] and [`files`] (atomic writes).
 //!
 //! Units: millimetres, newtons, degrees for angles. World frame: `x` towards the patient's left,
 //! `y` anterior, `z` cranial, origin at the C-arm's isocentre.
@@ -18,6 +19,9 @@ pub mod archive;
 pub mod carm;
 pub mod catheter;
 pub mod dataset;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod files;
+pub mod force_table;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod import;
 pub mod noise;

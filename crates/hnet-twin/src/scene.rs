@@ -178,6 +178,101 @@ impl SceneParams {
     }
 }
 
+impl SceneSampling {
+    /// How `scene` lies outside what this sampling draws, one phrase per departure (empty when
+    /// it could have been drawn): a network trained on these scenes has not seen such a one.
+    pub fn departures(&self, scene: &SceneParams) -> Vec<String> {
+        const TOLERANCE: f64 = 1e-6;
+        let outside = |value: f64, range: [f64; 2]| {
+            value < range[0] - TOLERANCE * range[0].abs().max(1e-3)
+                || value > range[1] + TOLERANCE * range[1].abs().max(1e-3)
+        };
+        let range_text = |range: [f64; 2], scale: f64, unit: &str| {
+            if range[0] == range[1] {
+                format!("{:.2} {unit}", range[0] * scale)
+            } else {
+                format!("{:.2}-{:.2} {unit}", range[0] * scale, range[1] * scale)
+            }
+        };
+        let mut departures = Vec::new();
+        let force = scene.tip_force_n.norm();
+        if outside(force, self.force_magnitude_n) {
+            departures.push(format!(
+                "|F| {force:.2} N (trained on {})",
+                range_text(self.force_magnitude_n, 1.0, "N")
+            ));
+        }
+        if force > 1e-9 {
+            let axis = scene.base_frame().column(2);
+            let angle = (-scene.tip_force_n.dot(axis) / force)
+                .clamp(-1.0, 1.0)
+                .acos()
+                .to_degrees();
+            if angle > self.force_cone_deg + 1e-6 {
+                departures.push(format!(
+                    "the force points {angle:.0}° away from pushing back along the catheter \
+                     (trained within {:.0}°)",
+                    self.force_cone_deg
+                ));
+            }
+        }
+        let mut check = |name: &str, value: f64, range: [f64; 2], scale: f64, unit: &str| {
+            if outside(value, range) {
+                departures.push(format!(
+                    "{name} {:.2} {unit} (trained on {})",
+                    value * scale,
+                    range_text(range, scale, unit)
+                ));
+            }
+        };
+        check(
+            "stiffness EI",
+            scene.bending_stiffness_n_m2,
+            self.bending_stiffness_n_m2,
+            1e3,
+            "mN·m²",
+        );
+        check(
+            "flexible length",
+            scene.length_mm,
+            self.length_mm,
+            1.0,
+            "mm",
+        );
+        check(
+            "pre-curvature",
+            scene.precurvature_per_mm,
+            self.precurvature_per_mm,
+            1e3,
+            "/m",
+        );
+        let shift = scene.base_position_mm - self.base_position_mm;
+        if shift.max_abs() > self.base_jitter_mm + 1e-6 {
+            departures.push(format!(
+                "the base moved {:.1} mm (trained within {:.1} mm)",
+                shift.max_abs(),
+                self.base_jitter_mm
+            ));
+        }
+        if scene.base_tilt_deg > self.base_tilt_deg + 1e-6 {
+            departures.push(format!(
+                "the base tilted {:.0}° (trained within {:.0}°)",
+                scene.base_tilt_deg, self.base_tilt_deg
+            ));
+        }
+        let roll = scene.base_roll_deg.rem_euclid(360.0);
+        if self.base_roll_deg[1] - self.base_roll_deg[0] < 360.0
+            && outside(roll, self.base_roll_deg)
+        {
+            departures.push(format!(
+                "the pre-curve's plane turned to {roll:.0}° (trained on {})",
+                range_text(self.base_roll_deg, 1.0, "°")
+            ));
+        }
+        departures
+    }
+}
+
 fn uniform(rng: &mut impl Rng, range: [f64; 2]) -> f64 {
     range[0] + (range[1] - range[0]) * rng.random::<f64>()
 }
@@ -582,6 +677,39 @@ mod tests {
                 assert!((40.0..=60.0).contains(&p.length_mm));
             }
         }
+    }
+
+    #[test]
+    fn drawn_scenes_are_inside_their_sampling_and_others_are_named() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for sampling in [SceneSampling::bench(), SceneSampling::varied()] {
+            for _ in 0..200 {
+                let scene = sampling.sample(&mut rng);
+                assert_eq!(
+                    sampling.departures(&scene),
+                    Vec::<String>::new(),
+                    "{scene:?}"
+                );
+            }
+        }
+        let bench = SceneSampling::bench();
+        let mut scene = bench.sample(&mut rng);
+        scene.tip_force_n = Vec3::new(0.6, 0.0, 0.3);
+        scene.bending_stiffness_n_m2 = 0.3e-3;
+        let departures = bench.departures(&scene);
+        assert_eq!(departures.len(), 3, "{departures:?}");
+        assert!(
+            departures[0].starts_with("|F| 0.67 N (trained on 0.00-0.40 N)"),
+            "{departures:?}"
+        );
+        assert!(
+            departures[1].starts_with("the force points"),
+            "{departures:?}"
+        );
+        assert_eq!(
+            departures[2],
+            "stiffness EI 0.30 mN·m² (trained on 0.60 mN·m²)"
+        );
     }
 
     #[test]

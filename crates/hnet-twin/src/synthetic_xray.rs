@@ -105,6 +105,27 @@ impl BackgroundSource {
         }
     }
 
+    /// What the source is, in words for people: the file's name, or for the phantom
+    /// "built-in thorax phantom" and its view (the recorded [`BackgroundSource::name`] stays
+    /// terse).
+    pub fn description(&self) -> String {
+        match self.name.strip_prefix("phantom:") {
+            Some(angles) => {
+                let mut parts = angles.split('/');
+                let (primary, secondary) =
+                    (parts.next().unwrap_or("+0"), parts.next().unwrap_or("+0"));
+                if primary.trim_start_matches(['+', '-']) == "0"
+                    && secondary.trim_start_matches(['+', '-']) == "0"
+                {
+                    "Built-in thorax phantom (frontal view)".into()
+                } else {
+                    format!("Built-in thorax phantom (C-arm {primary}° / {secondary}°)")
+                }
+            }
+            None => self.name.clone(),
+        }
+    }
+
     /// The built-in thorax phantom as seen from `view`'s direction (420 mm field at the
     /// isocentre, `size_px` square), regions located by projecting the phantom's landmarks.
     pub fn phantom(view: &CArm, size_px: usize) -> Self {

@@ -232,7 +232,7 @@ fn bad_rows_and_files_are_named_and_skippable() {
         .unwrap_err()
         .to_string();
     assert!(
-        err.contains("forces.csv") && err.contains("line 2: fz = `nan`"),
+        err.contains("forces.csv") && err.contains("line 2: fz of `frame_00.png` is `nan`"),
         "{err}"
     );
     assert!(!out.exists(), "nothing is written when the import stops");

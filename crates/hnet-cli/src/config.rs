@@ -1,0 +1,122 @@
+//! The training settings (`configs/*.json`, and `config.json` in a run folder): the network,
+//! the input size, the loss weights and the optimiser's schedule. Read by `hnet train`, and by
+//! `hnet eval` for the input size a run was trained at.
+
+use std::path::Path;
+
+use anyhow::{Context, bail};
+use hnet_model::HNetLossConfig;
+use hnet_model::architectures::ModelSpec;
+use serde::{Deserialize, Serialize};
+
+/// Everything that defines a training run (`config.json` in the run folder).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrainingConfig {
+    /// A short name for the settings (`paper`, `cpu`, ...).
+    pub name: String,
+    /// The network and its settings.
+    pub model: ModelSpec,
+    /// Input size `[height, width]`; images are resized to it.
+    pub image_size: [usize; 2],
+    /// Loss weights β1, β2, β3 (eq. 7).
+    pub loss: HNetLossConfig,
+    /// RMSprop learning rate (the paper: 1e-4).
+    pub learning_rate: f64,
+    /// Learning rate of H-Net's force head (its dense layers), when it differs from
+    /// `learning_rate`. The head reads globally pooled, all-positive features that vary little
+    /// between pairs, so RMSprop's nearly sign-sized steps at a large rate push whole hidden units
+    /// below zero for every input at once, where they stay (dead ReLUs). A smaller rate for the
+    /// head alone lets the encoder-decoder learn fast without losing the head.
+    #[serde(default)]
+    pub force_head_learning_rate: Option<f64>,
+    /// RMSprop smoothing constant (Keras' default `rho`, 0.9).
+    pub rmsprop_alpha: f32,
+    /// RMSprop momentum (Keras' default, 0).
+    pub rmsprop_momentum: f32,
+    /// RMSprop epsilon (Keras' default, 1e-7).
+    pub rmsprop_epsilon: f32,
+    /// Pairs per batch.
+    pub batch_size: usize,
+    /// Most epochs.
+    pub epochs: usize,
+    /// Stop when the validation loss has not improved for this many epochs.
+    pub patience: usize,
+    /// Seed of the weights' initialisation and of the shuffling.
+    pub seed: u64,
+    /// Use at most this many training pairs (all when absent).
+    pub max_train_samples: Option<usize>,
+    /// Use at most this many validation pairs (all when absent).
+    pub max_valid_samples: Option<usize>,
+    /// Threads decoding batches.
+    pub num_workers: usize,
+}
+
+impl TrainingConfig {
+    /// Checks that the settings describe a trainable run.
+    pub fn check(&self) -> anyhow::Result<()> {
+        let multiple = self.model.size_multiple();
+        if self.image_size.iter().any(|s| *s == 0 || s % multiple != 0) {
+            bail!(
+                "image size {}x{} must be a positive multiple of {multiple} for {}",
+                self.image_size[0],
+                self.image_size[1],
+                self.model
+            );
+        }
+        if let ModelSpec::Hnet(c) = &self.model
+            && c.image_size != self.image_size
+        {
+            bail!(
+                "the H-Net config's image_size {:?} differs from the training image_size {:?}",
+                c.image_size,
+                self.image_size
+            );
+        }
+        if self.batch_size == 0 || self.epochs == 0 {
+            bail!("batch_size and epochs must be at least 1");
+        }
+        Ok(())
+    }
+
+    /// Reads a config file (JSON).
+    pub fn load(path: &Path) -> anyhow::Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read training config '{}'", path.display()))?;
+        let config: Self = serde_json::from_str(&text)
+            .with_context(|| format!("'{}' is not a valid training config", path.display()))?;
+        config
+            .check()
+            .with_context(|| format!("training config '{}'", path.display()))?;
+        Ok(config)
+    }
+}
+
+/// The checked-in settings, by name.
+pub fn builtin_config(name: &str) -> Option<TrainingConfig> {
+    let text = match name {
+        "cpu" => include_str!("../../../configs/cpu.json"),
+        "paper" => include_str!("../../../configs/paper.json"),
+        _ => return None,
+    };
+    Some(serde_json::from_str(text).expect("the checked-in configs parse"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_checked_in_config_loads() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs");
+        let mut names = Vec::new();
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "json") {
+                let config = TrainingConfig::load(&path).unwrap_or_else(|e| panic!("{e:#}"));
+                names.push(config.name);
+            }
+        }
+        names.sort();
+        assert_eq!(names, ["cpu", "cpu-ynet", "paper"]);
+    }
+}

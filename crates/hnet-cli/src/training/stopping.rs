@@ -1,0 +1,132 @@
+//! When training stops: at the end of the epoch after which the validation loss has not improved
+//! for `patience` epochs (the paper's early stopping), or, with a time budget, at the end of the
+//! last epoch that fits in it, so that a run on a lent machine ends cleanly with its best
+//! checkpoint saved rather than being killed mid-epoch.
+
+use std::time::{Duration, Instant};
+
+use burn::train::EarlyStoppingStrategy;
+use burn::train::metric::store::EventStoreClient;
+
+/// A wall-clock budget for the epochs of this session.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TimeBudget {
+    limit: Duration,
+    started: Instant,
+    last_epoch_end: Instant,
+    longest_epoch: Duration,
+}
+
+impl TimeBudget {
+    /// A budget of `limit` from `started`.
+    pub fn new(limit: Duration, started: Instant) -> Self {
+        Self {
+            limit,
+            started,
+            last_epoch_end: started,
+            longest_epoch: Duration::ZERO,
+        }
+    }
+
+    /// Records an epoch that ended at `now`; whether one more epoch, as long as the longest so
+    /// far, still ends within the budget.
+    pub fn allows_another_epoch(&mut self, now: Instant) -> bool {
+        let epoch = now.saturating_duration_since(self.last_epoch_end);
+        self.longest_epoch = self.longest_epoch.max(epoch);
+        self.last_epoch_end = now;
+        now.saturating_duration_since(self.started) + self.longest_epoch <= self.limit
+    }
+
+    /// The budget.
+    pub fn limit(&self) -> Duration {
+        self.limit
+    }
+}
+
+/// The patience rule, and the time budget when there is one.
+#[derive(Clone)]
+pub struct StoppingRule<P> {
+    patience: P,
+    budget: Option<TimeBudget>,
+}
+
+impl<P> StoppingRule<P> {
+    /// Stops by `patience`, or when the next epoch would overrun `budget`.
+    pub fn new(patience: P, budget: Option<TimeBudget>) -> Self {
+        Self { patience, budget }
+    }
+}
+
+impl<P: EarlyStoppingStrategy> EarlyStoppingStrategy for StoppingRule<P> {
+    fn should_stop(&mut self, epoch: usize, store: &EventStoreClient) -> bool {
+        if self.patience.should_stop(epoch, store) {
+            return true;
+        }
+        let Some(budget) = &mut self.budget else {
+            return false;
+        };
+        if budget.allows_another_epoch(Instant::now()) {
+            return false;
+        }
+        eprintln!(
+            "stopping after epoch {epoch}: another epoch would not end within the time budget \
+             ({})",
+            crate::progress_renderer::duration_text(budget.limit())
+        );
+        true
+    }
+}
+
+/// Parses a duration as people write it: `90s`, `12m`, `1h30m`, `2h`.
+pub fn parse_duration(text: &str) -> Result<Duration, String> {
+    let bad = || format!("`{text}` is not a duration such as 90s, 12m or 1h30m");
+    let mut seconds = 0u64;
+    let mut number = String::new();
+    for c in text.trim().chars() {
+        if c.is_ascii_digit() {
+            number.push(c);
+            continue;
+        }
+        let unit = match c {
+            'h' => 3600,
+            'm' => 60,
+            's' => 1,
+            _ => return Err(bad()),
+        };
+        let value: u64 = number.parse().map_err(|_| bad())?;
+        seconds += value * unit;
+        number.clear();
+    }
+    if !number.is_empty() || text.trim().is_empty() {
+        return Err(bad());
+    }
+    Ok(Duration::from_secs(seconds))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_budget_stops_before_an_epoch_that_would_overrun_it() {
+        let t0 = Instant::now();
+        let mut budget = TimeBudget::new(Duration::from_secs(35), t0);
+        let at = |s| t0 + Duration::from_secs(s);
+        assert!(budget.allows_another_epoch(at(10))); // 10 s + 10 s
+        assert!(budget.allows_another_epoch(at(20))); // 20 s + 10 s
+        assert!(!budget.allows_another_epoch(at(31))); // 31 s + 11 s > 35 s
+        let mut none = TimeBudget::new(Duration::ZERO, t0);
+        assert!(!none.allows_another_epoch(at(1)));
+    }
+
+    #[test]
+    fn durations_are_read_as_written() {
+        assert_eq!(parse_duration("90s"), Ok(Duration::from_secs(90)));
+        assert_eq!(parse_duration("12m"), Ok(Duration::from_secs(720)));
+        assert_eq!(parse_duration("1h30m"), Ok(Duration::from_secs(5400)));
+        assert_eq!(parse_duration("0s"), Ok(Duration::ZERO));
+        for bad in ["", "12", "m", "1.5h", "ten minutes"] {
+            assert!(parse_duration(bad).is_err(), "{bad}");
+        }
+    }
+}

@@ -1,0 +1,204 @@
+//! The network with its loss as burn-train trains it: one step's forward pass, the loss of
+//! eq. 7 over the heads the network has (`hnet_model::loss`), and the step's host values that
+//! every logged metric reads.
+
+use std::sync::{Arc, OnceLock};
+
+use burn::module::Module;
+use burn::tensor::{ExecutionError, Tensor};
+use burn::train::metric::{Adaptor, ItemLazy, LossInput};
+use burn::train::{InferenceStep, TrainOutput, TrainStep};
+use hnet_model::HNetLossConfig;
+use hnet_model::architectures::{ModelSpec, StereoInput, StereoModel};
+use hnet_model::inference::host_values;
+use hnet_model::metrics::{ForceAccumulator, SegmentationAccumulator};
+
+use super::metrics::StepInput;
+use crate::data::StereoBatch;
+
+/// The network with its loss, as burn-train sees it.
+#[derive(Module, Debug)]
+pub struct StereoTrainee {
+    /// The network.
+    pub net: StereoModel,
+    #[module(skip)]
+    loss: HNetLossConfig,
+    #[module(skip)]
+    input: InputKind,
+    #[module(skip)]
+    heads: (bool, bool),
+}
+
+/// [`StereoInput`] as a plain value the module derive can skip.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum InputKind {
+    Images,
+    Masks,
+}
+
+impl StereoTrainee {
+    /// Wraps `net` built from `spec` with the loss weights.
+    pub fn new(net: StereoModel, spec: &ModelSpec, loss: HNetLossConfig) -> Self {
+        Self {
+            net,
+            loss,
+            input: match spec.input() {
+                StereoInput::Images => InputKind::Images,
+                StereoInput::Masks => InputKind::Masks,
+            },
+            heads: spec.heads(),
+        }
+    }
+
+    fn run(&self, batch: StereoBatch) -> StereoStepOutput {
+        let masks = [batch.mask_a.clone(), batch.mask_b.clone()];
+        let views = match self.input {
+            InputKind::Images => [batch.view_a, batch.view_b],
+            InputKind::Masks => masks.clone(),
+        };
+        let out = self.net.forward(views, masks.clone());
+        let terms = self.loss.init().forward_heads(
+            out.mask_logits.clone(),
+            out.force.clone(),
+            masks.clone(),
+            batch.force.clone(),
+        );
+        StereoStepOutput {
+            total: terms.total,
+            bce_a: terms.bce_a,
+            bce_b: terms.bce_b,
+            mse: terms.mse,
+            predicted_masks: out
+                .mask_logits
+                .map(|logits| logits.map(|l| burn::tensor::activation::sigmoid(l.detach()))),
+            target_masks: masks,
+            predicted_force: out.force.map(|f| f.detach()),
+            target_force: batch.force,
+            summary: Arc::new(OnceLock::new()),
+        }
+    }
+}
+
+/// One step's results: the loss terms (kept on the graph for the backward pass) and what the
+/// metrics need.
+#[derive(Debug, Clone)]
+pub struct StereoStepOutput {
+    total: Tensor<1>,
+    bce_a: Tensor<1>,
+    bce_b: Tensor<1>,
+    mse: Tensor<1>,
+    predicted_masks: Option<[Tensor<4>; 2]>,
+    target_masks: [Tensor<4>; 2],
+    predicted_force: Option<Tensor<2>>,
+    target_force: Tensor<2>,
+    summary: Arc<OnceLock<Result<StepSummary, String>>>,
+}
+
+/// Host values of one step, computed once for all metrics with [`hnet_model::metrics`].
+#[derive(Debug, Clone, Copy)]
+pub struct StepSummary {
+    /// Pairs in the batch.
+    pub batch_size: usize,
+    /// View A's mean BCE.
+    pub bce_a: f64,
+    /// View B's mean BCE.
+    pub bce_b: f64,
+    /// Force MSE, N².
+    pub mse: f64,
+    /// Mean IoU over both views and both classes (networks that segment).
+    pub miou: Option<f64>,
+    /// Mean Dice over both views and both classes.
+    pub mdice: Option<f64>,
+    /// Force MAE over the three axes, N (networks that estimate the force).
+    pub force_mae: Option<f64>,
+}
+
+/// A tensor's values on the host.
+fn host<const D: usize>(t: &Tensor<D>) -> Result<Vec<f32>, String> {
+    host_values(t.clone()).map_err(|e| e.to_string())
+}
+
+fn scalar(t: &Tensor<1>) -> Result<f64, String> {
+    t.clone()
+        .try_into_scalar::<f64>()
+        .map_err(|e| format!("{e:?}"))
+}
+
+impl StereoStepOutput {
+    fn summary(&self) -> Result<StepSummary, String> {
+        self.summary
+            .get_or_init(|| {
+                let batch_size = self.target_force.dims()[0];
+                let (miou, mdice) = match &self.predicted_masks {
+                    Some(predicted) => {
+                        let mut acc = SegmentationAccumulator::new();
+                        for (p, t) in predicted.iter().zip(&self.target_masks) {
+                            acc.push(&host(p)?, &host(t)?).map_err(|e| e.to_string())?;
+                        }
+                        let m = acc.finish().ok_or("empty batch")?;
+                        (Some(m.miou), Some(m.mdice))
+                    }
+                    None => (None, None),
+                };
+                let force_mae = match &self.predicted_force {
+                    Some(p) => {
+                        let (p, t) = (host(p)?, host(&self.target_force)?);
+                        let mut acc = ForceAccumulator::new();
+                        for (p, t) in p.chunks_exact(3).zip(t.chunks_exact(3)) {
+                            acc.push([p[0], p[1], p[2]], [t[0], t[1], t[2]]);
+                        }
+                        acc.finish().map(|m| m.overall.mae)
+                    }
+                    None => None,
+                };
+                Ok(StepSummary {
+                    batch_size,
+                    bce_a: scalar(&self.bce_a)?,
+                    bce_b: scalar(&self.bce_b)?,
+                    mse: scalar(&self.mse)?,
+                    miou,
+                    mdice,
+                    force_mae,
+                })
+            })
+            .clone()
+    }
+}
+
+impl ItemLazy for StereoStepOutput {
+    fn sync(self) -> Result<Self, ExecutionError> {
+        Ok(self)
+    }
+}
+
+impl Adaptor<LossInput> for StereoStepOutput {
+    fn adapt(&self) -> LossInput {
+        LossInput::new(self.total.clone())
+    }
+}
+
+impl Adaptor<StepInput> for StereoStepOutput {
+    fn adapt(&self) -> StepInput {
+        StepInput(self.summary())
+    }
+}
+
+impl TrainStep for StereoTrainee {
+    type Input = StereoBatch;
+    type Output = StereoStepOutput;
+
+    fn step(&self, batch: StereoBatch) -> TrainOutput<StereoStepOutput> {
+        let output = self.run(batch);
+        let grads = output.total.backward();
+        TrainOutput::new(self, grads, output)
+    }
+}
+
+impl InferenceStep for StereoTrainee {
+    type Input = StereoBatch;
+    type Output = StereoStepOutput;
+
+    fn step(&self, batch: StereoBatch) -> StereoStepOutput {
+        self.run(batch)
+    }
+}

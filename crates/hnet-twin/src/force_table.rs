@@ -1,0 +1,180 @@
+//! Tables of tip forces in CSV, as people write them: a header naming a key column (a pair's id,
+//! or an image's name) and the columns `fx`, `fy`, `fz` in newtons, in any order and case, with
+//! other columns ignored. The one reader behind `hnet import`'s forces file and the page's force
+//! labels (the dataset's own `manifest.csv` has its own, stricter reader in [`crate::dataset`]).
+
+use std::fmt;
+
+/// The force columns, in the order of the force's components.
+pub const FORCE_COLUMNS: [&str; 3] = ["fx", "fy", "fz"];
+
+/// One row of a force table.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ForceRow {
+    /// Its line in the file (the header is line 1).
+    pub line: u64,
+    /// Its key: the pair's id or the image's name.
+    pub key: String,
+    /// Tip force `(Fx, Fy, Fz)`, newtons.
+    pub force_n: [f64; 3],
+}
+
+/// What is wrong with a force table: the line when one line is at fault, and the problem. The
+/// caller names the file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ForceTableError {
+    /// The line of the file (the header is line 1).
+    pub line: Option<u64>,
+    /// What is wrong.
+    pub problem: String,
+}
+
+impl fmt::Display for ForceTableError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.line {
+            Some(line) => write!(f, "line {line}: {}", self.problem),
+            None => f.write_str(&self.problem),
+        }
+    }
+}
+
+impl std::error::Error for ForceTableError {}
+
+/// Reads a force table whose key column is named by one of `keys` (the first found, compared
+/// without case). A header without the key or a force column fails the whole table; otherwise
+/// each row is read on its own, so that a caller may skip bad rows.
+pub fn read_force_table(
+    bytes: &[u8],
+    keys: &[&str],
+) -> Result<Vec<Result<ForceRow, ForceTableError>>, ForceTableError> {
+    let error = |line: Option<u64>, problem: String| ForceTableError { line, problem };
+    let mut reader = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .flexible(true)
+        .from_reader(bytes);
+    let headers = reader
+        .headers()
+        .map_err(|e| error(Some(1), format!("cannot read the header: {e}")))?
+        .clone();
+    let column = |name: &str| headers.iter().position(|h| h.eq_ignore_ascii_case(name));
+    let needed = || {
+        let key = match keys {
+            [one] => format!("`{one}`"),
+            _ => format!(
+                "one of {}",
+                keys.iter()
+                    .map(|k| format!("`{k}`"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        };
+        format!("the header needs {key} and `fx`, `fy`, `fz` (newtons)")
+    };
+    let key_column = keys
+        .iter()
+        .find_map(|k| column(k))
+        .ok_or_else(|| error(Some(1), format!("no key column: {}", needed())))?;
+    let key_name = headers.get(key_column).unwrap_or_default().to_string();
+    let mut force_columns = [0; 3];
+    for (axis, slot) in FORCE_COLUMNS.iter().zip(&mut force_columns) {
+        *slot = column(axis)
+            .ok_or_else(|| error(Some(1), format!("no `{axis}` column: {}", needed())))?;
+    }
+    let mut rows = Vec::new();
+    for record in reader.records() {
+        let row = record
+            .map_err(|e| {
+                error(
+                    e.position().map(|p| p.line()),
+                    format!("cannot be read: {e}"),
+                )
+            })
+            .and_then(|record| {
+                let line = record.position().map_or(0, |p| p.line());
+                let key = record.get(key_column).unwrap_or_default();
+                if key.is_empty() {
+                    return Err(error(Some(line), format!("the {key_name} is empty")));
+                }
+                let mut force_n = [0.0; 3];
+                for ((axis, &column), value) in
+                    FORCE_COLUMNS.iter().zip(&force_columns).zip(&mut force_n)
+                {
+                    let text = record.get(column).unwrap_or_default();
+                    *value = parse_newtons(text).ok_or_else(|| {
+                        error(
+                            Some(line),
+                            format!(
+                                "{axis} of `{key}` is `{text}`, not a finite number of newtons"
+                            ),
+                        )
+                    })?;
+                }
+                Ok(ForceRow {
+                    line,
+                    key: key.to_string(),
+                    force_n,
+                })
+            });
+        rows.push(row);
+    }
+    Ok(rows)
+}
+
+/// A force component as written in a table: a finite number (`nan` and `inf` are refused).
+pub fn parse_newtons(text: &str) -> Option<f64> {
+    text.trim().parse::<f64>().ok().filter(|v| v.is_finite())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rows_are_read_by_name_in_any_order_and_case() {
+        let rows = read_force_table(
+            b"FZ,note,Image,fx,fy\n0.3,x,a.png,0.1,-0.2\n",
+            &["id", "image"],
+        )
+        .unwrap();
+        assert_eq!(
+            rows,
+            vec![Ok(ForceRow {
+                line: 2,
+                key: "a.png".into(),
+                force_n: [0.1, -0.2, 0.3],
+            })]
+        );
+    }
+
+    #[test]
+    fn bad_rows_are_named_and_the_others_kept() {
+        let rows = read_force_table(
+            b"id,fx,fy,fz\np1,0,0,0\np2,0,NaN,0\n,0,0,0\np4,0,0\n",
+            &["id"],
+        )
+        .unwrap();
+        assert!(rows[0].is_ok());
+        assert_eq!(
+            rows[1].as_ref().unwrap_err().to_string(),
+            "line 3: fy of `p2` is `NaN`, not a finite number of newtons"
+        );
+        assert_eq!(
+            rows[2].as_ref().unwrap_err().to_string(),
+            "line 4: the id is empty"
+        );
+        assert_eq!(
+            rows[3].as_ref().unwrap_err().to_string(),
+            "line 5: fz of `p4` is ``, not a finite number of newtons"
+        );
+        let err = read_force_table(b"name,fx,fy,fz\n", &["id"]).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "line 1: no key column: the header needs `id` and `fx`, `fy`, `fz` (newtons)"
+        );
+        let err = read_force_table(b"image,fx,fz\n", &["image", "file"]).unwrap_err();
+        assert!(
+            err.problem
+                .starts_with("no `fy` column: the header needs one of `image`, `file`")
+        );
+    }
+}
