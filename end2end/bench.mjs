@@ -10,12 +10,12 @@ const server = await serveDist();
 const context = await launchBrowser();
 const results = [];
 try {
-  for (const choice of ["cpu", "auto"]) {
+  for (const choice of ["cpu", "webgpu"]) {
     const { page } = await openPage(context, server.url);
     await waitForModel(page);
     await page.selectOption("#backend-choice", choice);
     // The model reloads on the chosen device; wait until the model bar names it (a browser
-    // without a WebGPU adapter stays on the CPU: then "auto" is timed on the CPU).
+    // without a WebGPU adapter stays on the CPU: then "webgpu" is timed on the CPU).
     const wanted = choice === "cpu" ? "CPU" : "WebGPU";
     await page
       .waitForFunction((w) => document.querySelector("#backend")?.textContent.includes(w), wanted, {

@@ -1,15 +1,41 @@
-//! Where H-Net runs in the browser: WebGPU when the browser offers an adapter, the CPU (Burn's
-//! flex backend, compiled to WebAssembly with SIMD) otherwise or when the user asks for it.
+//! Where H-Net runs in the browser: WebGPU when the browser offers a hardware adapter, the CPU
+//! (Burn's flex backend, compiled to WebAssembly with SIMD) otherwise or when the user asks for
+//! it. WebGPU on a software adapter only when the user asks for WebGPU.
 
 use burn::tensor::Device;
+use js_sys::{Function, Promise, Reflect};
+use wasm_bindgen::{JsCast, JsValue};
+use wasm_bindgen_futures::JsFuture;
 
 /// What the user asked for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum BackendChoice {
-    /// WebGPU if the browser has an adapter, else the CPU.
+    /// WebGPU on a hardware adapter; the CPU where the browser has none or only a software one.
     Auto,
+    /// WebGPU on whatever adapter the browser offers, software ones included.
+    WebGpu,
     /// The CPU.
     Cpu,
+}
+
+impl BackendChoice {
+    /// The value of the choice in the page's `<select>`.
+    pub fn value(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::WebGpu => "webgpu",
+            Self::Cpu => "cpu",
+        }
+    }
+
+    /// The choice of a `<select>` value (`auto` for anything unknown).
+    pub fn from_value(value: &str) -> Self {
+        match value {
+            "webgpu" => Self::WebGpu,
+            "cpu" => Self::Cpu,
+            _ => Self::Auto,
+        }
+    }
 }
 
 /// The backend the page settled on.
@@ -42,14 +68,62 @@ impl Backend {
     }
 }
 
-/// Whether the browser exposes `navigator.gpu` at all.
-fn has_webgpu() -> bool {
-    web_sys::window()
-        .map(|w| {
-            js_sys::Reflect::has(&w.navigator(), &wasm_bindgen::JsValue::from_str("gpu"))
-                .unwrap_or(false)
-        })
-        .unwrap_or(false)
+/// The browser's WebGPU object, `navigator.gpu`, if it has one.
+fn navigator_gpu() -> Option<JsValue> {
+    let window = web_sys::window()?;
+    Reflect::get(&window.navigator(), &JsValue::from_str("gpu"))
+        .ok()
+        .filter(|gpu| gpu.is_object())
+}
+
+/// The browser's default WebGPU adapter as the page will get it: `None` when there is none,
+/// else `Some(Some(name))` for a software adapter (such as Chromium's SwiftShader) and
+/// `Some(None)` for a hardware one.
+async fn default_adapter(gpu: &JsValue) -> Option<Option<String>> {
+    let request: Function = Reflect::get(gpu, &JsValue::from_str("requestAdapter"))
+        .ok()?
+        .dyn_into()
+        .ok()?;
+    let promise: Promise = request.call0(gpu).ok()?.dyn_into().ok()?;
+    let adapter = JsFuture::from(promise).await.ok()?;
+    if !adapter.is_object() {
+        return None;
+    }
+    let get = |object: &JsValue, key: &str| Reflect::get(object, &JsValue::from_str(key)).ok();
+    let info = get(&adapter, "info").filter(JsValue::is_object);
+    let text = |key: &str| {
+        info.as_ref()
+            .and_then(|i| get(i, key))
+            .and_then(|v| v.as_string())
+            .unwrap_or_default()
+    };
+    let fallback = |object: &JsValue| {
+        get(object, "isFallbackAdapter")
+            .and_then(|v| v.as_bool())
+            .unwrap_or(false)
+    };
+    let names = ["vendor", "architecture", "device", "description"]
+        .map(text)
+        .join(" ")
+        .to_lowercase();
+    const SOFTWARE: [&str; 5] = [
+        "swiftshader",
+        "llvmpipe",
+        "lavapipe",
+        "software",
+        "basic render",
+    ];
+    let software = fallback(&adapter)
+        || info.as_ref().is_some_and(fallback)
+        || SOFTWARE.iter().any(|s| names.contains(s));
+    Some(software.then(|| {
+        let name = names.split_whitespace().collect::<Vec<_>>().join(" ");
+        if name.is_empty() {
+            "a software adapter".to_string()
+        } else {
+            format!("a software adapter ({name})")
+        }
+    }))
 }
 
 thread_local! {
@@ -58,14 +132,32 @@ thread_local! {
     static WEBGPU: std::cell::RefCell<Option<Device>> = const { std::cell::RefCell::new(None) };
 }
 
-/// Picks the device: WebGPU if asked for (`Auto`) and an adapter can be had, the CPU otherwise.
+/// Picks the device for `choice`. `Auto` takes WebGPU only on a hardware adapter: a software
+/// adapter (Chromium's SwiftShader, Mesa's llvmpipe) runs H-Net many times slower than the
+/// CPU path (docs/benchmarks.md), so the CPU is used and the reason says so.
 pub async fn select_device(choice: BackendChoice) -> (Device, Backend) {
     let cpu = |reason: String| (Device::flex(), Backend::Cpu { reason });
     if choice == BackendChoice::Cpu {
         return cpu("CPU chosen".into());
     }
-    if !has_webgpu() {
+    let Some(gpu) = navigator_gpu() else {
         return cpu("this browser has no WebGPU".into());
+    };
+    match default_adapter(&gpu).await {
+        None => {
+            return cpu(
+                "this browser's WebGPU offers no adapter (no supported GPU, or WebGPU is turned \
+                 off)"
+                    .into(),
+            );
+        }
+        Some(Some(software)) if choice == BackendChoice::Auto => {
+            return cpu(format!(
+                "WebGPU here is {software}, much slower than the CPU path; choose \
+                 \u{201c}WebGPU\u{201d} to use it anyway"
+            ));
+        }
+        Some(_) => {}
     }
     if let Some(device) = WEBGPU.with_borrow(|d| d.clone()) {
         return (device, Backend::WebGpu);
@@ -75,6 +167,6 @@ pub async fn select_device(choice: BackendChoice) -> (Device, Backend) {
             WEBGPU.set(Some(device.clone()));
             (device, Backend::WebGpu)
         }
-        Err(e) => cpu(format!("no WebGPU adapter: {e}")),
+        Err(e) => cpu(format!("WebGPU could not be set up ({e})")),
     }
 }

@@ -2,16 +2,13 @@
 //! (`docs/dataset-format.md`), built with the twin crate's [`DatasetArchive`].
 
 use hnet_twin::archive::{ArchiveError, DatasetArchive};
-use hnet_twin::dataset::{DatasetHeader, ImageRef, ManifestRow, assign_splits};
+use hnet_twin::dataset::{DatasetHeader, ImageRef, ManifestRow, Split};
 
 use crate::imaging::WORK_SIZE;
-use crate::workspace::{LabeledPair, PairSource};
+use crate::workspace::{LabeledPair, PairSource, export_splits};
 
 /// Name of the dataset folder inside the zip (and of the zip file, with `.zip`).
 pub const DATASET_NAME: &str = "hnet-studio-labels";
-
-/// Seed of the exported pairs' 80/10/10 split.
-pub const SPLIT_SEED: u64 = 0;
 
 /// A built dataset zip.
 #[derive(Debug, Clone)]
@@ -22,6 +19,24 @@ pub struct Export {
     pub exported: Vec<String>,
     /// Pairs left out, with why.
     pub skipped: Vec<(String, &'static str)>,
+    /// Splits that hold no exported pair.
+    pub empty_splits: Vec<Split>,
+}
+
+impl Export {
+    /// What the user should know about the export's splits, if anything: `hnet train` needs a
+    /// training and a validation pair, and `hnet eval` a test pair.
+    pub fn split_warning(&self) -> Option<String> {
+        if self.empty_splits.is_empty() {
+            return None;
+        }
+        let names: Vec<&str> = self.empty_splits.iter().map(|s| s.name()).collect();
+        Some(format!(
+            "no {} pair: `hnet train` needs train and val pairs and `hnet eval` test pairs; \
+             export at least 3 complete pairs",
+            names.join(" or ")
+        ))
+    }
 }
 
 /// Why nothing could be exported.
@@ -93,13 +108,15 @@ fn describe(pair: &LabeledPair) -> (Vec<(String, String)>, serde_json::Value) {
 }
 
 /// Builds the dataset zip of every complete pair (masks labeled and a force label); the others
-/// are listed in [`Export::skipped`]. Pairs keep their ids; the split is the seeded 80/10/10 of
-/// the dataset format.
+/// are listed in [`Export::skipped`]. Pairs keep their ids and their splits ([`export_splits`]:
+/// a pair's split never changes once given).
 pub fn dataset_zip(pairs: &[LabeledPair]) -> Result<Export, ExportError> {
     let mut skipped = Vec::new();
-    let complete: Vec<&LabeledPair> = pairs
+    let splits = export_splits(pairs);
+    let complete: Vec<(&LabeledPair, Split)> = pairs
         .iter()
-        .filter(|p| {
+        .zip(splits)
+        .filter(|(p, _)| {
             let why = if !p.masks_labeled {
                 Some("masks not labeled")
             } else if p.force_n.is_none() {
@@ -112,13 +129,13 @@ pub fn dataset_zip(pairs: &[LabeledPair]) -> Result<Export, ExportError> {
             }
             why.is_none()
         })
+        .map(|(p, split)| (p, split.unwrap_or(Split::Train)))
         .collect();
     if complete.is_empty() {
         return Err(ExportError::NothingComplete);
     }
-    let splits = assign_splits(complete.len(), SPLIT_SEED);
     let mut archive = DatasetArchive::new(DATASET_NAME);
-    for (pair, split) in complete.iter().zip(splits) {
+    for &(pair, split) in &complete {
         let (extra, record) = describe(pair);
         // The label's shortest decimal form (0.12, not 0.11999999731779099).
         let force = pair
@@ -153,8 +170,12 @@ pub fn dataset_zip(pairs: &[LabeledPair]) -> Result<Export, ExportError> {
     );
     Ok(Export {
         zip: archive.finish(&header)?,
-        exported: complete.iter().map(|p| p.id.clone()).collect(),
+        exported: complete.iter().map(|(p, _)| p.id.clone()).collect(),
         skipped,
+        empty_splits: [Split::Train, Split::Val, Split::Test]
+            .into_iter()
+            .filter(|s| complete.iter().all(|(_, split)| split != s))
+            .collect(),
     })
 }
 
@@ -181,7 +202,15 @@ mod tests {
 
         let export = dataset_zip(&ws.pairs).unwrap();
         assert_eq!(export.exported, vec!["pair-0001", "pair-0003"]);
-        assert_eq!(export.skipped, vec![(id, "no force label")]);
+        assert_eq!(export.skipped, vec![(id.clone(), "no force label")]);
+        // Two pairs: both train, and the export says what is missing.
+        assert_eq!(export.empty_splits, vec![Split::Val, Split::Test]);
+        assert!(
+            export
+                .split_warning()
+                .unwrap()
+                .starts_with("no val or test pair")
+        );
 
         let dir = std::env::temp_dir().join(format!("hnet-studio-export-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
@@ -205,6 +234,51 @@ mod tests {
             dataset_zip(&none).unwrap_err(),
             ExportError::NothingComplete
         );
+    }
+
+    #[test]
+    fn a_pairs_split_stays_as_pairs_are_added() {
+        let background = XrayBackground::phantom();
+        let mut ws = Workspace::default();
+        let mut seen: Vec<(String, Split)> = Vec::new();
+        for i in 0..12 {
+            let controls = TwinControls {
+                force_n: [0.02 * i as f64, 0.0, -0.1],
+                ..TwinControls::default()
+            };
+            ws.add(controls.render(ws.next_id(), &background).unwrap());
+            ws.assign_splits();
+            let export = dataset_zip(&ws.pairs).unwrap();
+            let manifest = manifest_of(&export.zip);
+            for (id, split) in &seen {
+                assert_eq!(manifest[id], *split, "{id} moved after {} pairs", i + 1);
+            }
+            seen = manifest.into_iter().collect();
+            assert_eq!(export.empty_splits.is_empty(), i >= 3, "{} pairs", i + 1);
+        }
+        // A pair keeps its split when its label is cleared and given again.
+        let before = ws.pairs[2].split;
+        ws.set_force("pair-0003", None);
+        assert!(ws.assign_splits().is_empty());
+        ws.set_force("pair-0003", Some([0.1, 0.0, 0.0]));
+        assert_eq!(ws.pairs[2].split, before);
+    }
+
+    fn manifest_of(zip: &[u8]) -> std::collections::HashMap<String, Split> {
+        let mut zip = zip_reader(zip);
+        let mut text = String::new();
+        std::io::Read::read_to_string(
+            &mut zip
+                .by_name(&format!("{DATASET_NAME}/manifest.csv"))
+                .unwrap(),
+            &mut text,
+        )
+        .unwrap();
+        hnet_twin::dataset::parse_manifest(text.as_bytes(), std::path::Path::new("m.csv"))
+            .unwrap()
+            .into_iter()
+            .map(|r| (r.id, r.split))
+            .collect()
     }
 
     fn zip_reader(bytes: &[u8]) -> zip::ZipArchive<std::io::Cursor<&[u8]>> {

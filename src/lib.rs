@@ -7,14 +7,18 @@
 //! - [`workspace`]: the labeled pairs, brush strokes with undo and redo, force labels;
 //! - [`imaging`]: decoding uploads, the working resolution, overlays and force arrows;
 //! - [`twin_live`]: the digital twin's sliders and the synthetic X-ray background composer;
-//! - [`export`]: the labeled pairs as a dataset zip.
+//! - [`export`]: the labeled pairs as a dataset zip;
+//! - [`force_reading`]: what a force estimate can be said to show against the ablation band;
+//! - [`keymap`]: every keyboard shortcut, for the handlers, the help list and the tooltips.
 //!
-//! The rest exists only on wasm32: the components (`app`, `components`), the network on the
-//! chosen device (`engine`, `compute`), the browser's storage (`storage`) and files (`browser`).
-//! `src/main.rs` mounts [`App`].
+//! The rest exists only on wasm32: the page's state (`studio`), its components (`app`,
+//! `components`), the network on the chosen device (`engine`, `compute`), the browser's storage
+//! (`storage`) and files (`browser`). `src/main.rs` mounts [`App`].
 
 pub mod export;
+pub mod force_reading;
 pub mod imaging;
+pub mod keymap;
 pub mod twin_live;
 pub mod workspace;
 
@@ -32,6 +36,8 @@ pub mod compute;
 pub mod engine;
 #[cfg(target_arch = "wasm32")]
 pub mod storage;
+#[cfg(target_arch = "wasm32")]
+pub mod studio;
 
 #[cfg(target_arch = "wasm32")]
 pub use app::App;

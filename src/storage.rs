@@ -10,7 +10,7 @@ use wasm_bindgen::prelude::*;
 use wasm_bindgen_futures::JsFuture;
 use web_sys::{IdbDatabase, IdbRequest, IdbTransactionMode};
 
-use hnet_twin::dataset::{ImageRef, encode_png};
+use hnet_twin::dataset::{ImageRef, Split, encode_png};
 
 use crate::imaging::WORK_SIZE;
 use crate::workspace::{LabeledPair, PairSource};
@@ -94,6 +94,9 @@ struct Metadata {
     source: PairSource,
     masks_labeled: bool,
     force_n: Option<[f32; 3]>,
+    /// Absent in records saved before splits were kept (they get one at the next export).
+    #[serde(default)]
+    split: Option<Split>,
 }
 
 /// Saves (or replaces) a pair.
@@ -105,6 +108,7 @@ pub async fn save_pair(pair: &LabeledPair) -> Result<(), String> {
         source: pair.source.clone(),
         masks_labeled: pair.masks_labeled,
         force_n: pair.force_n,
+        split: pair.split,
     })
     .map_err(|e| e.to_string())?;
     let set = |key: &str, value: &JsValue| Reflect::set(&record, &key.into(), value);
@@ -183,6 +187,7 @@ pub async fn load_pairs() -> Result<(Vec<LabeledPair>, Vec<String>), String> {
                 mask_b: decode(&value, "mask_b", 1)?,
                 masks_labeled: metadata.masks_labeled,
                 force_n: metadata.force_n,
+                split: metadata.split,
             })
         })();
         match parsed {

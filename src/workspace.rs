@@ -5,6 +5,8 @@
 //! `[x, x+1) x [y, y+1)` in image coordinates (origin at the top-left corner, `y` down).
 
 use hnet_twin::carm::Biplane;
+use hnet_twin::dataset::{Split, implausible_tip_force, next_split};
+use hnet_twin::force_table::{ForceTableError, read_force_table};
 use serde::{Deserialize, Serialize};
 
 use crate::imaging::WORK_SIZE;
@@ -52,6 +54,10 @@ pub struct LabeledPair {
     pub masks_labeled: bool,
     /// The force label `(Fx, Fy, Fz)` in newtons, once entered, imported or accepted.
     pub force_n: Option<[f32; 3]>,
+    /// Its split in exported datasets, given at its first export and kept from then on (see
+    /// [`export_splits`]).
+    #[serde(default)]
+    pub split: Option<Split>,
 }
 
 /// The two views.
@@ -89,6 +95,7 @@ impl LabeledPair {
             mask_b: vec![0; pixels],
             masks_labeled: false,
             force_n: None,
+            split: None,
         }
     }
 
@@ -204,6 +211,16 @@ struct Edit {
     labeled_before: bool,
 }
 
+/// A pair taken out of the workspace, kept so that its deletion can be undone.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RemovedPair {
+    /// Its position in the pair list.
+    pub index: usize,
+    /// The pair, with its masks and force label.
+    pub pair: LabeledPair,
+    undo: Vec<Edit>,
+}
+
 /// The workspace: pairs, the one on screen, and the stroke history.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Workspace {
@@ -279,17 +296,34 @@ impl Workspace {
         }
     }
 
-    /// Removes the pair on screen and its history; returns its id.
-    pub fn remove_current(&mut self) -> Option<String> {
-        let i = self.current?;
-        let id = self.pairs.remove(i).id;
-        self.undo.retain(|e| e.pair != id);
-        self.redo.retain(|e| e.pair != id);
+    /// Removes the pair on screen; returns it with where it was and its undo history, so that
+    /// [`Workspace::restore`] can put it back as it was.
+    pub fn remove_current(&mut self) -> Option<RemovedPair> {
+        let index = self.current?;
+        let pair = self.pairs.remove(index);
+        let (undo, kept): (Vec<Edit>, Vec<Edit>) =
+            self.undo.drain(..).partition(|e| e.pair == pair.id);
+        self.undo = kept;
+        self.redo.retain(|e| e.pair != pair.id);
         self.current = if self.pairs.is_empty() {
             None
         } else {
-            Some(i.min(self.pairs.len() - 1))
+            Some(index.min(self.pairs.len() - 1))
         };
+        Some(RemovedPair { index, pair, undo })
+    }
+
+    /// Puts a removed pair back at its place, with its mask history, and shows it. Returns its
+    /// id, or `None` when a pair with that id was added since (nothing is replaced).
+    pub fn restore(&mut self, removed: RemovedPair) -> Option<String> {
+        if self.pair(&removed.pair.id).is_some() {
+            return None;
+        }
+        let index = removed.index.min(self.pairs.len());
+        let id = removed.pair.id.clone();
+        self.pairs.insert(index, removed.pair);
+        self.undo.extend(removed.undo);
+        self.current = Some(index);
         Some(id)
     }
 
@@ -415,6 +449,20 @@ impl Workspace {
         (!self.undo.is_empty(), !self.redo.is_empty())
     }
 
+    /// Gives each complete pair that has no split yet its split (see [`export_splits`]) and
+    /// returns their ids, to be saved.
+    pub fn assign_splits(&mut self) -> Vec<String> {
+        let splits = export_splits(&self.pairs);
+        let mut assigned = Vec::new();
+        for (pair, split) in self.pairs.iter_mut().zip(splits) {
+            if pair.split.is_none() && split.is_some() {
+                pair.split = split;
+                assigned.push(pair.id.clone());
+            }
+        }
+        assigned
+    }
+
     /// Applies force labels read from a CSV file (see [`parse_force_labels`]) to the pairs with
     /// those ids. Returns how many were applied and the ids that match no pair.
     pub fn apply_force_labels(&mut self, labels: &[(String, [f32; 3])]) -> (usize, Vec<String>) {
@@ -429,6 +477,28 @@ impl Workspace {
         }
         (applied, unknown)
     }
+}
+
+/// The split of each pair in an export: its own once it has one; complete pairs without one get
+/// theirs in id order by [`next_split`], counting every pair that holds a split, so that pairs
+/// keep their split as others are added, and a set of three or more complete pairs has a
+/// validation and a test pair. Incomplete pairs without a split get none.
+pub fn export_splits(pairs: &[LabeledPair]) -> Vec<Option<Split>> {
+    let mut splits: Vec<Option<Split>> = pairs.iter().map(|p| p.split).collect();
+    let mut counts = [0usize; 3];
+    for split in splits.iter().flatten() {
+        counts[*split as usize] += 1;
+    }
+    let mut pending: Vec<usize> = (0..pairs.len())
+        .filter(|&i| pairs[i].split.is_none() && pairs[i].is_complete())
+        .collect();
+    pending.sort_by(|&a, &b| pairs[a].id.cmp(&pairs[b].id));
+    for i in pending {
+        let split = next_split(counts);
+        counts[split as usize] += 1;
+        splits[i] = Some(split);
+    }
+    splits
 }
 
 /// Why a force-label file cannot be used: the file, the line (1-based, when it is one line's
@@ -452,73 +522,57 @@ impl std::fmt::Display for ForceLabelError {
     }
 }
 
+/// Reads one typed force component in newtons (`axis` names it in the message): a finite
+/// number, with a point or a comma as the decimal separator.
+pub fn parse_newtons(axis: &str, text: &str) -> Result<f32, String> {
+    let trimmed = text.trim();
+    if trimmed.is_empty() {
+        return Err(format!("{axis} is empty: enter a number of newtons"));
+    }
+    trimmed
+        .replace(',', ".")
+        .parse::<f32>()
+        .ok()
+        .filter(|v| v.is_finite())
+        .ok_or_else(|| format!("{axis} is `{trimmed}`, not a number of newtons"))
+}
+
+/// Why a force label is implausible (see [`implausible_tip_force`]), or `None`.
+pub fn implausible_label(force_n: [f32; 3]) -> Option<String> {
+    implausible_tip_force(force_n.map(f64::from))
+}
+
 /// Reads force labels from a CSV file with a header naming the columns `id`, `fx`, `fy` and `fz`
 /// (newtons; other columns are ignored, so a dataset's `manifest.csv` works too). Every value must
-/// be a finite number; the first bad line is reported and nothing is applied.
+/// be a finite number of newtons and the label plausible (see [`implausible_label`]); the first
+/// bad line is reported and nothing is applied.
 pub fn parse_force_labels(
     file: &str,
     bytes: &[u8],
 ) -> Result<Vec<(String, [f32; 3])>, ForceLabelError> {
-    let error = |line: Option<u64>, problem: String| ForceLabelError {
+    let error = |e: ForceTableError| ForceLabelError {
         file: file.to_string(),
-        line,
-        problem,
+        line: e.line,
+        problem: e.problem,
     };
-    let mut reader = csv::ReaderBuilder::new()
-        .trim(csv::Trim::All)
-        .flexible(true)
-        .from_reader(bytes);
-    let headers = reader
-        .headers()
-        .map_err(|e| error(Some(1), format!("cannot read the header: {e}")))?
-        .clone();
-    let column = |name: &str| {
-        headers
-            .iter()
-            .position(|h| h.eq_ignore_ascii_case(name))
-            .ok_or_else(|| {
-                error(
-                    Some(1),
-                    format!("no `{name}` column (the header needs id, fx, fy, fz)"),
-                )
-            })
-    };
-    let columns = [column("id")?, column("fx")?, column("fy")?, column("fz")?];
     let mut labels = Vec::new();
-    for record in reader.records() {
-        let record = record.map_err(|e| {
-            error(
-                e.position().map(|p| p.line()),
-                format!("cannot be read: {e}"),
-            )
-        })?;
-        let line = record.position().map(|p| p.line());
-        let field = |i: usize| record.get(columns[i]).unwrap_or("");
-        let id = field(0);
-        if id.is_empty() {
-            return Err(error(line, "the id is empty".into()));
+    for row in read_force_table(bytes, &["id"]).map_err(error)? {
+        let row = row.map_err(error)?;
+        let force = row.force_n.map(|f| f as f32);
+        if let Some(why) = implausible_label(force) {
+            return Err(error(ForceTableError {
+                line: Some(row.line),
+                problem: format!("the force of `{}` is refused: {why}", row.key),
+            }));
         }
-        let mut force = [0.0f32; 3];
-        for (axis, value) in force.iter_mut().enumerate() {
-            let text = field(axis + 1);
-            *value = text
-                .parse::<f32>()
-                .ok()
-                .filter(|v| v.is_finite())
-                .ok_or_else(|| {
-                    error(
-                        line,
-                        format!(
-                            "f{} of `{id}` is `{text}`, not a finite number of newtons",
-                            ["x", "y", "z"][axis]
-                        ),
-                    )
-                })?;
-        }
-        labels.push((id.to_string(), force));
+        labels.push((row.key, force));
     }
     if labels.is_empty() {
-        return Err(error(None, "holds no force labels".into()));
+        return Err(ForceLabelError {
+            file: file.to_string(),
+            line: None,
+            problem: "holds no force labels".into(),
+        });
     }
     Ok(labels)
 }
@@ -634,10 +688,59 @@ mod tests {
         ws.add(pair(&ws));
         assert_eq!(ws.pairs[1].id, "pair-0002");
         ws.select(0);
-        assert_eq!(ws.remove_current().as_deref(), Some("pair-0001"));
+        assert_eq!(ws.remove_current().unwrap().pair.id, "pair-0001");
         assert_eq!(ws.next_id(), "pair-0003");
         ws.step(1);
         assert_eq!(ws.current, Some(0));
+    }
+
+    #[test]
+    fn a_deleted_pair_comes_back_where_it_was_with_its_history() {
+        let mut ws = Workspace::default();
+        for _ in 0..3 {
+            ws.add(pair(&ws));
+        }
+        ws.select(1);
+        stroke(
+            &mut ws,
+            View::A,
+            [10.0, 10.0],
+            [60.0, 10.0],
+            3.0,
+            Tool::Brush,
+        );
+        ws.set_force("pair-0002", Some([0.1, 0.2, -0.1]));
+        let before = ws.pairs.clone();
+        let removed = ws.remove_current().unwrap();
+        assert_eq!(ws.pairs.len(), 2);
+        assert_eq!(ws.can_undo_redo(), (false, false));
+        assert_eq!(ws.restore(removed.clone()).as_deref(), Some("pair-0002"));
+        assert_eq!(ws.pairs, before);
+        assert_eq!(ws.current, Some(1));
+        // Its stroke can still be undone.
+        assert_eq!(ws.undo().as_deref(), Some("pair-0002"));
+        assert_eq!(ws.pairs[1].labeled_pixels(View::A), 0);
+        // A restore never replaces a pair that holds the id.
+        assert_eq!(ws.restore(removed), None);
+    }
+
+    #[test]
+    fn typed_newtons_accept_ordinary_typing_and_name_the_problem() {
+        assert_eq!(parse_newtons("Fx", "0.12"), Ok(0.12));
+        assert_eq!(parse_newtons("Fx", " -0.05 "), Ok(-0.05));
+        assert_eq!(parse_newtons("Fx", "0,2"), Ok(0.2));
+        assert_eq!(parse_newtons("Fx", ".5"), Ok(0.5));
+        assert_eq!(
+            parse_newtons("Fy", ""),
+            Err("Fy is empty: enter a number of newtons".into())
+        );
+        assert_eq!(
+            parse_newtons("Fz", "abc"),
+            Err("Fz is `abc`, not a number of newtons".into())
+        );
+        assert!(parse_newtons("Fz", "inf").is_err());
+        assert!(implausible_label([5.0, 0.0, 0.0]).is_some());
+        assert!(implausible_label([0.12, -0.05, 0.2]).is_none());
     }
 
     #[test]
@@ -646,10 +749,10 @@ mod tests {
             parse_force_labels("f.csv", b"id,fx,fy,fz\npair-0001, 0.1,-0.2,0.05\n").unwrap();
         assert_eq!(labels, vec![("pair-0001".to_string(), [0.1, -0.2, 0.05])]);
         // A dataset's manifest (extra columns, other order) works too.
-        let manifest = b"id,split,fx,fy,fz,source\np1,train,1,2,3,x\n";
+        let manifest = b"id,split,fx,fy,fz,source\np1,train,0.1,0.2,0.3,x\n";
         assert_eq!(
             parse_force_labels("m.csv", manifest).unwrap()[0].1,
-            [1.0, 2.0, 3.0]
+            [0.1, 0.2, 0.3]
         );
 
         let err = parse_force_labels("f.csv", b"id,fx,fy,fz\np1,0,0,0\np2,0,NaN,0\n").unwrap_err();
@@ -659,6 +762,15 @@ mod tests {
         let err = parse_force_labels("g.csv", b"name,fx,fy,fz\n").unwrap_err();
         assert!(err.problem.contains("`id`"), "{err}");
         assert!(parse_force_labels("e.csv", b"id,fx,fy,fz\n").is_err());
+        // A value far outside a catheter's range is refused with its line.
+        let err =
+            parse_force_labels("big.csv", b"id,fx,fy,fz\np1,0.1,0,0\np2,1e6,0,0\n").unwrap_err();
+        assert_eq!(err.line, Some(3));
+        assert!(
+            err.problem
+                .starts_with("the force of `p2` is refused: |F| = 1000000.000 N"),
+            "{err}"
+        );
 
         let mut ws = Workspace::default();
         ws.add(pair(&ws));

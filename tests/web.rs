@@ -50,12 +50,12 @@ async fn asking_for_the_cpu_gives_the_cpu() {
     assert_eq!(backend.reason(), Some("CPU chosen"));
 }
 
-/// With `--enable-unsafe-webgpu` headless Chromium offers a software WebGPU adapter: the page
-/// picks it, and H-Net computes there what it computes on the CPU. Without an adapter the page
-/// falls back to the CPU and says why.
+/// With `--enable-unsafe-webgpu` headless Chromium offers a software WebGPU adapter
+/// (SwiftShader): asked for WebGPU, the page uses it, and H-Net computes there what it computes
+/// on the CPU. Without an adapter the page falls back to the CPU and says why.
 #[wasm_bindgen_test]
 async fn webgpu_when_available_computes_what_the_cpu_computes() {
-    let (device, backend) = select_device(BackendChoice::Auto).await;
+    let (device, backend) = select_device(BackendChoice::WebGpu).await;
     let cpu = Device::flex();
     let (model, config) = small_hnet(&cpu);
     let bytes = model.to_weights_bytes(&config, &BTreeMap::new()).unwrap();
@@ -79,13 +79,29 @@ async fn webgpu_when_available_computes_what_the_cpu_computes() {
     }
 }
 
+/// "Fastest available" does not take a software WebGPU adapter (SwiftShader here): the CPU path
+/// is many times faster, and the reason is said in plain words.
+#[wasm_bindgen_test]
+async fn the_fastest_choice_passes_over_a_software_adapter() {
+    let (_, backend) = select_device(BackendChoice::Auto).await;
+    if let Backend::Cpu { reason } = &backend {
+        assert!(!reason.contains("WgpuDevice"), "{reason}");
+        assert!(
+            reason.contains("software adapter")
+                || reason.contains("no adapter")
+                || reason.contains("no WebGPU"),
+            "{reason}"
+        );
+    }
+}
+
 /// Switching to the CPU and back (or loading other weights) asks for WebGPU again: the page
 /// gets the device it set up the first time, not a failed second registration.
 #[wasm_bindgen_test]
 async fn asking_for_webgpu_again_gives_webgpu_again() {
-    let (_, first) = select_device(BackendChoice::Auto).await;
+    let (_, first) = select_device(BackendChoice::WebGpu).await;
     let _ = select_device(BackendChoice::Cpu).await;
-    let (_, again) = select_device(BackendChoice::Auto).await;
+    let (_, again) = select_device(BackendChoice::WebGpu).await;
     assert_eq!(first, again);
 }
 

@@ -6,9 +6,10 @@
 use leptos::prelude::*;
 use wasm_bindgen::{Clamped, JsCast};
 
-use crate::app::Studio;
 use crate::browser::{files, read_file};
 use crate::imaging::decode_radiograph;
+use crate::keymap::{self, Command, Scope};
+use crate::studio::Studio;
 use crate::twin_live::{XrayBackground, XrayStyle};
 
 /// Side of the radiograph canvas, canvas pixels.
@@ -148,9 +149,11 @@ pub fn Composer() -> impl IntoView {
         let (offset, size) = background.with_untracked(placement);
         Some([(x - offset[0]) / size[0], (y - offset[1]) / size[1]])
     };
+    // A new background makes a new twin pair: render it and run H-Net on it.
     let rerender = move || {
         if studio.twin.with_untracked(|t| t.modality.is_xray()) {
             studio.render_twin();
+            studio.run_model();
         }
     };
     let on_down = move |ev: web_sys::PointerEvent| {
@@ -182,10 +185,45 @@ pub fn Composer() -> impl IntoView {
         if dragging.get_untracked().is_some() {
             dragging.set(None);
             rerender();
-            studio.run_model();
         }
     };
 
+    // The keyboard on the focused radiograph: arrows move the region (Shift: five times
+    // further), + and - resize it; the pair is made again when the key is released.
+    let region_command = |ev: &web_sys::KeyboardEvent| {
+        let control = ev.ctrl_key() || ev.meta_key();
+        keymap::command(Scope::Region, &ev.key(), control, ev.shift_key())
+    };
+    let on_key = move |ev: web_sys::KeyboardEvent| {
+        let Some(command) = region_command(&ev) else {
+            return;
+        };
+        let step = if ev.shift_key() { 0.05 } else { 0.01 };
+        let (dx, dy, grow) = match command {
+            Command::Left => (-step, 0.0, 0.0),
+            Command::Right => (step, 0.0, 0.0),
+            Command::Up => (0.0, -step, 0.0),
+            Command::Down => (0.0, step, 0.0),
+            Command::Grow => (0.0, 0.0, 0.02),
+            Command::Shrink => (0.0, 0.0, -0.02),
+            _ => return,
+        };
+        ev.prevent_default();
+        background.update(|bg| {
+            if grow != 0.0 {
+                let side = (bg.region_side() + grow).clamp(0.1, 0.8);
+                bg.resize_region(side);
+            } else {
+                let [x0, y0, x1, y1] = bg.region.0;
+                bg.move_region_to([(x0 + x1) / 2.0 + dx, (y0 + y1) / 2.0 + dy]);
+            }
+        });
+    };
+    let on_key_up = move |ev: web_sys::KeyboardEvent| {
+        if region_command(&ev).is_some() {
+            rerender();
+        }
+    };
     let on_file = move |ev: leptos::ev::Event| {
         let input: web_sys::HtmlInputElement = event_target(&ev);
         let Some(file) = files(input.files()).into_iter().next() else {
@@ -241,10 +279,14 @@ pub fn Composer() -> impl IntoView {
                     <input id="background-file" type="file" accept="image/png,image/jpeg" on:change=on_file/>
                 </label>
             </div>
-            <p class="source-name" id="background-source">{move || background.with(|bg| bg.source.name.clone())}</p>
+            <p class="source-name" id="background-source">{move || background.with(|bg| bg.source.description())}</p>
             <canvas id="background-source-canvas" class="source" width=SOURCE_SIDE height=SOURCE_SIDE
                 node_ref=source_canvas on:pointerdown=on_down on:pointermove=on_move
-                on:pointerup=on_up on:pointercancel=on_up></canvas>
+                on:pointerup=on_up on:pointercancel=on_up on:keydown=on_key on:keyup=on_key_up
+                tabindex="0" role="img"
+                aria-label="The radiograph and the region cut into patches: drag the region, or \
+                    focus here and move it with the arrow keys (Shift: further), resize it with \
+                    + and -"></canvas>
             <label class="slider">
                 <span>"Region size"</span>
                 <input id="background-region-size" type="range" min="0.1" max="0.8" step="0.01"
@@ -254,7 +296,7 @@ pub fn Composer() -> impl IntoView {
                             background.update(|bg| bg.resize_region(side));
                         }
                     }
-                    on:change=move |_| { rerender(); studio.run_model(); }/>
+                    on:change=move |_| rerender()/>
             </label>
             <fieldset class="style">
                 <legend>"Style"</legend>
@@ -275,7 +317,6 @@ pub fn Composer() -> impl IntoView {
                             if let Ok(seed) = event_target_value(&ev).trim().parse::<u64>() {
                                 background.update(|bg| bg.seed = seed);
                                 rerender();
-                                studio.run_model();
                             } else {
                                 studio.error("the seed is a whole number ≥ 0");
                             }
@@ -284,7 +325,6 @@ pub fn Composer() -> impl IntoView {
                 <button id="background-shuffle" class="primary" on:click=move |_| {
                     background.update(|bg| bg.seed = bg.seed.wrapping_add(1));
                     rerender();
-                    studio.run_model();
                 }>"Shuffle"</button>
             </div>
             <div class="previews">

@@ -4,29 +4,17 @@
 
 use leptos::prelude::*;
 
-use crate::app::{ModelState, Studio};
 use crate::browser::{files, read_file};
 use crate::bundled::BUNDLED_FORCE_CAVEAT;
 use crate::engine::WeightsOrigin;
+use crate::force_reading::{ABLATION_BAND_N, BandPosition, TrainingDomain, Verdict};
 use crate::imaging::magnitude;
-use crate::workspace::parse_force_labels;
+use crate::studio::{ModelState, Studio};
+use crate::workspace::{implausible_label, parse_force_labels, parse_newtons};
 
-/// Contact forces of ablation within this band (newtons) are considered effective and safe.
-pub const ABLATION_BAND_N: [f32; 2] = [0.1, 0.3];
 /// Full scale of the magnitude gauge, newtons.
 const GAUGE_MAX_N: f32 = 0.5;
 const AXES: [&str; 3] = ["Fx", "Fy", "Fz"];
-
-/// Where a magnitude stands against the ablation band.
-pub fn band_verdict(magnitude_n: f32) -> &'static str {
-    if magnitude_n < ABLATION_BAND_N[0] {
-        "below the 0.1–0.3 N ablation band"
-    } else if magnitude_n <= ABLATION_BAND_N[1] {
-        "within the 0.1–0.3 N ablation band"
-    } else {
-        "above the 0.1–0.3 N ablation band"
-    }
-}
 
 /// The force panel.
 #[component]
@@ -38,42 +26,52 @@ pub fn ForcePanel() -> impl IntoView {
     };
     let truth = move || studio.with_shown(|p| p.and_then(|p| p.true_force()));
     let label = move || studio.with_shown(|p| p.and_then(|p| p.force_n));
-    // The label being typed, per axis.
+    // The label being typed, per axis, exactly as typed. The fields show the pair's label when
+    // another pair is shown or its label changes, and are never rewritten while typing (a
+    // rewrite moves the caret: typing `0.12` used to leave `120`).
     let typed = RwSignal::new([String::new(), String::new(), String::new()]);
+    let shown_label = Memo::new(move |_| (studio.shown_id(), label()));
+    let field_text = RwSignal::new([String::new(), String::new(), String::new()]);
+    // A typed label far outside a catheter's range, waiting for the user's confirmation.
+    let implausible = RwSignal::new(None::<([f32; 3], String)>);
     Effect::new(move |_| {
-        let values = label().map(|f| f.map(|v| format!("{v:.3}")));
-        typed.set(values.unwrap_or_default());
+        let values = shown_label.get().1.map(|f| f.map(|v| format!("{v:.3}")));
+        let values = values.unwrap_or_default();
+        typed.set(values.clone());
+        field_text.set(values);
+        implausible.set(None);
     });
 
     let set_label = move |force: Option<[f32; 3]>| {
-        if studio.showing_draft() {
-            studio.keep_draft();
-        }
-        let Some(id) = studio
-            .workspace
-            .with_untracked(|ws| ws.current().map(|p| p.id.clone()))
-        else {
+        let Some(id) = studio.labeled_pair_id() else {
             return;
         };
         studio.edit(|ws| ws.set_force(&id, force).then_some(id.clone()));
     };
-    let save_typed = move |_| {
+    let save = move |force: [f32; 3]| {
+        implausible.set(None);
+        set_label(Some(force));
+        studio.info(format!(
+            "force label saved: ({:+.3}, {:+.3}, {:+.3}) N",
+            force[0], force[1], force[2]
+        ));
+    };
+    let save_typed = move || {
         let values = typed.get_untracked();
         let mut force = [0.0f32; 3];
         for (axis, text) in values.iter().enumerate() {
-            match text.trim().parse::<f32>() {
-                Ok(v) if v.is_finite() => force[axis] = v,
-                _ => {
-                    studio.error(format!(
-                        "{} is `{text}`: enter a number of newtons",
-                        AXES[axis]
-                    ));
+            match parse_newtons(AXES[axis], text) {
+                Ok(v) => force[axis] = v,
+                Err(e) => {
+                    studio.error(e);
                     return;
                 }
             }
         }
-        set_label(Some(force));
-        studio.info("force label saved");
+        match implausible_label(force) {
+            Some(why) => implausible.set(Some((force, why))),
+            None => save(force),
+        }
     };
     let on_import = move |ev: leptos::ev::Event| {
         let input: web_sys::HtmlInputElement = event_target(&ev);
@@ -111,6 +109,18 @@ pub fn ForcePanel() -> impl IntoView {
         });
     };
 
+    // The verdict says no more than the weights' accuracy and training data support.
+    let verdict_text = move |estimate: [f32; 3]| {
+        let domain = studio.model.with(|m| match m {
+            ModelState::Ready(e) if e.origin == WeightsOrigin::Bundled => {
+                Some(TrainingDomain::bundled())
+            }
+            _ => None,
+        });
+        studio.with_shown(|pair| {
+            pair.map(|pair| Verdict::of(estimate, domain.as_ref(), pair).text(estimate))
+        })
+    };
     let row = move |name: &'static str, values: Option<[f32; 3]>, class: &'static str| {
         view! {
             <tr class=class>
@@ -148,28 +158,57 @@ pub fn ForcePanel() -> impl IntoView {
                 let pct = |v: f32| format!("{:.1}%", (v / GAUGE_MAX_N).clamp(0.0, 1.0) * 100.0);
                 view! {
                     <div class="gauge" id="force-gauge" role="img"
-                        aria-label=format!("{m:.3} N, {}", band_verdict(m))>
+                        aria-label=format!("estimated {m:.3} N on a 0 to {GAUGE_MAX_N} N scale")>
                         <div class="band" style:left=pct(ABLATION_BAND_N[0])
                             style:width=pct(ABLATION_BAND_N[1] - ABLATION_BAND_N[0])></div>
                         <div class="marker" style:left=pct(m)></div>
                         {truth().map(|t| view! { <div class="marker truth" style:left=pct(magnitude(t))></div> })}
                     </div>
-                    <p class="verdict" id="force-verdict">{format!("|F| = {m:.3} N: {}", band_verdict(m))}</p>
+                    <p class="verdict" id="force-verdict">{verdict_text(e)}</p>
+                    {truth().map(|t| {
+                        let m = magnitude(t);
+                        view! {
+                            <p class="verdict truth" id="force-truth-verdict">
+                                {format!("True |F| = {m:.3} N: {}", BandPosition::of(m).phrase())}
+                            </p>
+                        }
+                    })}
                 }
             })}
             <fieldset class="label-force">
                 <legend>"Force label of this pair"</legend>
-                {(0..3).map(|i| view! {
-                    <label>{AXES[i]}
-                        <input id=format!("label-f{}", ["x", "y", "z"][i]) type="number" step="0.001"
-                            prop:value=move || typed.with(|t| t[i].clone())
-                            on:input=move |ev| typed.update(|t| t[i] = event_target_value(&ev))/>
-                        " N"
-                    </label>
-                }).collect_view()}
+                <form class="typed-force" on:submit=move |ev: leptos::ev::SubmitEvent| {
+                    ev.prevent_default();
+                    save_typed();
+                }>
+                    {(0..3).map(|i| view! {
+                        <label>{AXES[i]}
+                            // Text, not type=number: a number field reports "" for partial input
+                            // such as `-` or `0.`, which then rewrote what was typed.
+                            <input id=format!("label-f{}", ["x", "y", "z"][i]) type="text"
+                                inputmode="decimal" autocomplete="off" spellcheck="false"
+                                aria-label=format!("{} label in newtons", AXES[i])
+                                prop:value=move || field_text.with(|t| t[i].clone())
+                                on:input=move |ev| {
+                                    implausible.set(None);
+                                    typed.update(|t| t[i] = event_target_value(&ev));
+                                }/>
+                            " N"
+                        </label>
+                    }).collect_view()}
+                    <button id="label-save" type="submit" class="primary"
+                        disabled=move || studio.shown_id().is_none()>"Save label"</button>
+                </form>
+                {move || implausible.get().map(|(force, why)| view! {
+                    <div class="confirm" id="label-confirm" role="alertdialog" aria-labelledby="label-confirm-text">
+                        <p id="label-confirm-text">{why}</p>
+                        <button id="label-confirm-yes" class="danger" on:click=move |_| save(force)>
+                            "Save it anyway"
+                        </button>
+                        <button id="label-confirm-no" on:click=move |_| implausible.set(None)>"Cancel"</button>
+                    </div>
+                })}
                 <div class="actions">
-                    <button id="label-save" class="primary" disabled=move || studio.shown_id().is_none()
-                        on:click=save_typed>"Save label"</button>
                     <button id="label-from-estimate" disabled=move || estimate().is_none()
                         on:click=move |_| set_label(estimate())>"Use H-Net's estimate"</button>
                     <button id="label-from-truth" disabled=move || truth().is_none()

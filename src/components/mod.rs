@@ -1,4 +1,4 @@
-//! The page's components, one concern each. They share the [`Studio`](crate::app::Studio) state
+//! The page's components, one concern each. They share the [`Studio`](crate::studio::Studio) state
 //! through Leptos' context.
 
 pub mod composer;

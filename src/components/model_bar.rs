@@ -5,10 +5,10 @@ use std::rc::Rc;
 
 use leptos::prelude::*;
 
-use crate::app::{ModelState, Studio, load_model};
 use crate::browser::{files, read_file};
 use crate::compute::BackendChoice;
 use crate::engine::WeightsOrigin;
+use crate::studio::{ModelState, Studio, load_model};
 
 /// The model bar.
 #[component]
@@ -22,10 +22,7 @@ pub fn ModelBar() -> impl IntoView {
         })
     };
     let on_backend = move |ev: leptos::ev::Event| {
-        let choice = match event_target_value(&ev).as_str() {
-            "cpu" => BackendChoice::Cpu,
-            _ => BackendChoice::Auto,
-        };
+        let choice = BackendChoice::from_value(&event_target_value(&ev));
         studio.backend_choice.set(choice);
         // The same weights on the other device.
         let weights = match studio.model.get_untracked() {
@@ -80,9 +77,10 @@ pub fn ModelBar() -> impl IntoView {
                         <dl data-state="ready">
                             <div>
                                 <dt>"Backend"</dt>
-                                <dd id="backend" title=engine.backend.reason().unwrap_or("").to_string()>
-                                    {engine.backend.label()}
-                                </dd>
+                                <dd id="backend">{engine.backend.label()}</dd>
+                                {engine.backend.reason().map(|why| view! {
+                                    <dd id="backend-reason" class="why" title=why.to_string()>{format!("({why})")}</dd>
+                                })}
                             </div>
                             <div><dt>"Parameters"</dt><dd id="params">{engine.params}</dd></div>
                             <div>
@@ -105,12 +103,14 @@ pub fn ModelBar() -> impl IntoView {
                 <label>
                     "Run on "
                     <select id="backend-choice" on:change=on_backend>
-                        <option value="auto" selected=move || studio.backend_choice.get() == BackendChoice::Auto>
-                            "WebGPU if available"
-                        </option>
-                        <option value="cpu" selected=move || studio.backend_choice.get() == BackendChoice::Cpu>
-                            "CPU"
-                        </option>
+                        {[
+                            (BackendChoice::Auto, "Fastest available"),
+                            (BackendChoice::WebGpu, "WebGPU"),
+                            (BackendChoice::Cpu, "CPU"),
+                        ].into_iter().map(|(choice, text)| view! {
+                            <option value=choice.value()
+                                selected=move || studio.backend_choice.get() == choice>{text}</option>
+                        }).collect_view()}
                     </select>
                 </label>
                 <label class="file-button">

@@ -3,10 +3,9 @@
 
 use leptos::prelude::*;
 
-use crate::app::Studio;
 use crate::browser::download;
 use crate::export::{DATASET_NAME, dataset_zip};
-use crate::storage;
+use crate::studio::Studio;
 use crate::workspace::PairSource;
 
 /// The pair list.
@@ -37,6 +36,12 @@ pub fn PairList() -> impl IntoView {
             .with(|ws| ws.pairs.iter().filter(|p| p.is_complete()).count())
     };
     let export = move |_| {
+        // Complete pairs without a split get theirs now and keep it from then on.
+        let mut assigned = Vec::new();
+        studio.workspace.update(|ws| assigned = ws.assign_splits());
+        for id in assigned {
+            studio.persist(Some(id));
+        }
         let result = studio.workspace.with_untracked(|ws| dataset_zip(&ws.pairs));
         match result {
             Ok(export) => {
@@ -53,7 +58,10 @@ pub fn PairList() -> impl IntoView {
                                 .collect();
                             text.push_str(&format!("; left out: {}", skipped.join(", ")));
                         }
-                        studio.info(text);
+                        match export.split_warning() {
+                            Some(warning) => studio.error(format!("{text}. Warning: {warning}")),
+                            None => studio.info(text),
+                        }
                     }
                     Err(e) => studio.error(e),
                 }
@@ -61,21 +69,12 @@ pub fn PairList() -> impl IntoView {
             Err(e) => studio.error(e.to_string()),
         }
     };
-    let delete = move |_| {
-        let mut removed = None;
-        studio.draft.set(None);
-        studio.workspace.update(|ws| removed = ws.remove_current());
-        if let Some(id) = removed {
-            studio.predictions.update(|p| {
-                p.remove(&id);
-            });
-            leptos::task::spawn_local(async move {
-                match storage::delete_pair(&id).await {
-                    Ok(()) => studio.info(format!("{id} deleted")),
-                    Err(e) => studio.error(format!("{id}: not deleted from the browser: {e}")),
-                }
-            });
-        }
+    // Deleting asks first; the notice then offers to undo it.
+    let confirming = RwSignal::new(false);
+    let current_id = move || {
+        studio
+            .workspace
+            .with(|ws| ws.current().map(|p| p.id.clone()))
     };
 
     view! {
@@ -102,9 +101,20 @@ pub fn PairList() -> impl IntoView {
                 <button id="export" class="primary" disabled=move || complete() == 0 on:click=export>
                     {move || format!("Export {} complete pair(s) (.zip)", complete())}
                 </button>
-                <button id="delete-pair" disabled=move || studio.workspace.with(|ws| ws.current.is_none()) || studio.showing_draft()
-                    on:click=delete>"Delete pair"</button>
+                <button id="delete-pair" disabled=move || current_id().is_none() || studio.showing_draft()
+                    aria-expanded=move || confirming.get().to_string()
+                    on:click=move |_| confirming.set(true)>"Delete pair…"</button>
             </div>
+            {move || (confirming.get() && !studio.showing_draft()).then(current_id).flatten().map(|id| view! {
+                <div class="confirm" id="delete-confirm" role="alertdialog" aria-labelledby="delete-question">
+                    <p id="delete-question">{format!("Delete {id} with its masks and force label?")}</p>
+                    <button id="delete-confirm-yes" class="danger" on:click=move |_| {
+                        confirming.set(false);
+                        studio.delete_current_pair();
+                    }>"Delete"</button>
+                    <button id="delete-confirm-no" on:click=move |_| confirming.set(false)>"Cancel"</button>
+                </div>
+            })}
         </section>
     }
 }

@@ -1,25 +1,47 @@
-//! Keyboard shortcuts, and their list on the page.
+//! The page-wide keyboard shortcuts ([`crate::keymap`]'s `Page` scope), and the help panel that
+//! lists every shortcut.
 
 use leptos::prelude::*;
 
-use crate::app::{PointerTool, Studio, ViewTransform};
+use crate::keymap::{Command, KEYMAP, Scope, command};
+use crate::studio::{PointerTool, Studio, ViewTransform};
 
-/// The shortcuts: key, what it does.
-pub const SHORTCUTS: [(&str, &str); 13] = [
-    ("R", "run H-Net"),
-    ("A", "use H-Net's masks as the labels"),
-    ("B", "brush"),
-    ("E", "eraser"),
-    ("H", "pan (or drag with the middle button)"),
-    ("[ / ]", "smaller / larger brush"),
-    ("Ctrl+Z", "undo"),
-    ("Ctrl+Shift+Z, Ctrl+Y", "redo"),
-    ("M", "show or hide H-Net's masks"),
-    ("L", "show or hide the labels"),
-    ("Wheel", "zoom at the pointer"),
-    ("0", "fit both views"),
-    ("N / P", "next / previous pair"),
-];
+/// Carries out a page-wide command.
+fn execute(studio: Studio, command: Command) {
+    match command {
+        Command::RunModel => studio.run_model(),
+        Command::AcceptMasks => studio.accept_predicted_masks(),
+        Command::Brush => studio.tool.set(PointerTool::Brush),
+        Command::Eraser => studio.tool.set(PointerTool::Eraser),
+        Command::Pan => studio.tool.set(PointerTool::Pan),
+        Command::SmallerBrush => studio.brush_radius.update(|r| *r = (*r - 0.5).max(1.0)),
+        Command::LargerBrush => studio.brush_radius.update(|r| *r = (*r + 0.5).min(20.0)),
+        Command::Undo => studio.undo_redo(false),
+        Command::Redo => studio.undo_redo(true),
+        Command::ToggleMasks => studio.show_prediction.update(|s| *s = !*s),
+        Command::ToggleLabels => studio.show_label.update(|s| *s = !*s),
+        Command::FitViews => {
+            for t in studio.transforms {
+                t.set(ViewTransform::default());
+            }
+        }
+        Command::NextPair | Command::PreviousPair => {
+            studio.draft.set(None);
+            let step = if command == Command::NextPair { 1 } else { -1 };
+            studio.workspace.update(|ws| ws.step(step));
+            studio.run_model();
+        }
+        // Keys of focused elements, handled there.
+        Command::Left
+        | Command::Right
+        | Command::Up
+        | Command::Down
+        | Command::Grow
+        | Command::Shrink
+        | Command::First
+        | Command::Last => {}
+    }
+}
 
 /// Listens to the keyboard on the whole page (not while typing in a field).
 pub fn install_shortcuts(studio: Studio) {
@@ -38,75 +60,13 @@ pub fn install_shortcuts(studio: Studio) {
                     || tag == "select"
                     || e.is_content_editable()
             });
-        if typing || ev.alt_key() {
+        if typing || ev.alt_key() || ev.default_prevented() {
             return;
         }
         let control = ev.ctrl_key() || ev.meta_key();
-        let key = ev.key().to_ascii_lowercase();
-        let handled = match (control, key.as_str()) {
-            (true, "z") => {
-                studio.undo_redo(ev.shift_key());
-                true
-            }
-            (true, "y") => {
-                studio.undo_redo(true);
-                true
-            }
-            (true, _) => false,
-            (false, "r") => {
-                studio.run_model();
-                true
-            }
-            (false, "a") => {
-                studio.accept_predicted_masks();
-                true
-            }
-            (false, "b") => {
-                studio.tool.set(PointerTool::Brush);
-                true
-            }
-            (false, "e") => {
-                studio.tool.set(PointerTool::Eraser);
-                true
-            }
-            (false, "h") => {
-                studio.tool.set(PointerTool::Pan);
-                true
-            }
-            (false, "[") => {
-                studio.brush_radius.update(|r| *r = (*r - 0.5).max(1.0));
-                true
-            }
-            (false, "]") => {
-                studio.brush_radius.update(|r| *r = (*r + 0.5).min(20.0));
-                true
-            }
-            (false, "m") => {
-                studio.show_prediction.update(|s| *s = !*s);
-                true
-            }
-            (false, "l") => {
-                studio.show_label.update(|s| *s = !*s);
-                true
-            }
-            (false, "0") => {
-                for t in studio.transforms {
-                    t.set(ViewTransform::default());
-                }
-                true
-            }
-            (false, "n" | "p") => {
-                studio.draft.set(None);
-                studio
-                    .workspace
-                    .update(|ws| ws.step(if key == "n" { 1 } else { -1 }));
-                studio.run_model();
-                true
-            }
-            _ => false,
-        };
-        if handled {
+        if let Some(command) = command(Scope::Page, &ev.key(), control, ev.shift_key()) {
             ev.prevent_default();
+            execute(studio, command);
         }
     });
     // The page lives as long as the listener.
@@ -117,13 +77,13 @@ pub fn install_shortcuts(studio: Studio) {
 #[component]
 pub fn Shortcuts() -> impl IntoView {
     view! {
-        <section class="shortcuts" aria-labelledby="shortcuts-title">
-            <h2 id="shortcuts-title">"Keyboard"</h2>
+        <details class="shortcuts" id="shortcuts">
+            <summary><h2>"Keyboard shortcuts"</h2></summary>
             <dl>
-                {SHORTCUTS.iter().map(|(key, what)| view! {
-                    <div><dt><kbd>{*key}</kbd></dt><dd>{*what}</dd></div>
+                {KEYMAP.iter().map(|binding| view! {
+                    <div><dt><kbd>{binding.keys}</kbd></dt><dd>{binding.what}</dd></div>
                 }).collect_view()}
             </dl>
-        </section>
+        </details>
     }
 }

@@ -4,44 +4,71 @@
 use hnet_twin::scene::Modality;
 use leptos::prelude::*;
 
-use crate::app::{SourceTab, Studio};
 use crate::browser::{files, read_file};
 use crate::components::composer::Composer;
 use crate::imaging::{WORK_SIZE, decode_to_rgb};
+use crate::keymap::{self, Command, Scope};
+use crate::studio::{SourceTab, Studio};
 use crate::twin_live::TwinControls;
 use crate::workspace::{LabeledPair, PairSource};
 
-/// The tabbed source panel.
+/// The source tabs: which, the tab's element id, its label.
+const TABS: [(SourceTab, &str, &str); 3] = [
+    (SourceTab::Images, "tab-images", "Images"),
+    (SourceTab::Twin, "tab-twin", "Digital twin"),
+    (SourceTab::Background, "tab-background", "X-ray background"),
+];
+
+/// The tabbed source panel. The tabs follow the ARIA tabs pattern: one tab stop, arrow keys
+/// (and Home, End) move between the tabs.
 #[component]
 pub fn Sources() -> impl IntoView {
     let studio = expect_context::<Studio>();
     let tab = studio.tab;
-    let tab_button = move |which: SourceTab, id: &'static str, label: &'static str| {
-        view! {
-            <button id=id role="tab" class="tab" aria-selected=move || (tab.get() == which).to_string()
-                on:click=move |_| {
-                    tab.set(which);
-                    if which == SourceTab::Background {
-                        // Show the catheter on the background being composed.
-                        let xray = studio.background.with_untracked(|bg| bg.style.modality());
-                        studio.twin.update(|t| t.modality = xray);
-                    }
-                    if which != SourceTab::Images {
-                        studio.render_twin();
-                        studio.run_model();
-                    }
-                }>
-                {label}
-            </button>
+    let select = move |which: SourceTab| {
+        tab.set(which);
+        if which == SourceTab::Background {
+            // Show the catheter on the background being composed.
+            let xray = studio.background.with_untracked(|bg| bg.style.modality());
+            studio.twin.update(|t| t.modality = xray);
+        }
+        if which != SourceTab::Images {
+            studio.render_twin();
+            studio.run_model();
+        }
+    };
+    let on_key = move |ev: web_sys::KeyboardEvent| {
+        let current = TABS
+            .iter()
+            .position(|t| t.0 == tab.get_untracked())
+            .unwrap_or(0);
+        let control = ev.ctrl_key() || ev.meta_key();
+        let next = match keymap::command(Scope::Tabs, &ev.key(), control, ev.shift_key()) {
+            Some(Command::Right) => (current + 1) % TABS.len(),
+            Some(Command::Left) => (current + TABS.len() - 1) % TABS.len(),
+            Some(Command::First) => 0,
+            Some(Command::Last) => TABS.len() - 1,
+            _ => return,
+        };
+        ev.prevent_default();
+        select(TABS[next].0);
+        if let Some(button) = document().get_element_by_id(TABS[next].1) {
+            let _ = wasm_bindgen::JsCast::unchecked_into::<web_sys::HtmlElement>(button).focus();
         }
     };
     view! {
-        <nav class="tabs" role="tablist">
-            {tab_button(SourceTab::Images, "tab-images", "Images")}
-            {tab_button(SourceTab::Twin, "tab-twin", "Digital twin")}
-            {tab_button(SourceTab::Background, "tab-background", "X-ray background")}
+        <nav class="tabs" role="tablist" aria-label="Where pairs come from" on:keydown=on_key>
+            {TABS.into_iter().map(|(which, id, label)| view! {
+                <button id=id role="tab" class="tab" aria-controls="source-panel"
+                    aria-selected=move || (tab.get() == which).to_string()
+                    tabindex=move || if tab.get() == which { "0" } else { "-1" }
+                    on:click=move |_| select(which)>
+                    {label}
+                </button>
+            }).collect_view()}
         </nav>
-        <div class="tab-panel">
+        <div class="tab-panel" id="source-panel" role="tabpanel"
+            aria-labelledby=move || TABS.iter().find(|t| t.0 == tab.get()).map_or("", |t| t.1)>
             {move || match tab.get() {
                 SourceTab::Images => view! { <UploadPair/> }.into_any(),
                 SourceTab::Twin => view! { <TwinSliders/> }.into_any(),
@@ -99,23 +126,62 @@ fn load_files(studio: Studio, picked: Vec<web_sys::File>, by_name: bool) {
     });
 }
 
+/// One view's image, decoded at the working size: the file's name and its RGB bytes.
+type PickedView = (String, Vec<u8>);
+
 /// Two file pickers and a drop zone.
 #[component]
 fn UploadPair() -> impl IntoView {
     let studio = expect_context::<Studio>();
-    let picked_a = StoredValue::new_local(None::<web_sys::File>);
-    let picked_b = StoredValue::new_local(None::<web_sys::File>);
+    // Each picker's image is decoded (and any problem reported) as soon as it is picked; the pair
+    // is made once both views are there.
+    let picked = RwSignal::new([None::<PickedView>, None::<PickedView>]);
     let dragging = RwSignal::new(false);
-    let pick = move |slot: StoredValue<Option<web_sys::File>, LocalStorage>| {
+    let pick = move |view: usize| {
         move |ev: leptos::ev::Event| {
             let input: web_sys::HtmlInputElement = event_target(&ev);
-            slot.set_value(files(input.files()).into_iter().next());
+            let Some(file) = files(input.files()).into_iter().next() else {
+                return;
+            };
             input.set_value("");
-            if let (Some(a), Some(b)) = (picked_a.get_value(), picked_b.get_value()) {
-                picked_a.set_value(None);
-                picked_b.set_value(None);
-                load_files(studio, vec![a, b], false);
-            }
+            leptos::task::spawn_local(async move {
+                let name = file.name();
+                let decoded = match read_file(&file).await {
+                    Ok(bytes) => decode_to_rgb(&name, &bytes, WORK_SIZE).map_err(|e| e.to_string()),
+                    Err(e) => Err(e),
+                };
+                let letter = ["A", "B"][view];
+                match decoded {
+                    Ok(rgb) => picked.update(|p| p[view] = Some((name.clone(), rgb))),
+                    Err(e) => {
+                        picked.update(|p| p[view] = None);
+                        studio.error(format!("view {letter}: {e}"));
+                        return;
+                    }
+                }
+                let [a, b] = picked.get_untracked();
+                match (a, b) {
+                    (Some(a), Some(b)) => {
+                        picked.set([None, None]);
+                        let id = studio.workspace.with_untracked(|ws| ws.next_id());
+                        let pair = LabeledPair::new(
+                            id,
+                            PairSource::Upload {
+                                view_a: a.0,
+                                view_b: b.0,
+                            },
+                            a.1,
+                            b.1,
+                        );
+                        studio.info(format!("{} loaded", pair.id));
+                        studio.add_pair(pair);
+                    }
+                    _ => studio.info(format!(
+                        "view {letter}: {name} is ready; now pick view {}",
+                        ["B", "A"][view]
+                    )),
+                }
+            });
         }
     };
     let on_drop = move |ev: leptos::ev::DragEvent| {
@@ -130,12 +196,16 @@ fn UploadPair() -> impl IntoView {
                 "Two simultaneous images of the catheter (PNG or JPEG, any size; resized to "
                 {WORK_SIZE}" px). They stay on this machine."
             </p>
-            <label class="file-button">"View A…"
-                <input id="file-view-a" type="file" accept="image/png,image/jpeg" on:change=pick(picked_a)/>
-            </label>
-            <label class="file-button">"View B…"
-                <input id="file-view-b" type="file" accept="image/png,image/jpeg" on:change=pick(picked_b)/>
-            </label>
+            {[0usize, 1].into_iter().map(|view| view! {
+                <label class="file-button">
+                    {["View A…", "View B…"][view]}
+                    <input id=["file-view-a", "file-view-b"][view] type="file"
+                        accept="image/png,image/jpeg" on:change=pick(view)/>
+                    {move || picked.with(|p| p[view].as_ref().map(|(name, _)| view! {
+                        <span class="picked">" ✓ "{name.clone()}</span>
+                    }))}
+                </label>
+            }).collect_view()}
             <div id="drop-zone" class="drop-zone" class:dragging=move || dragging.get()
                 on:dragover=move |ev: leptos::ev::DragEvent| { ev.prevent_default(); dragging.set(true); }
                 on:dragleave=move |_| dragging.set(false)

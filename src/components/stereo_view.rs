@@ -5,8 +5,9 @@ use hnet_twin::carm::{Biplane, CArm};
 use leptos::prelude::*;
 use wasm_bindgen::{Clamped, JsCast};
 
-use crate::app::{CANVAS_SIDE, PointerTool, Studio, ViewTransform, view_index};
 use crate::imaging::{WORK_SIZE, estimate_tip, force_arrow, overlay, project, rgba};
+use crate::keymap::{self, Command, Scope, tooltip};
+use crate::studio::{CANVAS_SIDE, PointerTool, Studio, ViewTransform, view_index};
 use crate::workspace::{PairSource, View};
 
 /// Colour of H-Net's masks.
@@ -25,10 +26,10 @@ pub fn StereoView() -> impl IntoView {
     let tool_button = move |tool: PointerTool,
                             id: &'static str,
                             label: &'static str,
-                            key: &'static str| {
+                            command: Command| {
         view! {
             <button id=id class="tool" aria-pressed=move || (studio.tool.get() == tool).to_string()
-                title=format!("{label} ({key})") on:click=move |_| studio.tool.set(tool)>
+                title=tooltip(label, command) on:click=move |_| studio.tool.set(tool)>
                 {label}
             </button>
         }
@@ -41,16 +42,16 @@ pub fn StereoView() -> impl IntoView {
     };
     view! {
         <div class="toolbar" role="toolbar" aria-label="Labeling tools">
-            <button id="run-model" class="primary" title="Run H-Net (R)"
+            <button id="run-model" class="primary" title=tooltip("Run H-Net", Command::RunModel)
                 disabled=move || studio.busy.get().is_some() || studio.shown_id().is_none()
                 on:click=move |_| studio.run_model()>"Run H-Net"</button>
-            <button id="accept-masks" title="Use H-Net's masks as the labels (A)"
+            <button id="accept-masks" title=tooltip("Use H-Net's masks as the labels", Command::AcceptMasks)
                 disabled=move || !has_prediction()
                 on:click=move |_| studio.accept_predicted_masks()>"Use H-Net masks as labels"</button>
             <span class="group">
-                {tool_button(PointerTool::Brush, "tool-brush", "Brush", "B")}
-                {tool_button(PointerTool::Eraser, "tool-eraser", "Eraser", "E")}
-                {tool_button(PointerTool::Pan, "tool-pan", "Pan", "H")}
+                {tool_button(PointerTool::Brush, "tool-brush", "Brush", Command::Brush)}
+                {tool_button(PointerTool::Eraser, "tool-eraser", "Eraser", Command::Eraser)}
+                {tool_button(PointerTool::Pan, "tool-pan", "Pan", Command::Pan)}
             </span>
             <label class="slider compact">"Size"
                 <input id="brush-size" type="range" min="1" max="20" step="0.5"
@@ -63,9 +64,9 @@ pub fn StereoView() -> impl IntoView {
                 <output>{move || format!("{:.1} px", studio.brush_radius.get())}</output>
             </label>
             <span class="group">
-                <button id="undo" title="Undo (Ctrl+Z)" disabled=move || !can().0
+                <button id="undo" title=tooltip("Undo", Command::Undo) disabled=move || !can().0
                     on:click=move |_| studio.undo_redo(false)>"Undo"</button>
-                <button id="redo" title="Redo (Ctrl+Shift+Z)" disabled=move || !can().1
+                <button id="redo" title=tooltip("Redo", Command::Redo) disabled=move || !can().1
                     on:click=move |_| studio.undo_redo(true)>"Redo"</button>
             </span>
             <span class="group">
@@ -87,7 +88,7 @@ pub fn StereoView() -> impl IntoView {
                         }
                     }/>
             </label>
-            <button id="reset-zoom" title="Reset zoom (0)" on:click=move |_| {
+            <button id="reset-zoom" title=tooltip("Fit both views", Command::FitViews) on:click=move |_| {
                 for t in studio.transforms { t.set(ViewTransform::default()); }
             }>"Fit"</button>
         </div>
@@ -363,6 +364,44 @@ fn ViewCanvas(view: View) -> impl IntoView {
         let factor = (-ev.delta_y() * 0.002).exp();
         transform.update(|t| *t = t.zoomed(factor, p));
     };
+    // The keyboard on a focused view: arrows pan (a zoomed view), + and - zoom at the centre.
+    let on_key = move |ev: web_sys::KeyboardEvent| {
+        const STEP: f64 = 24.0;
+        let control = ev.ctrl_key() || ev.meta_key();
+        let Some(command) = keymap::command(Scope::View, &ev.key(), control, ev.shift_key()) else {
+            return;
+        };
+        let t = transform.get_untracked();
+        let pan = |dx: f64, dy: f64| ViewTransform {
+            offset: [t.offset[0] + dx, t.offset[1] + dy],
+            ..t
+        };
+        let centre = [CANVAS_SIDE / 2.0; 2];
+        let next = match command {
+            Command::Left => pan(STEP, 0.0),
+            Command::Right => pan(-STEP, 0.0),
+            Command::Up => pan(0.0, STEP),
+            Command::Down => pan(0.0, -STEP),
+            Command::Grow => t.zoomed(1.25, centre),
+            Command::Shrink => t.zoomed(0.8, centre),
+            _ => return,
+        };
+        ev.prevent_default();
+        transform.set(next);
+    };
+    let description = move || {
+        let masks = match (studio.show_prediction.get(), studio.show_label.get()) {
+            (true, true) => "H-Net's mask in blue and the label in orange",
+            (true, false) => "H-Net's mask in blue",
+            (false, true) => "the label in orange",
+            (false, false) => "no masks shown",
+        };
+        format!(
+            "View {}: the image with {masks}. Paint with the pointer; arrow keys pan and + or - \
+             zoom this view.",
+            view.letter()
+        )
+    };
     let label_pixels = move || {
         studio.with_shown(|p| {
             p.map_or(0, |p| {
@@ -397,7 +436,8 @@ fn ViewCanvas(view: View) -> impl IntoView {
                 data-predicted-pixels=move || predicted_pixels().map(|n| n.to_string()).unwrap_or_default()
                 on:pointerdown=on_down on:pointermove=on_move on:pointerup=on_up
                 on:pointercancel=on_up on:pointerleave=move |_| pointer.set(None)
-                on:wheel=on_wheel on:contextmenu=|ev| ev.prevent_default()></canvas>
+                on:wheel=on_wheel on:contextmenu=|ev| ev.prevent_default()
+                tabindex="0" role="img" aria-label=description on:keydown=on_key></canvas>
             <figcaption>
                 "View "{view.letter()}
                 {move || studio.with_shown(|p| p.map(|p| match &p.source {

@@ -1,0 +1,264 @@
+//! What a tip-force estimate can be said to show: its magnitude against the ablation band, no more
+//! than the weights' accuracy supports, and nothing at all for a twin pair outside the data the
+//! weights were trained on.
+
+use hnet_twin::scene::{Modality, SceneParams, SceneSampling};
+
+use crate::imaging::magnitude;
+use crate::workspace::{LabeledPair, PairSource};
+
+/// Contact forces of ablation within this band (newtons) are considered effective and safe
+/// (the paper: ablation needs 0.1-0.3 N at the tip).
+pub const ABLATION_BAND_N: [f32; 2] = [0.1, 0.3];
+
+/// Where a force magnitude lies against the ablation band.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BandPosition {
+    /// Below 0.1 N.
+    Below,
+    /// 0.1-0.3 N.
+    Within,
+    /// Above 0.3 N.
+    Above,
+}
+
+impl BandPosition {
+    /// The position of `magnitude_n` (newtons).
+    pub fn of(magnitude_n: f32) -> Self {
+        if magnitude_n < ABLATION_BAND_N[0] {
+            Self::Below
+        } else if magnitude_n <= ABLATION_BAND_N[1] {
+            Self::Within
+        } else {
+            Self::Above
+        }
+    }
+
+    /// In words.
+    pub fn phrase(self) -> &'static str {
+        match self {
+            Self::Below => "below the 0.1–0.3 N ablation band",
+            Self::Within => "within the 0.1–0.3 N ablation band",
+            Self::Above => "above the 0.1–0.3 N ablation band",
+        }
+    }
+}
+
+/// What a set of weights was trained on, and how far its force estimates are off there.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrainingDomain {
+    /// Root-mean-square length of the force error vector on held-out pairs, newtons: a bound on
+    /// the RMS error of the estimated magnitude |F|.
+    pub force_error_n: f32,
+    /// The images' look.
+    pub modality: Modality,
+    /// How the training scenes were drawn.
+    pub scenes: SceneSampling,
+    /// Each view's C-arm angles (primary, secondary), degrees.
+    pub views_deg: [[f64; 2]; 2],
+    /// Whether every X-ray background was cut from the built-in thorax phantom.
+    pub phantom_backgrounds: bool,
+}
+
+impl TrainingDomain {
+    /// The bundled weights (`assets/MODEL.md`): XRay-2 bench scenes on phantom backgrounds, the
+    /// default biplane (0°/0° and 90°/0°). Their force error is √(ΣMSE) over the three axes of
+    /// their test split: √(0.00878 + 0.00785 + 0.00496) N = 0.147 N.
+    pub fn bundled() -> Self {
+        Self {
+            force_error_n: 0.147,
+            modality: Modality::Xray2,
+            scenes: SceneSampling::bench(),
+            views_deg: [[0.0, 0.0], [90.0, 0.0]],
+            phantom_backgrounds: true,
+        }
+    }
+
+    /// How a twin pair lies outside this domain, one phrase each (empty for pairs inside it,
+    /// and for uploaded pairs, whose settings are unknown).
+    pub fn departures(&self, pair: &LabeledPair) -> Vec<String> {
+        let PairSource::Twin {
+            views, settings, ..
+        } = &pair.source
+        else {
+            return Vec::new();
+        };
+        let mut departures = Vec::new();
+        let modality = settings["modality"]
+            .as_str()
+            .and_then(Modality::parse)
+            .unwrap_or(self.modality);
+        if modality != self.modality {
+            departures.push(format!(
+                "{} images (trained on {} only)",
+                modality.name(),
+                self.modality.name()
+            ));
+        }
+        match serde_json::from_value::<SceneParams>(settings["scene"].clone()) {
+            Ok(scene) => departures.extend(self.scenes.departures(&scene)),
+            Err(_) => departures.push("the pair's twin settings cannot be read".into()),
+        }
+        for (letter, (view, trained)) in ["A", "B"]
+            .iter()
+            .zip([views.a, views.b].iter().zip(self.views_deg))
+        {
+            let angles = [view.primary_deg, view.secondary_deg];
+            if (angles[0] - trained[0]).abs() > 0.5 || (angles[1] - trained[1]).abs() > 0.5 {
+                departures.push(format!(
+                    "view {letter} at {:+.0}°/{:+.0}° (trained at {:+.0}°/{:+.0}°)",
+                    angles[0], angles[1], trained[0], trained[1]
+                ));
+            }
+        }
+        let source = settings["background"]["source"].as_str().unwrap_or("");
+        if self.phantom_backgrounds && modality.is_xray() && !source.starts_with("phantom:") {
+            departures.push(format!(
+                "a background cut from {source} (trained on the built-in phantom only)"
+            ));
+        }
+        departures
+    }
+}
+
+/// What the page says about an estimated magnitude.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Verdict {
+    /// The estimate and its error lie on one side of the band's edges.
+    Clear {
+        /// Where.
+        position: BandPosition,
+        /// The weights' force error, newtons.
+        error_n: f32,
+    },
+    /// Within its error, the estimate could lie on either side of an edge of the band.
+    Unclear {
+        /// The weights' force error, newtons.
+        error_n: f32,
+    },
+    /// Weights whose accuracy is not known (loaded by the user, or untrained).
+    UnknownAccuracy,
+    /// A twin pair outside what the weights were trained on.
+    OutsideTraining(Vec<String>),
+}
+
+impl Verdict {
+    /// The verdict on estimate `force_n` of `pair` by weights trained on `domain` (`None`:
+    /// unknown weights).
+    pub fn of(force_n: [f32; 3], domain: Option<&TrainingDomain>, pair: &LabeledPair) -> Self {
+        let Some(domain) = domain else {
+            return Self::UnknownAccuracy;
+        };
+        let departures = domain.departures(pair);
+        if !departures.is_empty() {
+            return Self::OutsideTraining(departures);
+        }
+        let m = magnitude(force_n);
+        let error_n = domain.force_error_n;
+        let (low, high) = (BandPosition::of(m - error_n), BandPosition::of(m + error_n));
+        if low == high {
+            Self::Clear {
+                position: low,
+                error_n,
+            }
+        } else {
+            Self::Unclear { error_n }
+        }
+    }
+
+    /// The sentence shown under the gauge, for estimate `force_n`.
+    pub fn text(&self, force_n: [f32; 3]) -> String {
+        let m = magnitude(force_n);
+        match self {
+            Self::Clear { position, error_n } => {
+                format!("|F| = {m:.3} ± {error_n:.3} N: {}", position.phrase())
+            }
+            Self::Unclear { error_n } => format!(
+                "|F| = {m:.3} ± {error_n:.3} N: too uncertain to place against the 0.1–0.3 N \
+                 ablation band (the error spans an edge of the band)"
+            ),
+            Self::UnknownAccuracy => format!(
+                "|F| = {m:.3} N: no verdict against the 0.1–0.3 N ablation band (the accuracy \
+                 of these weights is not known)"
+            ),
+            Self::OutsideTraining(departures) => format!(
+                "|F| = {m:.3} N: no verdict: this pair lies outside what the weights were \
+                 trained on ({}), so the estimate may be far off",
+                departures.join("; ")
+            ),
+        }
+    }
+}
+
+#[cfg(all(test, not(target_arch = "wasm32")))]
+mod tests {
+    use super::*;
+    use crate::twin_live::{TwinControls, XrayBackground};
+
+    fn twin(controls: TwinControls) -> LabeledPair {
+        controls
+            .render("t".into(), &XrayBackground::phantom())
+            .unwrap()
+    }
+
+    #[test]
+    fn a_verdict_never_claims_more_than_the_error_allows() {
+        let domain = TrainingDomain::bundled();
+        let pair = twin(TwinControls::default());
+        assert_eq!(domain.departures(&pair), Vec::<String>::new());
+        // 0.18 N ± 0.147 N spans the band's lower edge: no verdict.
+        let unclear = Verdict::of([0.18, 0.0, 0.0], Some(&domain), &pair);
+        assert_eq!(unclear, Verdict::Unclear { error_n: 0.147 });
+        assert!(unclear.text([0.18, 0.0, 0.0]).contains("too uncertain"));
+        // Precise weights may place it.
+        let precise = TrainingDomain {
+            force_error_n: 0.01,
+            ..domain.clone()
+        };
+        assert_eq!(
+            Verdict::of([0.18, 0.0, 0.0], Some(&precise), &pair).text([0.18, 0.0, 0.0]),
+            "|F| = 0.180 ± 0.010 N: within the 0.1–0.3 N ablation band"
+        );
+        assert_eq!(
+            Verdict::of([0.18, 0.0, 0.0], None, &pair),
+            Verdict::UnknownAccuracy
+        );
+    }
+
+    #[test]
+    fn twin_settings_outside_the_training_data_get_no_verdict() {
+        let domain = TrainingDomain::bundled();
+        // The issue's case: |F| 0.69 N pushing cranially (Fz > 0).
+        let pair = twin(TwinControls {
+            force_n: [0.4, 0.4, 0.4],
+            view_a_deg: [30.0, 0.0],
+            ..TwinControls::default()
+        });
+        let verdict = Verdict::of([0.1, 0.1, 0.1], Some(&domain), &pair);
+        let Verdict::OutsideTraining(departures) = &verdict else {
+            panic!("{verdict:?}");
+        };
+        assert!(departures[0].starts_with("|F| 0.69 N"), "{departures:?}");
+        assert!(departures.iter().any(|d| d.starts_with("the force points")));
+        assert!(
+            departures
+                .iter()
+                .any(|d| d.starts_with("view A at +30°/+0°"))
+        );
+        assert!(verdict.text([0.1, 0.1, 0.1]).contains("no verdict"));
+
+        let rgb = twin(TwinControls {
+            modality: Modality::Rgb,
+            ..TwinControls::default()
+        });
+        let departures = domain.departures(&rgb);
+        assert!(departures[0].starts_with("rgb images"), "{departures:?}");
+    }
+
+    #[test]
+    fn band_positions() {
+        assert_eq!(BandPosition::of(0.05), BandPosition::Below);
+        assert_eq!(BandPosition::of(0.2), BandPosition::Within);
+        assert_eq!(BandPosition::of(0.31), BandPosition::Above);
+    }
+}

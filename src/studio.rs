@@ -1,0 +1,511 @@
+//! The page's state: signals gathered in [`Studio`], shared with the components through Leptos'
+//! context, and the actions that change them (run H-Net, keep the twin's pair, delete and
+//! restore pairs, undo). The labeling [`Workspace`] is saved to the browser's IndexedDB after
+//! every change (see [`Studio::persist`]), so that a reload loses nothing. The components only
+//! render this state and call these actions.
+
+use std::collections::HashMap;
+use std::rc::Rc;
+
+use leptos::prelude::*;
+
+use crate::bundled;
+use crate::compute::{self, BackendChoice};
+use crate::engine::{Engine, Prediction, WeightsOrigin};
+use crate::storage;
+use crate::twin_live::{TwinControls, XrayBackground};
+use crate::workspace::{LabeledPair, RemovedPair, Tool, View, Workspace};
+
+/// The model's state.
+#[derive(Clone)]
+pub enum ModelState {
+    /// Choosing the backend and loading the weights.
+    Loading(String),
+    /// Ready to run.
+    Ready(Rc<Engine>),
+    /// No model could be loaded.
+    Failed(String),
+}
+
+/// A message for the user.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Notice {
+    /// Whether it reports a problem.
+    pub error: bool,
+    /// The text.
+    pub text: String,
+    /// What the notice's button undoes, if it has one.
+    pub undo: Option<Undoable>,
+}
+
+/// An action the notice bar can undo.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Undoable {
+    /// A deleted pair: undo puts it back, with its masks, force label and history.
+    Deletion(Box<RemovedPair>),
+}
+
+/// What the pointer does on a view.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PointerTool {
+    /// Paints catheter.
+    Brush,
+    /// Erases catheter.
+    Eraser,
+    /// Moves the zoomed view.
+    Pan,
+}
+
+impl PointerTool {
+    /// The mask tool, for painting tools.
+    pub fn mask_tool(self) -> Option<Tool> {
+        match self {
+            PointerTool::Brush => Some(Tool::Brush),
+            PointerTool::Eraser => Some(Tool::Eraser),
+            PointerTool::Pan => None,
+        }
+    }
+}
+
+/// Zoom and pan of one view: screen = `offset + scale · image` in canvas pixels.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ViewTransform {
+    /// Canvas pixels per image pixel.
+    pub scale: f64,
+    /// Canvas position of the image's top-left corner.
+    pub offset: [f64; 2],
+}
+
+/// Side of a view's canvas, canvas pixels.
+pub const CANVAS_SIDE: f64 = 448.0;
+
+impl Default for ViewTransform {
+    fn default() -> Self {
+        Self {
+            scale: CANVAS_SIDE / crate::imaging::WORK_SIZE as f64,
+            offset: [0.0, 0.0],
+        }
+    }
+}
+
+impl ViewTransform {
+    /// Image coordinates of a canvas point.
+    pub fn to_image(&self, canvas: [f64; 2]) -> [f64; 2] {
+        [
+            (canvas[0] - self.offset[0]) / self.scale,
+            (canvas[1] - self.offset[1]) / self.scale,
+        ]
+    }
+
+    /// Canvas coordinates of an image point.
+    pub fn to_canvas(&self, image: [f64; 2]) -> [f64; 2] {
+        [
+            self.offset[0] + image[0] * self.scale,
+            self.offset[1] + image[1] * self.scale,
+        ]
+    }
+
+    /// Zooms by `factor` keeping the canvas point `at` fixed (between 1x and 16x the fit).
+    pub fn zoomed(&self, factor: f64, at: [f64; 2]) -> Self {
+        let fit = Self::default().scale;
+        let scale = (self.scale * factor).clamp(fit, 16.0 * fit);
+        let image = self.to_image(at);
+        Self {
+            scale,
+            offset: [at[0] - image[0] * scale, at[1] - image[1] * scale],
+        }
+    }
+}
+
+/// Which source panel is open.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SourceTab {
+    /// Two image files.
+    Images,
+    /// The live twin's sliders.
+    Twin,
+    /// The synthetic X-ray background composer.
+    Background,
+}
+
+/// Everything the page's components share.
+#[derive(Clone, Copy)]
+pub struct Studio {
+    /// The network.
+    pub model: RwSignal<ModelState, LocalStorage>,
+    /// Which backend the user asked for.
+    pub backend_choice: RwSignal<BackendChoice>,
+    /// The labeled pairs.
+    pub workspace: RwSignal<Workspace>,
+    /// The live twin's pair, shown until kept or another pair is selected.
+    pub draft: RwSignal<Option<LabeledPair>>,
+    /// H-Net's latest prediction per pair id.
+    pub predictions: RwSignal<HashMap<String, Prediction>>,
+    /// What the page is busy with, if anything.
+    pub busy: RwSignal<Option<String>>,
+    /// The latest message.
+    pub notice: RwSignal<Option<Notice>>,
+    /// Show H-Net's masks.
+    pub show_prediction: RwSignal<bool>,
+    /// Show the label masks.
+    pub show_label: RwSignal<bool>,
+    /// Opacity of the mask overlays, 0-1.
+    pub opacity: RwSignal<f64>,
+    /// What the pointer does.
+    pub tool: RwSignal<PointerTool>,
+    /// Brush radius, image pixels.
+    pub brush_radius: RwSignal<f64>,
+    /// Zoom and pan of view A and view B.
+    pub transforms: [RwSignal<ViewTransform>; 2],
+    /// The twin's sliders.
+    pub twin: RwSignal<TwinControls>,
+    /// The synthetic X-ray background.
+    pub background: RwSignal<XrayBackground>,
+    /// The open source panel.
+    pub tab: RwSignal<SourceTab>,
+    /// Counter of live twin renders (the draft's id).
+    pub draft_serial: RwSignal<u64>,
+    /// H-Net was asked to run while it was busy: run again on the pair on screen when done.
+    pub rerun: RwSignal<bool>,
+}
+
+impl Default for Studio {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Studio {
+    /// The state of a page that has just opened: no model yet, no pairs.
+    pub fn new() -> Self {
+        Self {
+            model: RwSignal::new_local(ModelState::Loading("Loading H-Net…".into())),
+            backend_choice: RwSignal::new(BackendChoice::Auto),
+            workspace: RwSignal::new(Workspace::default()),
+            draft: RwSignal::new(None),
+            predictions: RwSignal::new(HashMap::new()),
+            busy: RwSignal::new(None),
+            notice: RwSignal::new(None),
+            show_prediction: RwSignal::new(true),
+            show_label: RwSignal::new(true),
+            opacity: RwSignal::new(0.5),
+            tool: RwSignal::new(PointerTool::Brush),
+            brush_radius: RwSignal::new(3.0),
+            transforms: [
+                RwSignal::new(ViewTransform::default()),
+                RwSignal::new(ViewTransform::default()),
+            ],
+            twin: RwSignal::new(TwinControls::default()),
+            background: RwSignal::new(XrayBackground::phantom()),
+            tab: RwSignal::new(SourceTab::Images),
+            draft_serial: RwSignal::new(0),
+            rerun: RwSignal::new(false),
+        }
+    }
+
+    /// Reports a problem to the user.
+    pub fn error(&self, text: impl Into<String>) {
+        self.notice.set(Some(Notice {
+            error: true,
+            text: text.into(),
+            undo: None,
+        }));
+    }
+
+    /// Tells the user something.
+    pub fn info(&self, text: impl Into<String>) {
+        self.notice.set(Some(Notice {
+            error: false,
+            text: text.into(),
+            undo: None,
+        }));
+    }
+
+    /// Deletes the pair on screen, from the page and the browser's storage; the notice offers
+    /// to undo it.
+    pub fn delete_current_pair(&self) {
+        let mut removed = None;
+        self.draft.set(None);
+        self.workspace.update(|ws| removed = ws.remove_current());
+        let Some(removed) = removed else { return };
+        let id = removed.pair.id.clone();
+        self.predictions.update(|p| {
+            p.remove(&id);
+        });
+        let studio = *self;
+        leptos::task::spawn_local(async move {
+            match storage::delete_pair(&id).await {
+                Ok(()) => studio.notice.set(Some(Notice {
+                    error: false,
+                    text: format!("{id} deleted"),
+                    undo: Some(Undoable::Deletion(Box::new(removed))),
+                })),
+                Err(e) => studio.error(format!("{id}: not deleted from the browser: {e}")),
+            }
+        });
+        self.run_model();
+    }
+
+    /// Undoes what the notice offers to undo.
+    pub fn undo_notice(&self, undo: Undoable) {
+        match undo {
+            Undoable::Deletion(removed) => {
+                let id = removed.pair.id.clone();
+                let mut restored = None;
+                self.draft.set(None);
+                self.workspace.update(|ws| restored = ws.restore(*removed));
+                match restored {
+                    Some(id) => {
+                        self.persist(Some(id.clone()));
+                        self.info(format!("{id} restored"));
+                        self.run_model();
+                    }
+                    None => self.error(format!(
+                        "{id} cannot be restored: a pair with that id was added since"
+                    )),
+                }
+            }
+        }
+    }
+
+    /// Calls `f` with the pair on screen: the live twin's draft, else the workspace's current
+    /// pair. Tracks both.
+    pub fn with_shown<R>(&self, f: impl FnOnce(Option<&LabeledPair>) -> R) -> R {
+        self.draft.with(|draft| match draft {
+            Some(pair) => f(Some(pair)),
+            None => self.workspace.with(|ws| f(ws.current())),
+        })
+    }
+
+    /// Id of the pair on screen.
+    pub fn shown_id(&self) -> Option<String> {
+        self.with_shown(|p| p.map(|p| p.id.clone()))
+    }
+
+    /// Whether the pair on screen is the unsaved twin draft.
+    pub fn showing_draft(&self) -> bool {
+        self.draft.with(Option::is_some)
+    }
+
+    /// Saves pair `id` of the workspace to the browser's storage.
+    pub fn persist(&self, id: Option<String>) {
+        let Some(id) = id else { return };
+        let Some(pair) = self.workspace.with_untracked(|ws| ws.pair(&id).cloned()) else {
+            return;
+        };
+        let studio = *self;
+        leptos::task::spawn_local(async move {
+            if let Err(e) = storage::save_pair(&pair).await {
+                studio.error(format!("{}: not saved in the browser: {e}", pair.id));
+            }
+        });
+    }
+
+    /// Adds a pair to the workspace, shows it, saves it and runs H-Net on it.
+    pub fn add_pair(&self, pair: LabeledPair) {
+        let id = pair.id.clone();
+        self.draft.set(None);
+        self.workspace.update(|ws| ws.add(pair));
+        self.persist(Some(id));
+        self.run_model();
+    }
+
+    /// Keeps the live twin's draft as a workspace pair.
+    pub fn keep_draft(&self) {
+        let Some(mut pair) = self.draft.get_untracked() else {
+            return;
+        };
+        let draft_id = pair.id.clone();
+        pair.id = self.workspace.with_untracked(Workspace::next_id);
+        let id = pair.id.clone();
+        self.predictions.update(|p| {
+            if let Some(prediction) = p.remove(&draft_id) {
+                p.insert(id.clone(), prediction);
+            }
+        });
+        self.draft.set(None);
+        self.workspace.update(|ws| ws.add(pair));
+        self.persist(Some(id.clone()));
+        self.info(format!("{id} added to the labeled pairs"));
+    }
+
+    /// Runs H-Net on the pair on screen when the model is ready. A request made while H-Net is
+    /// busy runs once the current inference is done, on the pair then on screen.
+    pub fn run_model(&self) {
+        let ModelState::Ready(engine) = self.model.get_untracked() else {
+            return;
+        };
+        if self.busy.get_untracked().is_some() {
+            self.rerun.set(true);
+            return;
+        }
+        let shown = self
+            .draft
+            .with_untracked(|d| d.clone())
+            .or_else(|| self.workspace.with_untracked(|ws| ws.current().cloned()));
+        let Some(pair) = shown else {
+            return;
+        };
+        let studio = *self;
+        let id = pair.id;
+        self.busy.set(Some(format!("Running H-Net on {id}…")));
+        leptos::task::spawn_local(async move {
+            match engine.infer(&pair.view_a, &pair.view_b).await {
+                Ok(prediction) => studio.predictions.update(|p| {
+                    p.insert(id, prediction);
+                }),
+                Err(e) => studio.error(format!("H-Net failed on {id}: {e}")),
+            }
+            studio.busy.set(None);
+            if studio.rerun.get_untracked() {
+                studio.rerun.set(false);
+                let current = studio.shown_id_untracked();
+                if current
+                    .is_some_and(|id| studio.predictions.with_untracked(|p| !p.contains_key(&id)))
+                {
+                    studio.run_model();
+                }
+            }
+        });
+    }
+
+    /// Id of the pair on screen, without tracking.
+    fn shown_id_untracked(&self) -> Option<String> {
+        self.draft
+            .with_untracked(|d| d.as_ref().map(|p| p.id.clone()))
+            .or_else(|| {
+                self.workspace
+                    .with_untracked(|ws| ws.current().map(|p| p.id.clone()))
+            })
+    }
+
+    /// Renders the live twin with the current sliders and background as the draft.
+    pub fn render_twin(&self) {
+        let controls = self.twin.get_untracked();
+        let serial = self.draft_serial.get_untracked() + 1;
+        self.draft_serial.set(serial);
+        let id = format!("twin-{serial}");
+        let result = self.background.with_untracked(|bg| controls.render(id, bg));
+        match result {
+            Ok(pair) => {
+                // The previous draft's prediction is of no use any more.
+                if let Some(old) = self
+                    .draft
+                    .with_untracked(|d| d.as_ref().map(|p| p.id.clone()))
+                {
+                    self.predictions.update(|p| {
+                        p.remove(&old);
+                    });
+                }
+                self.draft.set(Some(pair));
+            }
+            Err(e) => self.error(format!(
+                "the catheter does not settle under this load ({e}); try a smaller force or a \
+                 stiffer catheter"
+            )),
+        }
+    }
+
+    /// Applies a workspace change that returns the changed pair's id, and saves that pair.
+    pub fn edit(&self, change: impl FnOnce(&mut Workspace) -> Option<String>) {
+        let mut changed = None;
+        self.workspace.update(|ws| changed = change(ws));
+        self.persist(changed);
+    }
+
+    /// The id of the pair on screen for labeling: the twin's draft is kept first (labels are
+    /// only given to kept pairs).
+    pub fn labeled_pair_id(&self) -> Option<String> {
+        if self.showing_draft() {
+            self.keep_draft();
+        }
+        self.workspace
+            .with_untracked(|ws| ws.current().map(|p| p.id.clone()))
+    }
+
+    /// Uses H-Net's masks of the pair on screen as its label masks (one undo step).
+    pub fn accept_predicted_masks(&self) {
+        let Some(id) = self.labeled_pair_id() else {
+            return;
+        };
+        let Some(prediction) = self.predictions.with_untracked(|p| p.get(&id).cloned()) else {
+            self.error("run H-Net first: there are no predicted masks for this pair");
+            return;
+        };
+        let masks = [
+            crate::imaging::binarize(&prediction.mask_a),
+            crate::imaging::binarize(&prediction.mask_b),
+        ];
+        self.edit(|ws| ws.set_masks(masks));
+        self.show_label.set(true);
+    }
+
+    /// Undo (`redo` false) or redo the last mask edit.
+    pub fn undo_redo(&self, redo: bool) {
+        self.draft.set(None);
+        self.edit(|ws| if redo { ws.redo() } else { ws.undo() });
+    }
+}
+
+/// Which backend to run on.
+async fn load_engine(
+    studio: Studio,
+    weights: Option<(Rc<[u8]>, String, WeightsOrigin)>,
+) -> Result<Engine, String> {
+    let (device, backend) = compute::select_device(studio.backend_choice.get_untracked()).await;
+    let weights = match weights {
+        Some(w) => Some(w),
+        None => bundled::fetch_bytes(bundled::BUNDLED_WEIGHTS)
+            .await?
+            .map(|bytes| {
+                (
+                    Rc::<[u8]>::from(bytes),
+                    bundled::BUNDLED_WEIGHTS.to_string(),
+                    WeightsOrigin::Bundled,
+                )
+            }),
+    };
+    match weights {
+        Some((bytes, name, origin)) => Engine::from_weights(bytes, &name, origin, device, backend),
+        None => Engine::untrained(device, backend),
+    }
+}
+
+/// Loads the model (bundled weights, or `weights`) on the chosen backend. On failure the model
+/// that was loaded stays.
+pub fn load_model(studio: Studio, weights: Option<(Rc<[u8]>, String, WeightsOrigin)>) {
+    let previous = studio.model.get_untracked();
+    let name = weights.as_ref().map(|w| w.1.clone());
+    studio.model.set(ModelState::Loading(match &name {
+        Some(name) => format!("Loading {name}…"),
+        None => "Loading H-Net…".into(),
+    }));
+    leptos::task::spawn_local(async move {
+        match load_engine(studio, weights).await {
+            Ok(engine) => {
+                let engine = Rc::new(engine);
+                studio.model.set(ModelState::Ready(engine.clone()));
+                if name.is_some() {
+                    studio.info(format!("Loaded {}", engine.weights_name));
+                }
+                studio.predictions.set(HashMap::new());
+                studio.run_model();
+            }
+            Err(e) => match previous {
+                ModelState::Ready(engine) => {
+                    studio.model.set(ModelState::Ready(engine.clone()));
+                    studio.error(format!("{e}. Still using {}.", engine.weights_name));
+                }
+                _ => studio.model.set(ModelState::Failed(e)),
+            },
+        }
+    });
+}
+
+/// Ids of both views, for element ids and labels.
+pub fn view_index(view: View) -> usize {
+    match view {
+        View::A => 0,
+        View::B => 1,
+    }
+}
