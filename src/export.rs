@@ -33,7 +33,7 @@ impl Export {
         let names: Vec<&str> = self.empty_splits.iter().map(|s| s.name()).collect();
         Some(format!(
             "no {} pair: `hnet train` needs train and val pairs and `hnet eval` test pairs; \
-             export at least 3 complete pairs",
+             export at least 4 complete pairs",
             names.join(" or ")
         ))
     }
@@ -117,17 +117,10 @@ pub fn dataset_zip(pairs: &[LabeledPair]) -> Result<Export, ExportError> {
         .iter()
         .zip(splits)
         .filter(|(p, _)| {
-            let why = if !p.masks_labeled {
-                Some("masks not labeled")
-            } else if p.force_n.is_none() {
-                Some("no force label")
-            } else {
-                None
-            };
-            if let Some(why) = why {
+            if let Some(why) = p.incomplete_because() {
                 skipped.push((p.id.clone(), why));
             }
-            why.is_none()
+            p.is_complete()
         })
         .map(|(p, split)| (p, split.unwrap_or(Split::Train)))
         .collect();

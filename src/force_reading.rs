@@ -74,20 +74,24 @@ impl TrainingDomain {
         }
     }
 
-    /// How a twin pair lies outside this domain, one phrase each (empty for pairs inside it,
-    /// and for uploaded pairs, whose settings are unknown).
+    /// How a pair lies outside this domain, one phrase each (empty for twin pairs inside it).
+    /// Uploaded images are outside it by definition: the weights' error was measured on twin
+    /// images, and nothing says how far real ones differ.
     pub fn departures(&self, pair: &LabeledPair) -> Vec<String> {
         let PairSource::Twin {
             views, settings, ..
         } = &pair.source
         else {
-            return Vec::new();
+            return vec![format!(
+                "images that are not the twin's (the error of these weights was measured on twin \
+                 {} images)",
+                self.modality.name()
+            )];
         };
         let mut departures = Vec::new();
-        let modality = settings["modality"]
-            .as_str()
-            .and_then(Modality::parse)
-            .unwrap_or(self.modality);
+        let Some(modality) = settings["modality"].as_str().and_then(Modality::parse) else {
+            return vec!["the pair's twin settings cannot be read".into()];
+        };
         if modality != self.modality {
             departures.push(format!(
                 "{} images (trained on {} only)",
@@ -111,10 +115,14 @@ impl TrainingDomain {
                 ));
             }
         }
-        let source = settings["background"]["source"].as_str().unwrap_or("");
-        if self.phantom_backgrounds && modality.is_xray() && !source.starts_with("phantom:") {
+        let source = settings["background"]["source"].as_str();
+        if self.phantom_backgrounds
+            && modality.is_xray()
+            && !source.is_some_and(|s| s.starts_with("phantom:"))
+        {
             departures.push(format!(
-                "a background cut from {source} (trained on the built-in phantom only)"
+                "a background cut from {} (trained on the built-in phantom only)",
+                source.unwrap_or("an unknown radiograph")
             ));
         }
         departures
@@ -138,7 +146,7 @@ pub enum Verdict {
     },
     /// Weights whose accuracy is not known (loaded by the user, or untrained).
     UnknownAccuracy,
-    /// A twin pair outside what the weights were trained on.
+    /// A pair outside what the weights were trained on (uploads included).
     OutsideTraining(Vec<String>),
 }
 
@@ -253,6 +261,26 @@ mod tests {
         });
         let departures = domain.departures(&rgb);
         assert!(departures[0].starts_with("rgb images"), "{departures:?}");
+    }
+
+    #[test]
+    fn uploaded_images_get_no_verdict_from_twin_trained_weights() {
+        let upload = LabeledPair::new(
+            "u".into(),
+            PairSource::Upload {
+                view_a: "a.png".into(),
+                view_b: "b.png".into(),
+            },
+            Vec::new(),
+            Vec::new(),
+        );
+        let verdict = Verdict::of([0.5, 0.0, 0.0], Some(&TrainingDomain::bundled()), &upload);
+        assert!(
+            verdict
+                .text([0.5, 0.0, 0.0])
+                .contains("images that are not the twin's"),
+            "{verdict:?}"
+        );
     }
 
     #[test]

@@ -46,9 +46,9 @@ pub enum Command {
     NextPair,
     /// The previous pair.
     PreviousPair,
-    /// Move left (a view's picture, the region), or the previous tab.
+    /// Move left (a view's picture, the region), or to the previous tab.
     Left,
-    /// Move right, or the next tab.
+    /// Move right, or to the next tab.
     Right,
     /// Move up.
     Up,
@@ -228,8 +228,8 @@ pub const KEYMAP: [Binding; 18] = [
     ),
     binding(
         Scope::Tabs,
-        "← → Home End",
-        "switch between the source tabs (Images, Digital twin, X-ray background)",
+        "← → ↑ ↓ Home End",
+        "move between the source tabs (Images, Digital twin, X-ray background); Enter opens one",
         &[
             (key("ArrowLeft"), Command::Left),
             (key("ArrowUp"), Command::Left),

@@ -440,6 +440,13 @@ impl Studio {
         self.show_label.set(true);
     }
 
+    /// Fits both views in their canvases (no zoom, no pan).
+    pub fn fit_views(&self) {
+        for t in self.transforms {
+            t.set(ViewTransform::default());
+        }
+    }
+
     /// Undo (`redo` false) or redo the last mask edit.
     pub fn undo_redo(&self, redo: bool) {
         self.draft.set(None);

@@ -132,7 +132,18 @@ impl LabeledPair {
 
     /// Whether the pair can be exported: both masks labeled and a force label.
     pub fn is_complete(&self) -> bool {
-        self.masks_labeled && self.force_n.is_some()
+        self.incomplete_because().is_none()
+    }
+
+    /// What keeps the pair from being exported, if anything.
+    pub fn incomplete_because(&self) -> Option<&'static str> {
+        if !self.masks_labeled {
+            Some("masks not labeled")
+        } else if self.force_n.is_none() {
+            Some("no force label")
+        } else {
+            None
+        }
     }
 
     /// Catheter pixels of a view's label mask.
@@ -323,6 +334,8 @@ impl Workspace {
         let id = removed.pair.id.clone();
         self.pairs.insert(index, removed.pair);
         self.undo.extend(removed.undo);
+        let excess = self.undo.len().saturating_sub(HISTORY);
+        self.undo.drain(..excess);
         self.current = Some(index);
         Some(id)
     }
@@ -479,15 +492,18 @@ impl Workspace {
     }
 }
 
-/// The split of each pair in an export: its own once it has one; complete pairs without one get
-/// theirs in id order by [`next_split`], counting every pair that holds a split, so that pairs
-/// keep their split as others are added, and a set of three or more complete pairs has a
-/// validation and a test pair. Incomplete pairs without a split get none.
+/// The split of each pair in an export: its own once it has one (it never moves); complete
+/// pairs without one get theirs in id order by [`next_split`], counting the complete pairs'
+/// splits, so that an export of four or more complete pairs has a validation and a test pair
+/// (unless pairs that hold those splits were completed later than others). Incomplete pairs
+/// without a split get none.
 pub fn export_splits(pairs: &[LabeledPair]) -> Vec<Option<Split>> {
     let mut splits: Vec<Option<Split>> = pairs.iter().map(|p| p.split).collect();
     let mut counts = [0usize; 3];
-    for split in splits.iter().flatten() {
-        counts[*split as usize] += 1;
+    for pair in pairs.iter().filter(|p| p.is_complete()) {
+        if let Some(split) = pair.split {
+            counts[split as usize] += 1;
+        }
     }
     let mut pending: Vec<usize> = (0..pairs.len())
         .filter(|&i| pairs[i].split.is_none() && pairs[i].is_complete())
@@ -522,18 +538,15 @@ impl std::fmt::Display for ForceLabelError {
     }
 }
 
-/// Reads one typed force component in newtons (`axis` names it in the message): a finite
-/// number, with a point or a comma as the decimal separator.
+/// Reads one typed force component in newtons (`axis` names it in the message), by the rule of
+/// [`hnet_twin::force_table::parse_newtons`].
 pub fn parse_newtons(axis: &str, text: &str) -> Result<f32, String> {
     let trimmed = text.trim();
     if trimmed.is_empty() {
         return Err(format!("{axis} is empty: enter a number of newtons"));
     }
-    trimmed
-        .replace(',', ".")
-        .parse::<f32>()
-        .ok()
-        .filter(|v| v.is_finite())
+    hnet_twin::force_table::parse_newtons(trimmed)
+        .map(|v| v as f32)
         .ok_or_else(|| format!("{axis} is `{trimmed}`, not a number of newtons"))
 }
 

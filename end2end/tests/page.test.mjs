@@ -60,10 +60,10 @@ test("load a pair, run H-Net, paint, undo, reload with labels kept, export the d
   await page.waitForSelector('#pairs li[data-id="pair-0001"]');
   // H-Net runs on the new pair: masks on both views and the force with its band.
   await page.waitForSelector("#force-verdict", { timeout: 120_000 });
-  // The verdict claims no more than the bundled weights' error (± 0.147 N) allows.
+  // Real images are not what the bundled weights' error was measured on: no verdict.
   assert.match(
     await page.textContent("#force-verdict"),
-    /\|F\| = \d\.\d{3} ± 0\.147 N: ((below|within|above) the 0\.1–0\.3 N ablation band|too uncertain to place)/,
+    /\|F\| = \d\.\d{3} N: no verdict: .*images that are not the twin's/,
   );
   assert.notEqual(await page.getAttribute("#view-a", "data-predicted-pixels"), "");
   assert.match(await page.textContent("#inference-time"), /\d+ ms on (WebGPU|CPU)/);
@@ -108,7 +108,7 @@ test("load a pair, run H-Net, paint, undo, reload with labels kept, export the d
   await page.waitForSelector('#pairs li[data-id="pair-0001"] .flag.done[title="masks"]');
   await page.waitForFunction((n) => document.querySelector("#view-a").dataset.labelPixels === String(n), painted);
   assert.equal(await labelPixels(page, "b"), erased);
-  assert.equal(await page.inputValue("#label-fx"), "0.120");
+  assert.equal(await page.inputValue("#label-fx"), "0.12");
 
   // Export: a zip in the dataset format.
   const [download] = await Promise.all([page.waitForEvent("download"), page.click("#export")]);
@@ -297,11 +297,13 @@ test("keyboard, screen readers and small screens", async () => {
   const { page, errors } = await openPage(context, server.url);
   await page.setViewportSize({ width: 1280, height: 720 });
   await waitForModel(page);
-  // The tabs: one tab stop, the arrow keys move between them.
+  // The tabs: one tab stop, the arrow keys move the focus, Enter opens the focused tab.
   await page.focus("#tab-images");
   await page.keyboard.press("ArrowRight");
-  await page.waitForFunction(() => document.querySelector("#tab-twin").getAttribute("aria-selected") === "true");
   assert.equal(await page.evaluate(() => document.activeElement.id), "tab-twin");
+  assert.equal(await page.getAttribute("#tab-twin", "aria-selected"), "false");
+  await page.keyboard.press("Enter");
+  await page.waitForFunction(() => document.querySelector("#tab-twin").getAttribute("aria-selected") === "true");
   assert.equal(await page.getAttribute("#tab-images", "tabindex"), "-1");
   // The views are named, focusable images; + zooms the focused one.
   assert.match(await page.getAttribute("#view-a", "aria-label"), /^View A: the image with /);

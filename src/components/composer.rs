@@ -194,6 +194,8 @@ pub fn Composer() -> impl IntoView {
         let control = ev.ctrl_key() || ev.meta_key();
         keymap::command(Scope::Region, &ev.key(), control, ev.shift_key())
     };
+    // Whether a key moved the region since the pair was last made.
+    let moved = StoredValue::new(false);
     let on_key = move |ev: web_sys::KeyboardEvent| {
         let Some(command) = region_command(&ev) else {
             return;
@@ -209,6 +211,7 @@ pub fn Composer() -> impl IntoView {
             _ => return,
         };
         ev.prevent_default();
+        let before = background.with_untracked(|bg| bg.region);
         background.update(|bg| {
             if grow != 0.0 {
                 let side = (bg.region_side() + grow).clamp(0.1, 0.8);
@@ -218,9 +221,13 @@ pub fn Composer() -> impl IntoView {
                 bg.move_region_to([(x0 + x1) / 2.0 + dx, (y0 + y1) / 2.0 + dy]);
             }
         });
+        if background.with_untracked(|bg| bg.region) != before {
+            moved.set_value(true);
+        }
     };
     let on_key_up = move |ev: web_sys::KeyboardEvent| {
-        if region_command(&ev).is_some() {
+        if region_command(&ev).is_some() && moved.get_value() {
+            moved.set_value(false);
             rerender();
         }
     };

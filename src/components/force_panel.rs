@@ -34,19 +34,23 @@ pub fn ForcePanel() -> impl IntoView {
     let field_text = RwSignal::new([String::new(), String::new(), String::new()]);
     // A typed label far outside a catheter's range, waiting for the user's confirmation.
     let implausible = RwSignal::new(None::<([f32; 3], String)>);
-    Effect::new(move |_| {
-        let values = shown_label.get().1.map(|f| f.map(|v| format!("{v:.3}")));
-        let values = values.unwrap_or_default();
+    // Shows `force` in the fields, in its shortest exact form (`0.12`, never a rounded `0.123`
+    // for `0.12345`, which a save would then write back).
+    let show = move |force: Option<[f32; 3]>| {
+        let values = force.map(|f| f.map(|v| v.to_string())).unwrap_or_default();
         typed.set(values.clone());
         field_text.set(values);
         implausible.set(None);
-    });
+    };
+    Effect::new(move |_| show(shown_label.get().1));
 
     let set_label = move |force: Option<[f32; 3]>| {
         let Some(id) = studio.labeled_pair_id() else {
             return;
         };
         studio.edit(|ws| ws.set_force(&id, force).then_some(id.clone()));
+        // Also when the label was already this value, the fields drop what was being typed.
+        show(force);
     };
     let save = move |force: [f32; 3]| {
         implausible.set(None);
@@ -109,14 +113,18 @@ pub fn ForcePanel() -> impl IntoView {
         });
     };
 
-    // The verdict says no more than the weights' accuracy and training data support.
-    let verdict_text = move |estimate: [f32; 3]| {
-        let domain = studio.model.with(|m| match m {
+    // What the loaded weights were trained on, when the page knows (the bundled ones).
+    let domain = move || {
+        studio.model.with(|m| match m {
             ModelState::Ready(e) if e.origin == WeightsOrigin::Bundled => {
                 Some(TrainingDomain::bundled())
             }
             _ => None,
-        });
+        })
+    };
+    // The verdict says no more than the weights' accuracy and training data support.
+    let verdict_text = move |estimate: [f32; 3]| {
+        let domain = domain();
         studio.with_shown(|pair| {
             pair.map(|pair| Verdict::of(estimate, domain.as_ref(), pair).text(estimate))
         })
@@ -148,10 +156,7 @@ pub fn ForcePanel() -> impl IntoView {
                 </tbody>
             </table>
             {move || {
-                let bundled = studio.model.with(|m| {
-                    matches!(m, ModelState::Ready(e) if e.origin == WeightsOrigin::Bundled)
-                });
-                bundled.then(|| view! { <p class="caveat" id="force-caveat">{BUNDLED_FORCE_CAVEAT}</p> })
+                domain().map(|_| view! { <p class="caveat" id="force-caveat">{BUNDLED_FORCE_CAVEAT}</p> })
             }}
             {move || estimate().map(|e| {
                 let m = magnitude(e);

@@ -69,13 +69,18 @@ pub fn PairList() -> impl IntoView {
             Err(e) => studio.error(e.to_string()),
         }
     };
-    // Deleting asks first; the notice then offers to undo it.
+    // Deleting asks first; the notice then offers to undo it. The question is about the pair on
+    // screen, so it is withdrawn when another pair is shown.
     let confirming = RwSignal::new(false);
-    let current_id = move || {
+    let current_id = Memo::new(move |_| {
         studio
             .workspace
             .with(|ws| ws.current().map(|p| p.id.clone()))
-    };
+    });
+    Effect::new(move |_| {
+        current_id.track();
+        confirming.set(false);
+    });
 
     view! {
         <section class="pair-list" aria-labelledby="pairs-title">
@@ -101,11 +106,11 @@ pub fn PairList() -> impl IntoView {
                 <button id="export" class="primary" disabled=move || complete() == 0 on:click=export>
                     {move || format!("Export {} complete pair(s) (.zip)", complete())}
                 </button>
-                <button id="delete-pair" disabled=move || current_id().is_none() || studio.showing_draft()
+                <button id="delete-pair" disabled=move || current_id.with(Option::is_none) || studio.showing_draft()
                     aria-expanded=move || confirming.get().to_string()
                     on:click=move |_| confirming.set(true)>"Delete pair…"</button>
             </div>
-            {move || (confirming.get() && !studio.showing_draft()).then(current_id).flatten().map(|id| view! {
+            {move || current_id.get().filter(|_| confirming.get() && !studio.showing_draft()).map(|id| view! {
                 <div class="confirm" id="delete-confirm" role="alertdialog" aria-labelledby="delete-question">
                     <p id="delete-question">{format!("Delete {id} with its masks and force label?")}</p>
                     <button id="delete-confirm-yes" class="danger" on:click=move |_| {

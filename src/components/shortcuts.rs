@@ -4,7 +4,7 @@
 use leptos::prelude::*;
 
 use crate::keymap::{Command, KEYMAP, Scope, command};
-use crate::studio::{PointerTool, Studio, ViewTransform};
+use crate::studio::{PointerTool, Studio};
 
 /// Carries out a page-wide command.
 fn execute(studio: Studio, command: Command) {
@@ -20,11 +20,7 @@ fn execute(studio: Studio, command: Command) {
         Command::Redo => studio.undo_redo(true),
         Command::ToggleMasks => studio.show_prediction.update(|s| *s = !*s),
         Command::ToggleLabels => studio.show_label.update(|s| *s = !*s),
-        Command::FitViews => {
-            for t in studio.transforms {
-                t.set(ViewTransform::default());
-            }
-        }
+        Command::FitViews => studio.fit_views(),
         Command::NextPair | Command::PreviousPair => {
             studio.draft.set(None);
             let step = if command == Command::NextPair { 1 } else { -1 };

@@ -19,8 +19,10 @@ const TABS: [(SourceTab, &str, &str); 3] = [
     (SourceTab::Background, "tab-background", "X-ray background"),
 ];
 
-/// The tabbed source panel. The tabs follow the ARIA tabs pattern: one tab stop, arrow keys
-/// (and Home, End) move between the tabs.
+/// The tabbed source panel. The tabs follow the ARIA tabs pattern with manual activation (a
+/// tab's panel renders the twin and runs H-Net, too slow to follow every arrow key): one tab
+/// stop, the arrow keys (and Home, End) move the focus between the tabs, Enter or Space opens
+/// the focused one.
 #[component]
 pub fn Sources() -> impl IntoView {
     let studio = expect_context::<Studio>();
@@ -38,9 +40,14 @@ pub fn Sources() -> impl IntoView {
         }
     };
     let on_key = move |ev: web_sys::KeyboardEvent| {
+        let focused = document()
+            .active_element()
+            .map(|e| e.id())
+            .unwrap_or_default();
         let current = TABS
             .iter()
-            .position(|t| t.0 == tab.get_untracked())
+            .position(|t| t.1 == focused)
+            .or_else(|| TABS.iter().position(|t| t.0 == tab.get_untracked()))
             .unwrap_or(0);
         let control = ev.ctrl_key() || ev.meta_key();
         let next = match keymap::command(Scope::Tabs, &ev.key(), control, ev.shift_key()) {
@@ -51,7 +58,6 @@ pub fn Sources() -> impl IntoView {
             _ => return,
         };
         ev.prevent_default();
-        select(TABS[next].0);
         if let Some(button) = document().get_element_by_id(TABS[next].1) {
             let _ = wasm_bindgen::JsCast::unchecked_into::<web_sys::HtmlElement>(button).focus();
         }
@@ -78,63 +84,64 @@ pub fn Sources() -> impl IntoView {
     }
 }
 
-/// Reads two image files into a pair, view A first (or, with `by_name`, the first by name).
-/// Every problem names its file; nothing is added unless both images are good.
-async fn pair_from_files(
-    studio: Studio,
-    mut picked: Vec<web_sys::File>,
-    by_name: bool,
-) -> Result<LabeledPair, String> {
-    if picked.len() != 2 {
-        return Err(format!(
-            "a stereo pair is two images (view A and view B); {} file{} given",
-            picked.len(),
-            if picked.len() == 1 { " was" } else { "s were" }
-        ));
-    }
-    if by_name {
-        picked.sort_by_key(|f| f.name());
-    }
-    let mut views = Vec::with_capacity(2);
-    for file in &picked {
-        let bytes = read_file(file).await?;
-        views.push(decode_to_rgb(&file.name(), &bytes, WORK_SIZE).map_err(|e| e.to_string())?);
-    }
-    let view_b = views.pop().unwrap_or_default();
-    let view_a = views.pop().unwrap_or_default();
-    let id = studio.workspace.with_untracked(|ws| ws.next_id());
-    Ok(LabeledPair::new(
-        id,
-        PairSource::Upload {
-            view_a: picked[0].name(),
-            view_b: picked[1].name(),
-        },
-        view_a,
-        view_b,
-    ))
-}
-
-fn load_files(studio: Studio, picked: Vec<web_sys::File>, by_name: bool) {
-    leptos::task::spawn_local(async move {
-        match pair_from_files(studio, picked, by_name).await {
-            Ok(pair) => {
-                studio.info(format!("{} loaded", pair.id));
-                studio.add_pair(pair);
-            }
-            Err(e) => studio.error(e),
-        }
-    });
-}
-
 /// One view's image, decoded at the working size: the file's name and its RGB bytes.
 type PickedView = (String, Vec<u8>);
+
+/// Reads and decodes one image file at the working size; the error names the file.
+async fn decode_view(file: &web_sys::File) -> Result<PickedView, String> {
+    let name = file.name();
+    let bytes = read_file(file).await?;
+    let rgb = decode_to_rgb(&name, &bytes, WORK_SIZE).map_err(|e| e.to_string())?;
+    Ok((name, rgb))
+}
+
+/// Adds the pair of two decoded views to the workspace and runs H-Net on it.
+fn add_upload(studio: Studio, [a, b]: [PickedView; 2]) {
+    let id = studio.workspace.with_untracked(|ws| ws.next_id());
+    let pair = LabeledPair::new(
+        id,
+        PairSource::Upload {
+            view_a: a.0,
+            view_b: b.0,
+        },
+        a.1,
+        b.1,
+    );
+    studio.info(format!("{} loaded", pair.id));
+    studio.add_pair(pair);
+}
+
+/// Reads two image files (dropped or picked together) into a pair, the first by name as view
+/// A. Every problem names its file; nothing is added unless both images are good.
+fn load_files(studio: Studio, mut picked: Vec<web_sys::File>) {
+    leptos::task::spawn_local(async move {
+        if picked.len() != 2 {
+            studio.error(format!(
+                "a stereo pair is two images (view A and view B); {} file{} given",
+                picked.len(),
+                if picked.len() == 1 { " was" } else { "s were" }
+            ));
+            return;
+        }
+        picked.sort_by_key(|f| f.name());
+        let views = match (decode_view(&picked[0]).await, decode_view(&picked[1]).await) {
+            (Ok(a), Ok(b)) => [a, b],
+            (Err(e), _) | (_, Err(e)) => {
+                studio.error(e);
+                return;
+            }
+        };
+        add_upload(studio, views);
+    });
+}
 
 /// Two file pickers and a drop zone.
 #[component]
 fn UploadPair() -> impl IntoView {
     let studio = expect_context::<Studio>();
     // Each picker's image is decoded (and any problem reported) as soon as it is picked; the pair
-    // is made once both views are there.
+    // is made once both views are there. The reading outlives this panel if the user switches
+    // tab meanwhile, so it only touches `picked` while the panel exists.
     let picked = RwSignal::new([None::<PickedView>, None::<PickedView>]);
     let dragging = RwSignal::new(false);
     let pick = move |view: usize| {
@@ -145,38 +152,30 @@ fn UploadPair() -> impl IntoView {
             };
             input.set_value("");
             leptos::task::spawn_local(async move {
-                let name = file.name();
-                let decoded = match read_file(&file).await {
-                    Ok(bytes) => decode_to_rgb(&name, &bytes, WORK_SIZE).map_err(|e| e.to_string()),
-                    Err(e) => Err(e),
-                };
                 let letter = ["A", "B"][view];
-                match decoded {
-                    Ok(rgb) => picked.update(|p| p[view] = Some((name.clone(), rgb))),
+                let decoded = match decode_view(&file).await {
+                    Ok(decoded) => decoded,
                     Err(e) => {
-                        picked.update(|p| p[view] = None);
+                        picked.try_update(|p| p[view] = None);
                         studio.error(format!("view {letter}: {e}"));
                         return;
                     }
-                }
-                let [a, b] = picked.get_untracked();
-                match (a, b) {
-                    (Some(a), Some(b)) => {
-                        picked.set([None, None]);
-                        let id = studio.workspace.with_untracked(|ws| ws.next_id());
-                        let pair = LabeledPair::new(
-                            id,
-                            PairSource::Upload {
-                                view_a: a.0,
-                                view_b: b.0,
-                            },
-                            a.1,
-                            b.1,
-                        );
-                        studio.info(format!("{} loaded", pair.id));
-                        studio.add_pair(pair);
+                };
+                let name = decoded.0.clone();
+                let Some(both) = picked.try_update(|p| {
+                    p[view] = Some(decoded);
+                    if p.iter().all(Option::is_some) {
+                        let [a, b] = std::mem::take(p);
+                        a.zip(b).map(|(a, b)| [a, b])
+                    } else {
+                        None
                     }
-                    _ => studio.info(format!(
+                }) else {
+                    return;
+                };
+                match both {
+                    Some(views) => add_upload(studio, views),
+                    None => studio.info(format!(
                         "view {letter}: {name} is ready; now pick view {}",
                         ["B", "A"][view]
                     )),
@@ -188,7 +187,7 @@ fn UploadPair() -> impl IntoView {
         ev.prevent_default();
         dragging.set(false);
         let dropped = files(ev.data_transfer().and_then(|d| d.files()));
-        load_files(studio, dropped, true);
+        load_files(studio, dropped);
     };
     view! {
         <div class="upload">
@@ -218,7 +217,7 @@ fn UploadPair() -> impl IntoView {
                         let input: web_sys::HtmlInputElement = event_target(&ev);
                         let picked = files(input.files());
                         input.set_value("");
-                        load_files(studio, picked, true);
+                        load_files(studio, picked);
                     }/>
             </label>
         </div>

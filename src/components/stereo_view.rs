@@ -88,9 +88,8 @@ pub fn StereoView() -> impl IntoView {
                         }
                     }/>
             </label>
-            <button id="reset-zoom" title=tooltip("Fit both views", Command::FitViews) on:click=move |_| {
-                for t in studio.transforms { t.set(ViewTransform::default()); }
-            }>"Fit"</button>
+            <button id="reset-zoom" title=tooltip("Fit both views", Command::FitViews)
+                on:click=move |_| studio.fit_views()>"Fit"</button>
         </div>
         {move || studio.showing_draft().then(|| view! {
             <p class="draft-note">
@@ -372,9 +371,17 @@ fn ViewCanvas(view: View) -> impl IntoView {
             return;
         };
         let t = transform.get_untracked();
-        let pan = |dx: f64, dy: f64| ViewTransform {
-            offset: [t.offset[0] + dx, t.offset[1] + dy],
-            ..t
+        // Only a zoomed view has somewhere to pan to.
+        let zoomed = t.scale > ViewTransform::default().scale * 1.001;
+        let pan = |dx: f64, dy: f64| {
+            if zoomed {
+                ViewTransform {
+                    offset: [t.offset[0] + dx, t.offset[1] + dy],
+                    ..t
+                }
+            } else {
+                t
+            }
         };
         let centre = [CANVAS_SIDE / 2.0; 2];
         let next = match command {

@@ -31,7 +31,7 @@ pub struct EvalArgs {
     #[arg(long, requires = "data")]
     weights: Option<PathBuf>,
     /// Input size (pixels, square) of a baseline's weights given with `--weights`.
-    #[arg(long)]
+    #[arg(long, requires = "weights")]
     size: Option<usize>,
     /// Dataset folder (the one the run was trained on by default).
     #[arg(long)]
@@ -191,7 +191,8 @@ pub fn load_weights(
     let multiple = spec.size_multiple();
     anyhow::ensure!(
         image_size.iter().all(|s| *s > 0 && s % multiple == 0),
-        "--size must be a positive multiple of {multiple} for `{}`",
+        "weights file '{}': --size must be a positive multiple of {multiple} for `{}`",
+        path.display(),
         spec.name()
     );
     Ok(TrainedModel {
@@ -354,9 +355,13 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     let (evaluation, predictions) = evaluate(&model, &data, args.split, &device, args.batch_size)?;
     // A run keeps its tables and predictions; weights on their own are only printed.
     if let Some(run) = &run {
+        let write = |path: PathBuf, bytes: &[u8]| {
+            std::fs::write(&path, bytes)
+                .with_context(|| format!("cannot write '{}'", path.display()))
+        };
         let [json, md] = run.eval_files(args.split);
-        std::fs::write(json, serde_json::to_vec_pretty(&evaluation)?)?;
-        std::fs::write(md, markdown(&evaluation))?;
+        write(json, &serde_json::to_vec_pretty(&evaluation)?)?;
+        write(md, markdown(&evaluation).as_bytes())?;
         let mut csv = String::from("id,fx,fy,fz,fx_pred,fy_pred,fz_pred\n");
         for p in &predictions {
             let _ = writeln!(
@@ -371,7 +376,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
                 p.predicted[2]
             );
         }
-        std::fs::write(run.predictions_file(args.split), csv)?;
+        write(run.predictions_file(args.split), csv.as_bytes())?;
     }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&evaluation)?);

@@ -11,12 +11,14 @@ use std::time::{Duration, Instant};
 
 use burn::train::LearnerSummary;
 use burn::train::logger::{EvaluationProgressLogger, TrainingProgressLogger};
-use burn::train::metric::{MetricDefinition, MetricId};
+use burn::train::metric::{MetricDefinition, MetricId, NumericEntry};
 use burn::train::renderer::{
     EvaluationName, MetricState, MetricsRenderer, MetricsRendererEvaluation,
     MetricsRendererTraining,
 };
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+use crate::run_dir::LOSS_METRIC;
 
 /// How often a plain progress line is written when the output is not a terminal.
 pub const PLAIN_EVERY: Duration = Duration::from_secs(30);
@@ -54,7 +56,8 @@ pub struct TrainingDisplay {
     trained_pairs: usize,
     training_time: Duration,
     names: HashMap<MetricId, String>,
-    latest: BTreeMap<String, String>,
+    /// Each numeric metric's mean over the split so far: its sum and its count (pairs).
+    means: BTreeMap<String, (f64, f64)>,
 }
 
 impl TrainingDisplay {
@@ -97,7 +100,7 @@ impl TrainingDisplay {
             trained_pairs: 0,
             training_time: Duration::ZERO,
             names: HashMap::new(),
-            latest: BTreeMap::new(),
+            means: BTreeMap::new(),
         }
     }
 
@@ -118,8 +121,15 @@ impl TrainingDisplay {
         }
     }
 
-    fn loss(&self) -> Option<&str> {
-        self.latest.get("Loss").map(String::as_str)
+    /// A metric's mean over the split so far.
+    fn mean(&self, name: &str) -> Option<f64> {
+        self.means
+            .get(name)
+            .and_then(|(sum, count)| (*count > 0.0).then(|| sum / count))
+    }
+
+    fn loss(&self) -> Option<String> {
+        self.mean(LOSS_METRIC).map(|l| format!("{l:.4}"))
     }
 
     /// `epoch 3/18 train`.
@@ -155,16 +165,29 @@ impl TrainingDisplay {
         text
     }
 
+    /// Adds a batch's value to its metric's running mean (weighted by the batch's pairs); an
+    /// epoch's final value replaces the mean.
     fn record(&mut self, state: &MetricState) {
-        let entry = match state {
-            MetricState::Generic(e) | MetricState::Numeric(e, _) => e,
-        };
-        if entry.serialized_entry.is_not_available() {
+        let MetricState::Numeric(entry, Some(value)) = state else {
             return;
-        }
-        if let Some(name) = self.names.get(&entry.metric_id) {
-            self.latest
-                .insert(name.clone(), entry.serialized_entry.formatted.clone());
+        };
+        let Some(name) = self.names.get(&entry.metric_id) else {
+            return;
+        };
+        let mean = self.means.entry(name.clone()).or_insert((0.0, 0.0));
+        match value {
+            NumericEntry::Value(v) => {
+                mean.0 += v;
+                mean.1 += 1.0;
+            }
+            NumericEntry::Aggregated {
+                aggregated_value,
+                count,
+            } => {
+                mean.0 += aggregated_value * *count as f64;
+                mean.1 += *count as f64;
+            }
+            NumericEntry::Final(v) => *mean = (*v, 1.0),
         }
         if let (Output::Terminal { bar, .. }, Some(loss)) = (&self.output, self.loss()) {
             bar.set_message(format!("loss {loss}"));
@@ -275,7 +298,7 @@ impl TrainingProgressLogger for TrainingDisplay {
 
     fn start_split(&mut self, split: &str, total_items: usize) {
         self.split = split.to_string();
-        self.latest.clear();
+        self.means.clear();
         let prefix = self.label();
         self.start_bar(prefix, total_items);
         if let Output::Plain { last, .. } = &mut self.output {
@@ -295,9 +318,9 @@ impl TrainingProgressLogger for TrainingDisplay {
             self.training_time += elapsed;
         }
         let metrics: Vec<String> = self
-            .latest
-            .iter()
-            .map(|(name, value)| format!("{name} {value}"))
+            .means
+            .keys()
+            .filter_map(|name| self.mean(name).map(|m| format!("{name} {m:.4}")))
             .collect();
         let text = format!(
             "{} {} pairs in {}, {}",

@@ -190,12 +190,17 @@ impl RunDir {
                     continue;
                 };
                 let mut values = BTreeMap::new();
-                for file in std::fs::read_dir(entry.path())?.filter_map(|e| e.ok()) {
+                let epoch_dir = entry.path();
+                let files = std::fs::read_dir(&epoch_dir)
+                    .with_context(|| format!("cannot list '{}'", epoch_dir.display()))?;
+                for file in files.filter_map(|e| e.ok()) {
                     let file_name = file.file_name().to_string_lossy().into_owned();
                     let Some(metric) = metric_of_log_file(&file_name) else {
                         continue;
                     };
-                    if let Some(mean) = weighted_mean(&std::fs::read_to_string(file.path())?) {
+                    let log = std::fs::read_to_string(file.path())
+                        .with_context(|| format!("cannot read '{}'", file.path().display()))?;
+                    if let Some(mean) = weighted_mean(&log) {
                         values.insert(metric, mean);
                     }
                 }

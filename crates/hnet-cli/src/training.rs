@@ -164,7 +164,7 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
             ),
             request
                 .time_budget
-                .map(|limit| TimeBudget::new(limit, session_started)),
+                .map(|limit| TimeBudget::new(limit, session_started, Instant::now())),
         ))
         .num_epochs(config.epochs)
         .renderer(Box::new(crate::progress_renderer::TrainingDisplay::new()));
@@ -231,7 +231,9 @@ fn export_best(
             values.join(",")
         ));
     }
-    std::fs::write(run.metrics_file(), csv)?;
+    let metrics_file = run.metrics_file();
+    std::fs::write(&metrics_file, csv)
+        .with_context(|| format!("cannot write '{}'", metrics_file.display()))?;
 
     let available = run.checkpoint_epochs();
     let best = rows
@@ -242,12 +244,13 @@ fn export_best(
         .or_else(|| available.last().map(|e| (*e, f64::NAN)))
         .context("no checkpoint was written")?;
     let config = &request.config;
-    let record = burn::store::ModuleRecord::load(run.checkpoint_model_file(best.0))
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let checkpoint = run.checkpoint_model_file(best.0);
+    let record = burn::store::ModuleRecord::load(&checkpoint)
+        .map_err(|e| anyhow::anyhow!("checkpoint '{}': {e}", checkpoint.display()))?;
     let net = config.model.init(device).map_err(anyhow::Error::msg)?;
     let trainee = StereoTrainee::new(net, &config.model, config.loss.clone())
         .try_load_record(record)
-        .map_err(|e| anyhow::anyhow!("checkpoint of epoch {}: {e}", best.0))?;
+        .map_err(|e| anyhow::anyhow!("checkpoint '{}': {e}", checkpoint.display()))?;
     let provenance = BTreeMap::from([
         ("command".to_string(), request.command.clone()),
         ("data".to_string(), request.data.display().to_string()),

@@ -154,12 +154,10 @@ pub fn encode<M: Module>(
     Ok(bytes.to_vec())
 }
 
-/// The first bytes of every weights file (Burn's burnpack container).
-const WEIGHTS_MAGIC: &[u8; 4] = b"NRUB";
-
-/// Refuses bytes that are not a weights file at all, saying what they look like instead.
+/// Refuses bytes that are not a weights file at all (they do not begin with Burn's burnpack
+/// magic number), saying what they look like instead.
 fn check_magic(bytes: &[u8]) -> Result<(), WeightsProblem> {
-    if bytes.starts_with(WEIGHTS_MAGIC) {
+    if bytes.starts_with(&burn_pack::MAGIC_NUMBER.to_le_bytes()) {
         return Ok(());
     }
     let what = if bytes.is_empty() {
@@ -174,12 +172,20 @@ fn check_magic(bytes: &[u8]) -> Result<(), WeightsProblem> {
         "a DICOM file"
     } else if bytes.starts_with(b"\x80") || bytes.starts_with(b"PK") {
         "another program's model or archive"
-    } else if std::str::from_utf8(&bytes[..bytes.len().min(512)]).is_ok() {
+    } else if looks_like_text(&bytes[..bytes.len().min(512)]) {
         "a text file"
     } else {
         "another kind of file"
     };
     Err(WeightsProblem::NotWeights(what))
+}
+
+/// Whether a file's first bytes are UTF-8 text (a character cut at the end is allowed).
+fn looks_like_text(head: &[u8]) -> bool {
+    match core::str::from_utf8(head) {
+        Ok(_) => true,
+        Err(e) => e.error_len().is_none(),
+    }
 }
 
 /// Reads the header of a weights file's bytes.

@@ -120,9 +120,16 @@ pub fn read_force_table(
     Ok(rows)
 }
 
-/// A force component as written in a table: a finite number (`nan` and `inf` are refused).
+/// A force component as people write it: a finite number (`nan` and `inf` are refused), with
+/// a point or a comma as the decimal separator (a comma only inside a quoted CSV field).
 pub fn parse_newtons(text: &str) -> Option<f64> {
-    text.trim().parse::<f64>().ok().filter(|v| v.is_finite())
+    let text = text.trim();
+    let text = if text.contains(',') && !text.contains('.') {
+        std::borrow::Cow::Owned(text.replacen(',', ".", 1))
+    } else {
+        std::borrow::Cow::Borrowed(text)
+    };
+    text.parse::<f64>().ok().filter(|v| v.is_finite())
 }
 
 #[cfg(test)]
@@ -171,6 +178,8 @@ mod tests {
             err.to_string(),
             "line 1: no key column: the header needs `id` and `fx`, `fy`, `fz` (newtons)"
         );
+        assert_eq!(parse_newtons(" -0,05 "), Some(-0.05));
+        assert_eq!(parse_newtons("1,000.5"), None);
         let err = read_force_table(b"image,fx,fz\n", &["image", "file"]).unwrap_err();
         assert!(
             err.problem

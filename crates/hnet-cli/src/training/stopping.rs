@@ -1,7 +1,8 @@
 //! When training stops: at the end of the epoch after which the validation loss has not improved
 //! for `patience` epochs (the paper's early stopping), or, with a time budget, at the end of the
 //! last epoch that fits in it, so that a run on a lent machine ends cleanly with its best
-//! checkpoint saved rather than being killed mid-epoch.
+//! checkpoint saved rather than being killed mid-epoch. At least one epoch always runs, and
+//! exporting the best checkpoint (seconds) comes after the budget.
 
 use std::time::{Duration, Instant};
 
@@ -18,12 +19,13 @@ pub struct TimeBudget {
 }
 
 impl TimeBudget {
-    /// A budget of `limit` from `started`.
-    pub fn new(limit: Duration, started: Instant) -> Self {
+    /// A budget of `limit` from `started` (the session's start: data loading counts), for
+    /// epochs from `first_epoch_starts` (so that loading is not taken for an epoch's length).
+    pub fn new(limit: Duration, started: Instant, first_epoch_starts: Instant) -> Self {
         Self {
             limit,
             started,
-            last_epoch_end: started,
+            last_epoch_end: first_epoch_starts.max(started),
             longest_epoch: Duration::ZERO,
         }
     }
@@ -94,7 +96,10 @@ pub fn parse_duration(text: &str) -> Result<Duration, String> {
             _ => return Err(bad()),
         };
         let value: u64 = number.parse().map_err(|_| bad())?;
-        seconds += value * unit;
+        seconds = value
+            .checked_mul(unit)
+            .and_then(|s| seconds.checked_add(s))
+            .ok_or_else(bad)?;
         number.clear();
     }
     if !number.is_empty() || text.trim().is_empty() {
@@ -110,12 +115,13 @@ mod tests {
     #[test]
     fn the_budget_stops_before_an_epoch_that_would_overrun_it() {
         let t0 = Instant::now();
-        let mut budget = TimeBudget::new(Duration::from_secs(35), t0);
         let at = |s| t0 + Duration::from_secs(s);
-        assert!(budget.allows_another_epoch(at(10))); // 10 s + 10 s
-        assert!(budget.allows_another_epoch(at(20))); // 20 s + 10 s
-        assert!(!budget.allows_another_epoch(at(31))); // 31 s + 11 s > 35 s
-        let mut none = TimeBudget::new(Duration::ZERO, t0);
+        // 4 s of loading, then epochs of 8, 10 and 11 s.
+        let mut budget = TimeBudget::new(Duration::from_secs(35), t0, at(4));
+        assert!(budget.allows_another_epoch(at(12))); // 12 s + 8 s
+        assert!(budget.allows_another_epoch(at(22))); // 22 s + 10 s
+        assert!(!budget.allows_another_epoch(at(33))); // 33 s + 11 s > 35 s
+        let mut none = TimeBudget::new(Duration::ZERO, t0, t0);
         assert!(!none.allows_another_epoch(at(1)));
     }
 
@@ -125,7 +131,14 @@ mod tests {
         assert_eq!(parse_duration("12m"), Ok(Duration::from_secs(720)));
         assert_eq!(parse_duration("1h30m"), Ok(Duration::from_secs(5400)));
         assert_eq!(parse_duration("0s"), Ok(Duration::ZERO));
-        for bad in ["", "12", "m", "1.5h", "ten minutes"] {
+        for bad in [
+            "",
+            "12",
+            "m",
+            "1.5h",
+            "ten minutes",
+            "99999999999999999999h",
+        ] {
             assert!(parse_duration(bad).is_err(), "{bad}");
         }
     }
