@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
-# Runs every test: formatting, clippy (native and wasm32), the native tests, the browser tests
-# (wasm-bindgen-test in headless Chromium), the trunk build of the page and the Playwright
-# end-to-end tests.
+# Runs every test: formatting, clippy (native and wasm32), the native tests, a type check of the
+# GPU (wgpu) build of `hnet`, the browser tests (wasm-bindgen-test in headless Chromium), the
+# trunk build of the page and the Playwright end-to-end tests.
 #
 # Clippy runs inside the builds that the tests need: clippy-driver is cargo's workspace wrapper
 # (what `cargo clippy` itself does, for `cargo check`), so every workspace crate is compiled once,
@@ -24,6 +24,11 @@ cargo fmt --all -- --check
 
 step "native: clippy, build and tests"
 with_clippy cargo test --workspace --all-targets --locked
+
+# The GPU backend cannot run here, but it must keep compiling (scripts/gpu-build.sh builds it
+# for a lent GPU machine): a type check, about 3-4 minutes on 2 cores.
+step "native: type-check hnet with the wgpu backend"
+cargo check -p hnet-cli --features wgpu --locked
 
 (
   . scripts/wasm-env.sh
