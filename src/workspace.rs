@@ -217,6 +217,9 @@ pub fn paint_segment(
 /// One undoable change of a pair's masks: each changed view's mask before and after.
 #[derive(Debug, Clone, PartialEq)]
 struct Edit {
+    /// When it was made: edits are numbered in order, so that a restored pair's edits go back
+    /// into the history where they were.
+    serial: u64,
     pair: String,
     masks: Vec<(View, Vec<u8>, Vec<u8>)>,
     labeled_before: bool,
@@ -243,6 +246,8 @@ pub struct Workspace {
     redo: Vec<Edit>,
     /// The stroke in progress: pair, view, and its mask before the stroke.
     stroke_start: Option<(String, View, Vec<u8>, bool)>,
+    /// The number of the next edit.
+    next_serial: u64,
 }
 
 /// Undo steps kept.
@@ -334,6 +339,7 @@ impl Workspace {
         let id = removed.pair.id.clone();
         self.pairs.insert(index, removed.pair);
         self.undo.extend(removed.undo);
+        self.undo.sort_by_key(|e| e.serial);
         let excess = self.undo.len().saturating_sub(HISTORY);
         self.undo.drain(..excess);
         self.current = Some(index);
@@ -379,6 +385,7 @@ impl Workspace {
             return None;
         }
         self.push_edit(Edit {
+            serial: 0,
             pair: id.clone(),
             masks: vec![(view, before, after)],
             labeled_before,
@@ -386,7 +393,9 @@ impl Workspace {
         Some(id)
     }
 
-    fn push_edit(&mut self, edit: Edit) {
+    fn push_edit(&mut self, mut edit: Edit) {
+        edit.serial = self.next_serial;
+        self.next_serial += 1;
         self.undo.push(edit);
         if self.undo.len() > HISTORY {
             self.undo.remove(0);
@@ -412,6 +421,7 @@ impl Workspace {
             return (!labeled_before).then_some(id);
         }
         self.push_edit(Edit {
+            serial: 0,
             pair: id.clone(),
             masks: changes,
             labeled_before,
@@ -733,6 +743,16 @@ mod tests {
         // Its stroke can still be undone.
         assert_eq!(ws.undo().as_deref(), Some("pair-0002"));
         assert_eq!(ws.pairs[1].labeled_pixels(View::A), 0);
+        assert_eq!(ws.redo().as_deref(), Some("pair-0002"));
+        // Edits of the restored pair go back where they were in time: here a newer stroke on
+        // pair-0001 is undone first.
+        ws.select(0);
+        stroke(&mut ws, View::A, [5.0, 5.0], [20.0, 5.0], 2.0, Tool::Brush);
+        ws.select(1);
+        let again = ws.remove_current().unwrap();
+        ws.restore(again);
+        assert_eq!(ws.undo().as_deref(), Some("pair-0001"));
+        assert_eq!(ws.undo().as_deref(), Some("pair-0002"));
         // A restore never replaces a pair that holds the id.
         assert_eq!(ws.restore(removed), None);
     }
