@@ -99,15 +99,12 @@ pub struct TrainedModel {
 /// Loads a run's `model.bpk` (and its training config for the input size).
 pub fn load_run(run: &RunDir, device: &Device) -> anyhow::Result<TrainedModel> {
     let path = run.model_file();
-    let bytes = std::fs::read(&path).with_context(|| {
+    let (net, spec) = read_weights(&path, device).with_context(|| {
         format!(
-            "cannot read '{}' (has `hnet train --out {}` finished?)",
-            path.display(),
+            "run folder '{}' (has `hnet train` finished?)",
             run.root().display()
         )
     })?;
-    let (net, spec, _) =
-        StereoModel::from_weights_bytes(&bytes, device, &path.display().to_string())?;
     let config = run.read_config()?;
     Ok(TrainedModel {
         net,
@@ -158,6 +155,15 @@ pub fn predict(
     Ok(())
 }
 
+/// Reads a weights file and rebuilds its network; errors name the file.
+fn read_weights(path: &Path, device: &Device) -> anyhow::Result<(StereoModel, ModelSpec)> {
+    let bytes = std::fs::read(path)
+        .with_context(|| format!("cannot read weights file '{}'", path.display()))?;
+    let (net, spec, _) =
+        StereoModel::from_weights_bytes(&bytes, device, &path.display().to_string())?;
+    Ok((net, spec))
+}
+
 /// Loads a weights file on its own. H-Net's weights record their input size; a baseline's come
 /// at `size` (square, pixels).
 pub fn load_weights(
@@ -165,10 +171,7 @@ pub fn load_weights(
     size: Option<usize>,
     device: &Device,
 ) -> anyhow::Result<TrainedModel> {
-    let bytes = std::fs::read(path)
-        .with_context(|| format!("cannot read weights file '{}'", path.display()))?;
-    let (net, spec, _) =
-        StereoModel::from_weights_bytes(&bytes, device, &path.display().to_string())?;
+    let (net, spec) = read_weights(path, device)?;
     let image_size = match (&spec, size) {
         (ModelSpec::Hnet(config), None) => config.image_size,
         (ModelSpec::Hnet(config), Some(size)) if [size, size] != config.image_size => {
