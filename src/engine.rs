@@ -9,9 +9,11 @@ use hnet_model::architectures::{ModelSpec, StereoModel};
 use hnet_model::inference::StereoPair;
 use hnet_model::weights::WeightsHeader;
 use hnet_model::{HNet, HNetConfig};
+use hnet_units::ImageSize;
 
 use crate::browser::{now_ms, yield_to_browser};
 use crate::compute::Backend;
+use crate::error_text::with_causes;
 use crate::imaging::{WORK_SIZE, rescale_mask, rescale_rgb};
 
 /// Input size of the untrained network the page falls back to when it ships no weights, pixels.
@@ -37,7 +39,7 @@ pub struct Engine {
     /// The network.
     pub model: HNet,
     /// Its input size `[height, width]`, pixels.
-    pub input: [usize; 2],
+    pub input: ImageSize,
     /// Parameter count.
     pub params: usize,
     /// The weights file's name.
@@ -76,17 +78,17 @@ impl Engine {
         backend: Backend,
     ) -> Result<Self, String> {
         let (model, spec, header) =
-            StereoModel::from_weights_bytes(&bytes, &device, name).map_err(|e| e.to_string())?;
+            StereoModel::from_weights_bytes(&bytes, &device, name).map_err(|e| with_causes(&e))?;
         let (StereoModel::Hnet(model), ModelSpec::Hnet(config)) = (model, spec) else {
             return Err(format!(
                 "{name}: holds `{}` weights; the page runs H-Net",
                 header.architecture
             ));
         };
-        if config.image_size[0] != config.image_size[1] {
+        if !config.image_size.is_square() {
             return Err(format!(
-                "{name}: the network takes {}x{} images; the page runs square inputs only",
-                config.image_size[0], config.image_size[1]
+                "{name}: the network takes {} images; the page runs square inputs only",
+                config.image_size
             ));
         }
         Ok(Self {
@@ -104,8 +106,8 @@ impl Engine {
 
     /// An untrained H-Net (paper architecture at [`FALLBACK_INPUT`] pixels).
     pub fn untrained(device: Device, backend: Backend) -> Result<Self, String> {
-        let config = HNetConfig::new().with_image_size([FALLBACK_INPUT, FALLBACK_INPUT]);
-        let model = config.init(&device).map_err(|e| e.to_string())?;
+        let config = HNetConfig::new().with_image_size(ImageSize::square(FALLBACK_INPUT));
+        let model = config.init(&device).map_err(|e| with_causes(&e))?;
         Ok(Self {
             params: model.num_params(),
             device,
@@ -122,7 +124,7 @@ impl Engine {
     /// Runs H-Net on two [`WORK_SIZE`] RGB images, resizing them to the network's input and
     /// its masks back. Yields to the browser first so that the busy state is painted.
     pub async fn infer(self: Rc<Self>, view_a: &[u8], view_b: &[u8]) -> Result<Prediction, String> {
-        let side = self.input[0];
+        let side = self.input.width;
         let (a, b) = (
             rescale_rgb(view_a, WORK_SIZE, side),
             rescale_rgb(view_b, WORK_SIZE, side),
@@ -140,7 +142,7 @@ impl Engine {
                 &self.device,
             )
             .await
-            .map_err(|e| e.to_string())?;
+            .map_err(|e| with_causes(&e))?;
         let millis = now_ms() - start;
         let p = out
             .into_iter()

@@ -3,6 +3,7 @@
 
 use hnet_twin::archive::{ArchiveError, DatasetArchive};
 use hnet_twin::dataset::{DatasetHeader, ImageRef, ManifestRow, Split};
+use hnet_units::ImageSize;
 
 use crate::imaging::WORK_SIZE;
 use crate::workspace::{LabeledPair, PairSource, export_splits};
@@ -40,29 +41,14 @@ impl Export {
 }
 
 /// Why nothing could be exported.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, thiserror::Error)]
 pub enum ExportError {
     /// No pair has both masks labeled and a force label.
+    #[error("no pair is complete yet: a pair needs its masks labeled and a force label")]
     NothingComplete,
     /// The archive could not be built.
-    Archive(String),
-}
-
-impl std::fmt::Display for ExportError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            ExportError::NothingComplete => f.write_str(
-                "no pair is complete yet: a pair needs its masks labeled and a force label",
-            ),
-            ExportError::Archive(e) => e.fmt(f),
-        }
-    }
-}
-
-impl From<ArchiveError> for ExportError {
-    fn from(e: ArchiveError) -> Self {
-        ExportError::Archive(e.to_string())
-    }
+    #[error(transparent)]
+    Archive(#[from] ArchiveError),
 }
 
 /// A square image at the working size.
@@ -153,7 +139,7 @@ pub fn dataset_zip(pairs: &[LabeledPair]) -> Result<Export, ExportError> {
         )?;
     }
     let header = DatasetHeader::new(
-        [WORK_SIZE, WORK_SIZE],
+        ImageSize::square(WORK_SIZE),
         complete.len(),
         serde_json::json!({
             "generator": "hnet-studio",
@@ -214,7 +200,7 @@ mod tests {
         let row = &dataset.rows[0];
         assert_eq!(row.force_n, [0.1, 0.0, -0.1]);
         let loaded = dataset.load_pair(row, None).unwrap();
-        assert_eq!(loaded.size, [WORK_SIZE, WORK_SIZE]);
+        assert_eq!(loaded.size, ImageSize::square(WORK_SIZE));
         let catheter = loaded.mask_a.iter().filter(|&&m| m > 0.5).count();
         assert_eq!(
             catheter,
@@ -223,10 +209,10 @@ mod tests {
         std::fs::remove_dir_all(dir).ok();
 
         let none: Vec<LabeledPair> = Vec::new();
-        assert_eq!(
+        assert!(matches!(
             dataset_zip(&none).unwrap_err(),
             ExportError::NothingComplete
-        );
+        ));
     }
 
     #[test]

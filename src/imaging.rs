@@ -15,19 +15,18 @@ pub const MAX_UPLOAD_BYTES: usize = 40 * 1024 * 1024;
 /// Largest decoded image accepted, pixels per side.
 pub const MAX_UPLOAD_SIDE: u32 = 8192;
 
-/// Why an uploaded file cannot be used.
-#[derive(Debug, Clone, PartialEq, Eq)]
+/// Why an uploaded file cannot be used: the file, what is wrong, and the decoder's error when
+/// the bytes could not be decoded.
+#[derive(Debug, thiserror::Error)]
+#[error("{file}: {problem}")]
 pub struct ImageError {
     /// The file's name.
     pub file: String,
     /// What is wrong.
     pub problem: String,
-}
-
-impl std::fmt::Display for ImageError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}: {}", self.file, self.problem)
-    }
+    /// The decoder's error.
+    #[source]
+    pub cause: Option<image::ImageError>,
 }
 
 /// Decodes a PNG or JPEG and resizes it to `size` x `size` RGB.
@@ -64,6 +63,11 @@ fn decode(file: &str, bytes: &[u8]) -> Result<image::DynamicImage, ImageError> {
     let error = |problem: String| ImageError {
         file: file.to_string(),
         problem,
+        cause: None,
+    };
+    let undecodable = |e: image::ImageError| ImageError {
+        cause: Some(e),
+        ..error("cannot be decoded".into())
     };
     if bytes.is_empty() {
         return Err(error("the file is empty".into()));
@@ -83,9 +87,7 @@ fn decode(file: &str, bytes: &[u8]) -> Result<image::DynamicImage, ImageError> {
         )));
     }
     let reader = || image::ImageReader::with_format(std::io::Cursor::new(bytes), format);
-    let (width, height) = reader()
-        .into_dimensions()
-        .map_err(|e| error(format!("cannot be decoded: {e}")))?;
+    let (width, height) = reader().into_dimensions().map_err(undecodable)?;
     if width > MAX_UPLOAD_SIDE || height > MAX_UPLOAD_SIDE {
         return Err(error(format!(
             "the image is {width} x {height} pixels; the limit is {MAX_UPLOAD_SIDE} per side"
@@ -97,9 +99,7 @@ fn decode(file: &str, bytes: &[u8]) -> Result<image::DynamicImage, ImageError> {
     limits.max_image_height = Some(MAX_UPLOAD_SIDE);
     limits.max_alloc = Some(512 * 1024 * 1024);
     reader.limits(limits);
-    reader
-        .decode()
-        .map_err(|e| error(format!("cannot be decoded: {e}")))
+    reader.decode().map_err(undecodable)
 }
 
 /// `image` as `size` x `size` RGB bytes (triangle filter).

@@ -9,12 +9,14 @@
 //! - [`twin_live`]: the digital twin's sliders and the synthetic X-ray background composer;
 //! - [`export`]: the labeled pairs as a dataset zip;
 //! - [`force_reading`]: what a force estimate can be said to show against the ablation band;
-//! - [`keymap`]: every keyboard shortcut, for the handlers, the help list and the tooltips.
+//! - [`keymap`]: every keyboard shortcut, for the handlers, the help list and the tooltips;
+//! - [`error_text`]: an error and its causes as one message.
 //!
 //! The rest exists only on wasm32: the page's state (`studio`), its components (`app`,
 //! `components`), the network on the chosen device (`engine`, `compute`), the browser's storage
 //! (`storage`) and files (`browser`). `src/main.rs` mounts [`App`].
 
+pub mod error_text;
 pub mod export;
 pub mod force_reading;
 pub mod imaging;

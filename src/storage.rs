@@ -12,6 +12,7 @@ use web_sys::{IdbDatabase, IdbRequest, IdbTransactionMode};
 
 use hnet_twin::dataset::{ImageRef, Split, encode_png};
 
+use crate::error_text::with_causes;
 use crate::imaging::WORK_SIZE;
 use crate::workspace::{LabeledPair, PairSource};
 
@@ -110,7 +111,7 @@ pub async fn save_pair(pair: &LabeledPair) -> Result<(), String> {
         force_n: pair.force_n,
         split: pair.split,
     })
-    .map_err(|e| e.to_string())?;
+    .map_err(|e| with_causes(&e))?;
     let set = |key: &str, value: &JsValue| Reflect::set(&record, &key.into(), value);
     set("metadata", &JsValue::from_str(&metadata)).map_err(|e| js_error("saving", e))?;
     set("view_a", &png(&pair.view_a, 3)).map_err(|e| js_error("saving", e))?;
@@ -177,7 +178,7 @@ pub async fn load_pairs() -> Result<(Vec<LabeledPair>, Vec<String>), String> {
                     .and_then(|m| m.as_string())
                     .ok_or("no metadata")?,
             )
-            .map_err(|e| e.to_string())?;
+            .map_err(|e| with_causes(&e))?;
             Ok(LabeledPair {
                 id: metadata.id,
                 source: metadata.source,

@@ -527,25 +527,15 @@ pub fn export_splits(pairs: &[LabeledPair]) -> Vec<Option<Split>> {
     splits
 }
 
-/// Why a force-label file cannot be used: the file, the line (1-based, when it is one line's
-/// fault) and the problem.
-#[derive(Debug, Clone, PartialEq, Eq)]
+/// Why a force-label file cannot be used: the file, and what is wrong in it (with the line,
+/// when it is one line's fault).
+#[derive(Debug, Clone, thiserror::Error)]
+#[error("{file}, {table}")]
 pub struct ForceLabelError {
     /// The file's name.
     pub file: String,
-    /// The line of the file, when one line is at fault.
-    pub line: Option<u64>,
-    /// What is wrong.
-    pub problem: String,
-}
-
-impl std::fmt::Display for ForceLabelError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self.line {
-            Some(line) => write!(f, "{}, line {line}: {}", self.file, self.problem),
-            None => write!(f, "{}: {}", self.file, self.problem),
-        }
-    }
+    /// What is wrong in it.
+    pub table: ForceTableError,
 }
 
 /// Reads one typed force component in newtons (`axis` names it in the message), by the rule of
@@ -573,29 +563,24 @@ pub fn parse_force_labels(
     file: &str,
     bytes: &[u8],
 ) -> Result<Vec<(String, [f32; 3])>, ForceLabelError> {
-    let error = |e: ForceTableError| ForceLabelError {
+    let error = |table: ForceTableError| ForceLabelError {
         file: file.to_string(),
-        line: e.line,
-        problem: e.problem,
+        table,
     };
     let mut labels = Vec::new();
     for row in read_force_table(bytes, &["id"]).map_err(error)? {
         let row = row.map_err(error)?;
         let force = row.force_n.map(|f| f as f32);
         if let Some(why) = implausible_label(force) {
-            return Err(error(ForceTableError {
-                line: Some(row.line),
-                problem: format!("the force of `{}` is refused: {why}", row.key),
-            }));
+            return Err(error(ForceTableError::new(
+                Some(row.line),
+                format!("the force of `{}` is refused: {why}", row.key),
+            )));
         }
         labels.push((row.key, force));
     }
     if labels.is_empty() {
-        return Err(ForceLabelError {
-            file: file.to_string(),
-            line: None,
-            problem: "holds no force labels".into(),
-        });
+        return Err(error(ForceTableError::new(None, "holds no force labels")));
     }
     Ok(labels)
 }
@@ -789,18 +774,19 @@ mod tests {
         );
 
         let err = parse_force_labels("f.csv", b"id,fx,fy,fz\np1,0,0,0\np2,0,NaN,0\n").unwrap_err();
-        assert_eq!(err.line, Some(3));
+        assert_eq!(err.table.line, Some(3));
         assert!(err.to_string().contains("f.csv, line 3"), "{err}");
-        assert!(err.problem.contains("fy of `p2`"), "{err}");
+        assert!(err.table.problem.contains("fy of `p2`"), "{err}");
         let err = parse_force_labels("g.csv", b"name,fx,fy,fz\n").unwrap_err();
-        assert!(err.problem.contains("`id`"), "{err}");
+        assert!(err.table.problem.contains("`id`"), "{err}");
         assert!(parse_force_labels("e.csv", b"id,fx,fy,fz\n").is_err());
         // A value far outside a catheter's range is refused with its line.
         let err =
             parse_force_labels("big.csv", b"id,fx,fy,fz\np1,0.1,0,0\np2,1e6,0,0\n").unwrap_err();
-        assert_eq!(err.line, Some(3));
+        assert_eq!(err.table.line, Some(3));
         assert!(
-            err.problem
+            err.table
+                .problem
                 .starts_with("the force of `p2` is refused: |F| = 1000000.000 N"),
             "{err}"
         );

@@ -7,6 +7,7 @@ use leptos::prelude::*;
 use wasm_bindgen::{Clamped, JsCast};
 
 use crate::browser::{files, read_file};
+use crate::error_text::with_causes;
 use crate::imaging::decode_radiograph;
 use crate::keymap::{self, Command, Scope};
 use crate::studio::Studio;
@@ -240,7 +241,7 @@ pub fn Composer() -> impl IntoView {
         leptos::task::spawn_local(async move {
             let result = async {
                 let bytes = read_file(&file).await?;
-                decode_radiograph(&file.name(), &bytes).map_err(|e| e.to_string())
+                decode_radiograph(&file.name(), &bytes).map_err(|e| with_causes(&e))
             }
             .await;
             match result {

@@ -7,6 +7,7 @@ use leptos::prelude::*;
 use crate::browser::{files, read_file};
 use crate::bundled::BUNDLED_FORCE_CAVEAT;
 use crate::engine::WeightsOrigin;
+use crate::error_text::with_causes;
 use crate::force_reading::{ABLATION_BAND_N, BandPosition, TrainingDomain, Verdict};
 use crate::imaging::magnitude;
 use crate::studio::{ModelState, Studio};
@@ -85,7 +86,7 @@ pub fn ForcePanel() -> impl IntoView {
         input.set_value("");
         leptos::task::spawn_local(async move {
             let labels = match read_file(&file).await {
-                Ok(bytes) => parse_force_labels(&file.name(), &bytes).map_err(|e| e.to_string()),
+                Ok(bytes) => parse_force_labels(&file.name(), &bytes).map_err(|e| with_causes(&e)),
                 Err(e) => Err(e),
             };
             match labels {

@@ -85,7 +85,7 @@ pub fn ModelBar() -> impl IntoView {
                             <div><dt>"Parameters"</dt><dd id="params">{engine.params}</dd></div>
                             <div>
                                 <dt>"Input"</dt>
-                                <dd id="input-size">{format!("{} × {} px", engine.input[1], engine.input[0])}</dd>
+                                <dd id="input-size">{format!("{} px", engine.input)}</dd>
                             </div>
                             <div>
                                 <dt>"Weights"</dt>

@@ -6,6 +6,7 @@ use leptos::prelude::*;
 
 use crate::browser::{files, read_file};
 use crate::components::composer::Composer;
+use crate::error_text::with_causes;
 use crate::imaging::{WORK_SIZE, decode_to_rgb};
 use crate::keymap::{self, Command, Scope};
 use crate::studio::{SourceTab, Studio};
@@ -91,7 +92,7 @@ type PickedView = (String, Vec<u8>);
 async fn decode_view(file: &web_sys::File) -> Result<PickedView, String> {
     let name = file.name();
     let bytes = read_file(file).await?;
-    let rgb = decode_to_rgb(&name, &bytes, WORK_SIZE).map_err(|e| e.to_string())?;
+    let rgb = decode_to_rgb(&name, &bytes, WORK_SIZE).map_err(|e| with_causes(&e))?;
     Ok((name, rgb))
 }
 

@@ -7,6 +7,7 @@ use std::path::Path;
 use anyhow::{Context, bail};
 use hnet_model::HNetLossConfig;
 use hnet_model::architectures::ModelSpec;
+use hnet_units::ImageSize;
 use serde::{Deserialize, Serialize};
 
 /// Everything that defines a training run (`config.json` in the run folder).
@@ -16,8 +17,8 @@ pub struct TrainingConfig {
     pub name: String,
     /// The network and its settings.
     pub model: ModelSpec,
-    /// Input size `[height, width]`; images are resized to it.
-    pub image_size: [usize; 2],
+    /// Input size in pixels; images are resized to it.
+    pub image_size: ImageSize,
     /// Loss weights β1, β2, β3 (eq. 7).
     pub loss: HNetLossConfig,
     /// RMSprop learning rate (the paper: 1e-4).
@@ -55,11 +56,11 @@ impl TrainingConfig {
     /// Checks that the settings describe a trainable run.
     pub fn check(&self) -> anyhow::Result<()> {
         let multiple = self.model.size_multiple();
-        if self.image_size.iter().any(|s| *s == 0 || s % multiple != 0) {
+        let ImageSize { width, height } = self.image_size;
+        if [width, height].iter().any(|s| *s == 0 || s % multiple != 0) {
             bail!(
-                "image size {}x{} must be a positive multiple of {multiple} for {}",
-                self.image_size[0],
-                self.image_size[1],
+                "image size {} (width×height) must be a positive multiple of {multiple} for {}",
+                self.image_size,
                 self.model
             );
         }
@@ -67,7 +68,7 @@ impl TrainingConfig {
             && c.image_size != self.image_size
         {
             bail!(
-                "the H-Net config's image_size {:?} differs from the training image_size {:?}",
+                "the H-Net config's image_size {} differs from the training image_size {}",
                 c.image_size,
                 self.image_size
             );

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use hnet_twin::dataset::Dataset;
+use hnet_units::ImageSize;
 use image::{Rgb, RgbImage, imageops};
 
 #[derive(clap::Args, Debug)]
@@ -33,7 +34,7 @@ pub fn run(args: &ContactSheetArgs) -> anyhow::Result<()> {
     let height = rows.len() as u32 * (tile + gap) + gap;
     let mut sheet = RgbImage::from_pixel(width, height, Rgb([255, 255, 255]));
     for (r, row) in rows.iter().enumerate() {
-        let pair = dataset.load_pair(row, Some([tile as usize, tile as usize]))?;
+        let pair = dataset.load_pair(row, Some(ImageSize::square(tile as usize)))?;
         let grey = |mask: &[f32]| -> Vec<u8> {
             mask.iter()
                 .flat_map(|&m| {

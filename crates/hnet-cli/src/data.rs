@@ -11,6 +11,7 @@ use burn::data::dataset::{Dataset as BurnDataset, DatasetError};
 use burn::tensor::{Device, Tensor, TensorData};
 use hnet_model::inference::push_planar;
 use hnet_twin::dataset::{Dataset, ManifestRow, Split};
+use hnet_units::ImageSize;
 use rayon::prelude::*;
 
 /// One stereo pair at the model's input size.
@@ -38,11 +39,11 @@ pub struct StereoSplit {
 }
 
 impl StereoSplit {
-    /// Loads `split` of `dataset` at `size` (`[height, width]`), at most `limit` pairs.
+    /// Loads `split` of `dataset` at `size`, at most `limit` pairs.
     pub fn load(
         dataset: &Dataset,
         split: Split,
-        size: [usize; 2],
+        size: ImageSize,
         limit: Option<usize>,
     ) -> anyhow::Result<Self> {
         let rows: Vec<&ManifestRow> = dataset
@@ -52,7 +53,7 @@ impl StereoSplit {
         let items = rows
             .par_iter()
             .map(|row| -> anyhow::Result<StereoItem> {
-                let pair = dataset.load_pair(row, Some([size[1], size[0]]))?;
+                let pair = dataset.load_pair(row, Some(size))?;
                 let mask = |m: &[f32]| -> Arc<[u8]> {
                     m.iter().map(|v| (v * 255.0).round() as u8).collect()
                 };
@@ -110,13 +111,13 @@ pub struct StereoBatch {
 /// Turns pairs into [`StereoBatch`]es.
 #[derive(Debug, Clone)]
 pub struct StereoBatcher {
-    /// `[height, width]`.
-    pub size: [usize; 2],
+    /// The images' size.
+    pub size: ImageSize,
 }
 
 impl Batcher<StereoItem, StereoBatch> for StereoBatcher {
     fn batch(&self, items: Vec<StereoItem>, device: &Device) -> StereoBatch {
-        let [h, w] = self.size;
+        let [h, w] = self.size.height_width();
         let n = items.len();
         let mut a = Vec::with_capacity(n * 3 * h * w);
         let mut b = Vec::with_capacity(n * 3 * h * w);
@@ -155,7 +156,7 @@ mod tests {
         let (width, height, marker) = (48usize, 32usize, (40usize, 5usize));
         let root = std::env::temp_dir().join(format!("hnet-non-square-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&root);
-        let header = DatasetHeader::new([width, height], 1, serde_json::json!({}));
+        let header = DatasetHeader::new(ImageSize::new(width, height), 1, serde_json::json!({}));
         let writer = DatasetWriter::create_or_resume(&root, &header).unwrap();
         let mut rgb = vec![0u8; width * height * 3];
         let mut grey = vec![0u8; width * height];
@@ -186,7 +187,7 @@ mod tests {
         writer.finish().unwrap();
 
         let dataset = Dataset::open(&root).unwrap();
-        let model_size = [height, width];
+        let model_size = ImageSize::new(width, height);
         let split = StereoSplit::load(&dataset, Split::Train, model_size, None).unwrap();
         assert_eq!(split.items[0].mask_a[at], 255);
         let batch = StereoBatcher { size: model_size }.batch(split.items, &Device::flex());

@@ -13,6 +13,7 @@ use hnet_model::metrics::{
     AXES, AxisMetrics, ForceAccumulator, ForceMetrics, SegmentationAccumulator, SegmentationMetrics,
 };
 use hnet_twin::dataset::{Dataset, Split};
+use hnet_units::ImageSize;
 use serde::{Deserialize, Serialize};
 
 use crate::backend::BackendChoice;
@@ -65,8 +66,8 @@ pub struct Evaluation {
     pub data: PathBuf,
     /// Split evaluated.
     pub split: String,
-    /// Input size `[height, width]`.
-    pub image_size: [usize; 2],
+    /// Input size, pixels.
+    pub image_size: ImageSize,
     /// Table I, for networks with a force head.
     pub force: Option<ForceMetrics>,
     /// Table II per head (view A, view B), for networks that segment.
@@ -92,8 +93,8 @@ pub struct TrainedModel {
     pub net: StereoModel,
     /// Its settings.
     pub spec: ModelSpec,
-    /// Input size `[height, width]` it was trained at.
-    pub image_size: [usize; 2],
+    /// Input size (pixels) it was trained at.
+    pub image_size: ImageSize,
 }
 
 /// Loads a run's `model.bpk` (and its training config for the input size).
@@ -125,7 +126,7 @@ pub fn predict(
     let batcher = StereoBatcher {
         size: model.image_size,
     };
-    let pixels = model.image_size[0] * model.image_size[1];
+    let pixels = model.image_size.pixels();
     for chunk in items.chunks(batch_size.max(1)) {
         let batch = batcher.batch(chunk.to_vec(), device);
         let out = model
@@ -174,16 +175,15 @@ pub fn load_weights(
     let (net, spec) = read_weights(path, device)?;
     let image_size = match (&spec, size) {
         (ModelSpec::Hnet(config), None) => config.image_size,
-        (ModelSpec::Hnet(config), Some(size)) if [size, size] != config.image_size => {
+        (ModelSpec::Hnet(config), Some(size)) if ImageSize::square(size) != config.image_size => {
             anyhow::bail!(
-                "weights file '{}': this H-Net takes {}x{} images, not {size}x{size} (leave \
+                "weights file '{}': this H-Net takes {} images, not {size}×{size} (leave \
                  --size out)",
                 path.display(),
-                config.image_size[1],
-                config.image_size[0]
+                config.image_size,
             )
         }
-        (_, Some(size)) => [size, size],
+        (_, Some(size)) => ImageSize::square(size),
         (spec, None) => anyhow::bail!(
             "weights file '{}' holds a `{}` network, whose input size is not recorded: give \
              --size",
@@ -193,7 +193,9 @@ pub fn load_weights(
     };
     let multiple = spec.size_multiple();
     anyhow::ensure!(
-        image_size.iter().all(|s| *s > 0 && s % multiple == 0),
+        [image_size.width, image_size.height]
+            .iter()
+            .all(|s| *s > 0 && s % multiple == 0),
         "weights file '{}': --size must be a positive multiple of {multiple} for `{}`",
         path.display(),
         spec.name()
@@ -290,12 +292,11 @@ pub fn markdown(e: &Evaluation) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "{} on the {} split of {} ({}x{}, {} parameters)\n",
+        "{} on the {} split of {} ({}, {} parameters)\n",
         e.architecture,
         e.split,
         e.data.display(),
-        e.image_size[1],
-        e.image_size[0],
+        e.image_size,
         e.params
     );
     if let Some(f) = &e.force {

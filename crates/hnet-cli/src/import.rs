@@ -69,17 +69,19 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<()> {
         bar.set_position(done as u64);
     })?;
     bar.finish_and_clear();
-    for message in &report.skipped {
-        eprintln!("skipped: {message}");
+    let skipped = report.skipped.len();
+    for problem in report.skipped {
+        // anyhow's alternate form prints the problem with its causes, as `main` does.
+        eprintln!("skipped: {:#}", anyhow::Error::from(problem));
     }
     eprintln!(
         "{} stereo pairs imported into {}{}",
         report.imported,
         args.out.display(),
-        if report.skipped.is_empty() {
+        if skipped == 0 {
             String::new()
         } else {
-            format!(", {} rows skipped", report.skipped.len())
+            format!(", {skipped} rows skipped")
         }
     );
     Ok(())

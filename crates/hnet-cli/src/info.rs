@@ -60,7 +60,7 @@ pub fn run(args: &InfoArgs) -> anyhow::Result<()> {
     };
     let params = count(true)?;
     let params_unshared = count(false)?;
-    let [h, w] = config.image_size;
+    let [h, w] = config.image_size.height_width();
     let info = Info {
         architecture: "hnet",
         params: if config.share_weights {

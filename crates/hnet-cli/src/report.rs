@@ -11,6 +11,7 @@ use anyhow::{Context, bail};
 use burn::tensor::Device;
 use hnet_model::metrics::AXES;
 use hnet_twin::dataset::{Dataset, Split};
+use hnet_units::ImageSize;
 use image::{Rgb, RgbImage};
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -294,7 +295,10 @@ fn sample_sheet(
     }
     let dataset = Dataset::open(data)?;
     let split = StereoSplit::load(&dataset, Split::Test, model.image_size, Some(4))?;
-    let [h, w] = model.image_size;
+    let ImageSize {
+        width: w,
+        height: h,
+    } = model.image_size;
     let (tile_w, tile_h, gap) = (w as u32, h as u32, 4u32);
     let rows = split.items.len() as u32;
     let mut sheet = RgbImage::from_pixel(

@@ -112,11 +112,10 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
         );
     }
     eprintln!(
-        "loaded {} training and {} validation pairs at {}x{} in {:.1} s",
+        "loaded {} training and {} validation pairs at {} in {:.1} s",
         train_split.items.len(),
         valid_split.items.len(),
-        config.image_size[1],
-        config.image_size[0],
+        config.image_size,
         started.elapsed().as_secs_f64()
     );
 
@@ -401,7 +400,9 @@ mod tests {
     #[test]
     fn the_force_head_alone_gets_its_own_learning_rate() {
         let mut config = builtin_config("cpu").unwrap();
-        config.model = ModelSpec::Hnet(hnet_model::HNetConfig::new().with_image_size([32, 32]));
+        config.model = ModelSpec::Hnet(
+            hnet_model::HNetConfig::new().with_image_size(hnet_units::ImageSize::square(32)),
+        );
         config.learning_rate = 1e-3;
         config.force_head_learning_rate = Some(1e-4);
         let device = Device::flex();

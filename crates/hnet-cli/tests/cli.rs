@@ -27,12 +27,21 @@ fn scratch(name: &str) -> PathBuf {
     dir
 }
 
-/// A small H-Net config (32x32, 8 filters, 2 levels) for tests.
+/// A small config for tests: H-Net at 48x32 (non-square, so that a width/height mix-up anywhere
+/// from the dataset to the report fails), 8 filters, 2 levels; the baselines at 32x32.
 fn tiny_config(dir: &Path, architecture: &str, epochs: usize) -> PathBuf {
+    let hnet_size = r#"{"width": 48, "height": 32}"#;
+    let square = r#"{"width": 32, "height": 32}"#;
+    let size = if architecture == "hnet" {
+        hnet_size
+    } else {
+        square
+    };
     let model = match architecture {
-        "hnet" => r#"{"architecture": "hnet", "in_channels": 3, "filters": 8, "depth": 2,
-                      "image_size": [32, 32], "share_weights": true, "force_hidden": [16, 8]}"#
-            .to_string(),
+        "hnet" => format!(
+            r#"{{"architecture": "hnet", "in_channels": 3, "filters": 8, "depth": 2,
+                 "image_size": {hnet_size}, "share_weights": true, "force_hidden": [16, 8]}}"#
+        ),
         "unet" => r#"{"architecture": "unet", "base_filters": 4, "depth": 2}"#.to_string(),
         "fcn" => r#"{"architecture": "fcn", "base_filters": 4}"#.to_string(),
         "hrnet" => r#"{"architecture": "hrnet", "width": 4}"#.to_string(),
@@ -43,7 +52,7 @@ fn tiny_config(dir: &Path, architecture: &str, epochs: usize) -> PathBuf {
     std::fs::write(
         &path,
         format!(
-            r#"{{"name": "tiny", "model": {model}, "image_size": [32, 32],
+            r#"{{"name": "tiny", "model": {model}, "image_size": {size},
               "loss": {{"beta_a": 1.0, "beta_b": 1.0, "beta_force": 1.0}},
               "learning_rate": 0.001, "rmsprop_alpha": 0.9, "rmsprop_momentum": 0.0,
               "rmsprop_epsilon": 1e-7, "batch_size": 8, "epochs": {epochs}, "patience": 20,
@@ -136,6 +145,10 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
     let out = run(&["eval", "--run", runs.to_str().unwrap(), "--json"]);
     let eval: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(eval["architecture"], "hnet");
+    assert_eq!(
+        eval["image_size"],
+        serde_json::json!({"width": 48, "height": 32})
+    );
     assert_eq!(eval["force"]["samples"], 40);
     assert!(eval["force"]["axes"][2]["rmse"].as_f64().unwrap() >= 0.0);
     assert!(eval["segmentation"][1]["mdice"].as_f64().unwrap() > 0.0);
@@ -166,7 +179,7 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
         ),
         (
             vec!["--weights", weights.to_str().unwrap(), "--size", "64"],
-            "takes 32x32 images, not 64x64",
+            "takes 48×32 images, not 64×64",
         ),
     ] {
         let out = hnet()

@@ -35,8 +35,8 @@ fn the_page_export_trains_and_evaluates() {
     std::fs::write(
         &config,
         r#"{"name": "tiny", "model": {"architecture": "hnet", "in_channels": 3, "filters": 4,
-            "depth": 2, "image_size": [32, 32], "share_weights": true, "force_hidden": [8, 8]},
-            "image_size": [32, 32], "loss": {"beta_a": 1.0, "beta_b": 1.0, "beta_force": 1.0},
+            "depth": 2, "image_size": {"width": 32, "height": 32}, "share_weights": true, "force_hidden": [8, 8]},
+            "image_size": {"width": 32, "height": 32}, "loss": {"beta_a": 1.0, "beta_b": 1.0, "beta_force": 1.0},
             "learning_rate": 0.001, "rmsprop_alpha": 0.9, "rmsprop_momentum": 0.0,
             "rmsprop_epsilon": 1e-7, "batch_size": 4, "epochs": 2, "patience": 5, "seed": 1,
             "max_train_samples": null, "max_valid_samples": null, "num_workers": 1}"#,

@@ -1,5 +1,10 @@
 //! H-Net and its baselines behind one type, so that one training and evaluation harness (and
 //! one weights format) serves them all.
+//!
+//! Each network is described once, by an [`Architecture`] implementation on its settings type
+//! (name, heads, input, size rule, how to build and run it); the [`architectures!`] list below
+//! turns those into [`ModelSpec`] (which network, with its settings) and [`StereoModel`] (the
+//! network). Adding a network is one `impl Architecture` and one line in that list.
 
 use alloc::collections::BTreeMap;
 use alloc::string::{String, ToString};
@@ -8,27 +13,12 @@ use core::fmt;
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
+use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use crate::baselines::{Fcn, FcnConfig, HrNet, HrNetConfig, UNet, UNetConfig, YNet, YNetConfig};
-use crate::model::{HNet, HNetConfig};
-use crate::weights::{self, WeightsError, WeightsHeader, WeightsProblem};
-
-/// Which network, with its settings. Serialised as `{"architecture": "hnet", ...settings}`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "architecture", rename_all = "lowercase")]
-pub enum ModelSpec {
-    /// H-Net: both masks and the tip force.
-    Hnet(HNetConfig),
-    /// U-Net on each view: masks only.
-    Unet(UNetConfig),
-    /// FCN-8s on each view: masks only.
-    Fcn(FcnConfig),
-    /// Small HRNet on each view: masks only.
-    Hrnet(HrNetConfig),
-    /// Y-Net: the tip force from both views' masks.
-    Ynet(YNetConfig),
-}
+use crate::model::{HNet, HNetConfig, HNetConfigError};
+use crate::weights::{self, ConfigProblem, WeightsError, WeightsHeader, WeightsProblem};
 
 /// What a network takes as its two inputs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -39,94 +29,6 @@ pub enum StereoInput {
     Masks,
 }
 
-impl ModelSpec {
-    /// The architecture's name (`hnet`, `unet`, `fcn`, `hrnet`, `ynet`).
-    pub fn name(&self) -> &'static str {
-        match self {
-            ModelSpec::Hnet(_) => "hnet",
-            ModelSpec::Unet(_) => "unet",
-            ModelSpec::Fcn(_) => "fcn",
-            ModelSpec::Hrnet(_) => "hrnet",
-            ModelSpec::Ynet(_) => "ynet",
-        }
-    }
-
-    /// The default settings of an architecture by name.
-    pub fn default_for(name: &str) -> Option<Self> {
-        Some(match name {
-            "hnet" => ModelSpec::Hnet(HNetConfig::new()),
-            "unet" => ModelSpec::Unet(UNetConfig::new()),
-            "fcn" => ModelSpec::Fcn(FcnConfig::new()),
-            "hrnet" => ModelSpec::Hrnet(HrNetConfig::new()),
-            "ynet" => ModelSpec::Ynet(YNetConfig::new()),
-            _ => return None,
-        })
-    }
-
-    /// Whether the network segments (has mask heads) and whether it estimates the force.
-    pub fn heads(&self) -> (bool, bool) {
-        match self {
-            ModelSpec::Hnet(_) => (true, true),
-            ModelSpec::Ynet(_) => (false, true),
-            _ => (true, false),
-        }
-    }
-
-    /// What the network reads.
-    pub fn input(&self) -> StereoInput {
-        match self {
-            ModelSpec::Ynet(_) => StereoInput::Masks,
-            _ => StereoInput::Images,
-        }
-    }
-
-    /// Image sides must be multiples of this.
-    pub fn size_multiple(&self) -> usize {
-        match self {
-            ModelSpec::Hnet(c) => 1 << c.depth.min(16),
-            ModelSpec::Unet(c) => 1 << c.depth.min(16),
-            ModelSpec::Fcn(_) => 32,
-            ModelSpec::Hrnet(_) => 16,
-            ModelSpec::Ynet(_) => 8,
-        }
-    }
-
-    /// Builds the network with fresh weights.
-    pub fn init(&self, device: &Device) -> Result<StereoModel, String> {
-        Ok(match self {
-            ModelSpec::Hnet(c) => StereoModel::Hnet(c.init(device).map_err(|e| e.to_string())?),
-            ModelSpec::Unet(c) => StereoModel::Unet(c.init(device)),
-            ModelSpec::Fcn(c) => StereoModel::Fcn(c.init(device)),
-            ModelSpec::Hrnet(c) => StereoModel::Hrnet(c.init(device)),
-            ModelSpec::Ynet(c) => StereoModel::Ynet(c.init(device)),
-        })
-    }
-}
-
-impl fmt::Display for ModelSpec {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-/// Any of the networks.
-// One value per training run or page, never in a collection: the size of the largest variant
-// (H-Net's layer records) costs nothing, and Burn's `Module` derive does not see through a `Box`.
-#[allow(clippy::large_enum_variant)]
-#[derive(Module, Debug)]
-pub enum StereoModel {
-    /// H-Net.
-    Hnet(HNet),
-    /// U-Net.
-    Unet(UNet),
-    /// FCN-8s.
-    Fcn(Fcn),
-    /// Small HRNet.
-    Hrnet(HrNet),
-    /// Y-Net.
-    Ynet(YNet),
-}
-
 /// What a network produced for a batch of `B` pairs.
 #[derive(Debug, Clone)]
 pub struct StereoOutputs {
@@ -134,6 +36,28 @@ pub struct StereoOutputs {
     pub mask_logits: Option<[Tensor<4>; 2]>,
     /// Tip force `[B, 3]` in newtons, for networks that estimate it.
     pub force: Option<Tensor<2>>,
+}
+
+/// Everything the harness needs to know about one network, implemented on its settings type.
+pub trait Architecture: Clone + Serialize + DeserializeOwned {
+    /// The network these settings build.
+    type Network: Module;
+    /// The name in weights files, configs and on the command line (`hnet`, `unet`, ...).
+    const NAME: &'static str;
+    /// Whether it has mask heads.
+    const SEGMENTS: bool;
+    /// Whether it estimates the tip force.
+    const ESTIMATES_FORCE: bool;
+    /// What it reads.
+    const INPUT: StereoInput;
+    /// The architecture's default settings.
+    fn defaults() -> Self;
+    /// Image sides (pixels) must be multiples of this.
+    fn size_multiple(&self) -> usize;
+    /// Builds the network with fresh weights.
+    fn build(&self, device: &Device) -> Result<Self::Network, HNetConfigError>;
+    /// Runs it on `views` (images `[B, 3, H, W]`) or `masks` (`[B, 1, H, W]`), per [`Self::INPUT`].
+    fn run(network: &Self::Network, views: [Tensor<4>; 2], masks: [Tensor<4>; 2]) -> StereoOutputs;
 }
 
 /// Runs a single-view segmentation network on both views as one batch.
@@ -147,134 +71,294 @@ fn both_views(views: [Tensor<4>; 2], net: impl Fn(Tensor<4>) -> Tensor<4>) -> [T
     ]
 }
 
-impl StereoModel {
-    /// Runs the network. `views` are the images `[B, 3, H, W]`; `masks` the catheter masks
-    /// `[B, 1, H, W]`, read only by networks whose input is [`StereoInput::Masks`].
-    pub fn forward(&self, views: [Tensor<4>; 2], masks: [Tensor<4>; 2]) -> StereoOutputs {
-        match self {
-            StereoModel::Hnet(net) => {
-                let [a, b] = views;
-                let out = net.forward(a, b);
-                StereoOutputs {
-                    mask_logits: Some([out.mask_logits_a, out.mask_logits_b]),
-                    force: Some(out.force),
-                }
-            }
-            StereoModel::Unet(net) => StereoOutputs {
-                mask_logits: Some(both_views(views, |x| net.forward(x))),
-                force: None,
-            },
-            StereoModel::Fcn(net) => StereoOutputs {
-                mask_logits: Some(both_views(views, |x| net.forward(x))),
-                force: None,
-            },
-            StereoModel::Hrnet(net) => StereoOutputs {
-                mask_logits: Some(both_views(views, |x| net.forward(x))),
-                force: None,
-            },
-            StereoModel::Ynet(net) => {
-                let [a, b] = masks;
-                StereoOutputs {
-                    mask_logits: None,
-                    force: Some(net.forward(a, b)),
-                }
-            }
+/// Masks only, from a single-view segmentation network run on both views.
+fn segmentation_outputs(mask_logits: [Tensor<4>; 2]) -> StereoOutputs {
+    StereoOutputs {
+        mask_logits: Some(mask_logits),
+        force: None,
+    }
+}
+
+impl Architecture for HNetConfig {
+    type Network = HNet;
+    const NAME: &'static str = "hnet";
+    const SEGMENTS: bool = true;
+    const ESTIMATES_FORCE: bool = true;
+    const INPUT: StereoInput = StereoInput::Images;
+    fn defaults() -> Self {
+        Self::new()
+    }
+    fn size_multiple(&self) -> usize {
+        1 << self.depth.min(16)
+    }
+    fn build(&self, device: &Device) -> Result<HNet, HNetConfigError> {
+        self.init(device)
+    }
+    fn run(net: &HNet, [a, b]: [Tensor<4>; 2], _masks: [Tensor<4>; 2]) -> StereoOutputs {
+        let out = net.forward(a, b);
+        StereoOutputs {
+            mask_logits: Some([out.mask_logits_a, out.mask_logits_b]),
+            force: Some(out.force),
         }
     }
+}
 
-    /// The bytes of a weights file holding this network with `spec` and `provenance`. The
-    /// file stores the architecture's own settings and parameter names, so an H-Net file written
-    /// here is the same as one written by [`HNet::to_weights_bytes`].
-    pub fn to_weights_bytes(
-        &self,
-        spec: &ModelSpec,
-        provenance: &BTreeMap<String, String>,
-    ) -> Result<Vec<u8>, WeightsError> {
-        let source = "<memory>";
-        let json = |r: Result<String, serde_json::Error>| {
-            r.map_err(|e| WeightsError {
-                source: source.to_string(),
-                problem: WeightsProblem::BadConfig(e.to_string()),
-            })
-        };
-        let name = spec.name();
-        match (self, spec) {
-            (StereoModel::Hnet(m), ModelSpec::Hnet(c)) => weights::encode(
-                m.clone(),
-                name,
-                &json(serde_json::to_string(c))?,
-                provenance,
-                source,
-            ),
-            (StereoModel::Unet(m), ModelSpec::Unet(c)) => weights::encode(
-                m.clone(),
-                name,
-                &json(serde_json::to_string(c))?,
-                provenance,
-                source,
-            ),
-            (StereoModel::Fcn(m), ModelSpec::Fcn(c)) => weights::encode(
-                m.clone(),
-                name,
-                &json(serde_json::to_string(c))?,
-                provenance,
-                source,
-            ),
-            (StereoModel::Hrnet(m), ModelSpec::Hrnet(c)) => weights::encode(
-                m.clone(),
-                name,
-                &json(serde_json::to_string(c))?,
-                provenance,
-                source,
-            ),
-            (StereoModel::Ynet(m), ModelSpec::Ynet(c)) => weights::encode(
-                m.clone(),
-                name,
-                &json(serde_json::to_string(c))?,
-                provenance,
-                source,
-            ),
-            _ => Err(WeightsError {
-                source: source.to_string(),
-                problem: WeightsProblem::BadConfig(alloc::format!(
-                    "settings of `{name}` given for another network"
-                )),
-            }),
+impl Architecture for UNetConfig {
+    type Network = UNet;
+    const NAME: &'static str = "unet";
+    const SEGMENTS: bool = true;
+    const ESTIMATES_FORCE: bool = false;
+    const INPUT: StereoInput = StereoInput::Images;
+    fn defaults() -> Self {
+        Self::new()
+    }
+    fn size_multiple(&self) -> usize {
+        1 << self.depth.min(16)
+    }
+    fn build(&self, device: &Device) -> Result<UNet, HNetConfigError> {
+        Ok(self.init(device))
+    }
+    fn run(net: &UNet, views: [Tensor<4>; 2], _masks: [Tensor<4>; 2]) -> StereoOutputs {
+        segmentation_outputs(both_views(views, |x| net.forward(x)))
+    }
+}
+
+impl Architecture for FcnConfig {
+    type Network = Fcn;
+    const NAME: &'static str = "fcn";
+    const SEGMENTS: bool = true;
+    const ESTIMATES_FORCE: bool = false;
+    const INPUT: StereoInput = StereoInput::Images;
+    fn defaults() -> Self {
+        Self::new()
+    }
+    fn size_multiple(&self) -> usize {
+        32
+    }
+    fn build(&self, device: &Device) -> Result<Fcn, HNetConfigError> {
+        Ok(self.init(device))
+    }
+    fn run(net: &Fcn, views: [Tensor<4>; 2], _masks: [Tensor<4>; 2]) -> StereoOutputs {
+        segmentation_outputs(both_views(views, |x| net.forward(x)))
+    }
+}
+
+impl Architecture for HrNetConfig {
+    type Network = HrNet;
+    const NAME: &'static str = "hrnet";
+    const SEGMENTS: bool = true;
+    const ESTIMATES_FORCE: bool = false;
+    const INPUT: StereoInput = StereoInput::Images;
+    fn defaults() -> Self {
+        Self::new()
+    }
+    fn size_multiple(&self) -> usize {
+        16
+    }
+    fn build(&self, device: &Device) -> Result<HrNet, HNetConfigError> {
+        Ok(self.init(device))
+    }
+    fn run(net: &HrNet, views: [Tensor<4>; 2], _masks: [Tensor<4>; 2]) -> StereoOutputs {
+        segmentation_outputs(both_views(views, |x| net.forward(x)))
+    }
+}
+
+impl Architecture for YNetConfig {
+    type Network = YNet;
+    const NAME: &'static str = "ynet";
+    const SEGMENTS: bool = false;
+    const ESTIMATES_FORCE: bool = true;
+    const INPUT: StereoInput = StereoInput::Masks;
+    fn defaults() -> Self {
+        Self::new()
+    }
+    fn size_multiple(&self) -> usize {
+        8
+    }
+    fn build(&self, device: &Device) -> Result<YNet, HNetConfigError> {
+        Ok(self.init(device))
+    }
+    fn run(net: &YNet, _views: [Tensor<4>; 2], [a, b]: [Tensor<4>; 2]) -> StereoOutputs {
+        StereoOutputs {
+            mask_logits: None,
+            force: Some(net.forward(a, b)),
         }
     }
+}
 
-    /// Rebuilds a network of any architecture from a weights file's bytes.
-    pub fn from_weights_bytes(
-        bytes: &[u8],
-        device: &Device,
-        source: &str,
-    ) -> Result<(StereoModel, ModelSpec, WeightsHeader), WeightsError> {
-        let header = weights::read_header(bytes, source)?;
-        let bad_config = |e: String| WeightsError {
-            source: source.to_string(),
-            problem: WeightsProblem::BadConfig(e),
-        };
-        fn parse<T: serde::de::DeserializeOwned>(json: &str) -> Result<T, String> {
-            serde_json::from_str(json).map_err(|e| e.to_string())
+/// Declares [`ModelSpec`] and [`StereoModel`] from the list of architectures and dispatches every
+/// method to the variant's [`Architecture`] implementation.
+macro_rules! architectures {
+    ($($(#[$doc:meta])* $variant:ident($settings:ty),)+) => {
+        /// Which network, with its settings. Serialised as `{"architecture": "hnet", ...settings}`.
+        #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+        #[serde(tag = "architecture", rename_all = "lowercase")]
+        pub enum ModelSpec {
+            $($(#[$doc])* $variant($settings),)+
         }
-        let json = header.config_json.as_str();
-        let spec = match header.architecture.as_str() {
-            "hnet" => ModelSpec::Hnet(parse(json).map_err(bad_config)?),
-            "unet" => ModelSpec::Unet(parse(json).map_err(bad_config)?),
-            "fcn" => ModelSpec::Fcn(parse(json).map_err(bad_config)?),
-            "hrnet" => ModelSpec::Hrnet(parse(json).map_err(bad_config)?),
-            "ynet" => ModelSpec::Ynet(parse(json).map_err(bad_config)?),
-            other => {
-                return Err(bad_config(alloc::format!("unknown architecture `{other}`")));
+
+        /// Any of the networks.
+        // One value per training run or page, never in a collection: the size of the largest
+        // variant (H-Net's layer records) costs nothing, and Burn's `Module` derive does not see
+        // through a `Box`.
+        #[allow(clippy::large_enum_variant)]
+        #[derive(Module, Debug)]
+        pub enum StereoModel {
+            $($(#[$doc])* $variant(<$settings as Architecture>::Network),)+
+        }
+
+        impl ModelSpec {
+            /// Every architecture's name, in the order of the list.
+            pub const NAMES: &'static [&'static str] = &[$(<$settings as Architecture>::NAME,)+];
+
+            /// The architecture's name (`hnet`, `unet`, `fcn`, `hrnet`, `ynet`).
+            pub fn name(&self) -> &'static str {
+                match self {
+                    $(Self::$variant(_) => <$settings as Architecture>::NAME,)+
+                }
             }
-        };
-        let model = match spec.init(device).map_err(bad_config)? {
-            StereoModel::Hnet(m) => StereoModel::Hnet(weights::apply(m, bytes, source)?),
-            StereoModel::Unet(m) => StereoModel::Unet(weights::apply(m, bytes, source)?),
-            StereoModel::Fcn(m) => StereoModel::Fcn(weights::apply(m, bytes, source)?),
-            StereoModel::Hrnet(m) => StereoModel::Hrnet(weights::apply(m, bytes, source)?),
-            StereoModel::Ynet(m) => StereoModel::Ynet(weights::apply(m, bytes, source)?),
-        };
-        Ok((model, spec, header))
+
+            /// The default settings of an architecture by name.
+            pub fn default_for(name: &str) -> Option<Self> {
+                $(if name == <$settings as Architecture>::NAME {
+                    return Some(Self::$variant(<$settings as Architecture>::defaults()));
+                })+
+                None
+            }
+
+            /// Whether the network segments (has mask heads) and whether it estimates the force.
+            pub fn heads(&self) -> (bool, bool) {
+                match self {
+                    $(Self::$variant(_) => (
+                        <$settings as Architecture>::SEGMENTS,
+                        <$settings as Architecture>::ESTIMATES_FORCE,
+                    ),)+
+                }
+            }
+
+            /// What the network reads.
+            pub fn input(&self) -> StereoInput {
+                match self {
+                    $(Self::$variant(_) => <$settings as Architecture>::INPUT,)+
+                }
+            }
+
+            /// Image sides (pixels) must be multiples of this.
+            pub fn size_multiple(&self) -> usize {
+                match self {
+                    $(Self::$variant(s) => s.size_multiple(),)+
+                }
+            }
+
+            /// Builds the network with fresh weights.
+            pub fn init(&self, device: &Device) -> Result<StereoModel, HNetConfigError> {
+                Ok(match self {
+                    $(Self::$variant(s) => StereoModel::$variant(s.build(device)?),)+
+                })
+            }
+
+            /// The settings alone as JSON (what a weights file's `hnet.config` holds).
+            fn settings_json(&self) -> Result<String, serde_json::Error> {
+                match self {
+                    $(Self::$variant(s) => serde_json::to_string(s),)+
+                }
+            }
+
+            /// Settings read from a weights file's `hnet.config`, for the architecture `name`.
+            fn from_settings_json(name: &str, json: &str) -> Result<Self, ConfigProblem> {
+                $(if name == <$settings as Architecture>::NAME {
+                    return serde_json::from_str(json)
+                        .map(Self::$variant)
+                        .map_err(ConfigProblem::Json);
+                })+
+                Err(ConfigProblem::UnknownArchitecture(name.to_string()))
+            }
+        }
+
+        impl StereoModel {
+            /// Runs the network. `views` are the images `[B, 3, H, W]`; `masks` the catheter
+            /// masks `[B, 1, H, W]`, read only by networks whose input is
+            /// [`StereoInput::Masks`].
+            pub fn forward(&self, views: [Tensor<4>; 2], masks: [Tensor<4>; 2]) -> StereoOutputs {
+                match self {
+                    $(Self::$variant(net) => <$settings as Architecture>::run(net, views, masks),)+
+                }
+            }
+
+            /// The bytes of a weights file holding this network with `spec` and `provenance`.
+            /// The file stores the architecture's own settings and parameter names, so an H-Net
+            /// file written here is the same as one written by [`HNet::to_weights_bytes`].
+            pub fn to_weights_bytes(
+                &self,
+                spec: &ModelSpec,
+                provenance: &BTreeMap<String, String>,
+            ) -> Result<Vec<u8>, WeightsError> {
+                let source = "<memory>";
+                let bad_config = |problem| WeightsError::new(source, WeightsProblem::BadConfig(problem));
+                let json = spec.settings_json().map_err(|e| bad_config(ConfigProblem::Json(e)))?;
+                match (self, spec) {
+                    $((Self::$variant(m), ModelSpec::$variant(_)) => {
+                        weights::encode(m.clone(), spec.name(), &json, provenance, source)
+                    })+
+                    #[allow(unreachable_patterns)]
+                    _ => Err(bad_config(ConfigProblem::OtherNetwork(spec.name()))),
+                }
+            }
+
+            /// Rebuilds a network of any architecture from a weights file's bytes.
+            pub fn from_weights_bytes(
+                bytes: &[u8],
+                device: &Device,
+                source: &str,
+            ) -> Result<(StereoModel, ModelSpec, WeightsHeader), WeightsError> {
+                let header = weights::read_header(bytes, source)?;
+                let bad_config = |problem| WeightsError::new(source, WeightsProblem::BadConfig(problem));
+                let spec = ModelSpec::from_settings_json(&header.architecture, &header.config_json)
+                    .map_err(bad_config)?;
+                let model = match spec.init(device).map_err(|e| bad_config(ConfigProblem::Invalid(e)))? {
+                    $(Self::$variant(m) => Self::$variant(weights::apply(m, bytes, source)?),)+
+                };
+                Ok((model, spec, header))
+            }
+        }
+    };
+}
+
+architectures! {
+    /// H-Net: both masks and the tip force.
+    Hnet(HNetConfig),
+    /// U-Net on each view: masks only.
+    Unet(UNetConfig),
+    /// FCN-8s on each view: masks only.
+    Fcn(FcnConfig),
+    /// Small HRNet on each view: masks only.
+    Hrnet(HrNetConfig),
+    /// Y-Net: the tip force from both views' masks.
+    Ynet(YNetConfig),
+}
+
+impl fmt::Display for ModelSpec {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The serde tag (the variant's lowercase name) must be the architecture's [`Architecture::NAME`],
+    /// or a config file would name a network one way and a weights file another.
+    #[test]
+    fn every_architecture_is_named_the_same_in_configs_and_weights_files() {
+        for name in ModelSpec::NAMES {
+            let spec = ModelSpec::default_for(name).expect("listed architectures have defaults");
+            assert_eq!(spec.name(), *name);
+            let json = serde_json::to_value(&spec).unwrap();
+            assert_eq!(json["architecture"], *name);
+            let back: ModelSpec = serde_json::from_value(json).unwrap();
+            assert_eq!(back, spec);
+        }
+        assert!(ModelSpec::default_for("resnet").is_none());
     }
 }

@@ -5,9 +5,9 @@
 //! page in the browser). Grey X-ray images are passed with the grey value in all three channels.
 
 use alloc::vec::Vec;
-use core::fmt;
 
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{DataError, Device, ExecutionError, Tensor, TensorData};
+use hnet_units::ImageSize;
 
 use crate::model::{HNet, HNetOutput};
 
@@ -21,7 +21,10 @@ pub struct StereoPair<'a> {
 }
 
 /// A buffer does not hold an image of the expected size.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "pair {pair} view {view}: {found} bytes, expected {expected} (an RGB image of the model's input size)"
+)]
 pub struct InputSizeError {
     /// Index of the pair in the batch.
     pub pair: usize,
@@ -33,23 +36,11 @@ pub struct InputSizeError {
     pub expected: usize,
 }
 
-impl fmt::Display for InputSizeError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "pair {} view {}: {} bytes, expected {} (an RGB image of the model's input size)",
-            self.pair, self.view, self.found, self.expected
-        )
-    }
-}
-
-impl core::error::Error for InputSizeError {}
-
 /// What H-Net says about one stereo pair.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StereoPrediction {
-    /// Input size `[height, width]` in pixels: the size of both masks.
-    pub size: [usize; 2],
+    /// Input size in pixels: the size of both masks.
+    pub size: ImageSize,
     /// View A catheter probability per pixel, row-major.
     pub mask_a: Vec<f32>,
     /// View B catheter probability per pixel, row-major.
@@ -83,10 +74,10 @@ pub fn push_planar(pixels: &[u8], out: &mut Vec<f32>) {
 /// Builds the two input tensors `[B, 3, H, W]` (values in `[0, 1]`) of a batch of pairs.
 pub fn stereo_batch(
     pairs: &[StereoPair<'_>],
-    size: [usize; 2],
+    size: ImageSize,
     device: &Device,
 ) -> Result<(Tensor<4>, Tensor<4>), InputSizeError> {
-    let expected = size[0] * size[1] * 3;
+    let expected = size.pixels() * 3;
     let mut a = Vec::with_capacity(pairs.len() * expected);
     let mut b = Vec::with_capacity(pairs.len() * expected);
     for (index, pair) in pairs.iter().enumerate() {
@@ -103,7 +94,7 @@ pub fn stereo_batch(
         push_planar(pair.view_a, &mut a);
         push_planar(pair.view_b, &mut b);
     }
-    let shape = [pairs.len(), 3, size[0], size[1]];
+    let shape = [pairs.len(), 3, size.height, size.width];
     Ok((
         Tensor::from_data(TensorData::new(a, shape), device),
         Tensor::from_data(TensorData::new(b, shape), device),
@@ -112,12 +103,12 @@ pub fn stereo_batch(
 
 /// Host copies of a batch's outputs, split per pair.
 fn split_predictions(
-    size: [usize; 2],
+    size: ImageSize,
     mask_a: Vec<f32>,
     mask_b: Vec<f32>,
     force: Vec<f32>,
 ) -> Vec<StereoPrediction> {
-    let pixels = size[0] * size[1];
+    let pixels = size.pixels();
     mask_a
         .chunks_exact(pixels)
         .zip(mask_b.chunks_exact(pixels))
@@ -132,20 +123,15 @@ fn split_predictions(
 }
 
 /// Reading a result back from the device failed.
-#[derive(Debug, Clone)]
-pub struct ReadbackError(pub alloc::string::String);
-
-impl fmt::Display for ReadbackError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "could not read the result back from the device: {}",
-            self.0
-        )
-    }
+#[derive(Debug, thiserror::Error)]
+pub enum ReadbackError {
+    /// The device failed while computing or transferring the result.
+    #[error("could not read the result back from the device")]
+    Device(#[source] ExecutionError),
+    /// The device returned data of another type than `f32`.
+    #[error("the device returned the result in an unexpected form")]
+    Data(#[source] DataError),
 }
-
-impl core::error::Error for ReadbackError {}
 
 /// A tensor's values read back to the host as `f32`s (the one read-back of the model, the CLI
 /// and the page).
@@ -154,8 +140,7 @@ pub fn host_values<const D: usize>(tensor: Tensor<D>) -> Result<Vec<f32>, Readba
 }
 
 fn to_vec(data: TensorData) -> Result<Vec<f32>, ReadbackError> {
-    data.try_into_vec::<f32>()
-        .map_err(|e| ReadbackError(alloc::format!("{e:?}")))
+    data.try_into_vec::<f32>().map_err(ReadbackError::Data)
 }
 
 fn masks_and_force(output: HNetOutput) -> [Tensor<2>; 3] {
@@ -168,12 +153,12 @@ fn masks_and_force(output: HNetOutput) -> [Tensor<2>; 3] {
 }
 
 impl HNet {
-    /// Runs `pairs` (each image `size` = `[height, width]`) and reads the results back,
+    /// Runs `pairs` (each image of `size`) and reads the results back,
     /// blocking until the device is done. Use [`HNet::predict_async`] in the browser.
     pub fn predict(
         &self,
         pairs: &[StereoPair<'_>],
-        size: [usize; 2],
+        size: ImageSize,
         device: &Device,
     ) -> Result<Vec<StereoPrediction>, PredictError> {
         let (a, b) = stereo_batch(pairs, size, device)?;
@@ -191,7 +176,7 @@ impl HNet {
     pub async fn predict_async(
         &self,
         pairs: &[StereoPair<'_>],
-        size: [usize; 2],
+        size: ImageSize,
         device: &Device,
     ) -> Result<Vec<StereoPrediction>, PredictError> {
         let (a, b) = stereo_batch(pairs, size, device)?;
@@ -199,7 +184,7 @@ impl HNet {
         let read = |t: Tensor<2>| async move {
             t.into_data_async()
                 .await
-                .map_err(|e| ReadbackError(alloc::format!("{e:?}")))
+                .map_err(ReadbackError::Device)
                 .and_then(to_vec)
         };
         Ok(split_predictions(
@@ -212,33 +197,12 @@ impl HNet {
 }
 
 /// Why a prediction failed.
-#[derive(Debug, Clone)]
+#[derive(Debug, thiserror::Error)]
 pub enum PredictError {
     /// An input image has the wrong size.
-    Input(InputSizeError),
+    #[error(transparent)]
+    Input(#[from] InputSizeError),
     /// The device could not return the result.
-    Readback(ReadbackError),
-}
-
-impl fmt::Display for PredictError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Self::Input(e) => e.fmt(f),
-            Self::Readback(e) => e.fmt(f),
-        }
-    }
-}
-
-impl core::error::Error for PredictError {}
-
-impl From<InputSizeError> for PredictError {
-    fn from(e: InputSizeError) -> Self {
-        Self::Input(e)
-    }
-}
-
-impl From<ReadbackError> for PredictError {
-    fn from(e: ReadbackError) -> Self {
-        Self::Readback(e)
-    }
+    #[error(transparent)]
+    Readback(#[from] ReadbackError),
 }

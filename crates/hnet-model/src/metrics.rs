@@ -180,25 +180,14 @@ pub struct SegmentationMetrics {
 }
 
 /// A predicted mask and its target do not have the same number of pixels.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("predicted mask has {predicted} pixels but the target has {target}")]
 pub struct MaskSizeMismatch {
     /// Pixels in the prediction.
     pub predicted: usize,
     /// Pixels in the target.
     pub target: usize,
 }
-
-impl core::fmt::Display for MaskSizeMismatch {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        write!(
-            f,
-            "predicted mask has {} pixels but the target has {}",
-            self.predicted, self.target
-        )
-    }
-}
-
-impl core::error::Error for MaskSizeMismatch {}
 
 /// Confusion counts of one segmentation head, catheter being the positive class.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]

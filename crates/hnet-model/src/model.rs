@@ -15,7 +15,7 @@
 //! `(Fx, Fy, Fz)` in newtons through dense layers of 64 and 32 units with ReLU and a linear output.
 
 use alloc::vec::Vec;
-use core::fmt;
+use hnet_units::ImageSize;
 
 use burn::config::Config;
 use burn::module::Module;
@@ -38,9 +38,9 @@ pub struct HNetConfig {
     /// Number of encoder blocks, and of decoder blocks (the paper uses 4).
     #[config(default = 4)]
     pub depth: usize,
-    /// Input image size `[height, width]` in pixels; both must be divisible by `2^depth`.
-    #[config(default = "[224, 224]")]
-    pub image_size: [usize; 2],
+    /// Input image size in pixels; width and height must be divisible by `2^depth`.
+    #[config(default = "ImageSize::square(224)")]
+    pub image_size: ImageSize,
     /// One encoder-decoder and segmentation head for both views (the paper's design). When false,
     /// each view gets its own weights.
     #[config(default = true)]
@@ -51,33 +51,20 @@ pub struct HNetConfig {
 }
 
 /// Why a [`HNetConfig`] cannot build a network.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum HNetConfigError {
     /// A size that must be positive is zero.
+    #[error("`{0}` must be at least 1")]
     Zero(&'static str),
     /// The image size cannot be halved `depth` times.
+    #[error("image size {image_size} (width×height) must be divisible by 2^depth = 2^{depth}")]
     ImageSizeNotDivisible {
-        /// The configured `[height, width]`.
-        image_size: [usize; 2],
+        /// The configured size.
+        image_size: ImageSize,
         /// The configured depth: sizes must be divisible by `2^depth`.
         depth: usize,
     },
 }
-
-impl fmt::Display for HNetConfigError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Self::Zero(field) => write!(f, "`{field}` must be at least 1"),
-            Self::ImageSizeNotDivisible { image_size, depth } => write!(
-                f,
-                "image size {}x{} (height x width) must be divisible by 2^depth = 2^{depth}",
-                image_size[0], image_size[1]
-            ),
-        }
-    }
-}
-
-impl core::error::Error for HNetConfigError {}
 
 impl HNetConfig {
     /// Checks that the settings describe a network that can be built.
@@ -86,8 +73,8 @@ impl HNetConfig {
             ("in_channels", self.in_channels),
             ("filters", self.filters),
             ("depth", self.depth),
-            ("image_size[0]", self.image_size[0]),
-            ("image_size[1]", self.image_size[1]),
+            ("image_size.width", self.image_size.width),
+            ("image_size.height", self.image_size.height),
             ("force_hidden[0]", self.force_hidden[0]),
             ("force_hidden[1]", self.force_hidden[1]),
         ] {
@@ -101,7 +88,7 @@ impl HNetConfig {
                 .and_then(|depth| 1usize.checked_shl(depth))
                 .is_some_and(|divisor| divisor <= size && size.is_multiple_of(divisor))
         };
-        if !divisible(self.image_size[0]) || !divisible(self.image_size[1]) {
+        if !divisible(self.image_size.width) || !divisible(self.image_size.height) {
             return Err(HNetConfigError::ImageSizeNotDivisible {
                 image_size: self.image_size,
                 depth: self.depth,
@@ -347,11 +334,11 @@ mod tests {
 
     #[test]
     fn config_rejects_sizes_that_cannot_be_pooled() {
-        let config = HNetConfig::new().with_image_size([100, 224]);
+        let config = HNetConfig::new().with_image_size(ImageSize::new(224, 100));
         assert_eq!(
             config.validate(),
             Err(HNetConfigError::ImageSizeNotDivisible {
-                image_size: [100, 224],
+                image_size: ImageSize::new(224, 100),
                 depth: 4
             })
         );

@@ -18,14 +18,13 @@ use alloc::collections::BTreeMap;
 use alloc::format;
 use alloc::string::{String, ToString};
 use alloc::vec::Vec;
-use core::fmt;
 
 use burn::module::Module;
 use burn::store::{ModuleRecord, RecordError};
 use burn::tensor::{Bytes, Device};
 use burn_pack::{Reader, Writer};
 
-use crate::model::{HNet, HNetConfig};
+use crate::model::{HNet, HNetConfig, HNetConfigError};
 
 /// Version of the metadata layout written by this crate.
 pub const FORMAT_VERSION: &str = "1";
@@ -39,20 +38,29 @@ const KEY_ARCHITECTURE: &str = "hnet.architecture";
 const KEY_CONFIG: &str = "hnet.config";
 const PROVENANCE_PREFIX: &str = "hnet.provenance.";
 
-/// What is wrong with a weights file.
-#[derive(Debug, Clone, PartialEq, Eq)]
+/// What is wrong with a weights file. Each message says this level only; the cause, where
+/// there is one, is the error's [`source`](core::error::Error::source).
+#[derive(Debug, thiserror::Error)]
 pub enum WeightsProblem {
-    /// The file could not be read or written.
-    Io(String),
+    /// The network could not be turned into a weights container.
+    #[error("the network could not be written as weights")]
+    Write(#[source] ContainerProblem),
     /// Not a weights file at all: what the bytes look like instead.
+    #[error("not an H-Net weights file (.bpk, written by `hnet train`): this is {0}")]
     NotWeights(&'static str),
     /// A weights container, but damaged or cut short.
-    NotBurnpack(String),
+    #[error("a weights file, but damaged or cut short (a partial download?)")]
+    NotBurnpack(#[source] ContainerProblem),
     /// A burnpack container without H-Net Studio's metadata.
+    #[error("a Burn weights file, but not written by H-Net Studio (no `{KEY_FORMAT}` metadata)")]
     NotHNetStudio,
     /// Written by a newer, incompatible version of this format.
+    #[error(
+        "weights format version {0} is not supported (this build reads version {FORMAT_VERSION})"
+    )]
     UnsupportedFormat(String),
     /// Weights of another network.
+    #[error("holds `{found}` weights, expected `{expected}`")]
     WrongArchitecture {
         /// What the caller asked for.
         expected: String,
@@ -60,56 +68,64 @@ pub enum WeightsProblem {
         found: String,
     },
     /// The configuration in the file cannot be read or describes no valid network.
-    BadConfig(String),
+    #[error("invalid network configuration")]
+    BadConfig(#[source] ConfigProblem),
     /// The tensors do not fit the network the configuration describes.
-    Mismatch(String),
+    #[error("weights do not match the network")]
+    Mismatch(#[source] ContainerProblem),
 }
 
-impl fmt::Display for WeightsProblem {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Self::Io(e) => write!(f, "{e}"),
-            Self::NotWeights(what) => write!(
-                f,
-                "not an H-Net weights file (.bpk, written by `hnet train`): this is {what}"
-            ),
-            Self::NotBurnpack(e) => write!(
-                f,
-                "a weights file, but damaged or cut short (a partial download?): {e}"
-            ),
-            Self::NotHNetStudio => write!(
-                f,
-                "a Burn weights file, but not written by H-Net Studio (no `{KEY_FORMAT}` metadata)"
-            ),
-            Self::UnsupportedFormat(v) => write!(
-                f,
-                "weights format version {v} is not supported (this build reads version {FORMAT_VERSION})"
-            ),
-            Self::WrongArchitecture { expected, found } => {
-                write!(f, "holds `{found}` weights, expected `{expected}`")
-            }
-            Self::BadConfig(e) => write!(f, "invalid network configuration: {e}"),
-            Self::Mismatch(e) => write!(f, "weights do not match the network: {e}"),
-        }
-    }
+/// Why a weights container could not be read or written: Burn's own error, kept as it came.
+#[derive(Debug, thiserror::Error)]
+pub enum ContainerProblem {
+    /// From the burnpack container.
+    #[error(transparent)]
+    Pack(#[from] burn_pack::Error),
+    /// From Burn's module record (which is an error value only with `std`, hence its message).
+    #[error("{}", record_message(.0))]
+    Record(RecordError),
+}
+
+/// Why the network settings stored in a weights file are unusable.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigProblem {
+    /// A metadata entry is missing.
+    #[error("missing `{0}` metadata")]
+    MissingMetadata(&'static str),
+    /// No network of this name exists in this build.
+    #[error("unknown architecture `{0}`")]
+    UnknownArchitecture(String),
+    /// The settings are of another network than the one given with them.
+    #[error("settings of `{0}` given for another network")]
+    OtherNetwork(&'static str),
+    /// The settings' JSON does not parse.
+    #[error("unreadable settings")]
+    Json(#[source] serde_json::Error),
+    /// The settings parse but describe no network that can be built.
+    #[error("settings that build no network")]
+    Invalid(#[source] HNetConfigError),
 }
 
 /// A weights file that could not be read or written, with the file's name.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, thiserror::Error)]
+#[error("weights file '{source_name}': {problem}")]
 pub struct WeightsError {
     /// The file (or, for in-memory bytes, the name the user knows them by).
-    pub source: String,
-    /// What went wrong.
+    pub source_name: String,
+    /// What went wrong; its own causes follow as [`source`](core::error::Error::source).
+    #[source]
     pub problem: WeightsProblem,
 }
 
-impl fmt::Display for WeightsError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "weights file '{}': {}", self.source, self.problem)
+impl WeightsError {
+    /// The `problem` of the weights named `source_name`.
+    pub fn new(source_name: &str, problem: WeightsProblem) -> Self {
+        Self {
+            source_name: source_name.to_string(),
+            problem,
+        }
     }
 }
-
-impl core::error::Error for WeightsError {}
 
 /// The metadata of a weights file.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -130,17 +146,15 @@ pub fn encode<M: Module>(
     provenance: &BTreeMap<String, String>,
     source: &str,
 ) -> Result<Vec<u8>, WeightsError> {
-    let error = |problem| WeightsError {
-        source: source.to_string(),
-        problem,
-    };
+    let error = |problem| WeightsError::new(source, problem);
+    let write_error = |e: ContainerProblem| error(WeightsProblem::Write(e));
     let record = module
         .into_record()
         .into_bytes()
-        .map_err(|e| error(WeightsProblem::Io(e.to_string())))?;
+        .map_err(|e| write_error(ContainerProblem::Record(e)))?;
     let tensors = Reader::from_bytes(record)
         .and_then(Reader::into_tensors)
-        .map_err(|e| error(WeightsProblem::Io(e.to_string())))?;
+        .map_err(|e| write_error(e.into()))?;
     let mut writer = Writer::new(tensors)
         .with_metadata(KEY_FORMAT, FORMAT_VERSION)
         .with_metadata(KEY_ARCHITECTURE, architecture)
@@ -148,9 +162,7 @@ pub fn encode<M: Module>(
     for (key, value) in provenance {
         writer = writer.with_metadata(&format!("{PROVENANCE_PREFIX}{key}"), value);
     }
-    let bytes = writer
-        .into_bytes()
-        .map_err(|e| error(WeightsProblem::Io(e.to_string())))?;
+    let bytes = writer.into_bytes().map_err(|e| write_error(e.into()))?;
     Ok(bytes.to_vec())
 }
 
@@ -190,13 +202,10 @@ fn looks_like_text(head: &[u8]) -> bool {
 
 /// Reads the header of a weights file's bytes.
 pub fn read_header(bytes: &[u8], source: &str) -> Result<WeightsHeader, WeightsError> {
-    let error = |problem| WeightsError {
-        source: source.to_string(),
-        problem,
-    };
+    let error = |problem| WeightsError::new(source, problem);
     check_magic(bytes).map_err(error)?;
     let reader = Reader::from_bytes(Bytes::from_bytes_vec(bytes.to_vec()))
-        .map_err(|e| error(WeightsProblem::NotBurnpack(e.to_string())))?;
+        .map_err(|e| error(WeightsProblem::NotBurnpack(e.into())))?;
     let metadata = reader.metadata();
     let format = metadata
         .get(KEY_FORMAT)
@@ -204,10 +213,10 @@ pub fn read_header(bytes: &[u8], source: &str) -> Result<WeightsHeader, WeightsE
     if format != FORMAT_VERSION {
         return Err(error(WeightsProblem::UnsupportedFormat(format.clone())));
     }
-    let field = |key: &str| {
+    let field = |key: &'static str| {
         metadata.get(key).cloned().ok_or_else(|| {
-            error(WeightsProblem::BadConfig(format!(
-                "missing `{key}` metadata"
+            error(WeightsProblem::BadConfig(ConfigProblem::MissingMetadata(
+                key,
             )))
         })
     };
@@ -226,19 +235,16 @@ pub fn read_header(bytes: &[u8], source: &str) -> Result<WeightsHeader, WeightsE
 
 /// Loads the tensors of a weights file into `module`, which must have the same structure.
 pub fn apply<M: Module>(module: M, bytes: &[u8], source: &str) -> Result<M, WeightsError> {
-    let error = |problem| WeightsError {
-        source: source.to_string(),
-        problem,
-    };
+    let error = |problem| WeightsError::new(source, problem);
     check_magic(bytes).map_err(error)?;
     let record = ModuleRecord::from_bytes(Bytes::from_bytes_vec(bytes.to_vec()))
-        .map_err(|e| error(WeightsProblem::NotBurnpack(record_message(e))))?;
+        .map_err(|e| error(WeightsProblem::NotBurnpack(ContainerProblem::Record(e))))?;
     module
         .try_load_record(record)
-        .map_err(|e| error(WeightsProblem::Mismatch(record_message(e))))
+        .map_err(|e| error(WeightsProblem::Mismatch(ContainerProblem::Record(e))))
 }
 
-fn record_message(error: RecordError) -> String {
+fn record_message(error: &RecordError) -> &str {
     match error {
         RecordError::Io(m) | RecordError::Validation(m) => m,
     }
@@ -252,13 +258,13 @@ pub fn expect_architecture(
 ) -> Result<WeightsHeader, WeightsError> {
     let header = read_header(bytes, source)?;
     if header.architecture != expected {
-        return Err(WeightsError {
-            source: source.to_string(),
-            problem: WeightsProblem::WrongArchitecture {
+        return Err(WeightsError::new(
+            source,
+            WeightsProblem::WrongArchitecture {
                 expected: expected.to_string(),
                 found: header.architecture,
             },
-        });
+        ));
     }
     Ok(header)
 }
@@ -270,9 +276,11 @@ impl HNet {
         config: &HNetConfig,
         provenance: &BTreeMap<String, String>,
     ) -> Result<Vec<u8>, WeightsError> {
-        let config_json = serde_json::to_string(config).map_err(|e| WeightsError {
-            source: "<memory>".to_string(),
-            problem: WeightsProblem::BadConfig(e.to_string()),
+        let config_json = serde_json::to_string(config).map_err(|e| {
+            WeightsError::new(
+                "<memory>",
+                WeightsProblem::BadConfig(ConfigProblem::Json(e)),
+            )
         })?;
         encode(
             self.clone(),
@@ -291,13 +299,12 @@ impl HNet {
         source: &str,
     ) -> Result<(HNet, HNetConfig, WeightsHeader), WeightsError> {
         let header = expect_architecture(bytes, HNET_ARCHITECTURE, source)?;
-        let bad_config = |e: String| WeightsError {
-            source: source.to_string(),
-            problem: WeightsProblem::BadConfig(e),
-        };
-        let config: HNetConfig =
-            serde_json::from_str(&header.config_json).map_err(|e| bad_config(e.to_string()))?;
-        let model = config.init(device).map_err(|e| bad_config(e.to_string()))?;
+        let bad_config = |e| WeightsError::new(source, WeightsProblem::BadConfig(e));
+        let config: HNetConfig = serde_json::from_str(&header.config_json)
+            .map_err(|e| bad_config(ConfigProblem::Json(e)))?;
+        let model = config
+            .init(device)
+            .map_err(|e| bad_config(ConfigProblem::Invalid(e)))?;
         let model = apply(model, bytes, source)?;
         Ok((model, config, header))
     }

@@ -5,13 +5,14 @@ use burn::optim::{GradientsParams, RmsPropConfig};
 use burn::tensor::Gradients;
 use burn::tensor::{Device, Distribution, Tensor, Tolerance};
 use hnet_model::{HNet, HNetConfig, HNetLossConfig};
+use hnet_units::ImageSize;
 
 /// A small network that still has the paper's structure (two pooling levels, 8 filters).
 fn small_config() -> HNetConfig {
     HNetConfig::new()
         .with_filters(8)
         .with_depth(2)
-        .with_image_size([16, 16])
+        .with_image_size(ImageSize::square(16))
 }
 
 fn random_views(device: &Device, batch: usize, size: usize) -> (Tensor<4>, Tensor<4>) {
@@ -27,7 +28,7 @@ fn outputs_have_the_documented_shapes() {
     let device = Device::flex();
     // The paper's depth and filters, at a small input size.
     let model = HNetConfig::new()
-        .with_image_size([32, 48])
+        .with_image_size(ImageSize::new(48, 32))
         .init(&device)
         .unwrap();
     let shape = [2, 3, 32, 48];

@@ -5,12 +5,13 @@ use std::collections::BTreeMap;
 use burn::tensor::{Device, Distribution, Tensor};
 use hnet_model::weights::{self, WeightsProblem};
 use hnet_model::{HNet, HNetConfig};
+use hnet_units::ImageSize;
 
 fn config() -> HNetConfig {
     HNetConfig::new()
         .with_filters(4)
         .with_depth(2)
-        .with_image_size([16, 16])
+        .with_image_size(ImageSize::square(16))
 }
 
 fn provenance() -> BTreeMap<String, String> {
@@ -58,7 +59,7 @@ fn truncated_files_are_reported_not_panicked_on() {
             "a file cut at {cut} of {} bytes loaded",
             bytes.len()
         ));
-        assert_eq!(err.source, "cut.bpk");
+        assert_eq!(err.source_name, "cut.bpk");
         assert!(
             err.to_string().starts_with("weights file 'cut.bpk': "),
             "{err}"
@@ -71,14 +72,20 @@ fn a_file_that_is_not_burnpack_is_named_in_the_error() {
     let device = Device::flex();
     let err = HNet::from_weights_bytes(b"\x89PNG\r\n\x1a\n not a model", &device, "photo.png")
         .unwrap_err();
-    assert_eq!(err.problem, WeightsProblem::NotWeights("a PNG image"));
+    assert!(matches!(
+        err.problem,
+        WeightsProblem::NotWeights("a PNG image")
+    ));
     assert_eq!(
         err.to_string(),
         "weights file 'photo.png': not an H-Net weights file (.bpk, written by `hnet train`): \
          this is a PNG image"
     );
     let err = HNet::from_weights_bytes(b"not a model", &device, "notes.txt").unwrap_err();
-    assert_eq!(err.problem, WeightsProblem::NotWeights("a text file"));
+    assert!(matches!(
+        err.problem,
+        WeightsProblem::NotWeights("a text file")
+    ));
 }
 
 #[test]
@@ -93,7 +100,7 @@ fn a_burnpack_file_from_elsewhere_is_rejected() {
         .into_bytes()
         .unwrap();
     let err = HNet::from_weights_bytes(&bytes, &device, "plain.bpk").unwrap_err();
-    assert_eq!(err.problem, WeightsProblem::NotHNetStudio);
+    assert!(matches!(err.problem, WeightsProblem::NotHNetStudio));
 }
 
 #[test]
@@ -113,6 +120,9 @@ fn weights_that_do_not_fit_the_config_are_a_mismatch() {
     let err = HNet::from_weights_bytes(&bytes, &device, "lying.bpk").unwrap_err();
     assert!(matches!(err.problem, WeightsProblem::Mismatch(_)), "{err}");
     assert!(err.to_string().contains("lying.bpk"));
+    // Burn's own account of the mismatch is kept as the cause.
+    let cause = std::error::Error::source(&err.problem).expect("the record error is kept");
+    assert!(!cause.to_string().is_empty());
 }
 
 #[test]
@@ -121,11 +131,26 @@ fn weights_of_another_architecture_are_rejected() {
     let model = config().init(&device).unwrap();
     let bytes = weights::encode(model, "unet", "{}", &provenance(), "unet.bpk").unwrap();
     let err = HNet::from_weights_bytes(&bytes, &device, "unet.bpk").unwrap_err();
-    assert_eq!(
-        err.problem,
-        WeightsProblem::WrongArchitecture {
-            expected: "hnet".into(),
-            found: "unet".into()
-        }
+    assert!(
+        matches!(
+            &err.problem,
+            WeightsProblem::WrongArchitecture { expected, found } if expected == "hnet" && found == "unet"
+        ),
+        "{err}"
     );
+}
+
+#[test]
+fn files_written_before_named_sizes_keep_their_height_and_width() {
+    // Settings used to store the size as `[height, width]`.
+    let device = Device::flex();
+    let config = config().with_image_size(ImageSize::new(32, 16));
+    let model = config.init(&device).unwrap();
+    let old_json = serde_json::to_string(&config)
+        .unwrap()
+        .replace(r#"{"width":32,"height":16}"#, "[16,32]");
+    assert!(old_json.contains("[16,32]"), "{old_json}");
+    let bytes = weights::encode(model, "hnet", &old_json, &provenance(), "old.bpk").unwrap();
+    let (_, read, _) = HNet::from_weights_bytes(&bytes, &device, "old.bpk").unwrap();
+    assert_eq!(read.image_size, ImageSize::new(32, 16));
 }

@@ -23,8 +23,8 @@ pub struct DatasetArchive {
 /// Writing to memory cannot fail for lack of space; a failure here is a bug in the archive's use
 /// (such as a duplicate pair id).
 #[derive(Debug, thiserror::Error)]
-#[error("cannot build the dataset archive: {0}")]
-pub struct ArchiveError(String);
+#[error("cannot build the dataset archive")]
+pub struct ArchiveError(#[from] zip::result::ZipError);
 
 impl DatasetArchive {
     /// An empty archive whose entries sit in the folder `folder` (the dataset's name).
@@ -43,10 +43,10 @@ impl DatasetArchive {
             .last_modified_time(zip::DateTime::default());
         self.zip
             .start_file(format!("{}/{path}", self.folder), options)
-            .map_err(|e| ArchiveError(e.to_string()))?;
+            .map_err(ArchiveError)?;
         self.zip
             .write_all(bytes)
-            .map_err(|e| ArchiveError(e.to_string()))
+            .map_err(|e| ArchiveError(e.into()))
     }
 
     /// Adds one pair: its manifest row, its four images and its record.
@@ -69,7 +69,7 @@ impl DatasetArchive {
         let manifest = manifest_csv(&self.rows);
         self.add(HEADER_FILE, &header_json(header))?;
         self.add(MANIFEST_FILE, &manifest)?;
-        let cursor = self.zip.finish().map_err(|e| ArchiveError(e.to_string()))?;
+        let cursor = self.zip.finish().map_err(ArchiveError)?;
         Ok(cursor.into_inner())
     }
 }
@@ -112,7 +112,7 @@ mod tests {
         }
         let bytes = archive
             .finish(&DatasetHeader::new(
-                [8, 6],
+                hnet_units::ImageSize::new(8, 6),
                 3,
                 serde_json::json!({"generator": "test"}),
             ))
@@ -127,7 +127,7 @@ mod tests {
         let dataset = Dataset::open(&dir.join("labels")).unwrap();
         assert_eq!(dataset.rows.len(), 3);
         let pair = dataset.load_pair(&dataset.rows[0], None).unwrap();
-        assert_eq!(pair.size, [8, 6]);
+        assert_eq!(pair.size, hnet_units::ImageSize::new(8, 6));
         assert!(pair.mask_a.iter().all(|&m| m == 1.0));
         std::fs::remove_dir_all(dir).ok();
     }

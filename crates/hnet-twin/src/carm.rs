@@ -9,6 +9,7 @@
 //! secondary angle tilts it about the left-right axis (`x`; positive = cranial). Pixel `(i, j)`
 //! covers `[i, i+1) x [j, j+1)`; its centre is `(i + 0.5, j + 0.5)`.
 
+use hnet_units::ImageSize;
 use serde::{Deserialize, Serialize};
 
 use crate::vec3::{Mat3, Vec3};
@@ -26,8 +27,9 @@ pub struct CArm {
     pub source_to_detector_mm: f64,
     /// Detector pixel pitch, mm.
     pub pixel_pitch_mm: f64,
-    /// Image size `[width, height]` in pixels.
-    pub image_size: [usize; 2],
+    /// Image size in pixels.
+    #[serde(deserialize_with = "hnet_units::width_height_or_named")]
+    pub image_size: ImageSize,
 }
 
 /// The 3x4 projection matrix `P = K [R | t]` mapping homogeneous world points (mm) to
@@ -56,7 +58,7 @@ impl CArm {
             source_to_isocentre_mm: 750.0,
             source_to_detector_mm: 1200.0,
             pixel_pitch_mm: 150.0 / size_px as f64,
-            image_size: [size_px, size_px],
+            image_size: ImageSize::square(size_px),
         }
     }
 
@@ -69,13 +71,13 @@ impl CArm {
             // A 12 mm focal length on a sensor 3.6 mm wide.
             source_to_detector_mm: 12.0,
             pixel_pitch_mm: 3.6 / size_px as f64,
-            image_size: [size_px, size_px],
+            image_size: ImageSize::square(size_px),
         }
     }
 
     /// The same view rendered at another image size, keeping the detector's physical size.
-    pub fn with_image_size(mut self, size: [usize; 2]) -> Self {
-        self.pixel_pitch_mm *= self.image_size[0] as f64 / size[0] as f64;
+    pub fn with_image_size(mut self, size: ImageSize) -> Self {
+        self.pixel_pitch_mm *= self.image_size.width as f64 / size.width as f64;
         self.image_size = size;
         self
     }
@@ -110,8 +112,8 @@ impl CArm {
         let depth = r.row(2).dot(rel);
         let f = self.focal_px();
         Projected {
-            u: f * r.row(0).dot(rel) / depth + self.image_size[0] as f64 / 2.0,
-            v: f * r.row(1).dot(rel) / depth + self.image_size[1] as f64 / 2.0,
+            u: f * r.row(0).dot(rel) / depth + self.image_size.width as f64 / 2.0,
+            v: f * r.row(1).dot(rel) / depth + self.image_size.height as f64 / 2.0,
             depth_mm: depth,
         }
     }
@@ -120,8 +122,8 @@ impl CArm {
     pub fn ray_direction(&self, u: f64, v: f64) -> Vec3 {
         let r = self.rotation();
         let f = self.focal_px();
-        let x = (u - self.image_size[0] as f64 / 2.0) / f;
-        let y = (v - self.image_size[1] as f64 / 2.0) / f;
+        let x = (u - self.image_size.width as f64 / 2.0) / f;
+        let y = (v - self.image_size.height as f64 / 2.0) / f;
         (r.row(0) * x + r.row(1) * y + r.row(2)).normalized()
     }
 
@@ -137,8 +139,8 @@ impl CArm {
         let t = r * -self.source_mm();
         let f = self.focal_px();
         let (cx, cy) = (
-            self.image_size[0] as f64 / 2.0,
-            self.image_size[1] as f64 / 2.0,
+            self.image_size.width as f64 / 2.0,
+            self.image_size.height as f64 / 2.0,
         );
         let k = [[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]];
         let rt = [
@@ -301,7 +303,7 @@ mod tests {
     #[test]
     fn resizing_keeps_the_field_of_view() {
         let big = CArm::cardiac(0.0, 0.0, 224);
-        let small = big.with_image_size([112, 112]);
+        let small = big.with_image_size(ImageSize::square(112));
         let p = Vec3::new(20.0, 0.0, 15.0);
         let (a, b) = (big.project(p), small.project(p));
         assert!((a.u / 2.0 - b.u).abs() < 1e-9 && (a.v / 2.0 - b.v).abs() < 1e-9);

@@ -24,6 +24,7 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+use hnet_units::ImageSize;
 use serde::{Deserialize, Serialize};
 
 /// `format` field of `dataset.json`.
@@ -178,8 +179,9 @@ pub struct DatasetHeader {
     pub format: String,
     /// Layout version, [`VERSION`].
     pub version: u32,
-    /// Image size `[width, height]` in pixels, the same for every image.
-    pub image_size: [usize; 2],
+    /// Image size in pixels, the same for every image.
+    #[serde(deserialize_with = "hnet_units::width_height_or_named")]
+    pub image_size: ImageSize,
     /// Number of pairs.
     pub samples: usize,
     /// What made the data and with which settings (free-form JSON: the twin's configuration, the
@@ -189,7 +191,7 @@ pub struct DatasetHeader {
 
 impl DatasetHeader {
     /// A header for `samples` pairs of `image_size` made by `source`.
-    pub fn new(image_size: [usize; 2], samples: usize, source: serde_json::Value) -> Self {
+    pub fn new(image_size: ImageSize, samples: usize, source: serde_json::Value) -> Self {
         Self {
             format: FORMAT.into(),
             version: VERSION,
@@ -200,29 +202,40 @@ impl DatasetHeader {
     }
 }
 
-/// A dataset could not be read or written.
-#[derive(Debug)]
+/// A dataset could not be read or written: the file, what is wrong with it, and the error that
+/// caused it (an I/O, image, CSV or JSON error) as the [`source`](std::error::Error::source).
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {problem}", path.display())]
 pub struct DatasetError {
     /// The file or folder concerned.
     pub path: PathBuf,
     /// What is wrong with it.
     pub problem: String,
+    /// The underlying error, when there is one.
+    #[source]
+    pub cause: Option<Box<dyn std::error::Error + Send + Sync>>,
 }
-
-impl fmt::Display for DatasetError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}: {}", self.path.display(), self.problem)
-    }
-}
-
-impl std::error::Error for DatasetError {}
 
 impl DatasetError {
-    /// An error about `path`.
+    /// A problem with `path` that has no underlying error.
     pub fn new(path: impl Into<PathBuf>, problem: impl fmt::Display) -> Self {
         Self {
             path: path.into(),
             problem: problem.to_string(),
+            cause: None,
+        }
+    }
+
+    /// A problem with `path` caused by `cause`.
+    pub fn caused_by(
+        path: impl Into<PathBuf>,
+        problem: impl fmt::Display,
+        cause: impl Into<Box<dyn std::error::Error + Send + Sync>>,
+    ) -> Self {
+        Self {
+            path: path.into(),
+            problem: problem.to_string(),
+            cause: Some(cause.into()),
         }
     }
 }
@@ -277,7 +290,7 @@ pub fn parse_manifest(bytes: &[u8], path: &Path) -> Result<Vec<ManifestRow>, Dat
     let mut reader = csv::ReaderBuilder::new().from_reader(bytes);
     let headers = reader
         .headers()
-        .map_err(|e| DatasetError::new(path, format!("unreadable header line: {e}")))?
+        .map_err(|e| DatasetError::caused_by(path, "unreadable header line", e))?
         .clone();
     let column = |name: &str| {
         headers
@@ -292,7 +305,8 @@ pub fn parse_manifest(bytes: &[u8], path: &Path) -> Result<Vec<ManifestRow>, Dat
     let mut seen = std::collections::HashSet::new();
     for (n, record) in reader.records().enumerate() {
         let line = n + 2;
-        let record = record.map_err(|e| DatasetError::new(path, format!("line {line}: {e}")))?;
+        let record = record
+            .map_err(|e| DatasetError::caused_by(path, format!("line {line} unreadable"), e))?;
         let row_id = record.get(id).unwrap_or_default().to_string();
         if !is_valid_id(&row_id) {
             return Err(DatasetError::new(
@@ -423,7 +437,7 @@ mod folder {
     use std::fs;
 
     fn io(path: &Path, e: std::io::Error) -> DatasetError {
-        DatasetError::new(path, e)
+        DatasetError::caused_by(path, "cannot be read or written", e)
     }
 
     /// Writes `bytes` to `path` atomically ([`crate::files::write_atomically`]).
@@ -475,7 +489,7 @@ mod folder {
             if header_path.exists() {
                 let bytes = fs::read(&header_path).map_err(|e| io(&header_path, e))?;
                 let existing: DatasetHeader = serde_json::from_slice(&bytes).map_err(|e| {
-                    DatasetError::new(&header_path, format!("not a dataset header: {e}"))
+                    DatasetError::caused_by(&header_path, "not a dataset header", e)
                 })?;
                 if &existing != header {
                     return Err(DatasetError::new(
@@ -607,8 +621,8 @@ mod folder {
     /// One pair's decoded images as 8-bit RGB and its masks as probabilities.
     #[derive(Debug, Clone, PartialEq)]
     pub struct LoadedPair {
-        /// `[width, height]`.
-        pub size: [usize; 2],
+        /// The size of all four images.
+        pub size: ImageSize,
         /// View A, RGB.
         pub view_a: Vec<u8>,
         /// View B, RGB.
@@ -624,14 +638,17 @@ mod folder {
         pub fn open(root: &Path) -> Result<Self, DatasetError> {
             let header_path = root.join(HEADER_FILE);
             let bytes = fs::read(&header_path).map_err(|e| {
-                DatasetError::new(
+                DatasetError::caused_by(
                     &header_path,
-                    format!("{e} (is {} an H-Net Studio dataset?)", root.display()),
+                    format!(
+                        "cannot be read (is {} an H-Net Studio dataset?)",
+                        root.display()
+                    ),
+                    e,
                 )
             })?;
-            let header: DatasetHeader = serde_json::from_slice(&bytes).map_err(|e| {
-                DatasetError::new(&header_path, format!("not a dataset header: {e}"))
-            })?;
+            let header: DatasetHeader = serde_json::from_slice(&bytes)
+                .map_err(|e| DatasetError::caused_by(&header_path, "not a dataset header", e))?;
             if header.format != FORMAT {
                 return Err(DatasetError::new(
                     &header_path,
@@ -649,9 +666,10 @@ mod folder {
             }
             let manifest_path = root.join(MANIFEST_FILE);
             let bytes = fs::read(&manifest_path).map_err(|e| {
-                DatasetError::new(
+                DatasetError::caused_by(
                     &manifest_path,
-                    format!("{e} (an interrupted generation writes it when resumed and finished)"),
+                    "cannot be read (an interrupted generation writes it when resumed and finished)",
+                    e,
                 )
             })?;
             let rows = parse_manifest(&bytes, &manifest_path)?;
@@ -677,49 +695,35 @@ mod folder {
             self.root.join(record_path(id))
         }
 
-        /// Decodes a pair, resized to `size` (`[width, height]`) when given.
+        /// Decodes a pair, resized to `size` when given.
         pub fn load_pair(
             &self,
             row: &ManifestRow,
-            size: Option<[usize; 2]>,
+            size: Option<ImageSize>,
         ) -> Result<LoadedPair, DatasetError> {
             let load = |kind: &str| -> Result<image::DynamicImage, DatasetError> {
                 let path = self.image_file(&row.id, kind);
                 let bytes = fs::read(&path).map_err(|e| io(&path, e))?;
                 image::load_from_memory(&bytes)
-                    .map_err(|e| DatasetError::new(&path, format!("unreadable image: {e}")))
+                    .map_err(|e| DatasetError::caused_by(&path, "unreadable image", e))
             };
             let [a, b, ma, mb] = SAMPLE_IMAGES.map(load);
             let (a, b, ma, mb) = (a?, b?, ma?, mb?);
-            let first = [a.width() as usize, a.height() as usize];
+            let first = image_size_of(&a);
             for (kind, img) in SAMPLE_IMAGES.iter().zip([&a, &b, &ma, &mb]) {
-                let found = [img.width() as usize, img.height() as usize];
+                let found = image_size_of(img);
                 if found != first {
                     return Err(DatasetError::new(
                         self.image_file(&row.id, kind),
                         format!(
-                            "is {}x{} but {} is {}x{}",
-                            found[0],
-                            found[1],
+                            "is {found} but {} is {first}",
                             image_path(&row.id, SAMPLE_IMAGES[0]),
-                            first[0],
-                            first[1]
                         ),
                     ));
                 }
             }
             let target = size.unwrap_or(first);
-            let resize = |img: image::DynamicImage| {
-                if [img.width() as usize, img.height() as usize] == target {
-                    img
-                } else {
-                    img.resize_exact(
-                        target[0] as u32,
-                        target[1] as u32,
-                        image::imageops::FilterType::Triangle,
-                    )
-                }
-            };
+            let resize = |img: image::DynamicImage| resized(img, target);
             let mask = |img: image::DynamicImage| -> Vec<f32> {
                 resize(img)
                     .to_luma8()
@@ -741,6 +745,24 @@ mod folder {
 
 #[cfg(not(target_arch = "wasm32"))]
 pub use folder::{Dataset, DatasetWriter, LoadedPair};
+
+/// The size of a decoded image.
+pub fn image_size_of(image: &image::DynamicImage) -> ImageSize {
+    ImageSize::new(image.width() as usize, image.height() as usize)
+}
+
+/// `image` at `size` (bilinear, the one resize of dataset images), untouched when already there.
+pub fn resized(image: image::DynamicImage, size: ImageSize) -> image::DynamicImage {
+    if image_size_of(&image) == size {
+        image
+    } else {
+        image.resize_exact(
+            size.width as u32,
+            size.height as u32,
+            image::imageops::FilterType::Triangle,
+        )
+    }
+}
 
 #[cfg(test)]
 mod tests {

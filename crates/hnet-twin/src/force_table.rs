@@ -3,7 +3,7 @@
 //! other columns ignored. The one reader behind `hnet import`'s forces file and the page's force
 //! labels (the dataset's own `manifest.csv` has its own, stricter reader in [`crate::dataset`]).
 
-use std::fmt;
+use std::sync::Arc;
 
 /// The force columns, in the order of the force's components.
 pub const FORCE_COLUMNS: [&str; 3] = ["fx", "fy", "fz"];
@@ -21,24 +21,28 @@ pub struct ForceRow {
 
 /// What is wrong with a force table: the line when one line is at fault, and the problem. The
 /// caller names the file.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, thiserror::Error)]
+#[error("{}{problem}", line.map(|l| format!("line {l}: ")).unwrap_or_default())]
 pub struct ForceTableError {
     /// The line of the file (the header is line 1).
     pub line: Option<u64>,
     /// What is wrong.
     pub problem: String,
+    /// The CSV reader's error, when the text itself could not be read.
+    #[source]
+    pub cause: Option<Arc<csv::Error>>,
 }
 
-impl fmt::Display for ForceTableError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self.line {
-            Some(line) => write!(f, "line {line}: {}", self.problem),
-            None => f.write_str(&self.problem),
+impl ForceTableError {
+    /// A problem with the table, or with its `line`.
+    pub fn new(line: Option<u64>, problem: impl Into<String>) -> Self {
+        Self {
+            line,
+            problem: problem.into(),
+            cause: None,
         }
     }
 }
-
-impl std::error::Error for ForceTableError {}
 
 /// Reads a force table whose key column is named by one of `keys` (the first found, compared
 /// without case). A header without the key or a force column fails the whole table; otherwise
@@ -47,14 +51,18 @@ pub fn read_force_table(
     bytes: &[u8],
     keys: &[&str],
 ) -> Result<Vec<Result<ForceRow, ForceTableError>>, ForceTableError> {
-    let error = |line: Option<u64>, problem: String| ForceTableError { line, problem };
+    let error = ForceTableError::new;
+    let unreadable = |line: Option<u64>, problem: &str, e: csv::Error| ForceTableError {
+        cause: Some(Arc::new(e)),
+        ..ForceTableError::new(line, problem)
+    };
     let mut reader = csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
         .flexible(true)
         .from_reader(bytes);
     let headers = reader
         .headers()
-        .map_err(|e| error(Some(1), format!("cannot read the header: {e}")))?
+        .map_err(|e| unreadable(Some(1), "cannot read the header", e))?
         .clone();
     let column = |name: &str| headers.iter().position(|h| h.eq_ignore_ascii_case(name));
     let needed = || {
@@ -83,12 +91,7 @@ pub fn read_force_table(
     let mut rows = Vec::new();
     for record in reader.records() {
         let row = record
-            .map_err(|e| {
-                error(
-                    e.position().map(|p| p.line()),
-                    format!("cannot be read: {e}"),
-                )
-            })
+            .map_err(|e| unreadable(e.position().map(|p| p.line()), "cannot be read", e))
             .and_then(|record| {
                 let line = record.position().map_or(0, |p| p.line());
                 let key = record.get(key_column).unwrap_or_default();
@@ -143,13 +146,14 @@ mod tests {
             &["id", "image"],
         )
         .unwrap();
+        let rows: Vec<ForceRow> = rows.into_iter().map(Result::unwrap).collect();
         assert_eq!(
             rows,
-            vec![Ok(ForceRow {
+            vec![ForceRow {
                 line: 2,
                 key: "a.png".into(),
                 force_n: [0.1, -0.2, 0.3],
-            })]
+            }]
         );
     }
 

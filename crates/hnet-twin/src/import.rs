@@ -8,13 +8,14 @@
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 
+use hnet_units::ImageSize;
 use serde_json::json;
 
 use crate::dataset::{
-    DatasetError, DatasetHeader, DatasetWriter, ImageRef, ManifestRow, assign_splits, is_valid_id,
-    sample_files,
+    DatasetError, DatasetHeader, DatasetWriter, ImageRef, ManifestRow, assign_splits,
+    image_size_of, is_valid_id, resized, sample_files,
 };
-use crate::force_table::{ForceRow, read_force_table};
+use crate::force_table::{ForceRow, ForceTableError, read_force_table};
 use crate::scene::{luma, otsu_threshold, threshold_mask};
 
 /// How masks are made from the recorded images.
@@ -51,12 +52,12 @@ pub struct ImportOptions {
 }
 
 /// What an import did.
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
+#[derive(Debug, Default)]
 pub struct ImportReport {
     /// Pairs written.
     pub imported: usize,
-    /// One message per skipped row (with `skip_bad`).
-    pub skipped: Vec<String>,
+    /// Why each skipped row was skipped (with `skip_bad`).
+    pub skipped: Vec<DatasetError>,
 }
 
 /// Extensions of the image files read from folders (recordings here, backgrounds in `hnet
@@ -72,13 +73,23 @@ pub fn is_image_file(path: &Path) -> bool {
 
 /// The forces CSV's rows (the key is the image's name), each good or its error.
 fn read_forces(path: &Path) -> Result<Vec<Result<ForceRow, DatasetError>>, DatasetError> {
-    let bytes = std::fs::read(path).map_err(|e| DatasetError::new(path, e))?;
+    let bytes =
+        std::fs::read(path).map_err(|e| DatasetError::caused_by(path, "cannot be read", e))?;
     let rows = read_force_table(&bytes, &["image", "file", "frame", "name"])
-        .map_err(|e| DatasetError::new(path, e))?;
+        .map_err(|e| table_error(path, e))?;
     Ok(rows
         .into_iter()
-        .map(|row| row.map_err(|e| DatasetError::new(path, e)))
+        .map(|row| row.map_err(|e| table_error(path, e)))
         .collect())
+}
+
+/// A force table's problem (with its line) as the problem of the file at `path`.
+fn table_error(path: &Path, error: ForceTableError) -> DatasetError {
+    let problem = error.to_string();
+    match error.cause {
+        Some(cause) => DatasetError::caused_by(path, problem, cause),
+        None => DatasetError::new(path, problem),
+    }
 }
 
 /// The file of `name` in `folder`: the name itself, or the name with an image extension.
@@ -122,9 +133,10 @@ struct Decoded {
 }
 
 fn decode(path: &Path) -> Result<Decoded, DatasetError> {
-    let bytes = std::fs::read(path).map_err(|e| DatasetError::new(path, e))?;
+    let bytes =
+        std::fs::read(path).map_err(|e| DatasetError::caused_by(path, "cannot be read", e))?;
     let image = image::load_from_memory(&bytes)
-        .map_err(|e| DatasetError::new(path, format!("unreadable image: {e}")))?;
+        .map_err(|e| DatasetError::caused_by(path, "unreadable image", e))?;
     Ok(Decoded {
         image,
         path: path.to_path_buf(),
@@ -132,16 +144,8 @@ fn decode(path: &Path) -> Result<Decoded, DatasetError> {
 }
 
 /// Grey or RGB pixels of an image at the dataset's size, and its channel count.
-fn pixels(image: &image::DynamicImage, size: [usize; 2]) -> (usize, Vec<u8>) {
-    let image = if [image.width() as usize, image.height() as usize] == size {
-        image.clone()
-    } else {
-        image.resize_exact(
-            size[0] as u32,
-            size[1] as u32,
-            image::imageops::FilterType::Triangle,
-        )
-    };
+fn pixels(image: &image::DynamicImage, size: ImageSize) -> (usize, Vec<u8>) {
+    let image = resized(image.clone(), size);
     if image.color().has_color() {
         (3, image.to_rgb8().into_raw())
     } else {
@@ -181,7 +185,7 @@ pub fn import_recordings(
     let mut report = ImportReport::default();
     let mut good = Vec::new();
     let mut ids = HashSet::new();
-    let mut size = options.size.map(|s| [s, s]);
+    let mut size = options.size.map(ImageSize::square);
     let mut size_source: Option<PathBuf> = None;
     let total = rows.len();
     for row in rows {
@@ -206,18 +210,11 @@ pub fn import_recordings(
                 })
             });
             let (a, b) = (decode(&a?)?, decode(&b?)?);
-            let dims = |d: &Decoded| [d.image.width() as usize, d.image.height() as usize];
+            let dims = |d: &Decoded| image_size_of(&d.image);
             if dims(&a) != dims(&b) {
                 return Err(DatasetError::new(
                     &b.path,
-                    format!(
-                        "is {}x{} but {} is {}x{}",
-                        dims(&b)[0],
-                        dims(&b)[1],
-                        a.path.display(),
-                        dims(&a)[0],
-                        dims(&a)[1]
-                    ),
+                    format!("is {} but {} is {}", dims(&b), a.path.display(), dims(&a)),
                 ));
             }
             match (size, &size_source) {
@@ -225,12 +222,9 @@ pub fn import_recordings(
                     return Err(DatasetError::new(
                         &a.path,
                         format!(
-                            "is {}x{} but {} is {}x{} (pass --size to resize all images)",
-                            dims(&a)[0],
-                            dims(&a)[1],
+                            "is {} but {} is {s} (pass --size to resize all images)",
+                            dims(&a),
                             first.display(),
-                            s[0],
-                            s[1]
                         ),
                     ));
                 }
@@ -244,7 +238,7 @@ pub fn import_recordings(
         });
         match checked {
             Ok(item) => good.push(item),
-            Err(e) if options.skip_bad => report.skipped.push(e.to_string()),
+            Err(e) if options.skip_bad => report.skipped.push(e),
             Err(e) => return Err(e),
         }
     }
@@ -278,7 +272,7 @@ pub fn import_recordings(
             let (ca, pa) = pixels(&a.image, size);
             let (cb, pb) = pixels(&b.image, size);
             let (ma, mb) = (mask_of(ca, &pa, options), mask_of(cb, &pb, options));
-            let [width, height] = size;
+            let ImageSize { width, height } = size;
             let manifest = ManifestRow {
                 id: id.clone(),
                 split,

@@ -7,6 +7,7 @@
 //! displaces (lungs are negative: air replaces soft tissue); values are effective linear
 //! attenuation coefficients at about 60 keV, in 1/mm.
 
+use hnet_units::ImageSize;
 use serde::{Deserialize, Serialize};
 
 use crate::carm::CArm;
@@ -360,7 +361,7 @@ impl Thorax {
             pixel_pitch_mm: field_mm * view.source_to_detector_mm
                 / view.source_to_isocentre_mm
                 / size_px as f64,
-            image_size: [size_px, size_px],
+            image_size: ImageSize::square(size_px),
             ..*view
         };
         let source = wide.source_mm();

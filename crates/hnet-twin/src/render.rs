@@ -6,6 +6,7 @@
 //! pixel's coverage is `clamp(0.5 - d, 0, 1)` where `d` is the signed distance in pixels from the
 //! pixel centre to the tube's outline (a one-pixel box filter of the exact outline).
 
+use hnet_units::ImageSize;
 use rand::{Rng, RngExt};
 
 use crate::carm::CArm;
@@ -65,7 +66,7 @@ pub fn rasterize_catheter(
     design: &CatheterDesign,
     view: &CArm,
 ) -> TubeRaster {
-    let [width, height] = view.image_size;
+    let ImageSize { width, height } = view.image_size;
     let mut raster = TubeRaster::empty(width, height);
     let radius_mm = diameter_mm / 2.0;
     let focal = view.focal_px();
@@ -198,7 +199,7 @@ pub fn render_xray(
 /// The bench's background: a matte board under a soft light with a faint 10 mm grid, as the
 /// camera's optics see it (noise is added by [`render_bench`]).
 pub fn bench_background(view: &CArm, rng: &mut impl Rng) -> RgbImage {
-    let [width, height] = view.image_size;
+    let ImageSize { width, height } = view.image_size;
     // Board tint and light placement vary a little from shot to shot.
     let tint = [
         0.80 + 0.04 * rng.random::<f32>(),

@@ -4,6 +4,7 @@
 //! Every random choice of sample `index` comes from its own generator seeded by `(seed, index)`,
 //! so samples can be generated in any order or in parallel and still be identical.
 
+use hnet_units::ImageSize;
 use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -540,7 +541,7 @@ pub fn render_view(
 ) -> ViewSample {
     let tube: TubeRaster =
         render::rasterize_catheter(shape, config.rod.diameter_mm, &config.catheter, view);
-    let [width, height] = view.image_size;
+    let ImageSize { width, height } = view.image_size;
     let (pixels, background) = match background {
         Some((source, layout)) => {
             let transmission =

@@ -3,6 +3,7 @@
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
+use hnet_units::ImageSize;
 use rayon::prelude::*;
 use serde_json::json;
 
@@ -129,7 +130,7 @@ pub fn simulate_dataset(
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<SimulationReport, SimulationError> {
     let header = DatasetHeader::new(
-        [config.image_size, config.image_size],
+        ImageSize::square(config.image_size),
         samples,
         json!({
             "generator": "hnet-twin",

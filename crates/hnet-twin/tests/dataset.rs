@@ -126,10 +126,12 @@ fn a_simulated_dataset_reads_back_with_splits_masks_and_geometry() {
     let row = &dataset.rows[0];
     assert!(row.force_n.iter().map(|f| f * f).sum::<f64>().sqrt() <= 0.4 + 1e-9);
     let pair = dataset.load_pair(row, None).unwrap();
-    assert_eq!(pair.size, [64, 64]);
+    assert_eq!(pair.size, hnet_units::ImageSize::square(64));
     assert_eq!(pair.view_a.len(), 64 * 64 * 3);
     assert!(pair.mask_a.iter().any(|&m| m > 0.99));
-    let resized = dataset.load_pair(row, Some([32, 32])).unwrap();
+    let resized = dataset
+        .load_pair(row, Some(hnet_units::ImageSize::square(32)))
+        .unwrap();
     assert_eq!(resized.mask_b.len(), 32 * 32);
 
     // The saved camera matrices reconstruct the saved 3D centreline.
@@ -201,7 +203,10 @@ fn recordings_import_into_the_same_format_with_thresholded_masks() {
     let report = import_recordings(&import_options(a, b, forces, out.clone()), &|_, _| {}).unwrap();
     assert_eq!(report.imported, 10);
     let dataset = Dataset::open(&out).unwrap();
-    assert_eq!(dataset.header.image_size, [40, 30]);
+    assert_eq!(
+        dataset.header.image_size,
+        hnet_units::ImageSize::new(40, 30)
+    );
     let row = dataset.rows.iter().find(|r| r.id == "frame_03").unwrap();
     assert_eq!(row.force_n, [0.3, -0.1, 0.2]);
     let pair = dataset.load_pair(row, None).unwrap();
@@ -246,7 +251,12 @@ fn bad_rows_and_files_are_named_and_skippable() {
     )
     .unwrap();
     assert_eq!(report.imported, 1);
-    let messages = report.skipped.join("\n");
+    let messages = report
+        .skipped
+        .iter()
+        .map(|e| e.to_string())
+        .collect::<Vec<_>>()
+        .join("\n");
     assert!(messages.contains("line 2: fz"), "{messages}");
     assert!(
         messages.contains("missing.png: missing (named on line 3"),
@@ -257,7 +267,7 @@ fn bad_rows_and_files_are_named_and_skippable() {
         "{messages}"
     );
     assert!(
-        messages.contains("cam_b/frame_02.png: is 10x10 but"),
+        messages.contains("cam_b/frame_02.png: is 10×10 but"),
         "{messages}"
     );
     assert_eq!(Dataset::open(&out).unwrap().rows[0].id, "frame_03");

@@ -12,6 +12,7 @@ use burn::tensor::module::{conv_transpose2d, conv2d};
 use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 use burn::tensor::{Device, Distribution, Tensor};
 use hnet_model::HNetConfig;
+use hnet_units::ImageSize;
 use serde::Serialize;
 
 use crate::backend::BackendChoice;
@@ -37,7 +38,7 @@ pub struct ConvLayer {
     /// Square kernel side.
     pub kernel: usize,
     /// Input `[height, width]` in pixels.
-    pub input_size: [usize; 2],
+    pub input_size: ImageSize,
     /// Whether training computes the gradient with respect to the input: not for the first
     /// layer, whose input is the images.
     pub input_grad: bool,
@@ -49,10 +50,12 @@ impl ConvLayer {
         self.channels_in * self.channels_out * self.kernel * self.kernel + self.channels_out
     }
 
-    fn output_size(&self) -> [usize; 2] {
+    fn output_size(&self) -> ImageSize {
         match self.kind {
             ConvKind::Same => self.input_size,
-            ConvKind::TransposedStride2 => self.input_size.map(|s| 2 * s),
+            ConvKind::TransposedStride2 => {
+                ImageSize::new(2 * self.input_size.width, 2 * self.input_size.height)
+            }
         }
     }
 }
@@ -60,8 +63,13 @@ impl ConvLayer {
 /// The convolutions of one H-Net branch in the order a forward pass runs them.
 pub fn hnet_convolutions(config: &HNetConfig) -> Vec<ConvLayer> {
     let f = config.filters;
-    let at = |level: usize| config.image_size.map(|s| s >> level);
-    let same = |name: String, channels_in: usize, input_size: [usize; 2]| ConvLayer {
+    let at = |level: usize| {
+        ImageSize::new(
+            config.image_size.width >> level,
+            config.image_size.height >> level,
+        )
+    };
+    let same = |name: String, channels_in: usize, input_size: ImageSize| ConvLayer {
         input_grad: true,
         name,
         kind: ConvKind::Same,
@@ -181,8 +189,8 @@ enum Tracked {
 }
 
 fn time_layer(layer: &ConvLayer, images: usize, runs: usize, device: &Device) -> LayerTimes {
-    let [h, w] = layer.input_size;
-    let [oh, ow] = layer.output_size();
+    let [h, w] = layer.input_size.height_width();
+    let [oh, ow] = layer.output_size().height_width();
     let (ci, co, k) = (layer.channels_in, layer.channels_out, layer.kernel);
     let random = |shape: [usize; 4]| Tensor::<4>::random(shape, Distribution::Default, device);
     let x = random([images, ci, h, w]);
@@ -247,7 +255,7 @@ fn time_layer(layer: &ConvLayer, images: usize, runs: usize, device: &Device) ->
 }
 
 pub fn run(args: &LayersBench) -> anyhow::Result<()> {
-    let config = HNetConfig::new().with_image_size([args.size, args.size]);
+    let config = HNetConfig::new().with_image_size(ImageSize::square(args.size));
     config.validate()?;
     let device = args.backend.device()?.autodiff();
     let images = 2 * args.batch;
@@ -284,7 +292,7 @@ pub fn run(args: &LayersBench) -> anyhow::Result<()> {
             "{:<18} {:>9} {:>11} {:>8.2} {:>12.2} {:>11}",
             l.layer.name,
             format!("{} -> {}", l.layer.channels_in, l.layer.channels_out),
-            format!("{}x{}", l.layer.input_size[0], l.layer.input_size[1]),
+            l.layer.input_size.to_string(),
             l.forward_ms,
             l.weight_grad_ms,
             l.input_grad_ms
@@ -312,7 +320,7 @@ mod tests {
     /// minus the force head's dense layers.
     #[test]
     fn the_listed_convolutions_are_the_networks() {
-        let config = HNetConfig::new().with_image_size([64, 64]);
+        let config = HNetConfig::new().with_image_size(ImageSize::square(64));
         let layers = hnet_convolutions(&config);
         let net = config.init(&Device::flex()).unwrap();
         let features = 2 * config.pooled_features_per_view();
@@ -321,15 +329,15 @@ mod tests {
         let conv: usize = layers.iter().map(ConvLayer::params).sum();
         assert_eq!(conv + dense, net.num_params());
         assert_eq!(layers.len(), 2 * config.depth + 2 + 3 * config.depth + 1);
-        assert_eq!(layers[0].input_size, [64, 64]);
-        assert_eq!(layers[2 * config.depth].input_size, [4, 4]);
-        assert_eq!(layers.last().unwrap().input_size, [64, 64]);
+        assert_eq!(layers[0].input_size, ImageSize::square(64));
+        assert_eq!(layers[2 * config.depth].input_size, ImageSize::square(4));
+        assert_eq!(layers.last().unwrap().input_size, ImageSize::square(64));
     }
 
     #[test]
     fn every_layer_is_timed() {
         let config = HNetConfig::new()
-            .with_image_size([16, 16])
+            .with_image_size(ImageSize::square(16))
             .with_filters(4)
             .with_depth(2);
         let device = Device::flex().autodiff();

@@ -6,6 +6,7 @@ use std::time::Instant;
 use anyhow::Context;
 use hnet_twin::scene::{Modality, TwinConfig};
 use hnet_twin::simulate::simulate_dataset;
+use hnet_units::ImageSize;
 use serde::Serialize;
 
 use crate::backend::BackendChoice;
@@ -72,7 +73,7 @@ fn model(args: &ModelBench) -> anyhow::Result<()> {
     for backend in &args.backend {
         let device = backend.device()?;
         let train_device = device.clone().autodiff();
-        let config = HNetConfig::new().with_image_size([args.size, args.size]);
+        let config = HNetConfig::new().with_image_size(ImageSize::square(args.size));
         let mut net = config.init(&train_device)?;
         let params = net.num_params();
         let loss = HNetLossConfig::new().init();
@@ -114,10 +115,10 @@ fn model(args: &ModelBench) -> anyhow::Result<()> {
             view_a: &pixels,
             view_b: &pixels,
         }];
-        net.predict(&pair, [args.size, args.size], &device)?;
+        net.predict(&pair, ImageSize::square(args.size), &device)?;
         let start = Instant::now();
         for _ in 0..args.runs {
-            net.predict(&pair, [args.size, args.size], &device)?;
+            net.predict(&pair, ImageSize::square(args.size), &device)?;
         }
         let infer_pair_s = start.elapsed().as_secs_f64() / args.runs as f64;
         results.push(ModelResult {

@@ -1,0 +1,186 @@
+//! The sizes that H-Net Studio's network (`hnet-model`), digital twin (`hnet-twin`), command-line
+//! tool and page all speak of, defined once so that no caller has to remember an index order.
+//!
+//! [`ImageSize`] names its fields: `width` (pixels along `u`, a row's length) and `height`
+//! (pixels along `v`, the number of rows). Tensors are `[batch, channels, height, width]` and
+//! pixel buffers are row-major, `height` rows of `width` pixels.
+//!
+//! Files store a size as `{"width": W, "height": H}`. Files written before this type existed
+//! stored bare arrays, in two orders: the network's settings `[height, width]` (the tensor
+//! order) and the twin's `[width, height]`. [`ImageSize`]'s own `Deserialize` reads the object,
+//! and an array as `[height, width]`; fields that held `[width, height]` read old files with
+//! `#[serde(deserialize_with = "hnet_units::width_height_or_named")]`.
+#![no_std]
+
+use core::fmt;
+
+use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
+use serde::{Deserialize, Serialize};
+
+/// The size of an image, in pixels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+pub struct ImageSize {
+    /// Pixels per row (along `u`).
+    pub width: usize,
+    /// Rows (along `v`).
+    pub height: usize,
+}
+
+impl ImageSize {
+    /// A size of `width` x `height` pixels.
+    pub const fn new(width: usize, height: usize) -> Self {
+        Self { width, height }
+    }
+
+    /// A square of `side` x `side` pixels.
+    pub const fn square(side: usize) -> Self {
+        Self::new(side, side)
+    }
+
+    /// Pixels in the image (`width · height`).
+    pub const fn pixels(self) -> usize {
+        self.width * self.height
+    }
+
+    /// Whether width and height are equal.
+    pub const fn is_square(self) -> bool {
+        self.width == self.height
+    }
+
+    /// `[height, width]`: the order of a tensor's last two dimensions.
+    pub const fn height_width(self) -> [usize; 2] {
+        [self.height, self.width]
+    }
+
+    /// The size of a tensor whose last two dimensions are `[.., height, width]`.
+    pub fn of_dims(dims: &[usize]) -> Option<Self> {
+        match dims {
+            [.., height, width] => Some(Self::new(*width, *height)),
+            _ => None,
+        }
+    }
+}
+
+/// `W×H`, the way image sizes are written in the user interface and in messages.
+impl fmt::Display for ImageSize {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}×{}", self.width, self.height)
+    }
+}
+
+/// Which order a bare two-number array has (files written before [`ImageSize`] existed).
+#[derive(Clone, Copy)]
+enum ArrayOrder {
+    HeightWidth,
+    WidthHeight,
+}
+
+/// A key of `{"width": W, "height": H}`.
+#[derive(Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum Field {
+    Width,
+    Height,
+}
+
+struct SizeVisitor(ArrayOrder);
+
+impl<'de> Visitor<'de> for SizeVisitor {
+    type Value = ImageSize;
+
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("an image size {\"width\": W, \"height\": H} in pixels")
+    }
+
+    fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<ImageSize, A::Error> {
+        let (mut width, mut height) = (None, None);
+        while let Some(field) = map.next_key::<Field>()? {
+            match field {
+                Field::Width => width = Some(map.next_value()?),
+                Field::Height => height = Some(map.next_value()?),
+            }
+        }
+        Ok(ImageSize {
+            width: width.ok_or_else(|| de::Error::missing_field("width"))?,
+            height: height.ok_or_else(|| de::Error::missing_field("height"))?,
+        })
+    }
+
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<ImageSize, A::Error> {
+        let first: usize = seq
+            .next_element()?
+            .ok_or_else(|| de::Error::invalid_length(0, &self))?;
+        let second: usize = seq
+            .next_element()?
+            .ok_or_else(|| de::Error::invalid_length(1, &self))?;
+        if seq.next_element::<de::IgnoredAny>()?.is_some() {
+            return Err(de::Error::invalid_length(3, &self));
+        }
+        Ok(match self.0 {
+            ArrayOrder::HeightWidth => ImageSize::new(second, first),
+            ArrayOrder::WidthHeight => ImageSize::new(first, second),
+        })
+    }
+}
+
+impl<'de> Deserialize<'de> for ImageSize {
+    /// Reads `{"width": W, "height": H}`, or a bare `[height, width]` array (the network's
+    /// settings before this type existed).
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        deserializer.deserialize_any(SizeVisitor(ArrayOrder::HeightWidth))
+    }
+}
+
+/// Reads `{"width": W, "height": H}`, or a bare `[width, height]` array (the twin's datasets
+/// and C-arm settings before [`ImageSize`] existed). For `#[serde(deserialize_with = ..)]`.
+pub fn width_height_or_named<'de, D: Deserializer<'de>>(
+    deserializer: D,
+) -> Result<ImageSize, D::Error> {
+    deserializer.deserialize_any(SizeVisitor(ArrayOrder::WidthHeight))
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+
+    use std::string::ToString;
+
+    use super::*;
+
+    #[test]
+    fn named_fields_round_trip_and_old_arrays_keep_their_meaning() {
+        let size = ImageSize::new(320, 240);
+        let json = serde_json::to_string(&size).unwrap();
+        assert_eq!(json, r#"{"width":320,"height":240}"#);
+        assert_eq!(serde_json::from_str::<ImageSize>(&json).unwrap(), size);
+        // The network's old settings were [height, width].
+        assert_eq!(
+            serde_json::from_str::<ImageSize>("[240, 320]").unwrap(),
+            size
+        );
+        // The twin's old files were [width, height].
+        let mut de = serde_json::Deserializer::from_str("[320, 240]");
+        assert_eq!(width_height_or_named(&mut de).unwrap(), size);
+        let mut de = serde_json::Deserializer::from_str(&json);
+        assert_eq!(width_height_or_named(&mut de).unwrap(), size);
+        for bad in [
+            "[1]",
+            "[1, 2, 3]",
+            r#"{"width": 3}"#,
+            r#"{"w": 3, "h": 2}"#,
+            "7",
+        ] {
+            assert!(serde_json::from_str::<ImageSize>(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn tensor_order_and_display() {
+        let size = ImageSize::new(320, 240);
+        assert_eq!(size.height_width(), [240, 320]);
+        assert_eq!(ImageSize::of_dims(&[8, 3, 240, 320]), Some(size));
+        assert_eq!(size.pixels(), 76_800);
+        assert_eq!(size.to_string(), "320×240");
+        assert!(!size.is_square() && ImageSize::square(64).is_square());
+    }
+}
