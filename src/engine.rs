@@ -38,7 +38,7 @@ pub struct Engine {
     pub backend: Backend,
     /// The network.
     pub model: HNet,
-    /// Its input size `[height, width]`, pixels.
+    /// Its input size, pixels.
     pub input: ImageSize,
     /// Parameter count.
     pub params: usize,
@@ -92,33 +92,39 @@ impl Engine {
             ));
         }
         Ok(Self {
-            params: model.num_params(),
-            device,
-            backend,
-            model,
-            input: config.image_size,
             weights_name: name.to_string(),
             origin,
             header: Some(header),
             weights: Some(bytes),
+            ..Self::without_file(model, config.image_size, device, backend)
         })
+    }
+
+    /// An engine for `model` that came from no file.
+    fn without_file(model: HNet, input: ImageSize, device: Device, backend: Backend) -> Self {
+        Self {
+            params: model.num_params(),
+            device,
+            backend,
+            model,
+            input,
+            weights_name: "untrained".into(),
+            origin: WeightsOrigin::Untrained,
+            header: None,
+            weights: None,
+        }
     }
 
     /// An untrained H-Net (paper architecture at [`FALLBACK_INPUT`] pixels).
     pub fn untrained(device: Device, backend: Backend) -> Result<Self, String> {
         let config = HNetConfig::new().with_image_size(ImageSize::square(FALLBACK_INPUT));
         let model = config.init(&device).map_err(|e| with_causes(&e))?;
-        Ok(Self {
-            params: model.num_params(),
+        Ok(Self::without_file(
+            model,
+            config.image_size,
             device,
             backend,
-            model,
-            input: config.image_size,
-            weights_name: "untrained".into(),
-            origin: WeightsOrigin::Untrained,
-            header: None,
-            weights: None,
-        })
+        ))
     }
 
     /// Runs H-Net on two [`WORK_SIZE`] RGB images, resizing them to the network's input and

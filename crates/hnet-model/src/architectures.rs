@@ -71,14 +71,6 @@ fn both_views(views: [Tensor<4>; 2], net: impl Fn(Tensor<4>) -> Tensor<4>) -> [T
     ]
 }
 
-/// Masks only, from a single-view segmentation network run on both views.
-fn segmentation_outputs(mask_logits: [Tensor<4>; 2]) -> StereoOutputs {
-    StereoOutputs {
-        mask_logits: Some(mask_logits),
-        force: None,
-    }
-}
-
 impl Architecture for HNetConfig {
     type Network = HNet;
     const NAME: &'static str = "hnet";
@@ -103,65 +95,39 @@ impl Architecture for HNetConfig {
     }
 }
 
-impl Architecture for UNetConfig {
-    type Network = UNet;
-    const NAME: &'static str = "unet";
-    const SEGMENTS: bool = true;
-    const ESTIMATES_FORCE: bool = false;
-    const INPUT: StereoInput = StereoInput::Images;
-    fn defaults() -> Self {
-        Self::new()
-    }
-    fn size_multiple(&self) -> usize {
-        1 << self.depth.min(16)
-    }
-    fn build(&self, device: &Device) -> Result<UNet, HNetConfigError> {
-        Ok(self.init(device))
-    }
-    fn run(net: &UNet, views: [Tensor<4>; 2], _masks: [Tensor<4>; 2]) -> StereoOutputs {
-        segmentation_outputs(both_views(views, |x| net.forward(x)))
-    }
+/// The [`Architecture`] of a single-view segmentation network (masks only, run on both views as
+/// one batch): its settings type, network, name and size rule.
+macro_rules! single_view_segmenter {
+    ($settings:ty => $network:ty, $name:literal, |$config:ident| $size_multiple:expr) => {
+        impl Architecture for $settings {
+            type Network = $network;
+            const NAME: &'static str = $name;
+            const SEGMENTS: bool = true;
+            const ESTIMATES_FORCE: bool = false;
+            const INPUT: StereoInput = StereoInput::Images;
+            fn defaults() -> Self {
+                Self::new()
+            }
+            fn size_multiple(&self) -> usize {
+                let $config = self;
+                $size_multiple
+            }
+            fn build(&self, device: &Device) -> Result<$network, HNetConfigError> {
+                Ok(self.init(device))
+            }
+            fn run(net: &$network, views: [Tensor<4>; 2], _: [Tensor<4>; 2]) -> StereoOutputs {
+                StereoOutputs {
+                    mask_logits: Some(both_views(views, |x| net.forward(x))),
+                    force: None,
+                }
+            }
+        }
+    };
 }
 
-impl Architecture for FcnConfig {
-    type Network = Fcn;
-    const NAME: &'static str = "fcn";
-    const SEGMENTS: bool = true;
-    const ESTIMATES_FORCE: bool = false;
-    const INPUT: StereoInput = StereoInput::Images;
-    fn defaults() -> Self {
-        Self::new()
-    }
-    fn size_multiple(&self) -> usize {
-        32
-    }
-    fn build(&self, device: &Device) -> Result<Fcn, HNetConfigError> {
-        Ok(self.init(device))
-    }
-    fn run(net: &Fcn, views: [Tensor<4>; 2], _masks: [Tensor<4>; 2]) -> StereoOutputs {
-        segmentation_outputs(both_views(views, |x| net.forward(x)))
-    }
-}
-
-impl Architecture for HrNetConfig {
-    type Network = HrNet;
-    const NAME: &'static str = "hrnet";
-    const SEGMENTS: bool = true;
-    const ESTIMATES_FORCE: bool = false;
-    const INPUT: StereoInput = StereoInput::Images;
-    fn defaults() -> Self {
-        Self::new()
-    }
-    fn size_multiple(&self) -> usize {
-        16
-    }
-    fn build(&self, device: &Device) -> Result<HrNet, HNetConfigError> {
-        Ok(self.init(device))
-    }
-    fn run(net: &HrNet, views: [Tensor<4>; 2], _masks: [Tensor<4>; 2]) -> StereoOutputs {
-        segmentation_outputs(both_views(views, |x| net.forward(x)))
-    }
-}
+single_view_segmenter!(UNetConfig => UNet, "unet", |c| 1 << c.depth.min(16));
+single_view_segmenter!(FcnConfig => Fcn, "fcn", |_c| 32);
+single_view_segmenter!(HrNetConfig => HrNet, "hrnet", |_c| 16);
 
 impl Architecture for YNetConfig {
     type Network = YNet;

@@ -143,16 +143,24 @@ fn to_vec(data: TensorData) -> Result<Vec<f32>, ReadbackError> {
     data.try_into_vec::<f32>().map_err(ReadbackError::Data)
 }
 
-fn masks_and_force(output: HNetOutput) -> [Tensor<2>; 3] {
-    let [batch, _, _, _] = output.mask_logits_a.dims();
-    [
-        output.mask_a().reshape([batch as i32, -1]),
-        output.mask_b().reshape([batch as i32, -1]),
-        output.force,
-    ]
-}
-
 impl HNet {
+    /// Runs a batch of `pairs`: mask probabilities `[B, H·W]` of both views and the force `[B, 3]`.
+    fn masks_and_force(
+        &self,
+        pairs: &[StereoPair<'_>],
+        size: ImageSize,
+        device: &Device,
+    ) -> Result<[Tensor<2>; 3], InputSizeError> {
+        let (a, b) = stereo_batch(pairs, size, device)?;
+        let output: HNetOutput = self.forward(a, b);
+        let batch = pairs.len() as i32;
+        Ok([
+            output.mask_a().reshape([batch, -1]),
+            output.mask_b().reshape([batch, -1]),
+            output.force,
+        ])
+    }
+
     /// Runs `pairs` (each image of `size`) and reads the results back,
     /// blocking until the device is done. Use [`HNet::predict_async`] in the browser.
     pub fn predict(
@@ -161,13 +169,13 @@ impl HNet {
         size: ImageSize,
         device: &Device,
     ) -> Result<Vec<StereoPrediction>, PredictError> {
-        let (a, b) = stereo_batch(pairs, size, device)?;
-        let [mask_a, mask_b, force] = masks_and_force(self.forward(a, b));
+        let [mask_a, mask_b, force] = self.masks_and_force(pairs, size, device)?;
+        let read = |t: Tensor<2>| to_vec(t.into_data());
         Ok(split_predictions(
             size,
-            to_vec(mask_a.into_data())?,
-            to_vec(mask_b.into_data())?,
-            to_vec(force.into_data())?,
+            read(mask_a)?,
+            read(mask_b)?,
+            read(force)?,
         ))
     }
 
@@ -179,8 +187,7 @@ impl HNet {
         size: ImageSize,
         device: &Device,
     ) -> Result<Vec<StereoPrediction>, PredictError> {
-        let (a, b) = stereo_batch(pairs, size, device)?;
-        let [mask_a, mask_b, force] = masks_and_force(self.forward(a, b));
+        let [mask_a, mask_b, force] = self.masks_and_force(pairs, size, device)?;
         let read = |t: Tensor<2>| async move {
             t.into_data_async()
                 .await
