@@ -6,6 +6,9 @@
 //! - [`render`]: the catheter's exact anti-aliased mask, X-ray attenuation and camera look;
 //! - [`phantom`] and [`synthetic_xray`]: chest radiograph backgrounds cut into shuffled patches;
 //! - [`scene`]: random scenes and complete stereo samples;
+//! - [`centreline`], [`reconstruction`] and [`rod_fit`]: the catheter in 3D from its two masks
+//!   (sub-pixel centrelines, epipolar matching and triangulation) and the tip force of the rod
+//!   that fits it (a physics-checked force, no training);
 //! - [`dataset`]: the on-disk format; [`force_table`]: force tables in CSV (imports and the page's
 //!   labels); natively also [`simulate`], [`import`] and [`files`] (atomic writes).
 //!
@@ -18,6 +21,7 @@
 pub mod archive;
 pub mod carm;
 pub mod catheter;
+pub mod centreline;
 pub mod dataset;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod files;
@@ -27,8 +31,10 @@ pub mod import;
 pub mod noise;
 pub mod phantom;
 pub mod raster;
+pub mod reconstruction;
 pub mod render;
 pub mod rod;
+pub mod rod_fit;
 pub mod scene;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod simulate;

@@ -5,13 +5,18 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use hnet_units::ImageSize;
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 use serde_json::json;
 
+use crate::carm::{CArm, CameraMatrix};
 use crate::dataset::{
-    DatasetError, DatasetHeader, DatasetWriter, ImageRef, ManifestRow, Split, assign_splits,
-    sample_files,
+    Dataset, DatasetError, DatasetHeader, DatasetWriter, ImageRef, ManifestRow, Split,
+    assign_splits, sample_files,
 };
-use crate::scene::{Backgrounds, StereoSample, TwinConfig, generate};
+use crate::rod::RodConfig;
+use crate::scene::{Backgrounds, SceneParams, StereoSample, TwinConfig, generate};
+use crate::synthetic_xray::PatchLayout;
+use crate::vec3::Vec3;
 
 /// The id of sample `index`.
 pub fn sample_id(index: u64) -> String {
@@ -73,29 +78,71 @@ pub fn simulated_sample_files(
         channels: 1,
         pixels: &sample.views[i].mask,
     };
-    let record = json!({
-        "scene": sample.params,
-        "rod": sample.params.rod(&config.rod).0,
-        "centreline_mm": sample.shape.points_mm,
-        "arc_mm": sample.shape.arc_mm,
-        "views": [
-            {
-                "carm": config.views.a,
-                "camera_matrix": sample.views[0].camera,
-                "background": sample.views[0].background,
-            },
-            {
-                "carm": config.views.b,
-                "camera_matrix": sample.views[1].camera,
-                "background": sample.views[1].background,
-            }
-        ],
-    });
+    let record = SampleRecord {
+        scene: sample.params,
+        rod: sample.params.rod(&config.rod).0,
+        centreline_mm: sample.shape.points_mm.clone(),
+        arc_mm: sample.shape.arc_mm.clone(),
+        views: [0, 1].map(|i| ViewRecord {
+            carm: *config.views.views()[i],
+            camera_matrix: sample.views[i].camera,
+            background: sample.views[i].background.clone(),
+        }),
+    };
+    let record = serde_json::to_value(&record).expect("a sample record is plain data");
     sample_files(
         &manifest_row(sample, split),
         [view(0), view(1), mask(0), mask(1)],
         &record,
     )
+}
+
+/// The record (`record.json`) of a simulated pair: everything needed to rebuild it, to
+/// reconstruct it in 3D and to check a force estimate against physics.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SampleRecord {
+    /// The scene's random draws.
+    pub scene: SceneParams,
+    /// The rod as solved (the twin's rod with the scene's length, stiffness and pre-curvature).
+    pub rod: RodConfig,
+    /// The solved centreline from the clamped base to the tip, world frame, mm.
+    pub centreline_mm: Vec<Vec3>,
+    /// Arc length of each centreline point from the base, mm.
+    pub arc_mm: Vec<f64>,
+    /// View A and view B.
+    pub views: [ViewRecord; 2],
+}
+
+/// One view of a [`SampleRecord`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ViewRecord {
+    /// The C-arm (or bench camera) settings.
+    pub carm: CArm,
+    /// Its projection matrix `K [R | t]`: world mm to pixels.
+    pub camera_matrix: CameraMatrix,
+    /// The background radiograph's name and layout (X-ray modalities).
+    pub background: Option<(String, PatchLayout)>,
+}
+
+/// Reads the record of the simulated pair `id` of `dataset`.
+pub fn read_sample_record(dataset: &Dataset, id: &str) -> Result<SampleRecord, DatasetError> {
+    let path = dataset.record_file(id);
+    let bytes =
+        std::fs::read(&path).map_err(|e| DatasetError::caused_by(&path, "cannot be read", e))?;
+    /// The file holds the manifest row beside the record ([`sample_files`]).
+    #[derive(Deserialize)]
+    struct File {
+        record: SampleRecord,
+    }
+    serde_json::from_slice::<File>(&bytes)
+        .map(|file| file.record)
+        .map_err(|e| {
+            DatasetError::caused_by(
+                &path,
+                "is not the record of a simulated pair (made by `hnet simulate`)",
+                e,
+            )
+        })
 }
 
 /// What a generation did.

@@ -8,8 +8,7 @@ use hnet_twin::carm::triangulate;
 use hnet_twin::dataset::{Dataset, Split};
 use hnet_twin::import::{ImportOptions, MaskThreshold, import_recordings};
 use hnet_twin::scene::{Backgrounds, Modality, TwinConfig};
-use hnet_twin::simulate::simulate_dataset;
-use hnet_twin::vec3::Vec3;
+use hnet_twin::simulate::{read_sample_record, simulate_dataset};
 
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("hnet-twin-{name}-{}", std::process::id()));
@@ -135,21 +134,9 @@ fn a_simulated_dataset_reads_back_with_splits_masks_and_geometry() {
     assert_eq!(resized.mask_b.len(), 32 * 32);
 
     // The saved camera matrices reconstruct the saved 3D centreline.
-    let record: serde_json::Value =
-        serde_json::from_slice(&fs::read(dataset.record_file(&row.id)).unwrap()).unwrap();
-    let record = &record["record"];
-    let camera = |i: usize| -> [[f64; 4]; 3] {
-        serde_json::from_value(record["views"][i]["camera_matrix"].clone()).unwrap()
-    };
-    let tip: Vec3 = serde_json::from_value(
-        record["centreline_mm"]
-            .as_array()
-            .unwrap()
-            .last()
-            .unwrap()
-            .clone(),
-    )
-    .unwrap();
+    let record = read_sample_record(&dataset, &row.id).unwrap();
+    let camera = |i: usize| record.views[i].camera_matrix;
+    let tip = *record.centreline_mm.last().unwrap();
     let project = |p: &[[f64; 4]; 3]| {
         let h: Vec<f64> = (0..3)
             .map(|r| (0..3).map(|c| p[r][c] * tip[c]).sum::<f64>() + p[r][3])

@@ -1,0 +1,1047 @@
+//! The catheter's centreline in one view, with sub-pixel precision, from its mask.
+//!
+//! Pixel convention (the same as [`crate::render`] and [`crate::carm::CArm::project`]): pixel
+//! `(x, y)` of a row-major `width x height` mask covers `[x, x+1) x [y, y+1)` and its value sits at
+//! its centre `(x + 0.5, y + 0.5)`; points are `[u, v]` = `[column, row]` in pixels.
+//!
+//! The method:
+//!
+//! 1. The mask is cut at half coverage; its 8-connected blobs are found. Specks smaller than
+//!    [`CentrelineSettings::min_blob_px`] (and than [`CentrelineSettings::min_blob_fraction`]
+//!    of the largest blob) are ignored; more than one blob left is an error, not a guess.
+//! 2. **Ordering.** The proximal end is where the catheter leaves the image: the blob's pixels on
+//!    the image border (if it touches the border in several places, the contact nearest to
+//!    [`CentrelineSettings::proximal_hint_px`] or else the one with the most coverage). A blob
+//!    that does not touch the border is ordered from its end nearer to the border (the catheter
+//!    comes in from outside the field of view). The tip is the blob pixel farthest from the
+//!    proximal end along paths inside the blob (Dijkstra, 8-neighbours), and the pixel path
+//!    between them gives the first, staircase, centreline.
+//! 3. **Sub-pixel refinement.** The path is smoothed and resampled at 1 px; then, three times,
+//!    every point moves to the intensity-weighted centroid of the mask's values along the local
+//!    normal (bilinear samples every 0.25 px, three parallel profiles half a pixel apart). For
+//!    the exact anti-aliased masks of the twin, whose coverage falls linearly from 1 to 0 over one
+//!    pixel across the outline, this centroid is the projected axis. The integral of a profile
+//!    is the shaft's width.
+//! 4. **Tip.** The mask ends with the tube's round cap, a half disc of half the shaft's width
+//!    around the tip's centre: the centreline is cut (or extended) to the point where the mask's
+//!    area still ahead of it is that half disc's (an area is robust to a ragged outline).
+//! 5. **Check.** Every pixel of the blob must lie on the tube around the centreline (within half
+//!    a width plus 1.5 px), and the tube's width may not grow by more than half anywhere: where
+//!    the catheter crosses or overlaps itself in the view (a loop, a hairpin, a tip curled back
+//!    over the shaft), or the mask has a branch, the centreline cannot be the catheter's, and
+//!    that is an error ([`CentrelineError::NotATube`]) rather than a wrong curve.
+//! 6. The result is resampled at equal arc-length steps of at most
+//!    [`CentrelineSettings::spacing_px`].
+//!
+//! Pure computation (no threads, no files): it runs in the browser as well.
+
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+use serde::{Deserialize, Serialize};
+
+/// A mask's values: 8-bit coverage (255 = catheter) or soft values in `[0, 1]` (probabilities or
+/// coverage).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MaskValues<'a> {
+    /// 8-bit coverage, 255 = fully catheter (the dataset's mask PNGs, the twin's masks).
+    Coverage8(&'a [u8]),
+    /// Soft values in `[0, 1]` (a network's probabilities); values outside are clamped, NaN is 0.
+    Soft(&'a [f32]),
+}
+
+/// A row-major mask of one view.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Mask<'a> {
+    /// Width in pixels (columns, `u`).
+    pub width: usize,
+    /// Height in pixels (rows, `v`).
+    pub height: usize,
+    /// `width·height` values.
+    pub values: MaskValues<'a>,
+}
+
+impl<'a> Mask<'a> {
+    /// An 8-bit coverage mask.
+    pub fn coverage8(width: usize, height: usize, values: &'a [u8]) -> Self {
+        Self {
+            width,
+            height,
+            values: MaskValues::Coverage8(values),
+        }
+    }
+
+    /// A soft mask with values in `[0, 1]`.
+    pub fn soft(width: usize, height: usize, values: &'a [f32]) -> Self {
+        Self {
+            width,
+            height,
+            values: MaskValues::Soft(values),
+        }
+    }
+
+    fn len(&self) -> usize {
+        match self.values {
+            MaskValues::Coverage8(v) => v.len(),
+            MaskValues::Soft(v) => v.len(),
+        }
+    }
+
+    fn to_f32(self) -> Vec<f32> {
+        match self.values {
+            MaskValues::Coverage8(v) => v.iter().map(|&b| f32::from(b) / 255.0).collect(),
+            MaskValues::Soft(v) => v
+                .iter()
+                .map(|&x| if x.is_nan() { 0.0 } else { x.clamp(0.0, 1.0) })
+                .collect(),
+        }
+    }
+}
+
+/// How a centreline is extracted.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CentrelineSettings {
+    /// Largest arc-length step between the returned points, pixels.
+    pub spacing_px: f64,
+    /// Blobs smaller than this many pixels are specks and ignored.
+    pub min_blob_px: usize,
+    /// Blobs smaller than this fraction of the largest one are specks and ignored.
+    pub min_blob_fraction: f64,
+    /// Shortest acceptable centreline, pixels.
+    pub min_length_px: f64,
+    /// If given, the end of the catheter nearest to this point `[u, v]` is the proximal one
+    /// (for a catheter that touches the border twice, or not at all).
+    pub proximal_hint_px: Option<[f64; 2]>,
+    /// Most mask area allowed off the tube around the centreline (farther than half a width
+    /// plus 1.5 px from it), in squared shaft widths.
+    pub max_off_tube_widths2: f64,
+    /// Largest ratio allowed between the mask's width in a place (median over 7 px) and along
+    /// most of it (its lower quartile).
+    pub max_width_ratio: f64,
+}
+
+impl Default for CentrelineSettings {
+    fn default() -> Self {
+        Self {
+            spacing_px: 1.0,
+            min_blob_px: 8,
+            min_blob_fraction: 0.1,
+            min_length_px: 10.0,
+            proximal_hint_px: None,
+            max_off_tube_widths2: 2.0,
+            max_width_ratio: 1.5,
+        }
+    }
+}
+
+/// A view's centreline, ordered from the proximal end to the tip.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Centreline {
+    /// Points `[u, v]` in pixels (pixel centres at `+0.5`), equally spaced along the curve.
+    pub points_px: Vec<[f64; 2]>,
+    /// Arc length of each point from the first, pixels.
+    pub arc_px: Vec<f64>,
+    /// The shaft's width (median over the curve), pixels.
+    pub width_px: f64,
+    /// Whether the proximal end is on the image border (the catheter enters the image there).
+    pub proximal_at_border: bool,
+    /// Whether the distal end is on the image border: the tip is outside the image and the last
+    /// point is not the tip.
+    pub tip_at_border: bool,
+}
+
+impl Centreline {
+    /// Length along the curve, pixels.
+    pub fn length_px(&self) -> f64 {
+        self.arc_px.last().copied().unwrap_or(0.0)
+    }
+
+    /// The last point: the tip, unless [`Centreline::tip_at_border`].
+    pub fn tip_px(&self) -> [f64; 2] {
+        *self.points_px.last().expect("a centreline has points")
+    }
+}
+
+/// Why a mask gives no centreline.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CentrelineError {
+    /// The values do not fill `width x height`.
+    #[error("view {view}: the mask is {width}x{height} but has {values} values")]
+    WrongSize {
+        /// The view's name.
+        view: String,
+        /// Width given.
+        width: usize,
+        /// Height given.
+        height: usize,
+        /// Values given.
+        values: usize,
+    },
+    /// Nothing in the mask reaches half coverage.
+    #[error("view {view}: the mask is empty (no pixel reaches half coverage)")]
+    Empty {
+        /// The view's name.
+        view: String,
+    },
+    /// More than one blob of significant size.
+    #[error(
+        "view {view}: the mask has {} separate blobs of {} pixels, expected one catheter",
+        sizes.len(),
+        sizes.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(", ")
+    )]
+    SeveralBlobs {
+        /// The view's name.
+        view: String,
+        /// Sizes of the significant blobs in pixels, largest first.
+        sizes: Vec<usize>,
+    },
+    /// The mask is not one tube of constant width around its centreline.
+    #[error(
+        "view {view}: the mask is not one catheter seen once: {problem}; the catheter crosses or overlaps itself in this view, or the mask has a branch"
+    )]
+    NotATube {
+        /// The view's name.
+        view: String,
+        /// What does not fit.
+        problem: String,
+    },
+    /// The centreline is shorter than [`CentrelineSettings::min_length_px`].
+    #[error(
+        "view {view}: the catheter's centreline is only {length_px:.1} px long (at least {min_px:.1} px needed)"
+    )]
+    TooShort {
+        /// The view's name.
+        view: String,
+        /// Its length, pixels.
+        length_px: f64,
+        /// The least accepted, pixels.
+        min_px: f64,
+    },
+}
+
+/// The mask's values with bilinear sampling at continuous pixel coordinates.
+struct Field<'a> {
+    width: usize,
+    height: usize,
+    values: &'a [f32],
+}
+
+impl Field<'_> {
+    /// Bilinear value at `(u, v)` (pixel centres at `+0.5`), clamped to the border pixels: the
+    /// shaft is taken to continue beyond the image as it enters it.
+    fn sample(&self, u: f64, v: f64) -> f64 {
+        let fx = (u - 0.5).clamp(0.0, (self.width - 1) as f64);
+        let fy = (v - 0.5).clamp(0.0, (self.height - 1) as f64);
+        let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
+        let (x1, y1) = ((x0 + 1).min(self.width - 1), (y0 + 1).min(self.height - 1));
+        let (tx, ty) = (fx - x0 as f64, fy - y0 as f64);
+        let at = |x: usize, y: usize| f64::from(self.values[y * self.width + x]);
+        let top = at(x0, y0) * (1.0 - tx) + at(x1, y0) * tx;
+        let bottom = at(x0, y1) * (1.0 - tx) + at(x1, y1) * tx;
+        top * (1.0 - ty) + bottom * ty
+    }
+}
+
+const NEIGHBOURS: [(isize, isize); 8] = [
+    (-1, -1),
+    (0, -1),
+    (1, -1),
+    (-1, 0),
+    (1, 0),
+    (-1, 1),
+    (0, 1),
+    (1, 1),
+];
+
+/// Extracts the centreline of the catheter in `mask`; `view` names the view in errors.
+pub fn extract_centreline(
+    mask: &Mask<'_>,
+    view: &str,
+    settings: &CentrelineSettings,
+) -> Result<Centreline, CentrelineError> {
+    let (width, height) = (mask.width, mask.height);
+    if width == 0 || height == 0 || mask.len() != width * height {
+        return Err(CentrelineError::WrongSize {
+            view: view.into(),
+            width,
+            height,
+            values: mask.len(),
+        });
+    }
+    let values = mask.to_f32();
+    let field = Field {
+        width,
+        height,
+        values: &values,
+    };
+    let inside: Vec<bool> = values.iter().map(|&c| c >= 0.5).collect();
+    let blob = largest_blob(&inside, width, height, view, settings)?;
+
+    let on_border = |i: usize| {
+        let (x, y) = (i % width, i / width);
+        x == 0 || y == 0 || x == width - 1 || y == height - 1
+    };
+    let border_pixels: Vec<usize> = blob.iter().copied().filter(|&i| on_border(i)).collect();
+    let centre_of = |i: usize| [(i % width) as f64 + 0.5, (i / width) as f64 + 0.5];
+    let distance_to_border = |p: [f64; 2]| {
+        p[0].min(width as f64 - p[0])
+            .min(p[1])
+            .min(height as f64 - p[1])
+    };
+    let near_hint = |hint: [f64; 2], p: [f64; 2]| (p[0] - hint[0]).hypot(p[1] - hint[1]);
+
+    let mut in_blob = vec![false; width * height];
+    for &i in &blob {
+        in_blob[i] = true;
+    }
+    // The proximal sources and the tip.
+    let (sources, proximal_at_border) = if border_pixels.is_empty() {
+        let (first_far, _, _) = geodesic(&in_blob, width, height, &[blob[0]]);
+        let (end_a, _, _) = geodesic(&in_blob, width, height, &[first_far]);
+        let (end_b, _, _) = geodesic(&in_blob, width, height, &[end_a]);
+        let score = |i: usize| match settings.proximal_hint_px {
+            Some(hint) => near_hint(hint, centre_of(i)),
+            None => distance_to_border(centre_of(i)),
+        };
+        let proximal = if score(end_b) < score(end_a) {
+            end_b
+        } else {
+            end_a
+        };
+        (vec![proximal], false)
+    } else {
+        let runs = border_runs(&border_pixels, width);
+        let best = match settings.proximal_hint_px {
+            Some(hint) => runs.iter().min_by(|a, b| {
+                let d = |run: &Vec<usize>| {
+                    run.iter()
+                        .map(|&i| near_hint(hint, centre_of(i)))
+                        .fold(f64::INFINITY, f64::min)
+                };
+                d(a).total_cmp(&d(b))
+            }),
+            None => runs.iter().max_by(|a, b| {
+                let c = |run: &Vec<usize>| run.iter().map(|&i| f64::from(values[i])).sum::<f64>();
+                c(a).total_cmp(&c(b))
+            }),
+        };
+        (best.expect("a border pixel makes a run").clone(), true)
+    };
+    let (tip, _, previous) = geodesic(&in_blob, width, height, &sources);
+    let tip_at_border = on_border(tip) && proximal_at_border;
+    let mut path = vec![centre_of(tip)];
+    let mut at = tip;
+    while let Some(p) = previous[at] {
+        at = p;
+        path.push(centre_of(at));
+    }
+    path.reverse();
+
+    // A first estimate of the width: the blob's coverage over the path's length.
+    let covered: f64 = blob.iter().map(|&i| f64::from(values[i])).sum();
+    let rough_length = polyline_length(&path).max(1.0);
+    let rough_width = (covered / rough_length).clamp(1.0, 50.0);
+
+    let mut points = smooth(&path, (rough_width.round() as usize).max(2));
+    points = resample(&points, 1.0);
+    let mut widths = Vec::new();
+    for iteration in 0..3 {
+        let reach = if iteration == 0 {
+            rough_width + 2.0
+        } else {
+            0.5 * median(&widths).max(1.0) + 2.0
+        };
+        let (refined, w) = refine(&field, &points, reach);
+        widths = w;
+        points = resample(&smooth(&refined, 1), 1.0);
+    }
+    let width_px = median(&widths).max(0.0);
+
+    if !tip_at_border && points.len() >= 3 {
+        // The width just before the tip's cap (perspective makes it differ along the catheter);
+        // the profiles are one pixel apart.
+        let n = widths.len();
+        let near_tip = &widths[n.saturating_sub((width_px + 6.0) as usize)
+            ..n.saturating_sub(width_px.ceil() as usize)];
+        let local = median(near_tip);
+        let radius = if near_tip.len() >= 3 && local > 0.0 {
+            local
+        } else {
+            width_px
+        } / 2.0;
+        points = place_tip(&field, points, radius);
+    }
+    let length_px = polyline_length(&points);
+    if length_px < settings.min_length_px || points.len() < 2 {
+        return Err(CentrelineError::TooShort {
+            view: view.into(),
+            length_px,
+            min_px: settings.min_length_px,
+        });
+    }
+    // Every pixel of the blob must lie on the tube around the centreline; a catheter that
+    // crosses or overlaps itself in this view, or a mask with a branch, leaves some off it.
+    let reach = width_px / 2.0 + 1.5;
+    let mut on_tube = vec![false; width * height];
+    for p in resample(&points, 0.5) {
+        let (x0, x1) = (
+            (p[0] - reach - 0.5).floor().max(0.0) as usize,
+            ((p[0] + reach - 0.5).ceil().max(0.0) as usize).min(width - 1),
+        );
+        let (y0, y1) = (
+            (p[1] - reach - 0.5).floor().max(0.0) as usize,
+            ((p[1] + reach - 0.5).ceil().max(0.0) as usize).min(height - 1),
+        );
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let (du, dv) = (x as f64 + 0.5 - p[0], y as f64 + 0.5 - p[1]);
+                if du * du + dv * dv <= reach * reach {
+                    on_tube[y * width + x] = true;
+                }
+            }
+        }
+    }
+    let off_tube: f64 = blob
+        .iter()
+        .filter(|&&i| !on_tube[i])
+        .map(|&i| f64::from(values[i]))
+        .sum();
+    let allowed = settings.max_off_tube_widths2 * width_px * width_px;
+    let not_a_tube = |problem: String| CentrelineError::NotATube {
+        view: view.into(),
+        problem,
+    };
+    if off_tube > allowed {
+        return Err(not_a_tube(format!(
+            "{off_tube:.0} px of it lie off the centreline's tube (at most {allowed:.0} px allowed)"
+        )));
+    }
+    // Where two stretches lie side by side the mask is twice as wide (a hairpin in the view).
+    let narrow = quantile(&widths, 0.25);
+    let widest = widths.windows(7).map(median).fold(0.0f64, f64::max);
+    if narrow > 0.0 && widest > settings.max_width_ratio * narrow {
+        return Err(not_a_tube(format!(
+            "it is {:.1} times as wide in places as along most of its length (at most {:.1} \
+             allowed)",
+            widest / narrow,
+            settings.max_width_ratio
+        )));
+    }
+    let points_px = resample(&points, settings.spacing_px.max(1e-3));
+    let arc_px = arc_lengths(&points_px);
+    Ok(Centreline {
+        points_px,
+        arc_px,
+        width_px,
+        proximal_at_border,
+        tip_at_border,
+    })
+}
+
+/// The pixels of the largest blob, or the error when there is none or more than one.
+fn largest_blob(
+    inside: &[bool],
+    width: usize,
+    height: usize,
+    view: &str,
+    settings: &CentrelineSettings,
+) -> Result<Vec<usize>, CentrelineError> {
+    let mut label = vec![usize::MAX; inside.len()];
+    let mut blobs: Vec<Vec<usize>> = Vec::new();
+    let mut stack = Vec::new();
+    for start in 0..inside.len() {
+        if !inside[start] || label[start] != usize::MAX {
+            continue;
+        }
+        let id = blobs.len();
+        let mut pixels = Vec::new();
+        label[start] = id;
+        stack.push(start);
+        while let Some(i) = stack.pop() {
+            pixels.push(i);
+            let (x, y) = ((i % width) as isize, (i / width) as isize);
+            for (dx, dy) in NEIGHBOURS {
+                let (nx, ny) = (x + dx, y + dy);
+                if nx < 0 || ny < 0 || nx >= width as isize || ny >= height as isize {
+                    continue;
+                }
+                let j = ny as usize * width + nx as usize;
+                if inside[j] && label[j] == usize::MAX {
+                    label[j] = id;
+                    stack.push(j);
+                }
+            }
+        }
+        blobs.push(pixels);
+    }
+    if blobs.is_empty() {
+        return Err(CentrelineError::Empty { view: view.into() });
+    }
+    blobs.sort_by_key(|b| Reverse(b.len()));
+    let largest = blobs[0].len();
+    let significant =
+        (settings.min_blob_px as f64).max(settings.min_blob_fraction * largest as f64);
+    let sizes: Vec<usize> = blobs
+        .iter()
+        .map(Vec::len)
+        .filter(|&n| n as f64 >= significant)
+        .collect();
+    if sizes.is_empty() {
+        // Only specks: nothing that could be a catheter.
+        return Err(CentrelineError::Empty { view: view.into() });
+    }
+    if sizes.len() > 1 {
+        return Err(CentrelineError::SeveralBlobs {
+            view: view.into(),
+            sizes,
+        });
+    }
+    let mut blob = blobs.swap_remove(0);
+    blob.sort_unstable();
+    Ok(blob)
+}
+
+/// Groups border pixels into runs of 8-connected neighbours.
+fn border_runs(border: &[usize], width: usize) -> Vec<Vec<usize>> {
+    let mut runs: Vec<Vec<usize>> = Vec::new();
+    let mut assigned = vec![false; border.len()];
+    for start in 0..border.len() {
+        if assigned[start] {
+            continue;
+        }
+        assigned[start] = true;
+        let mut run = vec![border[start]];
+        let mut k = 0;
+        while k < run.len() {
+            let (x, y) = ((run[k] % width) as isize, (run[k] / width) as isize);
+            for (j, &other) in border.iter().enumerate() {
+                if assigned[j] {
+                    continue;
+                }
+                let (ox, oy) = ((other % width) as isize, (other / width) as isize);
+                if (ox - x).abs() <= 1 && (oy - y).abs() <= 1 {
+                    assigned[j] = true;
+                    run.push(other);
+                }
+            }
+            k += 1;
+        }
+        runs.push(run);
+    }
+    runs
+}
+
+/// Shortest paths inside `in_blob` from `sources` (8-neighbours, steps of 1 and √2 weighted 5
+/// and 7): the farthest pixel, its distance and every pixel's predecessor.
+fn geodesic(
+    in_blob: &[bool],
+    width: usize,
+    height: usize,
+    sources: &[usize],
+) -> (usize, u32, Vec<Option<usize>>) {
+    let mut distance = vec![u32::MAX; in_blob.len()];
+    let mut previous = vec![None; in_blob.len()];
+    let mut heap = BinaryHeap::new();
+    for &s in sources {
+        distance[s] = 0;
+        heap.push(Reverse((0u32, s)));
+    }
+    let (mut far, mut far_distance) = (sources[0], 0);
+    while let Some(Reverse((d, i))) = heap.pop() {
+        if d > distance[i] {
+            continue;
+        }
+        if d > far_distance {
+            (far, far_distance) = (i, d);
+        }
+        let (x, y) = ((i % width) as isize, (i / width) as isize);
+        for (dx, dy) in NEIGHBOURS {
+            let (nx, ny) = (x + dx, y + dy);
+            if nx < 0 || ny < 0 || nx >= width as isize || ny >= height as isize {
+                continue;
+            }
+            let j = ny as usize * width + nx as usize;
+            if !in_blob[j] {
+                continue;
+            }
+            let nd = d + if dx != 0 && dy != 0 { 7 } else { 5 };
+            if nd < distance[j] {
+                distance[j] = nd;
+                previous[j] = Some(i);
+                heap.push(Reverse((nd, j)));
+            }
+        }
+    }
+    (far, far_distance, previous)
+}
+
+/// Moves every point to the centroid of the mask along its normal within `reach` pixels; returns
+/// the moved points and the profile widths (the integral of each profile; NaN where the profile
+/// is empty).
+fn refine(field: &Field<'_>, points: &[[f64; 2]], reach: f64) -> (Vec<[f64; 2]>, Vec<f64>) {
+    const STEP: f64 = 0.25;
+    let n = points.len();
+    let steps = (reach / STEP).ceil() as isize;
+    let mut refined = Vec::with_capacity(n);
+    let mut widths = Vec::with_capacity(n);
+    for k in 0..n {
+        let t = tangent(points, k);
+        let normal = [-t[1], t[0]];
+        let p = points[k];
+        let (mut total, mut moment) = (0.0, 0.0);
+        for along in [-0.5, 0.0, 0.5] {
+            for j in -steps..=steps {
+                let off = j as f64 * STEP;
+                let c = field.sample(
+                    p[0] + normal[0] * off + t[0] * along,
+                    p[1] + normal[1] * off + t[1] * along,
+                );
+                total += c;
+                moment += c * off;
+            }
+        }
+        let width = total * STEP / 3.0;
+        if width > 0.2 {
+            let shift = (moment / total).clamp(-reach, reach);
+            refined.push([p[0] + normal[0] * shift, p[1] + normal[1] * shift]);
+            widths.push(width);
+        } else {
+            refined.push(p);
+            widths.push(f64::NAN);
+        }
+    }
+    (refined, widths)
+}
+
+/// Cuts or extends the distal end so that it ends at the tip's centre. The mask ends with the
+/// tube's round cap, a half disc of `radius` beyond that centre: the centre is where the mask's
+/// area still ahead, within a band along the end's direction, is that half disc's. An area
+/// averages the outline's pixels, so a ragged outline moves it far less than it moves the point
+/// where the coverage along the axis falls below one half.
+fn place_tip(field: &Field<'_>, mut points: Vec<[f64; 2]>, radius: f64) -> Vec<[f64; 2]> {
+    let n = points.len();
+    let end = points[n - 1];
+    let back = points[n.saturating_sub(4)];
+    let d = [end[0] - back[0], end[1] - back[1]];
+    let norm = d[0].hypot(d[1]);
+    if norm < 1e-9 || radius <= 0.0 {
+        return points;
+    }
+    let t = [d[0] / norm, d[1] / norm];
+    let normal = [-t[1], t[0]];
+    const STEP: f64 = 0.25;
+    let band = ((radius + 1.5) / STEP).ceil() as isize;
+    let (first, last) = (
+        (-(2.0 * radius + 2.0) / STEP).floor() as isize,
+        ((2.0 * radius + 4.0) / STEP).ceil() as isize,
+    );
+    // The mask's width at each step along the end's direction.
+    let widths: Vec<f64> = (first..=last)
+        .map(|k| {
+            let s = k as f64 * STEP;
+            (-band..=band)
+                .map(|j| {
+                    let o = j as f64 * STEP;
+                    field.sample(
+                        end[0] + t[0] * s + normal[0] * o,
+                        end[1] + t[1] * s + normal[1] * o,
+                    )
+                })
+                .sum::<f64>()
+                * STEP
+        })
+        .collect();
+    // The mask must end inside the band, after a stretch of full shaft.
+    if widths[widths.len() - 1] > 0.25 * radius || widths[0] < radius {
+        return points;
+    }
+    let cap = core::f64::consts::PI * radius * radius / 2.0;
+    let mut ahead = 0.0;
+    let mut tip = None;
+    for k in (0..widths.len() - 1).rev() {
+        let slice = 0.5 * (widths[k] + widths[k + 1]) * STEP;
+        if ahead + slice >= cap {
+            let f = (cap - ahead) / slice;
+            tip = Some((first + k as isize + 1) as f64 * STEP - f * STEP);
+            break;
+        }
+        ahead += slice;
+    }
+    let Some(tip_offset) = tip else {
+        return points;
+    };
+    if tip_offset >= 0.0 {
+        points.push([end[0] + t[0] * tip_offset, end[1] + t[1] * tip_offset]);
+        points
+    } else {
+        let length = polyline_length(&points);
+        truncate(&points, (length + tip_offset).max(0.0))
+    }
+}
+
+/// Unit tangent at point `k` (central difference over two points each side).
+fn tangent(points: &[[f64; 2]], k: usize) -> [f64; 2] {
+    let n = points.len();
+    let (a, b) = (points[k.saturating_sub(2)], points[(k + 2).min(n - 1)]);
+    let d = [b[0] - a[0], b[1] - a[1]];
+    let norm = d[0].hypot(d[1]);
+    if norm > 0.0 {
+        [d[0] / norm, d[1] / norm]
+    } else {
+        [1.0, 0.0]
+    }
+}
+
+/// Moving average over `half` points each side, the window shrinking at the ends so that the end
+/// points stay.
+fn smooth(points: &[[f64; 2]], half: usize) -> Vec<[f64; 2]> {
+    let n = points.len();
+    (0..n)
+        .map(|k| {
+            let h = half.min(k).min(n - 1 - k);
+            let window = &points[k - h..=k + h];
+            let m = window.len() as f64;
+            [
+                window.iter().map(|p| p[0]).sum::<f64>() / m,
+                window.iter().map(|p| p[1]).sum::<f64>() / m,
+            ]
+        })
+        .collect()
+}
+
+/// Cumulative arc length along a polyline.
+pub(crate) fn arc_lengths(points: &[[f64; 2]]) -> Vec<f64> {
+    let mut arc = Vec::with_capacity(points.len());
+    let mut s = 0.0;
+    for (k, p) in points.iter().enumerate() {
+        if k > 0 {
+            let q = points[k - 1];
+            s += (p[0] - q[0]).hypot(p[1] - q[1]);
+        }
+        arc.push(s);
+    }
+    arc
+}
+
+fn polyline_length(points: &[[f64; 2]]) -> f64 {
+    arc_lengths(points).last().copied().unwrap_or(0.0)
+}
+
+/// The point at arc length `s` along a polyline with cumulative lengths `arc`.
+pub(crate) fn point_at(points: &[[f64; 2]], arc: &[f64], s: f64) -> [f64; 2] {
+    let n = points.len();
+    if n == 1 || s <= 0.0 {
+        return points[0];
+    }
+    let k = arc.partition_point(|&a| a < s).clamp(1, n - 1);
+    let span = arc[k] - arc[k - 1];
+    let f = if span > 0.0 {
+        ((s - arc[k - 1]) / span).clamp(0.0, 1.0)
+    } else {
+        1.0
+    };
+    let (a, b) = (points[k - 1], points[k]);
+    [a[0] + (b[0] - a[0]) * f, a[1] + (b[1] - a[1]) * f]
+}
+
+/// The polyline resampled at equal arc-length steps of at most `spacing`, keeping both ends.
+fn resample(points: &[[f64; 2]], spacing: f64) -> Vec<[f64; 2]> {
+    let arc = arc_lengths(points);
+    let length = arc.last().copied().unwrap_or(0.0);
+    if points.len() < 2 || length <= 0.0 {
+        return points.to_vec();
+    }
+    let segments = (length / spacing).ceil().max(1.0) as usize;
+    (0..=segments)
+        .map(|k| point_at(points, &arc, length * k as f64 / segments as f64))
+        .collect()
+}
+
+/// The first `length` of the polyline.
+fn truncate(points: &[[f64; 2]], length: f64) -> Vec<[f64; 2]> {
+    let arc = arc_lengths(points);
+    let mut out: Vec<[f64; 2]> = points
+        .iter()
+        .zip(&arc)
+        .take_while(|(_, a)| **a < length)
+        .map(|(p, _)| *p)
+        .collect();
+    out.push(point_at(points, &arc, length));
+    out
+}
+
+/// The median of the values that are not NaN (0 when there are none).
+fn median(values: &[f64]) -> f64 {
+    quantile(values, 0.5)
+}
+
+/// The `q` quantile (lower) of the values that are not NaN (0 when there are none).
+fn quantile(values: &[f64], q: f64) -> f64 {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| !x.is_nan()).collect();
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * q) as usize]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::carm::CArm;
+    use crate::catheter::CatheterDesign;
+    use crate::raster::to_byte;
+    use crate::render::{PROXIMAL_SHAFT_MM, rasterize_catheter};
+    use crate::rod::{RodBase, RodConfig, RodShape, solve};
+    use crate::vec3::{Mat3, Vec3};
+
+    /// Distance from `p` to the polyline `line`.
+    fn distance_to(line: &[[f64; 2]], p: [f64; 2]) -> f64 {
+        line.windows(2)
+            .map(|w| {
+                let (a, b) = (w[0], w[1]);
+                let d = [b[0] - a[0], b[1] - a[1]];
+                let len2 = d[0] * d[0] + d[1] * d[1];
+                let t = if len2 > 0.0 {
+                    (((p[0] - a[0]) * d[0] + (p[1] - a[1]) * d[1]) / len2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                (p[0] - a[0] - t * d[0]).hypot(p[1] - a[1] - t * d[1])
+            })
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// The projected true centreline: the proximal shaft and the flexible section.
+    fn projected(shape: &RodShape, view: &CArm) -> Vec<[f64; 2]> {
+        let mut points = vec![shape.points_mm[0] - shape.tangents[0] * PROXIMAL_SHAFT_MM];
+        points.extend_from_slice(&shape.points_mm);
+        points
+            .iter()
+            .map(|p| {
+                let q = view.project(*p);
+                [q.u, q.v]
+            })
+            .collect()
+    }
+
+    fn bent_catheter(force: Vec3) -> RodShape {
+        let config = RodConfig {
+            precurvature_per_mm: [1.0 / 60.0, 0.0],
+            steps: 100,
+            ..RodConfig::default()
+        };
+        let base = RodBase {
+            position_mm: Vec3::new(2.0, 1.0, -35.0),
+            orientation: Mat3::rotation(Vec3::Z, 0.6),
+        };
+        solve(&config, &base, force).unwrap()
+    }
+
+    fn mask_of(shape: &RodShape, view: &CArm) -> Vec<u8> {
+        rasterize_catheter(shape, 2.33, &CatheterDesign::default(), view)
+            .coverage
+            .iter()
+            .map(|&c| to_byte(c))
+            .collect()
+    }
+
+    #[test]
+    fn the_centreline_of_a_rendered_catheter_is_its_projected_axis() {
+        for (force, angles, size) in [
+            (Vec3::new(0.1, -0.05, -0.15), [0.0, 0.0], 128),
+            (Vec3::new(-0.2, 0.1, -0.1), [90.0, 0.0], 128),
+            (Vec3::new(0.0, 0.0, 0.0), [-30.0, 20.0], 160),
+        ] {
+            let view = CArm::cardiac(angles[0], angles[1], size);
+            let shape = bent_catheter(force);
+            let mask = mask_of(&shape, &view);
+            let line = extract_centreline(
+                &Mask::coverage8(size, size, &mask),
+                "A",
+                &CentrelineSettings::default(),
+            )
+            .unwrap();
+            let truth = projected(&shape, &view);
+            let errors: Vec<f64> = line
+                .points_px
+                .iter()
+                .map(|&p| distance_to(&truth, p))
+                .collect();
+            let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+            let max = errors.iter().fold(0.0f64, |m, &e| m.max(e));
+            assert!(mean < 0.03 && max < 0.2, "mean {mean} px, max {max} px");
+            // Ordered from the border to the tip, which is found along the curve too.
+            assert!(line.proximal_at_border && !line.tip_at_border);
+            let first = line.points_px[0];
+            let border = first[0]
+                .min(first[1])
+                .min(size as f64 - first[0])
+                .min(size as f64 - first[1]);
+            assert!(border < 1.0, "{first:?}");
+            let tip = view.project(shape.tip_mm());
+            let tip_error = (line.tip_px()[0] - tip.u).hypot(line.tip_px()[1] - tip.v);
+            eprintln!("tip {tip_error}");
+            assert!(tip_error < 0.3, "tip off by {tip_error} px");
+            // Equal steps of at most the spacing; the shaft's width is the projected diameter.
+            let steps: Vec<f64> = line.arc_px.windows(2).map(|w| w[1] - w[0]).collect();
+            assert!(
+                steps.iter().all(|&s| s <= 1.0 + 1e-9 && s > 0.9),
+                "{steps:?}"
+            );
+            let expected_width = 2.33 / view.isocentre_mm_per_px();
+            assert!(
+                (line.width_px - expected_width).abs() < 0.1 * expected_width,
+                "{} vs {expected_width}",
+                line.width_px
+            );
+        }
+    }
+
+    #[test]
+    fn soft_masks_give_the_same_centreline() {
+        let view = CArm::cardiac(0.0, 0.0, 96);
+        let shape = bent_catheter(Vec3::new(0.15, 0.0, -0.1));
+        let tube = rasterize_catheter(&shape, 2.33, &CatheterDesign::default(), &view);
+        let soft = extract_centreline(
+            &Mask::soft(96, 96, &tube.coverage),
+            "B",
+            &CentrelineSettings {
+                spacing_px: 2.0,
+                ..CentrelineSettings::default()
+            },
+        )
+        .unwrap();
+        let truth = projected(&shape, &view);
+        for &p in &soft.points_px {
+            assert!(distance_to(&truth, p) < 0.25);
+        }
+        let steps: Vec<f64> = soft.arc_px.windows(2).map(|w| w[1] - w[0]).collect();
+        assert!(steps.iter().all(|&s| s <= 2.0 + 1e-9 && s > 1.8));
+    }
+
+    #[test]
+    fn a_catheter_inside_the_image_starts_at_the_end_nearer_the_border() {
+        // A horizontal bar from u = 20 to u = 50 at v = 30 in a 64 x 64 mask.
+        let (w, h) = (64, 64);
+        let mut mask = vec![0u8; w * h];
+        for y in 28..33 {
+            for x in 20..51 {
+                mask[y * w + x] = 255;
+            }
+        }
+        let line =
+            extract_centreline(&Mask::coverage8(w, h, &mask), "A", &Default::default()).unwrap();
+        assert!(!line.proximal_at_border && !line.tip_at_border);
+        // u = 20 is 20 px from the border, u = 51 is 13 px from it.
+        assert!(line.points_px[0][0] > 45.0, "{:?}", line.points_px[0]);
+        assert!((line.points_px[0][1] - 30.5).abs() < 0.05);
+        // A hint turns it round.
+        let hinted = extract_centreline(
+            &Mask::coverage8(w, h, &mask),
+            "A",
+            &CentrelineSettings {
+                proximal_hint_px: Some([0.0, 30.0]),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert!(hinted.points_px[0][0] < 25.0);
+    }
+
+    #[test]
+    fn bad_masks_are_named_errors() {
+        let (w, h) = (40, 30);
+        let empty = vec![0u8; w * h];
+        let err = extract_centreline(&Mask::coverage8(w, h, &empty), "A", &Default::default())
+            .unwrap_err();
+        assert!(matches!(err, CentrelineError::Empty { .. }), "{err}");
+        assert!(err.to_string().starts_with("view A: the mask is empty"));
+
+        // Two bars of 5 x 20 and 4 x 15 pixels.
+        let mut two = vec![0u8; w * h];
+        for y in 0..20 {
+            for x in 5..10 {
+                two[y * w + x] = 255;
+            }
+        }
+        for y in 5..20 {
+            for x in 25..29 {
+                two[y * w + x] = 255;
+            }
+        }
+        let err =
+            extract_centreline(&Mask::coverage8(w, h, &two), "B", &Default::default()).unwrap_err();
+        assert_eq!(
+            err,
+            CentrelineError::SeveralBlobs {
+                view: "B".into(),
+                sizes: vec![100, 60]
+            }
+        );
+        assert_eq!(
+            err.to_string(),
+            "view B: the mask has 2 separate blobs of 100, 60 pixels, expected one catheter"
+        );
+        // A speck beside the catheter is ignored.
+        let mut speck = two.clone();
+        for y in 5..20 {
+            for x in 25..29 {
+                speck[y * w + x] = 0;
+            }
+        }
+        speck[25 * w + 30] = 255;
+        assert!(
+            extract_centreline(&Mask::coverage8(w, h, &speck), "B", &Default::default()).is_ok()
+        );
+
+        // A hairpin: two legs side by side, one of them reaching the border.
+        let mut hairpin = vec![0u8; w * h];
+        for y in 5..h {
+            for x in 10..15 {
+                hairpin[y * w + x] = 255;
+            }
+        }
+        for y in 5..20 {
+            for x in 15..20 {
+                hairpin[y * w + x] = 255;
+            }
+        }
+        let err = extract_centreline(&Mask::coverage8(w, h, &hairpin), "A", &Default::default())
+            .unwrap_err();
+        assert!(matches!(err, CentrelineError::NotATube { .. }), "{err}");
+        assert!(err.to_string().contains("times as wide"), "{err}");
+        // A branch off the catheter's side.
+        let n = 60;
+        let mut branch = vec![0u8; n * n];
+        for y in 0..50 {
+            for x in 28..33 {
+                branch[y * n + x] = 255;
+            }
+        }
+        for y in 20..25 {
+            for x in 33..50 {
+                branch[y * n + x] = 255;
+            }
+        }
+        let err = extract_centreline(&Mask::coverage8(n, n, &branch), "A", &Default::default())
+            .unwrap_err();
+        assert!(
+            err.to_string().contains("lie off the centreline's tube"),
+            "{err}"
+        );
+
+        let mut dot = vec![0.0f32; w * h];
+        for y in 10..14 {
+            for x in 10..14 {
+                dot[y * w + x] = 0.9;
+            }
+        }
+        let err =
+            extract_centreline(&Mask::soft(w, h, &dot), "A", &Default::default()).unwrap_err();
+        assert!(matches!(err, CentrelineError::TooShort { .. }), "{err}");
+        let err =
+            extract_centreline(&Mask::soft(w, h + 1, &dot), "A", &Default::default()).unwrap_err();
+        assert!(matches!(err, CentrelineError::WrongSize { .. }), "{err}");
+    }
+}

@@ -1,0 +1,1165 @@
+//! The physics-checked force: the tip force under which the twin's Kirchhoff rod takes the shape
+//! of a reconstructed 3D centreline.
+//!
+//! **Model.** The rod of [`crate::rod`] (its [`RodConfig`] and clamped [`RodBase`] from a
+//! dataset's record or the page's settings) solved under a tip force `F`, with the straight
+//! proximal shaft behind its base that the twin draws ([`crate::render::PROXIMAL_SHAFT_MM`]):
+//! the reconstruction starts where the catheter enters both images, usually on that shaft.
+//!
+//! **Residuals.** The offsets of the reconstructed points from the model curve, in two stages:
+//!
+//! 1. when the reconstruction ends at the tip seen in both views, each point is paired with the
+//!    model's point at the same arc length *from the tip* (the image border cuts the catheter's
+//!    proximal end at a place that depends on the view, its tip is where it is). This pairing
+//!    fixes the whole curve and leaves few local minima;
+//! 2. then each point is paired with its *nearest* point of the model curve, which forgives the
+//!    small errors in length that a reconstruction from real masks has.
+//!
+//! Optionally, the rod tip's offset from the reconstructed tip counts too, with weight
+//! [`RodFitSettings::tip_weight`]. The objective is the weighted mean square.
+//!
+//! **Unknowns.** The force (three components, N), and as options the base position (offset, mm),
+//! the base orientation (a rotation vector, rad) and the bending stiffness (its logarithm). The
+//! force and the stiffness cannot both be fitted without gravity: the equilibrium then depends
+//! on `F/EI` only, so that request is refused.
+//!
+//! **Solver.** Levenberg-Marquardt from the `levenberg-marquardt` crate (rust-cv; MINPACK's
+//! trust-region algorithm with each unknown scaled by its Jacobian column, so newtons,
+//! millimetres and radians need no hand-tuned scales), on nalgebra vectors. The Jacobian is by
+//! forward finite differences of the rod solver (one solve per unknown), which integrates with
+//! steps of [`RodFitSettings::fit_step_mm`] during the fit (the error is far below a micrometre;
+//! the returned shape uses the configuration's own steps). A trial step where the rod solver
+//! fails, or whose force exceeds [`RodFitSettings::max_force_n`] (where a buckled rod has several
+//! shapes), is answered with a large residual, so the trust region shrinks instead of the fit
+//! stopping. It starts from zero force or a given guess.
+
+use std::cell::{Cell, RefCell};
+
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
+use nalgebra::{DMatrix, DVector, Dyn, Owned};
+use serde::{Deserialize, Serialize};
+
+use crate::reconstruction::Reconstruction;
+use crate::render::PROXIMAL_SHAFT_MM;
+use crate::rod::{self, RodBase, RodConfig, RodError, RodShape};
+use crate::vec3::{Mat3, Vec3};
+
+/// What is fitted and how.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RodFitSettings {
+    /// The starting force (warm start), N; also the force used when it is not fitted.
+    pub initial_force_n: Vec3,
+    /// Fit the tip force.
+    pub fit_force: bool,
+    /// Fit an offset of the base position.
+    pub fit_base_position: bool,
+    /// Fit a rotation of the base frame (about the base point).
+    pub fit_base_rotation: bool,
+    /// Fit the bending stiffness (a factor on the configured EI, the shear modulus following).
+    pub fit_stiffness: bool,
+    /// Length of the straight shaft modelled behind the base, mm (0 for none).
+    pub proximal_shaft_mm: f64,
+    /// Weight of the rod tip's offset from the reconstructed tip, in units of one centreline
+    /// point, when the tip is seen. 0 by default: the reconstructed tip is its least precise
+    /// point (it is placed from the outline of the tip's rounded end), and on the twin's bench
+    /// pairs any weight made the axial force worse (R² 0.995 at 0, 0.987 at 1, 0.955 at 5).
+    pub tip_weight: f64,
+    /// Largest force considered, N: beyond it the rod may buckle into several shapes.
+    pub max_force_n: f64,
+    /// The rod's integration step during the fit, mm.
+    pub fit_step_mm: f64,
+    /// Relative tolerance on the objective and on the unknowns (MINPACK's `ftol` and `xtol`).
+    pub tolerance: f64,
+    /// Residual evaluations allowed per stage, per unknown plus one (MINPACK's factor on
+    /// `maxfev`).
+    pub patience: usize,
+}
+
+impl Default for RodFitSettings {
+    fn default() -> Self {
+        Self {
+            initial_force_n: Vec3::ZERO,
+            fit_force: true,
+            fit_base_position: false,
+            fit_base_rotation: false,
+            fit_stiffness: false,
+            proximal_shaft_mm: PROXIMAL_SHAFT_MM,
+            tip_weight: 0.0,
+            max_force_n: 2.0,
+            fit_step_mm: 1.0,
+            tolerance: 1e-8,
+            patience: 30,
+        }
+    }
+}
+
+/// The fitted rod.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RodFit {
+    /// The tip force, N (world frame).
+    pub force_n: Vec3,
+    /// The base: the given one, moved and turned if those were fitted.
+    pub base: RodBase,
+    /// Bending stiffness EI of the fitted rod, N·mm².
+    pub bending_stiffness_n_mm2: f64,
+    /// The rod's shape under the fitted force.
+    pub shape: RodShape,
+    /// Root mean square distance of the centreline's points from the fitted rod (and shaft), mm.
+    pub rms_mm: f64,
+    /// Largest such distance, mm.
+    pub max_mm: f64,
+    /// Distance of the rod's tip from the centreline's tip, mm, when the tip was seen.
+    pub tip_distance_mm: Option<f64>,
+    /// Levenberg-Marquardt iterations (Jacobian evaluations), both stages.
+    pub iterations: usize,
+    /// Rod solves spent, Jacobians included.
+    pub rod_solves: usize,
+}
+
+/// Why no force was fitted.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RodFitError {
+    /// The settings ask for something that cannot be fitted.
+    #[error("invalid rod fit settings: {0}")]
+    InvalidSettings(String),
+    /// The centreline is unusable.
+    #[error("the centreline cannot be fitted: {0}")]
+    InvalidCentreline(String),
+    /// The rod cannot be solved at the starting point.
+    #[error("the rod solver failed at the fit's starting point ({force_n:?} N): {source}")]
+    Rod {
+        /// The starting force, N.
+        force_n: [f64; 3],
+        /// The solver's error.
+        source: RodError,
+    },
+    /// Levenberg-Marquardt stopped without converging.
+    #[error(
+        "the rod fit did not converge ({reason}) after {iterations} iterations; the rod is {rms_mm:.2} mm RMS from the centreline"
+    )]
+    NotConverged {
+        /// What stopped it.
+        reason: String,
+        /// Iterations spent.
+        iterations: usize,
+        /// RMS distance at the last accepted step, mm.
+        rms_mm: f64,
+    },
+}
+
+/// Which unknowns are fitted, and where they sit in the parameter vector.
+#[derive(Debug, Clone, Copy)]
+struct Layout {
+    force: Option<usize>,
+    position: Option<usize>,
+    rotation: Option<usize>,
+    stiffness: Option<usize>,
+    len: usize,
+}
+
+impl Layout {
+    fn new(settings: &RodFitSettings) -> Self {
+        let mut len = 0;
+        let mut take = |on: bool, n: usize| {
+            on.then(|| {
+                len += n;
+                len - n
+            })
+        };
+        let force = take(settings.fit_force, 3);
+        let position = take(settings.fit_base_position, 3);
+        let rotation = take(settings.fit_base_rotation, 3);
+        let stiffness = take(settings.fit_stiffness, 1);
+        Self {
+            force,
+            position,
+            rotation,
+            stiffness,
+            len,
+        }
+    }
+
+    /// Finite-difference step of each unknown.
+    fn steps(&self) -> Vec<f64> {
+        let mut steps = vec![0.0; self.len];
+        let mut set = |at: Option<usize>, n: usize, h: f64| {
+            if let Some(at) = at {
+                steps[at..at + n].iter_mut().for_each(|s| *s = h);
+            }
+        };
+        set(self.force, 3, 1e-6);
+        set(self.position, 3, 1e-5);
+        set(self.rotation, 3, 1e-6);
+        set(self.stiffness, 1, 1e-6);
+        steps
+    }
+}
+
+/// How reconstructed points are paired with the model's.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Pairing {
+    /// The model's point at the same arc length from the tip.
+    ArcFromTip,
+    /// The nearest point of the model.
+    Nearest,
+}
+
+/// The rod for a parameter vector.
+struct Model {
+    config: RodConfig,
+    base: RodBase,
+    force: Vec3,
+}
+
+/// Why a parameter vector gives no shape.
+enum Unsolved {
+    Rod(RodError),
+    TooLarge,
+}
+
+struct Problem<'a> {
+    /// The rod with the fit's integration step.
+    config: RodConfig,
+    base: &'a RodBase,
+    target: &'a [Vec3],
+    /// Arc length of each target point from the target's last point, mm.
+    from_tip_mm: Vec<f64>,
+    tip: Option<Vec3>,
+    settings: &'a RodFitSettings,
+    layout: Layout,
+    pairing: Pairing,
+    params: DVector<f64>,
+    /// Residuals at `params` when last computed.
+    cache: RefCell<Option<(DVector<f64>, DVector<f64>)>>,
+    solves: Cell<usize>,
+    jacobians: Cell<usize>,
+    /// The first rod failure met.
+    failure: RefCell<Option<RodError>>,
+}
+
+impl Problem<'_> {
+    fn model(&self, x: &DVector<f64>, config: &RodConfig) -> Model {
+        let vec_at = |at: usize| Vec3::new(x[at], x[at + 1], x[at + 2]);
+        let force = self
+            .layout
+            .force
+            .map_or(self.settings.initial_force_n, vec_at);
+        let mut base = *self.base;
+        if let Some(at) = self.layout.position {
+            base.position_mm += vec_at(at);
+        }
+        if let Some(at) = self.layout.rotation {
+            let w = vec_at(at);
+            let angle = w.norm();
+            if angle > 0.0 {
+                base.orientation = Mat3::rotation(w / angle, angle) * base.orientation;
+            }
+        }
+        let config = match self.layout.stiffness {
+            Some(at) => config
+                .clone()
+                .with_bending_stiffness(config.bending_stiffness_n_mm2() * x[at].exp()),
+            None => config.clone(),
+        };
+        Model {
+            config,
+            base,
+            force,
+        }
+    }
+
+    /// The rod at `x`, solved with `config`'s steps.
+    fn solve_with(
+        &self,
+        x: &DVector<f64>,
+        config: &RodConfig,
+    ) -> Result<(Model, RodShape), Unsolved> {
+        let model = self.model(x, config);
+        if model.force.norm() > self.settings.max_force_n {
+            return Err(Unsolved::TooLarge);
+        }
+        self.solves.set(self.solves.get() + 1);
+        let shape = rod::solve(&model.config, &model.base, model.force).map_err(Unsolved::Rod)?;
+        Ok((model, shape))
+    }
+
+    fn solve(&self, x: &DVector<f64>) -> Result<RodShape, Unsolved> {
+        self.solve_with(x, &self.config).map(|(_, shape)| shape)
+    }
+
+    /// Number of residuals.
+    fn rows(&self) -> usize {
+        3 * (self.target.len() + usize::from(self.tip.is_some()))
+    }
+
+    fn residuals_of(&self, shape: &RodShape) -> DVector<f64> {
+        let curve = ModelCurve::new(shape, self.settings.proximal_shaft_mm);
+        let tip_weight = self.tip.map_or(0.0, |_| self.settings.tip_weight.max(0.0));
+        let scale = 1.0 / (self.target.len() as f64 + tip_weight).sqrt();
+        let mut r = DVector::zeros(self.rows());
+        let length = curve.arc[curve.arc.len() - 1];
+        for (k, p) in self.target.iter().enumerate() {
+            let paired = match self.pairing {
+                Pairing::ArcFromTip => curve.at_arc(length - self.from_tip_mm[k]),
+                Pairing::Nearest => curve.nearest(*p),
+            };
+            let mut d = *p - paired;
+            if self.pairing == Pairing::Nearest && paired == curve.points[curve.points.len() - 1] {
+                // Beyond the rod's tip only the offset across it counts: the reconstructed tip is
+                // its least precise point along the catheter.
+                let t = shape.tangents[shape.tangents.len() - 1];
+                let along = d.dot(t);
+                if along > 0.0 {
+                    d = d - t * along;
+                }
+            }
+            for c in 0..3 {
+                r[3 * k + c] = d[c] * scale;
+            }
+        }
+        if let Some(tip) = self.tip {
+            let d = (tip - shape.tip_mm()) * (tip_weight.sqrt() * scale);
+            let at = 3 * self.target.len();
+            for c in 0..3 {
+                r[at + c] = d[c];
+            }
+        }
+        r
+    }
+
+    /// Residuals at `x`, or `None` where the rod cannot be solved.
+    fn evaluate(&self, x: &DVector<f64>) -> Option<DVector<f64>> {
+        if let Some((at, r)) = &*self.cache.borrow()
+            && at == x
+        {
+            return Some(r.clone());
+        }
+        match self.solve(x) {
+            Ok(shape) => {
+                let r = self.residuals_of(&shape);
+                *self.cache.borrow_mut() = Some((x.clone(), r.clone()));
+                Some(r)
+            }
+            Err(Unsolved::Rod(e)) => {
+                self.failure.borrow_mut().get_or_insert(e);
+                None
+            }
+            Err(Unsolved::TooLarge) => None,
+        }
+    }
+}
+
+/// The size of the residual answered for a step where the rod cannot be solved, mm: far worse
+/// than any fit, so the step is rejected.
+const FAILED_STEP_MM: f64 = 1e4;
+
+impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
+    type ResidualStorage = Owned<f64, Dyn>;
+    type JacobianStorage = Owned<f64, Dyn, Dyn>;
+    type ParameterStorage = Owned<f64, Dyn>;
+
+    fn set_params(&mut self, x: &DVector<f64>) {
+        self.params.copy_from(x);
+    }
+
+    fn params(&self) -> DVector<f64> {
+        self.params.clone()
+    }
+
+    fn residuals(&self) -> Option<DVector<f64>> {
+        Some(
+            self.evaluate(&self.params)
+                .unwrap_or_else(|| DVector::from_element(self.rows(), FAILED_STEP_MM)),
+        )
+    }
+
+    fn jacobian(&self) -> Option<DMatrix<f64>> {
+        self.jacobians.set(self.jacobians.get() + 1);
+        let x = self.params.clone();
+        let r0 = self.evaluate(&x)?;
+        let mut jacobian = DMatrix::zeros(r0.len(), x.len());
+        for (j, h) in self.layout.steps().into_iter().enumerate() {
+            let mut probe = x.clone();
+            probe[j] += h;
+            let column = match self.solve(&probe) {
+                Ok(shape) => (self.residuals_of(&shape) - &r0) / h,
+                Err(_) => {
+                    probe[j] = x[j] - h;
+                    let shape = self.solve(&probe).ok()?;
+                    (&r0 - self.residuals_of(&shape)) / h
+                }
+            };
+            jacobian.set_column(j, &column);
+        }
+        Some(jacobian)
+    }
+}
+
+/// The model's centreline: the straight shaft behind the base, then the rod, with the arc length
+/// of each point (negative along the shaft).
+struct ModelCurve {
+    points: Vec<Vec3>,
+    arc: Vec<f64>,
+}
+
+impl ModelCurve {
+    fn new(shape: &RodShape, shaft_mm: f64) -> Self {
+        let mut points = Vec::with_capacity(shape.points_mm.len() + 1);
+        let mut arc = Vec::with_capacity(shape.points_mm.len() + 1);
+        if shaft_mm > 0.0 {
+            points.push(shape.points_mm[0] - shape.tangents[0] * shaft_mm);
+            arc.push(-shaft_mm);
+        }
+        points.extend_from_slice(&shape.points_mm);
+        arc.extend_from_slice(&shape.arc_mm);
+        Self { points, arc }
+    }
+
+    /// The point at arc length `s` (clamped to the curve).
+    fn at_arc(&self, s: f64) -> Vec3 {
+        let n = self.points.len();
+        let k = self.arc.partition_point(|&a| a < s).clamp(1, n - 1);
+        let span = self.arc[k] - self.arc[k - 1];
+        let t = if span > 0.0 {
+            ((s - self.arc[k - 1]) / span).clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        self.points[k - 1] + (self.points[k] - self.points[k - 1]) * t
+    }
+
+    /// The point nearest to `p`.
+    fn nearest(&self, p: Vec3) -> Vec3 {
+        let mut best = self.points[0];
+        let mut best_d2 = f64::INFINITY;
+        for w in self.points.windows(2) {
+            let (a, b) = (w[0], w[1]);
+            let ab = b - a;
+            let len2 = ab.dot(ab);
+            let t = if len2 > 0.0 {
+                ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let q = a + ab * t;
+            let d = p - q;
+            let d2 = d.dot(d);
+            if d2 < best_d2 {
+                best_d2 = d2;
+                best = q;
+            }
+        }
+        best
+    }
+}
+
+/// Distances of `points` from the model curve of `shape` (with `shaft_mm` of straight shaft
+/// behind the base), mm.
+pub fn distances_to_rod(shape: &RodShape, shaft_mm: f64, points: &[Vec3]) -> Vec<f64> {
+    let curve = ModelCurve::new(shape, shaft_mm);
+    points
+        .iter()
+        .map(|p| (*p - curve.nearest(*p)).norm())
+        .collect()
+}
+
+/// Fits the tip force (and, as `settings` ask, the base pose and the stiffness) of the rod
+/// `config` clamped at `base` to `centreline_mm`, ordered from its proximal end; `tip_seen` says
+/// that its last point is the catheter's tip.
+pub fn fit_rod(
+    config: &RodConfig,
+    base: &RodBase,
+    centreline_mm: &[Vec3],
+    tip_seen: bool,
+    settings: &RodFitSettings,
+) -> Result<RodFit, RodFitError> {
+    let layout = Layout::new(settings);
+    if layout.len == 0 {
+        return Err(RodFitError::InvalidSettings(
+            "nothing to fit: enable the force, the base pose or the stiffness".into(),
+        ));
+    }
+    if settings.fit_force && settings.fit_stiffness && config.gravity_m_per_s2.is_none() {
+        return Err(RodFitError::InvalidSettings(
+            "the force and the stiffness cannot both be fitted without gravity: the shape \
+             depends on F/EI only"
+                .into(),
+        ));
+    }
+    if !(settings.tolerance > 0.0
+        && settings.patience > 0
+        && settings.tip_weight >= 0.0
+        && settings.max_force_n > 0.0
+        && settings.fit_step_mm > 0.0)
+    {
+        return Err(RodFitError::InvalidSettings(
+            "tolerance, patience, the largest force and the step must be positive and the tip \
+             weight not negative"
+                .into(),
+        ));
+    }
+    if settings.initial_force_n.norm() > settings.max_force_n {
+        return Err(RodFitError::InvalidSettings(format!(
+            "the starting force {:.3} N exceeds the largest force considered, {:.3} N",
+            settings.initial_force_n.norm(),
+            settings.max_force_n
+        )));
+    }
+    if centreline_mm.len() < 3 {
+        return Err(RodFitError::InvalidCentreline(format!(
+            "it has {} points, at least 3 needed",
+            centreline_mm.len()
+        )));
+    }
+    if !centreline_mm
+        .iter()
+        .all(|p| p.0.iter().all(|v| v.is_finite()))
+    {
+        return Err(RodFitError::InvalidCentreline(
+            "it has points that are not finite numbers".into(),
+        ));
+    }
+    let mut from_tip_mm = vec![0.0; centreline_mm.len()];
+    for k in (0..centreline_mm.len() - 1).rev() {
+        from_tip_mm[k] = from_tip_mm[k + 1] + (centreline_mm[k + 1] - centreline_mm[k]).norm();
+    }
+    let fit_steps = (config.length_mm / settings.fit_step_mm).ceil().max(10.0) as usize;
+    let mut params = DVector::zeros(layout.len);
+    if let Some(at) = layout.force {
+        for c in 0..3 {
+            params[at + c] = settings.initial_force_n[c];
+        }
+    }
+    let mut problem = Problem {
+        config: RodConfig {
+            steps: config.steps.min(fit_steps),
+            ..config.clone()
+        },
+        base,
+        target: centreline_mm,
+        from_tip_mm,
+        tip: tip_seen.then(|| centreline_mm[centreline_mm.len() - 1]),
+        settings,
+        layout,
+        pairing: Pairing::ArcFromTip,
+        params,
+        cache: RefCell::new(None),
+        solves: Cell::new(0),
+        jacobians: Cell::new(0),
+        failure: RefCell::new(None),
+    };
+    if problem.evaluate(&problem.params).is_none() {
+        let source = problem
+            .failure
+            .borrow_mut()
+            .take()
+            .expect("a failed evaluation records its error");
+        return Err(RodFitError::Rod {
+            force_n: settings.initial_force_n.0,
+            source,
+        });
+    }
+    let optimiser = LevenbergMarquardt::new()
+        .with_ftol(settings.tolerance)
+        .with_xtol(settings.tolerance)
+        .with_gtol(1e-10)
+        .with_stepbound(1.0)
+        .with_patience(settings.patience);
+    let stages: &[Pairing] = if tip_seen {
+        &[Pairing::ArcFromTip, Pairing::Nearest]
+    } else {
+        &[Pairing::Nearest]
+    };
+    let mut termination = TerminationReason::ResidualsZero;
+    for &pairing in stages {
+        problem.pairing = pairing;
+        *problem.cache.borrow_mut() = None;
+        let (done, report) = optimiser.minimize(problem);
+        problem = done;
+        termination = report.termination;
+    }
+    let iterations = problem.jacobians.get();
+    let converged = termination.was_successful()
+        || matches!(termination, TerminationReason::NoImprovementPossible(_));
+    // The fitted rod with the configuration's own steps (or, should that solve fail, with the
+    // fit's, whose shape differs by far less than a micrometre).
+    let solved = problem
+        .solve_with(&problem.params, config)
+        .or_else(|_| problem.solve_with(&problem.params, &problem.config));
+    let rms_of = |shape: &RodShape| {
+        let d = distances_to_rod(shape, settings.proximal_shaft_mm, centreline_mm);
+        let rms = (d.iter().map(|v| v * v).sum::<f64>() / d.len() as f64).sqrt();
+        (rms, d.iter().fold(0.0f64, |m, &v| m.max(v)))
+    };
+    let (model, shape) = match (converged, solved) {
+        (true, Ok(solved)) => solved,
+        (_, solved) => {
+            let reason = match (&termination, &solved) {
+                (_, Err(Unsolved::Rod(e))) => {
+                    format!("the rod solver failed at the last force: {e}")
+                }
+                (_, Err(Unsolved::TooLarge)) => "the force left the range considered".to_string(),
+                (TerminationReason::LostPatience, _) => "the evaluation budget ran out".to_string(),
+                (TerminationReason::User(_), _) => {
+                    "the rod solver failed around the last force".to_string()
+                }
+                (TerminationReason::Numerical(what), _) => {
+                    format!("a numerical failure in the {what}")
+                }
+                (other, _) => format!("{other:?}"),
+            };
+            return Err(RodFitError::NotConverged {
+                reason,
+                iterations,
+                rms_mm: solved.map_or(f64::NAN, |(_, shape)| rms_of(&shape).0),
+            });
+        }
+    };
+    let (rms_mm, max_mm) = rms_of(&shape);
+    Ok(RodFit {
+        force_n: model.force,
+        base: model.base,
+        bending_stiffness_n_mm2: model.config.bending_stiffness_n_mm2(),
+        tip_distance_mm: problem.tip.map(|tip| (tip - shape.tip_mm()).norm()),
+        shape,
+        rms_mm,
+        max_mm,
+        iterations,
+        rod_solves: problem.solves.get(),
+    })
+}
+
+/// [`fit_rod`] to a reconstruction (its tip is used when it was seen in both views).
+pub fn fit_rod_to_reconstruction(
+    config: &RodConfig,
+    base: &RodBase,
+    reconstruction: &Reconstruction,
+    settings: &RodFitSettings,
+) -> Result<RodFit, RodFitError> {
+    fit_rod(
+        config,
+        base,
+        &reconstruction.points_mm,
+        reconstruction.tip_seen,
+        settings,
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::reconstruction::tests::{bench_sample, centrelines, distance_to_truth};
+    use crate::reconstruction::{ReconstructionSettings, reconstruct};
+    use crate::scene::{SceneParams, SceneSampling, sample_rng};
+
+    /// A bench scene's rod, its base and its solved shape.
+    fn bench_rod(index: u64) -> (SceneParams, RodConfig, RodBase, RodShape) {
+        let params = SceneSampling::bench().sample(&mut sample_rng(3, index));
+        let (config, base) = params.rod(&RodConfig::default());
+        let shape = rod::solve(&config, &base, params.tip_force_n).unwrap();
+        (params, config, base, shape)
+    }
+
+    /// What a reconstruction of `shape` sees: from 10 mm of shaft below the base to the tip,
+    /// every millimetre.
+    fn seen(shape: &RodShape) -> Vec<Vec3> {
+        let (base, axis) = (shape.points_mm[0], shape.tangents[0]);
+        let mut points: Vec<Vec3> = (0..10).map(|k| base - axis * (10 - k) as f64).collect();
+        points.extend(shape.points_mm.iter().step_by(4));
+        points.push(shape.tip_mm());
+        points
+    }
+
+    #[test]
+    fn the_force_is_recovered_from_the_true_centreline() {
+        for index in 0..3 {
+            let (params, config, base, shape) = bench_rod(index);
+            let fit = fit_rod(
+                &config,
+                &base,
+                &seen(&shape),
+                true,
+                &RodFitSettings::default(),
+            )
+            .unwrap();
+            let error = (fit.force_n - params.tip_force_n).max_abs();
+            assert!(
+                error < 1e-4,
+                "{index}: {:?} N vs {:?} N",
+                fit.force_n,
+                params.tip_force_n
+            );
+            assert!(fit.rms_mm < 1e-3 && fit.tip_distance_mm.unwrap() < 1e-3);
+            assert!(fit.iterations >= 1 && fit.rod_solves > fit.iterations);
+            assert_eq!(fit.base, base);
+        }
+    }
+
+    #[test]
+    fn the_force_is_recovered_from_the_true_masks() {
+        let size = 128;
+        for index in 0..2 {
+            let (config, sample) = bench_sample(size, 5, index);
+            let [a, b] = centrelines(&sample, size);
+            let r = reconstruct(
+                &a,
+                &sample.views[0].camera,
+                &b,
+                &sample.views[1].camera,
+                &ReconstructionSettings::default(),
+            )
+            .unwrap();
+            let (rod_config, base) = sample.params.rod(&config.rod);
+            let fit = fit_rod_to_reconstruction(&rod_config, &base, &r, &RodFitSettings::default())
+                .unwrap();
+            let truth = sample.params.tip_force_n;
+            let error = (fit.force_n - truth).max_abs();
+            assert!(error < 0.03, "{index}: {:?} N vs {truth:?} N", fit.force_n);
+            assert!(fit.rms_mm < 0.3, "{}", fit.rms_mm);
+            // The fitted rod lies on the true one.
+            let off = fit
+                .shape
+                .points_mm
+                .iter()
+                .map(|&p| distance_to_truth(&sample.shape, p))
+                .fold(0.0f64, f64::max);
+            assert!(off < 0.5, "{off} mm");
+        }
+    }
+
+    #[test]
+    fn the_base_position_and_the_stiffness_can_be_fitted_too() {
+        let (params, config, base, shape) = bench_rod(4);
+        let points = seen(&shape);
+        // The base assumed 1.5 mm off.
+        let assumed = RodBase {
+            position_mm: base.position_mm + Vec3::new(1.5, -1.0, 0.5),
+            ..base
+        };
+        let wrong = fit_rod(&config, &assumed, &points, true, &RodFitSettings::default()).unwrap();
+        let fit = fit_rod(
+            &config,
+            &assumed,
+            &points,
+            true,
+            &RodFitSettings {
+                fit_base_position: true,
+                ..RodFitSettings::default()
+            },
+        )
+        .unwrap();
+        assert!((fit.base.position_mm - base.position_mm).max_abs() < 1e-3);
+        assert!((fit.force_n - params.tip_force_n).max_abs() < 1e-4);
+        assert!(
+            fit.rms_mm < 1e-3 && wrong.rms_mm > 0.1,
+            "{} {}",
+            fit.rms_mm,
+            wrong.rms_mm
+        );
+        // With the force known, the stiffness: a catheter assumed 30 % stiffer is found out.
+        let ei = config.bending_stiffness_n_mm2();
+        let fit = fit_rod(
+            &config.clone().with_bending_stiffness(1.3 * ei),
+            &base,
+            &points,
+            true,
+            &RodFitSettings {
+                initial_force_n: params.tip_force_n,
+                fit_force: false,
+                fit_stiffness: true,
+                ..RodFitSettings::default()
+            },
+        )
+        .unwrap();
+        assert!(
+            (fit.bending_stiffness_n_mm2 / ei - 1.0).abs() < 1e-3,
+            "{} vs {ei}",
+            fit.bending_stiffness_n_mm2
+        );
+    }
+
+    #[test]
+    fn bad_requests_are_named_errors() {
+        let (_, config, base, shape) = bench_rod(0);
+        let points = seen(&shape);
+        let fit = |config: &RodConfig, points: &[Vec3], settings: RodFitSettings| {
+            fit_rod(config, &base, points, true, &settings).unwrap_err()
+        };
+        let err = fit(
+            &config,
+            &points,
+            RodFitSettings {
+                fit_force: false,
+                ..Default::default()
+            },
+        );
+        assert!(matches!(err, RodFitError::InvalidSettings(_)), "{err}");
+        let err = fit(
+            &config,
+            &points,
+            RodFitSettings {
+                fit_stiffness: true,
+                ..Default::default()
+            },
+        );
+        assert!(err.to_string().contains("F/EI"), "{err}");
+        let err = fit(&config, &points[..2], RodFitSettings::default());
+        assert!(matches!(err, RodFitError::InvalidCentreline(_)), "{err}");
+        let mut bad = points.clone();
+        bad[3] = Vec3::new(f64::NAN, 0.0, 0.0);
+        let err = fit(&config, &bad, RodFitSettings::default());
+        assert!(err.to_string().contains("not finite"), "{err}");
+        // The evaluation budget runs out.
+        let err = fit(
+            &config,
+            &points,
+            RodFitSettings {
+                patience: 1,
+                ..Default::default()
+            },
+        );
+        assert!(
+            matches!(err, RodFitError::NotConverged { iterations, rms_mm, .. } if iterations >= 1 && rms_mm.is_finite()),
+            "{err}"
+        );
+        assert!(
+            err.to_string()
+                .starts_with("the rod fit did not converge (the evaluation budget ran out)"),
+            "{err}"
+        );
+        // The rod cannot be solved at the starting point.
+        let weak = RodConfig {
+            max_newton_iterations: 1,
+            ..config.clone()
+        };
+        let err = fit(
+            &weak,
+            &points,
+            RodFitSettings {
+                initial_force_n: Vec3::new(1.5, 0.0, 0.0),
+                ..Default::default()
+            },
+        );
+        assert!(matches!(err, RodFitError::Rod { .. }), "{err}");
+        assert!(err.to_string().contains("did not converge"), "{err}");
+        // A start beyond the largest force considered.
+        let err = fit(
+            &config,
+            &points,
+            RodFitSettings {
+                initial_force_n: Vec3::new(5.0, 0.0, 0.0),
+                ..Default::default()
+            },
+        );
+        assert!(
+            err.to_string().contains("exceeds the largest force"),
+            "{err}"
+        );
+    }
+
+    /// The issue's targets on 50 bench XRay-2 pairs at 224 px, from their true masks: mean
+    /// centreline error ≤ 1 mm, tip error ≤ 2 mm, force R² ≥ 0.95 per axis, ≤ 100 ms per pair.
+    /// Then from the same masks degraded as a network's might be: cut at one half (binary, no
+    /// sub-pixel information), and binary with a ragged outline (each pixel on the outline
+    /// flipped with probability 0.3); with the catheter's stiffness or base assumed wrong; and
+    /// on the varied scenes (other catheters and base poses).
+    /// `cargo test -p hnet-twin --release --lib measure_ -- --ignored --nocapture`.
+    #[test]
+    #[ignore = "a measurement: run it in release and read its output"]
+    fn measure_reconstruction_and_fit_on_bench_pairs() {
+        use crate::scene::{Modality, SceneSampling, TwinConfig};
+        use rand::{RngExt, SeedableRng};
+
+        let bench = TwinConfig::new(Modality::Xray2, 224);
+        let exact = |m: &[u8]| m.to_vec();
+        let binary =
+            |m: &[u8]| -> Vec<u8> { m.iter().map(|&v| if v >= 128 { 255 } else { 0 }).collect() };
+        let ragged = |m: &[u8]| -> Vec<u8> {
+            let size = 224;
+            let b = binary(m);
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
+                m.iter()
+                    .enumerate()
+                    .map(|(i, &v)| i as u64 * u64::from(v))
+                    .sum(),
+            );
+            let mut out = b.clone();
+            for y in 1..size - 1 {
+                for x in 1..size - 1 {
+                    let i = y * size + x;
+                    let outline = [i - 1, i + 1, i - size, i + size]
+                        .iter()
+                        .any(|&j| b[j] != b[i]);
+                    if outline && rng.random::<f64>() < 0.3 {
+                        out[i] = 255 - b[i];
+                    }
+                }
+            }
+            out
+        };
+        let truth = |c: RodConfig, b: RodBase| (c, b);
+        let stiffer = |c: RodConfig, b: RodBase| {
+            let ei = c.bending_stiffness_n_mm2();
+            (c.with_bending_stiffness(1.2 * ei), b)
+        };
+        let softer = |c: RodConfig, b: RodBase| {
+            let ei = c.bending_stiffness_n_mm2();
+            (c.with_bending_stiffness(0.8 * ei), b)
+        };
+        let moved = |c: RodConfig, b: RodBase| {
+            let position_mm = b.position_mm + Vec3::new(2.0, 0.0, 0.0);
+            (c, RodBase { position_mm, ..b })
+        };
+        let turned = |c: RodConfig, b: RodBase| {
+            let position_mm = b.position_mm + Vec3::new(2.0, -1.0, 1.0);
+            let tilt = Mat3::rotation(Vec3::new(1.0, 1.0, 0.0), 2f64.to_radians());
+            let orientation = tilt * b.orientation;
+            (
+                c,
+                RodBase {
+                    position_mm,
+                    orientation,
+                },
+            )
+        };
+        let default = RodFitSettings::default();
+        let position = RodFitSettings {
+            fit_base_position: true,
+            ..RodFitSettings::default()
+        };
+        let pose = RodFitSettings {
+            fit_base_rotation: true,
+            ..position.clone()
+        };
+        let varied = TwinConfig {
+            scene: SceneSampling::varied(),
+            ..bench.clone()
+        };
+        let cases: [Case<'_>; 10] = [
+            ("true masks", &bench, &exact, &truth, default.clone()),
+            ("binary masks", &bench, &binary, &truth, default.clone()),
+            (
+                "binary masks, ragged outlines",
+                &bench,
+                &ragged,
+                &truth,
+                default.clone(),
+            ),
+            (
+                "true masks, EI assumed +20 %",
+                &bench,
+                &exact,
+                &stiffer,
+                default.clone(),
+            ),
+            (
+                "true masks, EI assumed -20 %",
+                &bench,
+                &exact,
+                &softer,
+                default.clone(),
+            ),
+            (
+                "true masks, base assumed 2 mm off",
+                &bench,
+                &exact,
+                &moved,
+                default.clone(),
+            ),
+            (
+                "the same, base position fitted",
+                &bench,
+                &exact,
+                &moved,
+                position,
+            ),
+            (
+                "true masks, base assumed 2.4 mm and 2° off, base pose fitted",
+                &bench,
+                &exact,
+                &turned,
+                pose.clone(),
+            ),
+            (
+                "ragged outlines, base pose fitted",
+                &bench,
+                &ragged,
+                &turned,
+                pose,
+            ),
+            (
+                "varied scenes (catheters, base poses), true masks",
+                &varied,
+                &exact,
+                &truth,
+                default,
+            ),
+        ];
+        for case in &cases {
+            println!("{}", case.0);
+            measure(case, 50);
+        }
+    }
+
+    /// A measurement: its name, the twin, how the masks are degraded, the rod and base the fit
+    /// assumes (from the true ones), and the fit's settings.
+    type Case<'a> = (
+        &'a str,
+        &'a crate::scene::TwinConfig,
+        &'a dyn Fn(&[u8]) -> Vec<u8>,
+        &'a dyn Fn(RodConfig, RodBase) -> (RodConfig, RodBase),
+        RodFitSettings,
+    );
+
+    fn measure(case: &Case<'_>, pairs: u64) {
+        let (_, config, degrade, assume, settings) = case;
+        use crate::centreline::{CentrelineSettings, Mask, extract_centreline};
+        use crate::scene::{Backgrounds, generate};
+        use std::time::{Duration, Instant};
+
+        let size = config.image_size;
+        let backgrounds = Backgrounds::phantom(&config.views);
+        let (mut line_errors, mut tip_errors, mut truth, mut fitted) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let mut fit_rms = Vec::new();
+        let mut times = [Duration::ZERO; 3];
+        let mut failures = Vec::new();
+        for index in 0..pairs {
+            let sample = generate(config, &backgrounds, 2024, index).unwrap();
+            let masks = [0, 1].map(|i| degrade(&sample.views[i].mask));
+            let start = Instant::now();
+            let lines: Vec<_> = (0..2)
+                .map(|i| {
+                    extract_centreline(
+                        &Mask::coverage8(size, size, &masks[i]),
+                        ["A", "B"][i],
+                        &CentrelineSettings::default(),
+                    )
+                })
+                .collect();
+            let t_lines = start.elapsed();
+            let (a, b) = match (&lines[0], &lines[1]) {
+                (Ok(a), Ok(b)) => (a, b),
+                (Err(e), _) | (_, Err(e)) => {
+                    failures.push(format!("{index}: {e}"));
+                    continue;
+                }
+            };
+            let r = match reconstruct(
+                a,
+                &sample.views[0].camera,
+                b,
+                &sample.views[1].camera,
+                &ReconstructionSettings::default(),
+            ) {
+                Ok(r) => r,
+                Err(e) => {
+                    failures.push(format!("{index}: {e}"));
+                    continue;
+                }
+            };
+            let t_reconstruct = start.elapsed();
+            let (rod_config, base) = sample.params.rod(&config.rod);
+            let (rod_config, base) = assume(rod_config, base);
+            let fit = fit_rod_to_reconstruction(&rod_config, &base, &r, settings);
+            let t_fit = start.elapsed();
+            times[0] += t_lines;
+            times[1] += t_reconstruct - t_lines;
+            times[2] += t_fit - t_reconstruct;
+            let errors: Vec<f64> = r
+                .points_mm
+                .iter()
+                .map(|&p| distance_to_truth(&sample.shape, p))
+                .collect();
+            let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+            let tip = (r.last_mm() - sample.shape.tip_mm()).norm();
+            line_errors.push(mean);
+            if r.tip_seen {
+                tip_errors.push(tip);
+            }
+            let f = sample.params.tip_force_n;
+            match fit {
+                Ok(fit) => {
+                    println!(
+                        "{index:2}: line {mean:.3} mm, tip {tip:.3} mm (seen {}), residual {:.3} px, \
+                         fit rms {:.3} mm, {} iterations, {} solves, \
+                         F {:+.3} {:+.3} {:+.3} vs {:+.3} {:+.3} {:+.3} N",
+                        r.tip_seen,
+                        r.mean_residual_px,
+                        fit.rms_mm,
+                        fit.iterations,
+                        fit.rod_solves,
+                        fit.force_n[0],
+                        fit.force_n[1],
+                        fit.force_n[2],
+                        f[0],
+                        f[1],
+                        f[2]
+                    );
+                    truth.push(f);
+                    fitted.push(fit.force_n);
+                    fit_rms.push(fit.rms_mm);
+                }
+                Err(e) => failures.push(format!("{index}: {e}")),
+            }
+        }
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+        let r2 = |axis: usize| {
+            let t: Vec<f64> = truth.iter().map(|f| f[axis]).collect();
+            let m = mean(&t);
+            let total: f64 = t.iter().map(|v| (v - m).powi(2)).sum();
+            let residual: f64 = truth
+                .iter()
+                .zip(&fitted)
+                .map(|(a, b)| (a[axis] - b[axis]).powi(2))
+                .sum();
+            1.0 - residual / total
+        };
+        let mae = |axis: usize| {
+            let errors: Vec<f64> = truth
+                .iter()
+                .zip(&fitted)
+                .map(|(a, b)| (a[axis] - b[axis]).abs())
+                .collect();
+            mean(&errors)
+        };
+        let worst = |v: &[f64]| v.iter().fold(0.0f64, |m, &x| m.max(x));
+        let n = line_errors.len().max(1) as f64;
+        println!("failures: {failures:?}");
+        println!(
+            "{} of {pairs} pairs reconstructed, {} fitted",
+            line_errors.len(),
+            fitted.len()
+        );
+        println!(
+            "mean centreline error {:.3} mm (worst pair {:.3}), mean tip error {:.3} mm (worst {:.3}) \
+             over the {} pairs whose tip both views see",
+            mean(&line_errors),
+            worst(&line_errors),
+            mean(&tip_errors),
+            worst(&tip_errors),
+            tip_errors.len(),
+        );
+        println!(
+            "fitted rod to reconstruction: mean RMS {:.3} mm, worst {:.3} mm",
+            mean(&fit_rms),
+            worst(&fit_rms)
+        );
+        println!(
+            "force R² x {:.4} y {:.4} z {:.4}; mean absolute error x {:.4} y {:.4} z {:.4} N",
+            r2(0),
+            r2(1),
+            r2(2),
+            mae(0),
+            mae(1),
+            mae(2)
+        );
+        println!(
+            "mean time per pair {:.1} ms: centrelines {:.1} ms, reconstruction {:.1} ms, fit {:.1} ms",
+            (times[0] + times[1] + times[2]).as_secs_f64() * 1e3 / n,
+            times[0].as_secs_f64() * 1e3 / n,
+            times[1].as_secs_f64() * 1e3 / n,
+            times[2].as_secs_f64() * 1e3 / n
+        );
+    }
+}
