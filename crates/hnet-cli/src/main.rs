@@ -18,6 +18,7 @@ mod progress_renderer;
 mod report;
 mod run_dir;
 mod simulate;
+mod study;
 mod training;
 
 /// H-Net Studio: stereo catheter segmentation and 3D tip-force estimation.
@@ -46,6 +47,8 @@ enum Command {
     ContactSheet(contact_sheet::ContactSheetArgs),
     /// Measure throughput (see docs/benchmarks.md).
     Bench(bench::BenchArgs),
+    /// Study what a dataset allows (`hnet study ceiling`: the force recoverable from its geometry).
+    Study(study::StudyArgs),
 }
 
 fn main() -> ExitCode {
@@ -60,6 +63,7 @@ fn main() -> ExitCode {
         Command::Report(args) => report::run(&args),
         Command::ContactSheet(args) => contact_sheet::run(&args),
         Command::Bench(args) => bench::run(&args),
+        Command::Study(args) => study::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
