@@ -18,7 +18,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::backend::BackendChoice;
 use crate::data::{StereoBatcher, StereoItem, StereoSplit};
+use crate::physics_check::{self, MaskOrigin, PairToCheck, PhysicsEvaluation};
 use crate::run_dir::RunDir;
+use hnet_twin::centreline::Mask;
+use hnet_twin::simulate::SampleRecord;
 
 #[derive(clap::Args, Debug)]
 #[command(group(clap::ArgGroup::new("model").required(true).args(["run", "weights"])))]
@@ -43,6 +46,10 @@ pub struct EvalArgs {
     /// Print JSON instead of markdown.
     #[arg(long)]
     json: bool,
+    /// Skip the physics check (3D reconstruction and rod fit of every simulated pair, from the
+    /// true and the predicted masks).
+    #[arg(long)]
+    no_physics: bool,
     /// Where to compute.
     #[arg(long, value_enum, default_value = "flex")]
     backend: BackendChoice,
@@ -74,6 +81,10 @@ pub struct Evaluation {
     pub segmentation: Option<[SegmentationMetrics; 2]>,
     /// Table II over both heads together.
     pub segmentation_mean: Option<SegmentationMetrics>,
+    /// The physics check of simulated pairs: from the true masks, and from the predicted ones
+    /// for networks that segment (empty when skipped or when the data was not simulated).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub physics: Vec<PhysicsEvaluation>,
 }
 
 /// One pair's true and predicted force, for `hnet report`.
@@ -207,13 +218,15 @@ pub fn load_weights(
     })
 }
 
-/// Evaluates a trained model on a split; returns the tables and the per-pair forces.
+/// Evaluates a trained model on a split; returns the tables and the per-pair forces. With
+/// `physics`, simulated pairs also get the physics check.
 pub fn evaluate(
     model: &TrainedModel,
     data: &Path,
     split: Split,
     device: &Device,
     batch_size: usize,
+    physics: bool,
 ) -> anyhow::Result<(Evaluation, Vec<ForcePrediction>)> {
     let dataset = Dataset::open(data)?;
     let pairs = StereoSplit::load(&dataset, split, model.image_size, None)?;
@@ -230,12 +243,33 @@ pub fn evaluate(
     let mut forces = ForceAccumulator::new();
     let mut predictions = Vec::new();
     let mut error = None;
+    let records = if physics {
+        let ids: Vec<&str> = pairs.items.iter().map(|item| &*item.id).collect();
+        let records = physics_check::read_records(&dataset, &ids);
+        if records.is_none() {
+            eprintln!(
+                "{} was not simulated (no twin records): no physics check",
+                data.display()
+            );
+        }
+        records
+    } else {
+        None
+    };
+    // Per pair, what the physics check reads: the predicted masks and force.
+    let mut predicted: Vec<NetworkOutput> = Vec::new();
     predict(
         model,
         &pairs.items,
         batch_size,
         device,
         |item, masks, force| {
+            if records.is_some() {
+                predicted.push(NetworkOutput {
+                    masks: masks.clone(),
+                    force,
+                });
+            }
             if let Some(masks) = masks {
                 for ((head, predicted), target) in heads
                     .iter_mut()
@@ -268,6 +302,10 @@ pub fn evaluate(
         both.merge(&heads[1]);
         both.finish().expect("pairs were seen")
     });
+    let physics = match &records {
+        Some(records) => physics_checks(&dataset, split, model, &pairs.items, &predicted, records)?,
+        None => Vec::new(),
+    };
     Ok((
         Evaluation {
             architecture: model.spec.name().to_string(),
@@ -278,9 +316,89 @@ pub fn evaluate(
             force: if force_head { forces.finish() } else { None },
             segmentation,
             segmentation_mean,
+            physics,
         },
         predictions,
     ))
+}
+
+/// What the network said about one pair: its masks' probabilities and its force (N), for the
+/// networks that have them.
+struct NetworkOutput {
+    masks: Option<[Vec<f32>; 2]>,
+    force: Option<[f32; 3]>,
+}
+
+/// The physics check of every pair: from the dataset's own masks at its own size, and from the
+/// network's masks (at its input size) when it segments.
+fn physics_checks(
+    dataset: &Dataset,
+    split: Split,
+    model: &TrainedModel,
+    items: &[StereoItem],
+    predicted: &[NetworkOutput],
+    records: &[SampleRecord],
+) -> anyhow::Result<Vec<PhysicsEvaluation>> {
+    use rayon::prelude::*;
+    let rows: Vec<_> = dataset.split(split).collect();
+    let true_masks = rows
+        .par_iter()
+        .map(|row| dataset.load_pair(row, None))
+        .collect::<Result<Vec<_>, _>>()?;
+    let size = dataset.header.image_size;
+    fn pair<'a>(
+        items: &[StereoItem],
+        predicted: &[NetworkOutput],
+        i: usize,
+        masks: [Mask<'a>; 2],
+    ) -> PairToCheck<'a> {
+        PairToCheck {
+            truth_n: items[i].force_n,
+            network_n: predicted[i].force,
+            masks,
+        }
+    }
+    let from_truth: Vec<_> = true_masks
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            pair(
+                items,
+                predicted,
+                i,
+                [&p.mask_a, &p.mask_b].map(|m| Mask::soft(size.width, size.height, m)),
+            )
+        })
+        .collect();
+    let mut checks = vec![physics_check::check(
+        MaskOrigin::True,
+        size,
+        &from_truth,
+        records,
+    )];
+    if predicted.iter().all(|p| p.masks.is_some()) {
+        let net = model.image_size;
+        let from_network: Vec<_> = predicted
+            .iter()
+            .enumerate()
+            .filter_map(|(i, p)| {
+                let [a, b] = p.masks.as_ref()?;
+                Some(pair(
+                    items,
+                    predicted,
+                    i,
+                    [a, b].map(|m| Mask::soft(net.width, net.height, m)),
+                ))
+            })
+            .collect();
+        checks.push(physics_check::check(
+            MaskOrigin::Predicted,
+            net,
+            &from_network,
+            records,
+        ));
+    }
+    Ok(checks)
 }
 
 fn number(v: Option<f64>) -> String {
@@ -336,6 +454,7 @@ pub fn markdown(e: &Evaluation) -> String {
             );
         }
     }
+    s.push_str(&physics_check::markdown(&e.physics));
     s
 }
 
@@ -356,7 +475,14 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         ),
         (None, None) => anyhow::bail!("give --run or --weights"),
     };
-    let (evaluation, predictions) = evaluate(&model, &data, args.split, &device, args.batch_size)?;
+    let (evaluation, predictions) = evaluate(
+        &model,
+        &data,
+        args.split,
+        &device,
+        args.batch_size,
+        !args.no_physics,
+    )?;
     // A run keeps its tables and predictions; weights on their own are only printed.
     if let Some(run) = &run {
         let write = |path: PathBuf, bytes: &[u8]| {

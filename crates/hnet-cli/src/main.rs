@@ -13,6 +13,7 @@ mod data;
 mod evaluation;
 mod import;
 mod info;
+mod physics_check;
 mod progress;
 mod progress_renderer;
 mod report;

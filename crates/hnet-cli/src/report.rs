@@ -361,7 +361,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     }
     let device = args.backend.device()?;
     let model = load_run(&run, &device)?;
-    let (_, predictions) = evaluate(&model, &data, Split::Test, &device, 16)?;
+    let (_, predictions) = evaluate(&model, &data, Split::Test, &device, 16, false)?;
     let mut written = Vec::new();
     if !predictions.is_empty() {
         for (axis, name) in AXES.iter().enumerate() {

@@ -150,6 +150,23 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
         serde_json::json!({"width": 48, "height": 32})
     );
     assert_eq!(eval["force"]["samples"], 40);
+    // The physics check: from the dataset's own 32x32 masks and from the network's 48x32 ones,
+    // every pair fitted or counted as a failure of a named step.
+    let physics = eval["physics"].as_array().unwrap();
+    assert_eq!(physics[0]["masks"], "true");
+    assert_eq!(
+        physics[1]["size"],
+        serde_json::json!({"width": 48, "height": 32})
+    );
+    for check in physics {
+        let failed: u64 = check["failures"]
+            .as_object()
+            .unwrap()
+            .values()
+            .map(|n| n.as_u64().unwrap())
+            .sum();
+        assert_eq!(check["fitted"].as_u64().unwrap() + failed, 40, "{check}");
+    }
     assert!(eval["force"]["axes"][2]["rmse"].as_f64().unwrap() >= 0.0);
     assert!(eval["segmentation"][1]["mdice"].as_f64().unwrap() > 0.0);
     assert!(runs.join("eval-test.md").is_file());
@@ -237,9 +254,16 @@ fn every_baseline_trains_and_evaluates_in_the_same_harness() {
         let saved: serde_json::Value =
             serde_json::from_slice(&std::fs::read(runs.join("config.json")).unwrap()).unwrap();
         assert_eq!(saved["seed"], 9, "{architecture}");
-        let out = run(&["eval", "--run", runs.to_str().unwrap(), "--json"]);
+        let out = run(&[
+            "eval",
+            "--run",
+            runs.to_str().unwrap(),
+            "--json",
+            "--no-physics",
+        ]);
         let eval: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
         assert_eq!(eval["architecture"], architecture);
+        assert!(eval.get("physics").is_none(), "{architecture}");
         assert_eq!(!eval["segmentation"].is_null(), segments, "{architecture}");
         assert_eq!(!eval["force"].is_null(), force, "{architecture}");
         // Each epoch logs the metrics of the heads the network has, and no others.

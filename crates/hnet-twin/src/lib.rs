@@ -8,7 +8,8 @@
 //! - [`scene`]: random scenes and complete stereo samples;
 //! - [`centreline`], [`reconstruction`] and [`rod_fit`]: the catheter in 3D from its two masks
 //!   (sub-pixel centrelines, epipolar matching and triangulation) and the tip force of the rod
-//!   that fits it (a physics-checked force, no training);
+//!   that fits it (a physics-checked force, no training); [`physics_force`] runs the three on a
+//!   pair's masks in one call;
 //! - [`dataset`]: the on-disk format; [`force_table`]: force tables in CSV (imports and the page's
 //!   labels); natively also [`simulate`], [`import`] and [`files`] (atomic writes).
 //!
@@ -30,6 +31,7 @@ pub mod force_table;
 pub mod import;
 pub mod noise;
 pub mod phantom;
+pub mod physics_force;
 pub mod raster;
 pub mod reconstruction;
 pub mod render;

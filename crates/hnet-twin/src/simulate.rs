@@ -13,6 +13,7 @@ use crate::dataset::{
     Dataset, DatasetError, DatasetHeader, DatasetWriter, ImageRef, ManifestRow, Split,
     assign_splits, sample_files,
 };
+use crate::physics_force::PhysicsSetup;
 use crate::rod::RodConfig;
 use crate::scene::{Backgrounds, SceneParams, StereoSample, TwinConfig, generate};
 use crate::synthetic_xray::PatchLayout;
@@ -111,6 +112,38 @@ pub struct SampleRecord {
     pub arc_mm: Vec<f64>,
     /// View A and view B.
     pub views: [ViewRecord; 2],
+}
+
+impl SampleRecord {
+    /// What [`crate::physics_force::physics_estimate`] needs to read this pair's masks at `size`
+    /// (the dataset's size, or the size they were resized to, in either direction): both views'
+    /// cameras scaled to that size, and the rod and base exactly as simulated.
+    pub fn physics_setup(&self, size: ImageSize) -> PhysicsSetup {
+        let (rod, base) = self.scene.rod(&self.rod);
+        PhysicsSetup::new(
+            self.views.each_ref().map(|view| {
+                // Pixel coordinates scale with the image: u' = u·W'/W, v' = v·H'/H.
+                let from = view.carm.image_size;
+                let scale = [
+                    size.width as f64 / from.width as f64,
+                    size.height as f64 / from.height as f64,
+                    1.0,
+                ];
+                let mut camera = view.camera_matrix;
+                for (row, s) in camera.iter_mut().zip(scale) {
+                    row.iter_mut().for_each(|v| *v *= s);
+                }
+                camera
+            }),
+            rod,
+            base,
+        )
+    }
+
+    /// The tip of the solved centreline, mm.
+    pub fn tip_mm(&self) -> Option<Vec3> {
+        self.centreline_mm.last().copied()
+    }
 }
 
 /// One view of a [`SampleRecord`].

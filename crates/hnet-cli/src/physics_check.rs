@@ -1,0 +1,224 @@
+//! `hnet eval`'s physics check: each simulated pair's catheter reconstructed in 3D from its masks
+//! (the true ones, and the network's) and the tip force of the twin's rod fitted to it
+//! ([`hnet_twin::physics_force`]), against the pair's record: the reconstruction's distance from
+//! the true centreline, and Table I of the physics force beside the network's on the same pairs.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::time::Instant;
+
+use hnet_model::metrics::{AXES, ForceAccumulator, ForceMetrics};
+use hnet_twin::centreline::Mask;
+use hnet_twin::dataset::Dataset;
+use hnet_twin::physics_force::physics_estimate;
+use hnet_twin::render::PROXIMAL_SHAFT_MM;
+use hnet_twin::rod;
+use hnet_twin::rod_fit::distances_to_rod;
+use hnet_twin::simulate::{SampleRecord, read_sample_record};
+use hnet_twin::vec3::Vec3;
+use hnet_units::ImageSize;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// Which masks the catheter was reconstructed from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MaskOrigin {
+    /// The dataset's masks (exact for simulated pairs).
+    True,
+    /// The network's predicted masks (probabilities).
+    Predicted,
+}
+
+impl MaskOrigin {
+    fn describe(self) -> &'static str {
+        match self {
+            Self::True => "true masks",
+            Self::Predicted => "predicted masks",
+        }
+    }
+}
+
+/// The physics check over one split, from one kind of masks.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PhysicsEvaluation {
+    /// Which masks.
+    pub masks: MaskOrigin,
+    /// Their size: the dataset's own for the true masks, the network's input for its masks.
+    pub size: ImageSize,
+    /// Pairs tried.
+    pub pairs: usize,
+    /// Pairs reconstructed and fitted.
+    pub fitted: usize,
+    /// Pairs that failed, by the step that failed (`centreline`, `reconstruction`, `fit`).
+    pub failures: BTreeMap<String, usize>,
+    /// Mean distance of the reconstructed points from the true centreline (its flexible section
+    /// and the straight shaft behind the base), mean over fitted pairs, mm.
+    pub centreline_error_mm: Option<f64>,
+    /// Mean distance of the reconstructed tip from the true tip, over fitted pairs whose tip was
+    /// seen in both views, mm.
+    pub tip_error_mm: Option<f64>,
+    /// Table I of the fitted rod's tip force.
+    pub force: Option<ForceMetrics>,
+    /// Table I of the network's force on the same pairs, when it estimates one.
+    pub network_force: Option<ForceMetrics>,
+    /// Wall time per pair (centrelines, reconstruction and fit; all cores), ms.
+    pub millis_per_pair: f64,
+}
+
+/// One pair to check.
+pub struct PairToCheck<'a> {
+    /// Its true force, N.
+    pub truth_n: [f32; 3],
+    /// The network's force, N, when it has one.
+    pub network_n: Option<[f32; 3]>,
+    /// The masks of view A and B to reconstruct from.
+    pub masks: [Mask<'a>; 2],
+}
+
+/// The records of `pairs`, or `None` when the dataset was not simulated (imported or exported
+/// by the page: nothing to check against).
+pub fn read_records(dataset: &Dataset, ids: &[&str]) -> Option<Vec<SampleRecord>> {
+    ids.par_iter()
+        .map(|id| read_sample_record(dataset, id).ok())
+        .collect()
+}
+
+/// Mean distance of `points` from the true rod of `record`, mm.
+fn distance_from_truth(record: &SampleRecord, points: &[Vec3]) -> Option<f64> {
+    let (config, base) = record.scene.rod(&record.rod);
+    let truth = rod::solve(&config, &base, record.scene.tip_force_n).ok()?;
+    let d = distances_to_rod(&truth, PROXIMAL_SHAFT_MM, points);
+    (!d.is_empty()).then(|| d.iter().sum::<f64>() / d.len() as f64)
+}
+
+/// What one pair gave.
+enum Outcome {
+    Fitted {
+        force_n: [f32; 3],
+        centreline_error_mm: Option<f64>,
+        tip_error_mm: Option<f64>,
+    },
+    Failed(&'static str),
+}
+
+/// Checks `pairs` (with their `records`; masks all of `size`) from the masks `origin`.
+pub fn check(
+    origin: MaskOrigin,
+    size: ImageSize,
+    pairs: &[PairToCheck<'_>],
+    records: &[SampleRecord],
+) -> PhysicsEvaluation {
+    let started = Instant::now();
+    let outcomes: Vec<Outcome> = pairs
+        .par_iter()
+        .zip(records)
+        .map(
+            |(pair, record)| match physics_estimate(pair.masks, &record.physics_setup(size)) {
+                Ok(estimate) => {
+                    let reconstruction = &estimate.reconstruction;
+                    Outcome::Fitted {
+                        force_n: estimate.fit.force_n.0.map(|f| f as f32),
+                        centreline_error_mm: distance_from_truth(record, &reconstruction.points_mm),
+                        tip_error_mm: reconstruction
+                            .tip_seen
+                            .then(|| record.tip_mm())
+                            .flatten()
+                            .map(|tip| (reconstruction.last_mm() - tip).norm()),
+                    }
+                }
+                Err(e) => Outcome::Failed(e.step()),
+            },
+        )
+        .collect();
+    let millis_per_pair = started.elapsed().as_secs_f64() * 1e3 / pairs.len().max(1) as f64;
+
+    let mut failures = BTreeMap::new();
+    let (mut physics, mut network) = (ForceAccumulator::new(), ForceAccumulator::new());
+    let (mut centreline, mut tip) = (Vec::new(), Vec::new());
+    for (pair, outcome) in pairs.iter().zip(&outcomes) {
+        match outcome {
+            Outcome::Fitted {
+                force_n,
+                centreline_error_mm,
+                tip_error_mm,
+            } => {
+                physics.push(*force_n, pair.truth_n);
+                if let Some(n) = pair.network_n {
+                    network.push(n, pair.truth_n);
+                }
+                centreline.extend(*centreline_error_mm);
+                tip.extend(*tip_error_mm);
+            }
+            Outcome::Failed(step) => *failures.entry(step.to_string()).or_insert(0) += 1,
+        }
+    }
+    let mean = |v: &[f64]| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
+    PhysicsEvaluation {
+        masks: origin,
+        size,
+        pairs: pairs.len(),
+        fitted: physics.len() as usize,
+        failures,
+        centreline_error_mm: mean(&centreline),
+        tip_error_mm: mean(&tip),
+        force: physics.finish(),
+        network_force: network.finish(),
+        millis_per_pair,
+    }
+}
+
+/// The physics check as markdown.
+pub fn markdown(checks: &[PhysicsEvaluation]) -> String {
+    let mut s = String::new();
+    if checks.is_empty() {
+        return s;
+    }
+    let _ = writeln!(
+        s,
+        "\n3D reconstruction and physics-checked force (the twin's rod fitted to the catheter \
+         reconstructed from both masks)\n"
+    );
+    let _ = writeln!(
+        s,
+        "| masks | fitted | centreline error (mm) | tip error (mm) | R² Fx / Fy / Fz, physics | \
+         R² Fx / Fy / Fz, network, same pairs | failures | ms per pair |"
+    );
+    let _ = writeln!(s, "| --- | --- | --- | --- | --- | --- | --- | --- |");
+    let r2 = |m: &Option<ForceMetrics>| match m {
+        Some(m) => AXES
+            .iter()
+            .enumerate()
+            .map(|(i, _)| m.axes[i].r2.map_or("n/a".into(), |v| format!("{v:.3}")))
+            .collect::<Vec<_>>()
+            .join(" / "),
+        None => "n/a".into(),
+    };
+    let mm = |v: Option<f64>| v.map_or("n/a".into(), |v| format!("{v:.3}"));
+    for c in checks {
+        let failures = if c.failures.is_empty() {
+            "none".to_string()
+        } else {
+            c.failures
+                .iter()
+                .map(|(step, n)| format!("{n} at {step}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let _ = writeln!(
+            s,
+            "| {} ({}) | {} of {} | {} | {} | {} | {} | {} | {:.0} |",
+            c.masks.describe(),
+            c.size,
+            c.fitted,
+            c.pairs,
+            mm(c.centreline_error_mm),
+            mm(c.tip_error_mm),
+            r2(&c.force),
+            r2(&c.network_force),
+            failures,
+            c.millis_per_pair
+        );
+    }
+    s
+}
