@@ -10,6 +10,21 @@ use hnet_model::architectures::ModelSpec;
 use hnet_units::ImageSize;
 use serde::{Deserialize, Serialize};
 
+/// How the learning rates change over a run.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum LearningRateSchedule {
+    /// The configured rates throughout (the paper's).
+    #[default]
+    Constant,
+    /// Cosine annealing from each configured rate down to `final_factor` times it at the last
+    /// step of the last epoch.
+    Cosine {
+        /// The final rate as a fraction of the starting one.
+        final_factor: f64,
+    },
+}
+
 /// Everything that defines a training run (`config.json` in the run folder).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TrainingConfig {
@@ -30,6 +45,15 @@ pub struct TrainingConfig {
     /// head alone lets the encoder-decoder learn fast without losing the head.
     #[serde(default)]
     pub force_head_learning_rate: Option<f64>,
+    /// Train H-Net's force head on standardised forces: the train split's per-axis mean and
+    /// standard deviation (from its manifest) are put in the network's settings, so that its
+    /// outputs stay in newtons, and the force loss becomes the MSE of standardised forces. The
+    /// run's `config.json` records the statistics used.
+    #[serde(default)]
+    pub standardise_force: bool,
+    /// How the learning rates change over the run.
+    #[serde(default)]
+    pub schedule: LearningRateSchedule,
     /// RMSprop smoothing constant (Keras' default `rho`, 0.9).
     pub rmsprop_alpha: f32,
     /// RMSprop momentum (Keras' default, 0).
@@ -118,6 +142,6 @@ mod tests {
             }
         }
         names.sort();
-        assert_eq!(names, ["cpu", "cpu-ynet", "paper"]);
+        assert_eq!(names, ["cpu", "cpu-ynet", "force-128", "paper"]);
     }
 }

@@ -18,20 +18,23 @@ use anyhow::{Context, bail};
 use burn::data::dataloader::DataLoaderBuilder;
 use burn::module::{Module, ParamGroup};
 use burn::optim::RmsPropConfig;
-use burn::optim::lr_scheduler::module_lr_scheduler::ModuleLrScheduler;
+use burn::optim::lr_scheduler::LrSchedulerConfig;
+use burn::optim::lr_scheduler::cosine::CosineAnnealingLrSchedulerConfig;
+use burn::optim::lr_scheduler::module_lr_scheduler::{ModuleLrScheduler, ModuleLrSchedulerConfig};
 use burn::tensor::Device;
 use burn::train::metric::LossMetric;
 use burn::train::metric::store::{Aggregate, Direction, Split as MetricSplit};
 use burn::train::{Learner, MetricEarlyStoppingStrategy, StoppingCondition, SupervisedTraining};
 use hnet_model::HNet;
 use hnet_model::architectures::ModelSpec;
+use hnet_model::model::ForceScale;
 use hnet_twin::dataset::{Dataset, Split};
 
 use self::metrics::{Quantity, StepMetric};
 use self::stopping::{StoppingRule, TimeBudget, parse_duration};
 use self::trainee::StereoTrainee;
 use crate::backend::BackendChoice;
-use crate::config::{TrainingConfig, builtin_config};
+use crate::config::{LearningRateSchedule, TrainingConfig, builtin_config};
 use crate::data::{StereoBatcher, StereoSplit};
 use crate::run_dir::{LOSS_METRIC, RunDir, RunInfo, log_name};
 
@@ -59,6 +62,17 @@ pub struct TrainRequest {
 pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
     let session_started = Instant::now();
     let run = RunDir::new(&request.out);
+    // A new run fixes its force statistics now, so that config.json records them.
+    let resolved;
+    let request = if request.resume {
+        request
+    } else {
+        resolved = TrainRequest {
+            config: with_force_statistics(request.config.clone(), &request.data)?,
+            ..request.clone()
+        };
+        &resolved
+    };
     let config = &request.config;
     config.check()?;
     let resume_from = if request.resume {
@@ -119,6 +133,7 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
         started.elapsed().as_secs_f64()
     );
 
+    let train_pairs = train_split.items.len();
     let device: Device = request.backend.device()?;
     device.seed(config.seed);
     let batcher = StereoBatcher {
@@ -180,7 +195,9 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
     } else if request.resume {
         eprintln!("no complete checkpoint yet: starting from the first epoch");
     }
-    let result = training.launch(Learner::new(trainee, optimizer, learning_rates(config)));
+    let iterations_per_epoch = train_pairs.div_ceil(config.batch_size.max(1));
+    let rates = learning_rates(config, iterations_per_epoch * config.epochs)?;
+    let result = training.launch(Learner::new(trainee, optimizer, rates));
     if let Some(error) = result.error {
         bail!("training failed: {error}");
     }
@@ -189,15 +206,56 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
 }
 
 /// The learning rate of every parameter: `learning_rate`, and `force_head_learning_rate` for
-/// H-Net's force head (matched by its parameters' path, which checkpoints keep).
-fn learning_rates(config: &TrainingConfig) -> ModuleLrScheduler {
-    let scheduler = ModuleLrScheduler::new(config.learning_rate);
-    match (config.force_head_learning_rate, &config.model) {
-        (Some(head), ModelSpec::Hnet(_)) => {
-            scheduler.with_group(ParamGroup::from_predicate(HNet::FORCE_HEAD_PATH), head)
+/// H-Net's force head (matched by its parameters' path, which checkpoints keep), each following
+/// the config's schedule over the run's `iterations`.
+fn learning_rates(config: &TrainingConfig, iterations: usize) -> anyhow::Result<ModuleLrScheduler> {
+    let rate = |lr: f64| -> LrSchedulerConfig {
+        match config.schedule {
+            LearningRateSchedule::Constant => LrSchedulerConfig::Constant(lr),
+            LearningRateSchedule::Cosine { final_factor } => {
+                CosineAnnealingLrSchedulerConfig::new(lr, iterations.max(1))
+                    .with_min_lr(lr * final_factor.clamp(0.0, 1.0))
+                    .into()
+            }
         }
-        _ => scheduler,
+    };
+    let mut scheduler = ModuleLrSchedulerConfig::new(rate(config.learning_rate));
+    if let (Some(head), ModelSpec::Hnet(_)) = (config.force_head_learning_rate, &config.model) {
+        scheduler = scheduler.with_group(
+            ParamGroup::from_predicate(HNet::FORCE_HEAD_PATH),
+            rate(head),
+        );
     }
+    scheduler
+        .init()
+        .map_err(|e| anyhow::anyhow!("learning rate schedule: {e}"))
+}
+
+/// `config` with H-Net's force statistics filled in from the train split of `data` when it asks
+/// for standardised forces (the baselines ignore the setting). Statistics already in the
+/// config are kept.
+fn with_force_statistics(
+    mut config: TrainingConfig,
+    data: &Path,
+) -> anyhow::Result<TrainingConfig> {
+    let ModelSpec::Hnet(network) = &mut config.model else {
+        return Ok(config);
+    };
+    if !config.standardise_force || network.force_scale.is_some() {
+        return Ok(config);
+    }
+    let dataset = Dataset::open(data)?;
+    let scale =
+        ForceScale::of(dataset.split(Split::Train).map(|row| row.force_n)).with_context(|| {
+            format!(
+                "standardise_force: the train split of {} needs at least two pairs and forces \
+                 that vary on every axis",
+                data.display()
+            )
+        })?;
+    network.force_scale = Some(scale);
+    config.loss.force_std_n = Some(scale.std_n);
+    Ok(config)
 }
 
 /// Writes `metrics.csv` and exports the checkpoint with the lowest validation loss as
@@ -410,7 +468,7 @@ mod tests {
         let trainee = StereoTrainee::new(net, &config.model, config.loss.clone());
         let mut paths = Paths::default();
         trainee.visit(&mut paths);
-        let rates = learning_rates(&config).step();
+        let rates = learning_rates(&config, 100).unwrap().step();
         let mut head = 0;
         for (id, path) in &paths.found {
             let lr = rates.lr_from_param(*id, Some(path));

@@ -16,9 +16,14 @@ pub struct HNetLossConfig {
     /// β2: view B's binary cross-entropy.
     #[config(default = 1.0)]
     pub beta_b: f64,
-    /// β3: mean squared error of the tip force (in N²).
+    /// β3: mean squared error of the tip force (in N², or in standardised units with
+    /// `force_std_n`).
     #[config(default = 1.0)]
     pub beta_force: f64,
+    /// When set, the force error of each axis is divided by this standard deviation (N) before
+    /// squaring: the force term is then the MSE of standardised forces, of unit scale whatever
+    /// the force range (set with [`crate::model::HNetConfig::force_scale`]).
+    pub force_std_n: Option<[f64; 3]>,
 }
 
 impl HNetLossConfig {
@@ -45,7 +50,8 @@ pub struct LossTerms {
     pub bce_a: Tensor<1>,
     /// Mean binary cross-entropy of view B's mask.
     pub bce_b: Tensor<1>,
-    /// Mean squared error of the force over the batch and the three axes, in N².
+    /// Mean squared error of the force over the batch and the three axes, in N² (standardised
+    /// units with [`HNetLossConfig::force_std_n`]).
     pub mse: Tensor<1>,
 }
 
@@ -87,9 +93,13 @@ impl HNetLoss {
             ),
             None => (zero(), zero()),
         };
-        let mse = match force {
-            Some(force) => (force - target_force).square().mean(),
-            None => zero(),
+        let mse = match (force, self.config.force_std_n) {
+            (Some(force), None) => (force - target_force).square().mean(),
+            (Some(force), Some(std_n)) => {
+                let std = Tensor::<2>::from_floats([std_n.map(|s| s as f32)], &device);
+                ((force - target_force) / std).square().mean()
+            }
+            (None, _) => zero(),
         };
         let total = bce_a.clone().mul_scalar(self.config.beta_a)
             + bce_b.clone().mul_scalar(self.config.beta_b)

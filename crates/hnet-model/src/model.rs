@@ -15,7 +15,9 @@
 //! `(Fx, Fy, Fz)` in newtons through dense layers of 64 and 32 units with ReLU and a linear output.
 
 use alloc::vec::Vec;
+
 use hnet_units::ImageSize;
+use serde::{Deserialize, Serialize};
 
 use burn::config::Config;
 use burn::module::Module;
@@ -48,6 +50,44 @@ pub struct HNetConfig {
     /// Units of the two hidden dense layers of the force head.
     #[config(default = "[64, 32]")]
     pub force_hidden: [usize; 2],
+    /// When set, the force head's linear output is a standardised force that the network turns
+    /// back into newtons (`F = mean + std · output`), so that it learns targets of unit scale
+    /// while every output stays in newtons. Absent in weights written before it existed.
+    pub force_scale: Option<ForceScale>,
+}
+
+/// The tip force's per-axis mean and standard deviation over a training set, in newtons.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ForceScale {
+    /// Mean of `(Fx, Fy, Fz)`, N.
+    pub mean_n: [f64; 3],
+    /// Standard deviation of `(Fx, Fy, Fz)`, N (each positive).
+    pub std_n: [f64; 3],
+}
+
+impl ForceScale {
+    /// The statistics of `forces` (N); `None` for fewer than two forces or an axis that does
+    /// not vary.
+    pub fn of(forces: impl IntoIterator<Item = [f64; 3]>) -> Option<Self> {
+        let (mut n, mut sum, mut sum_sq) = (0usize, [0.0f64; 3], [0.0f64; 3]);
+        for f in forces {
+            n += 1;
+            for axis in 0..3 {
+                sum[axis] += f[axis];
+                sum_sq[axis] += f[axis] * f[axis];
+            }
+        }
+        if n < 2 {
+            return None;
+        }
+        let mean_n = sum.map(|s| s / n as f64);
+        let mut std_n = [0.0; 3];
+        for axis in 0..3 {
+            let variance = (sum_sq[axis] / n as f64 - mean_n[axis] * mean_n[axis]).max(0.0);
+            std_n[axis] = variance.sqrt();
+        }
+        (std_n.iter().all(|s| *s > 1e-12 && s.is_finite())).then_some(Self { mean_n, std_n })
+    }
 }
 
 /// Why a [`HNetConfig`] cannot build a network.
@@ -117,6 +157,7 @@ impl HNetConfig {
             segmentation,
             segmentation_b,
             force,
+            force_scale: self.force_scale,
         })
     }
 }
@@ -258,6 +299,9 @@ pub struct HNet {
     /// View B's own branch when weights are not shared.
     segmentation_b: Option<SegmentationBranch>,
     force: ForceHead,
+    /// Turns the force head's standardised output into newtons (see [`HNetConfig::force_scale`]).
+    #[module(skip)]
+    force_scale: Option<ForceScale>,
 }
 
 /// The three heads' outputs for a batch of `B` stereo pairs.
@@ -320,10 +364,16 @@ impl HNet {
             Some(branch_b) => (self.segmentation.forward(view_a), branch_b.forward(view_b)),
         };
         let features = Tensor::cat(alloc::vec![a.pooled, b.pooled], 1);
+        let mut force = self.force.forward(features);
+        if let Some(scale) = self.force_scale {
+            let device = force.device();
+            let row = |v: [f64; 3]| Tensor::<2>::from_floats([v.map(|x| x as f32)], &device);
+            force = force * row(scale.std_n) + row(scale.mean_n);
+        }
         HNetOutput {
             mask_logits_a: a.mask_logits,
             mask_logits_b: b.mask_logits,
-            force: self.force.forward(features),
+            force,
         }
     }
 }

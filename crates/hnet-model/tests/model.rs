@@ -4,6 +4,7 @@ use burn::module::{Module, ModuleVisitor, Param};
 use burn::optim::{GradientsParams, RmsPropConfig};
 use burn::tensor::Gradients;
 use burn::tensor::{Device, Distribution, Tensor, Tolerance};
+use hnet_model::model::ForceScale;
 use hnet_model::{HNet, HNetConfig, HNetLossConfig};
 use hnet_units::ImageSize;
 
@@ -210,4 +211,44 @@ fn loss_terms_are_weighted_by_the_betas() {
         .total
         .into_data()
         .assert_approx_eq::<f32>(&expected.into_data(), Tolerance::default());
+}
+
+#[test]
+fn a_standardised_force_head_answers_in_newtons_and_its_loss_is_standardised() {
+    let device = Device::flex();
+    let scale = ForceScale::of([[0.1, -0.2, 0.0], [0.3, 0.2, 0.1], [0.2, 0.0, 0.2]]).unwrap();
+    assert!((scale.mean_n[0] - 0.2).abs() < 1e-12);
+    assert!(
+        ForceScale::of([[0.1, 0.0, 0.0], [0.2, 0.0, 0.0]]).is_none(),
+        "Fy never varies"
+    );
+    // Same weights with and without the scale: the scaled force is mean + std · raw.
+    let plain = small_config().init(&device).unwrap();
+    let scaled_config = small_config().with_force_scale(Some(scale));
+    let bytes = plain
+        .to_weights_bytes(&scaled_config, &Default::default())
+        .unwrap();
+    let (scaled, read_config, _) = HNet::from_weights_bytes(&bytes, &device, "scaled.bpk").unwrap();
+    assert_eq!(read_config.force_scale, Some(scale));
+    let (a, b) = random_views(&device, 2, 16);
+    let raw = plain.forward(a.clone(), b.clone()).force;
+    let newtons = scaled.forward(a, b).force;
+    let std = Tensor::<2>::from_floats([scale.std_n.map(|v| v as f32)], &device);
+    let mean = Tensor::<2>::from_floats([scale.mean_n.map(|v| v as f32)], &device);
+    newtons
+        .into_data()
+        .assert_approx_eq::<f32>(&(raw * std + mean).into_data(), Tolerance::absolute(1e-6));
+
+    // An error of one standard deviation on every axis costs 1 in the standardised loss.
+    let loss = HNetLossConfig::new()
+        .with_force_std_n(Some(scale.std_n))
+        .init();
+    let target = Tensor::<2>::from_floats([scale.mean_n.map(|v| v as f32)], &device);
+    let off = target.clone() + Tensor::<2>::from_floats([scale.std_n.map(|v| v as f32)], &device);
+    let masks = || Tensor::<4>::zeros([1, 1, 4, 4], &device);
+    let terms = loss.forward_heads(None, Some(off), [masks(), masks()], target);
+    terms.mse.into_data().assert_approx_eq::<f32>(
+        &burn::tensor::TensorData::from([1.0f32]),
+        Tolerance::absolute(1e-5),
+    );
 }
