@@ -1,5 +1,7 @@
 // Inference time per stereo pair in headless Chromium, on the CPU backend (WebAssembly) and on
-// WebGPU where the browser offers an adapter (here: SwiftShader, a software adapter).
+// WebGPU where the browser offers an adapter (here: SwiftShader, a software adapter); and the
+// time of the catheter's 3D reconstruction and rod fit (centrelines, matching, triangulation,
+// Levenberg-Marquardt) per twin pair, on the page's thread (WebAssembly).
 // Usage, after `trunk build`: node end2end/bench.mjs [runs]   (docs/benchmarks.md)
 import { statSync, readdirSync } from "node:fs";
 import { join, resolve } from "node:path";
@@ -45,6 +47,35 @@ try {
     });
     await page.close();
   }
+  // The catheter in 3D: each Fx step of the twin's slider renders a new pair, reconstructed once.
+  const { page } = await openPage(context, server.url);
+  await waitForModel(page);
+  await page.click("#tab-twin");
+  await page.waitForSelector("#catheter-3d[data-state=ready]", { timeout: 60_000 });
+  const times = [];
+  for (let i = 0; i < runs; i++) {
+    const pair = await page.getAttribute("#catheter-3d", "data-pair");
+    await page.focus("#twin-fx");
+    await page.keyboard.press(i % 2 ? "ArrowRight" : "ArrowLeft");
+    await page.waitForFunction(
+      (p) => {
+        const c = document.querySelector("#catheter-3d");
+        return c.dataset.pair !== p && c.dataset.state === "ready";
+      },
+      pair,
+      { timeout: 60_000 },
+    );
+    times.push(Number(await page.getAttribute("#catheter-3d", "data-millis")));
+  }
+  times.sort((a, b) => a - b);
+  results.push({
+    reconstruction: "twin pair at 224 px: centrelines, reconstruction and rod fit",
+    runs,
+    median_ms: times[Math.floor(times.length / 2)],
+    min_ms: times[0],
+    max_ms: times[times.length - 1],
+  });
+  await page.close();
 } finally {
   await context.close();
   await server.close();

@@ -4,6 +4,7 @@
 use leptos::prelude::*;
 
 use crate::components::{
+    catheter_view::CatheterView,
     force_panel::ForcePanel,
     model_bar::ModelBar,
     pair_list::PairList,
@@ -12,7 +13,7 @@ use crate::components::{
     stereo_view::StereoView,
 };
 use crate::storage;
-use crate::studio::{Studio, load_model};
+use crate::studio::{Studio, install_reconstruction, load_model};
 use crate::workspace::Workspace;
 
 /// The page.
@@ -50,6 +51,7 @@ pub fn App() -> impl IntoView {
         }
     });
     install_shortcuts(studio);
+    install_reconstruction(studio);
 
     view! {
         <header class="top">
@@ -68,6 +70,7 @@ pub fn App() -> impl IntoView {
             <section class="work">
                 <StereoView/>
                 <ForcePanel/>
+                <CatheterView/>
             </section>
             <aside class="pairs">
                 <PairList/>

@@ -1,6 +1,7 @@
 //! What a tip-force estimate can be said to show: its magnitude against the ablation band, no more
 //! than the weights' accuracy supports, and nothing at all for a twin pair outside the data the
-//! weights were trained on.
+//! weights were trained on; and whether H-Net's estimate and the physics estimate (the rod fitted
+//! to the catheter in 3D, [`crate::catheter_3d`]) disagree beyond what their errors explain.
 
 use hnet_twin::scene::{Modality, SceneParams, SceneSampling};
 
@@ -198,6 +199,60 @@ impl Verdict {
     }
 }
 
+/// Root-mean-square length of the physics estimate's error vector on twin pairs read from their
+/// exact masks, newtons: 0.013 N over 30 pairs of the twin tab's default catheter and views with
+/// forces drawn uniformly in ±0.25 N (Fz ≤ 0), worst 0.037 N (`reconstruct_pair` at the working
+/// size, 224 px; the pairs' label masks).
+pub const PHYSICS_FORCE_ERROR_N: f32 = 0.013;
+
+/// H-Net's and the physics estimate are said to disagree when their difference |ΔF| exceeds
+/// this, newtons. If both err as measured (H-Net: the bundled weights' per-axis mean square
+/// errors 0.00878, 0.00785 and 0.00496 N², [`TrainingDomain::bundled`]; the physics estimate:
+/// [`PHYSICS_FORCE_ERROR_N`]), independently and normally, |ΔF| stays below 0.24 N on 95 % of
+/// pairs (0.13 N median; by sampling). Beyond 0.25 N, one of the two is off by more than its
+/// usual error. H-Net's coarse force dominates it: with weights ten times as accurate the
+/// tolerance would shrink accordingly.
+pub const DISAGREEMENT_TOLERANCE_N: f32 = 0.25;
+
+/// How far H-Net's estimate and the physics estimate are apart.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Disagreement {
+    /// |ΔF|, newtons.
+    pub delta_n: f32,
+}
+
+impl Disagreement {
+    /// Between H-Net's estimate `hnet_n` and the physics estimate `physics_n`.
+    pub fn between(hnet_n: [f32; 3], physics_n: [f32; 3]) -> Self {
+        Self {
+            delta_n: magnitude([0, 1, 2].map(|i| hnet_n[i] - physics_n[i])),
+        }
+    }
+
+    /// Whether it exceeds [`DISAGREEMENT_TOLERANCE_N`].
+    pub fn beyond_tolerance(&self) -> bool {
+        self.delta_n > DISAGREEMENT_TOLERANCE_N
+    }
+
+    /// The sentence shown under the force table.
+    pub fn text(&self) -> String {
+        let delta = self.delta_n;
+        let tolerance = DISAGREEMENT_TOLERANCE_N;
+        if self.beyond_tolerance() {
+            format!(
+                "H-Net and the physics estimate disagree: |ΔF| = {delta:.3} N, beyond the \
+                 {tolerance:.2} N their measured errors explain on 95 % of twin pairs. One of \
+                 them is off: check the masks the rod was fitted to, the catheter's settings and \
+                 the C-arm angles."
+            )
+        } else {
+            format!(
+                "H-Net and the physics estimate agree within {tolerance:.2} N: |ΔF| = {delta:.3} N."
+            )
+        }
+    }
+}
+
 #[cfg(all(test, not(target_arch = "wasm32")))]
 mod tests {
     use super::*;
@@ -280,6 +335,26 @@ mod tests {
                 .text([0.5, 0.0, 0.0])
                 .contains("images that are not the twin's"),
             "{verdict:?}"
+        );
+    }
+
+    #[test]
+    fn a_disagreement_beyond_the_tolerance_is_a_warning() {
+        let agree = Disagreement::between([0.1, 0.0, -0.1], [0.2, 0.0, -0.1]);
+        assert!((agree.delta_n - 0.1).abs() < 1e-6);
+        assert!(!agree.beyond_tolerance());
+        assert_eq!(
+            agree.text(),
+            "H-Net and the physics estimate agree within 0.25 N: |ΔF| = 0.100 N."
+        );
+        let apart = Disagreement::between([0.1, 0.0, -0.1], [-0.1, 0.2, -0.1]);
+        assert!(apart.beyond_tolerance());
+        assert!(
+            apart
+                .text()
+                .starts_with("H-Net and the physics estimate disagree: |ΔF| = 0.283 N, beyond"),
+            "{}",
+            apart.text()
         );
     }
 

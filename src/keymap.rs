@@ -13,6 +13,8 @@ pub enum Scope {
     Region,
     /// On the focused source tabs.
     Tabs,
+    /// On the focused 3D view of the catheter.
+    Scene,
 }
 
 /// What a key does.
@@ -62,6 +64,10 @@ pub enum Command {
     First,
     /// The last tab.
     Last,
+    /// Back to the 3D view's first angles and framing.
+    ResetView,
+    /// Switch the 3D view between perspective and orthographic projection.
+    ToggleProjection,
 }
 
 /// One key press that triggers a command: the key (as `KeyboardEvent.key`, compared without
@@ -133,7 +139,7 @@ const GROW_SHRINK: &[(Chord, Command)] = &[
 ];
 
 /// Every shortcut, in the help panel's order.
-pub const KEYMAP: [Binding; 18] = [
+pub const KEYMAP: [Binding; 24] = [
     binding(
         Scope::Page,
         "R",
@@ -239,6 +245,32 @@ pub const KEYMAP: [Binding; 18] = [
             (key("End"), Command::Last),
         ],
     ),
+    binding(Scope::Scene, "Drag", "rotate the 3D view", &[]),
+    binding(
+        Scope::Scene,
+        "← → ↑ ↓ (Shift: further)",
+        "rotate the focused 3D view",
+        ARROWS,
+    ),
+    binding(Scope::Scene, "Wheel", "zoom the 3D view", &[]),
+    binding(
+        Scope::Scene,
+        "+ / −",
+        "zoom the focused 3D view in / out",
+        GROW_SHRINK,
+    ),
+    binding(
+        Scope::Scene,
+        "Home",
+        "the 3D view's first angles and zoom",
+        &[(key("Home"), Command::ResetView)],
+    ),
+    binding(
+        Scope::Scene,
+        "O",
+        "perspective or orthographic 3D view",
+        &[(key("o"), Command::ToggleProjection)],
+    ),
 ];
 
 /// The command of a key press in `scope` (`key` as `KeyboardEvent.key`; `control` for Ctrl or
@@ -268,6 +300,17 @@ pub fn tooltip(label: &str, command: Command) -> String {
     }
 }
 
+/// The keys of `scope` and what they do, `keys: what` joined by `; `, for the tooltip and
+/// description of the element they act on.
+pub fn scope_help(scope: Scope) -> String {
+    KEYMAP
+        .iter()
+        .filter(|b| b.scope == scope)
+        .map(|b| format!("{}: {}", b.keys, b.what))
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -295,6 +338,28 @@ mod tests {
         assert_eq!(
             command(Scope::Tabs, "End", false, false),
             Some(Command::Last)
+        );
+        assert_eq!(
+            command(Scope::Scene, "O", false, false),
+            Some(Command::ToggleProjection)
+        );
+        assert_eq!(
+            command(Scope::Scene, "ArrowUp", false, true),
+            Some(Command::Up)
+        );
+        assert_eq!(command(Scope::Page, "Home", false, false), None);
+    }
+
+    #[test]
+    fn the_3d_view_describes_its_keys_from_the_keymap() {
+        let help = scope_help(Scope::Scene);
+        assert!(
+            help.starts_with("Drag: rotate the 3D view; ← → ↑ ↓ (Shift: further): rotate"),
+            "{help}"
+        );
+        assert!(
+            help.ends_with("O: perspective or orthographic 3D view"),
+            "{help}"
         );
     }
 

@@ -7,6 +7,8 @@
 //! - [`workspace`]: the labeled pairs, brush strokes with undo and redo, force labels;
 //! - [`imaging`]: decoding uploads, the working resolution, overlays and force arrows;
 //! - [`twin_live`]: the digital twin's sliders and the synthetic X-ray background composer;
+//! - [`catheter_3d`]: the catheter in 3D from both masks and the physics-checked force of the
+//!   rod fitted to it, and what the 3D view draws; [`orbit_camera`]: the 3D view's camera;
 //! - [`export`]: the labeled pairs as a dataset zip;
 //! - [`force_reading`]: what a force estimate can be said to show against the ablation band;
 //! - [`keymap`]: every keyboard shortcut, for the handlers, the help list and the tooltips;
@@ -16,11 +18,13 @@
 //! `components`), the network on the chosen device (`engine`, `compute`), the browser's storage
 //! (`storage`) and files (`browser`). `src/main.rs` mounts [`App`].
 
+pub mod catheter_3d;
 pub mod error_text;
 pub mod export;
 pub mod force_reading;
 pub mod imaging;
 pub mod keymap;
+pub mod orbit_camera;
 pub mod twin_live;
 pub mod workspace;
 

@@ -10,11 +10,15 @@ use std::rc::Rc;
 use leptos::prelude::*;
 
 use crate::bundled;
+use crate::catheter_3d::{Catheter3d, PairGeometry, PairMasks, pair_views, reconstruct_pair};
 use crate::compute::{self, BackendChoice};
 use crate::engine::{Engine, Prediction, WeightsOrigin};
+use crate::error_text::with_causes;
+use crate::orbit_camera::OrbitCamera;
 use crate::storage;
 use crate::twin_live::{TwinControls, XrayBackground};
 use crate::workspace::{LabeledPair, RemovedPair, Tool, View, Workspace};
+use hnet_twin::carm::Biplane;
 
 /// The model's state.
 #[derive(Clone)]
@@ -117,6 +121,19 @@ impl ViewTransform {
     }
 }
 
+/// The catheter in 3D of one pair, as the page computed it ([`Studio::reconstruct_shown`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CatheterReading {
+    /// The pair's id.
+    pub id: String,
+    /// Its views (for drawing the C-arms).
+    pub views: Biplane,
+    /// The catheter and its physics force, or why there is none (with its causes).
+    pub result: Result<Catheter3d, String>,
+    /// Time of the centrelines, the reconstruction and the rod fit, milliseconds.
+    pub millis: f64,
+}
+
 /// Which source panel is open.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SourceTab {
@@ -167,6 +184,12 @@ pub struct Studio {
     pub draft_serial: RwSignal<u64>,
     /// H-Net was asked to run while it was busy: run again on the pair on screen when done.
     pub rerun: RwSignal<bool>,
+    /// The catheter in 3D and its physics force, for the pair on screen.
+    pub catheter: RwSignal<Option<CatheterReading>>,
+    /// The pointer on a view (image pixels), whose epipolar line the other view draws.
+    pub epipolar_pointer: RwSignal<Option<(View, [f64; 2])>>,
+    /// The 3D view's camera (its target and framing follow the catheter).
+    pub orbit: RwSignal<OrbitCamera>,
 }
 
 impl Default for Studio {
@@ -200,6 +223,9 @@ impl Studio {
             tab: RwSignal::new(SourceTab::Images),
             draft_serial: RwSignal::new(0),
             rerun: RwSignal::new(false),
+            catheter: RwSignal::new(None),
+            epipolar_pointer: RwSignal::new(None),
+            orbit: RwSignal::new(OrbitCamera::default()),
         }
     }
 
@@ -447,6 +473,39 @@ impl Studio {
         }
     }
 
+    /// Reconstructs the catheter of the pair on screen in 3D and fits the rod to it (the label
+    /// masks, else H-Net's), into [`Studio::catheter`]. A failure is kept there as its message;
+    /// nothing else changes.
+    pub fn reconstruct_shown(&self) {
+        let shown = self
+            .draft
+            .with_untracked(|d| d.clone())
+            .or_else(|| self.workspace.with_untracked(|ws| ws.current().cloned()));
+        let Some(pair) = shown else {
+            self.catheter.set(None);
+            return;
+        };
+        let prediction = self.predictions.with_untracked(|p| {
+            p.get(&pair.id)
+                .map(|p| (p.mask_a.clone(), p.mask_b.clone()))
+        });
+        let controls = self.twin.get_untracked();
+        let clock = web_sys::window().and_then(|w| w.performance());
+        let now = || clock.as_ref().map_or(0.0, |p| p.now());
+        let start = now();
+        let result = PairGeometry::of(&pair, &controls).and_then(|geometry| {
+            let predicted = prediction.as_ref().map(|(a, b)| [&a[..], &b[..]]);
+            reconstruct_pair(&geometry, &PairMasks::of(&pair, predicted)?)
+        });
+        let millis = now() - start;
+        self.catheter.set(Some(CatheterReading {
+            views: pair_views(&pair),
+            id: pair.id,
+            result: result.map_err(|e| with_causes(&e)),
+            millis,
+        }));
+    }
+
     /// Undo (`redo` false) or redo the last mask edit.
     pub fn undo_redo(&self, redo: bool) {
         self.draft.set(None);
@@ -506,6 +565,36 @@ pub fn load_model(studio: Studio, weights: Option<(Rc<[u8]>, String, WeightsOrig
                 _ => studio.model.set(ModelState::Failed(e)),
             },
         }
+    });
+}
+
+/// Keeps [`Studio::catheter`] up to date: after the pair on screen, its masks, H-Net's masks or
+/// the twin's catheter settings change (not during a brush stroke), the catheter is
+/// reconstructed again, once the changes have paused for a moment (a slider being dragged
+/// renders many pairs).
+pub fn install_reconstruction(studio: Studio) {
+    let serial = StoredValue::new(0u64);
+    Effect::new(move |_| {
+        let shown = studio.shown_id();
+        studio.predictions.track();
+        studio.twin.track();
+        if studio.workspace.with(Workspace::is_stroking) {
+            return;
+        }
+        if shown.is_none() {
+            studio.catheter.set(None);
+            return;
+        }
+        serial.update_value(|s| *s += 1);
+        let mine = serial.get_value();
+        set_timeout(
+            move || {
+                if serial.get_value() == mine {
+                    studio.reconstruct_shown();
+                }
+            },
+            std::time::Duration::from_millis(40),
+        );
     });
 }
 

@@ -130,7 +130,7 @@ test("load a pair, run H-Net, paint, undo, reload with labels kept, export the d
   }
   const header = JSON.parse(zip.get("hnet-studio-labels/dataset.json").toString());
   assert.equal(header.format, "hnet-dataset");
-  assert.deepEqual(header.image_size, [224, 224]);
+  assert.deepEqual(header.image_size, { width: 224, height: 224 });
   const manifest = zip.get("hnet-studio-labels/manifest.csv").toString().trim().split("\n");
   assert.match(manifest[0], /^id,split,fx,fy,fz/);
   assert.match(manifest[1], /^pair-0001,train,0\.12,-0\.05,0\.2/);
@@ -341,6 +341,48 @@ test("keyboard, screen readers and small screens", async () => {
   const manifest = readStoredZip(await readFile(path)).get("hnet-studio-labels/manifest.csv").toString();
   assert.match(manifest, /\npair-0001,train,/);
   assert.ok(manifest.trim().split("\n").length >= 4, manifest);
+  assert.deepEqual(errors, []);
+  await page.close();
+});
+
+test("a twin pair in 3D: the catheter, the physics force beside H-Net's, the epipolar line", async () => {
+  const { page, errors } = await openPage(context, server.url);
+  await waitForModel(page);
+  await page.click("#tab-twin");
+  await page.waitForSelector("#keep-draft");
+  // The catheter is reconstructed from the twin's masks and drawn: the canvas is not blank.
+  await page.waitForSelector("#catheter-3d[data-state=ready]", { timeout: 60_000 });
+  const drawn = await page.evaluate(() => {
+    const c = document.querySelector("#catheter-3d");
+    const data = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
+    let lit = 0;
+    for (let i = 0; i < data.length; i += 4) if (data[i] + data[i + 1] + data[i + 2] > 200) lit++;
+    return lit;
+  });
+  assert.ok(drawn > 500, `${drawn} bright pixels in the 3D view`);
+  assert.match(await page.textContent("#catheter-summary"), /^Catheter \d+ mm reconstructed from the label masks .*physics force/);
+  assert.match(await page.getAttribute("#catheter-3d", "aria-label"), /^3D view of the catheter\. Catheter \d+ mm/);
+  const millis = Number(await page.getAttribute("#catheter-3d", "data-millis"));
+  console.log(`# reconstruct + fit in the page: ${millis} ms`);
+  // The physics estimate is close to the twin's true force (0.15, 0.05, -0.10) N.
+  const physics = await page.$$eval("#force-table tr.physics td", (tds) => tds.map((td) => Number(td.textContent)));
+  assert.ok(Math.abs(physics[0] - 0.15) < 0.03 && Math.abs(physics[2] + 0.1) < 0.03, `physics ${physics}`);
+  // Beside H-Net's, with their disagreement.
+  await page.waitForSelector("#force-disagreement", { timeout: 120_000 });
+  assert.match(await page.textContent("#force-disagreement"), /\|ΔF\| = \d\.\d{3} N/);
+  // The keys rotate the focused 3D view.
+  await page.focus("#catheter-3d");
+  await page.keyboard.press("ArrowRight");
+  assert.match(await page.textContent("#catheter-3d-orbit"), /^\+35° \/ \+20°/);
+  // Hovering view A draws the pointer's epipolar line across view B.
+  assert.equal(await page.getAttribute("#view-b", "data-epipolar"), "");
+  const before = await page.evaluate(() => document.querySelector("#view-b").toDataURL());
+  const box = await page.locator("#view-a").boundingBox();
+  await page.locator("#view-a").hover({ position: { x: box.width * 0.5, y: box.height * 0.6 } });
+  await page.waitForFunction(() => document.querySelector("#view-b").dataset.epipolar !== "");
+  const [u0, v0, u1, v1] = (await page.getAttribute("#view-b", "data-epipolar")).split(",").map(Number);
+  assert.ok(Math.hypot(u1 - u0, v1 - v0) > 100, `a line across view B: ${[u0, v0, u1, v1]}`);
+  await page.waitForFunction((b) => document.querySelector("#view-b").toDataURL() !== b, before);
   assert.deepEqual(errors, []);
   await page.close();
 });

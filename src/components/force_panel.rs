@@ -1,5 +1,6 @@
 //! The tip force: H-Net's estimate in newtons, its magnitude against the ablation band, the true
-//! force and the error for twin pairs; and the pair's force label (typed, accepted from the
+//! force and the error for twin pairs, the physics estimate (the rod fitted to the catheter in
+//! 3D) and its disagreement with H-Net's; and the pair's force label (typed, accepted from the
 //! estimate or the truth, or imported from a CSV file).
 
 use leptos::prelude::*;
@@ -8,7 +9,7 @@ use crate::browser::{files, read_file};
 use crate::bundled::BUNDLED_FORCE_CAVEAT;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
-use crate::force_reading::{ABLATION_BAND_N, BandPosition, TrainingDomain, Verdict};
+use crate::force_reading::{ABLATION_BAND_N, BandPosition, Disagreement, TrainingDomain, Verdict};
 use crate::imaging::magnitude;
 use crate::studio::{ModelState, Studio};
 use crate::workspace::{implausible_label, parse_force_labels, parse_newtons};
@@ -26,6 +27,16 @@ pub fn ForcePanel() -> impl IntoView {
         studio.predictions.with(|p| p.get(&id).map(|p| p.force_n))
     };
     let truth = move || studio.with_shown(|p| p.and_then(|p| p.true_force()));
+    // The physics estimate of the pair on screen, if its catheter was reconstructed.
+    let physics = move || {
+        let id = studio.shown_id()?;
+        studio.catheter.with(|c| {
+            c.as_ref()
+                .filter(|c| c.id == id)
+                .and_then(|c| c.result.as_ref().ok())
+                .map(|c| c.force_f32())
+        })
+    };
     let label = move || studio.with_shown(|p| p.and_then(|p| p.force_n));
     // The label being typed, per axis, exactly as typed. The fields show the pair's label when
     // another pair is shown or its label changes, and are never rewritten while typing (a
@@ -149,6 +160,7 @@ pub fn ForcePanel() -> impl IntoView {
                 <thead><tr><th></th><th>"Fx (N)"</th><th>"Fy (N)"</th><th>"Fz (N)"</th><th>"|F| (N)"</th></tr></thead>
                 <tbody>
                     {move || row("H-Net", estimate(), "estimate")}
+                    {move || row("Physics (rod fit)", physics(), "physics")}
                     {move || truth().map(|t| row("True (twin)", Some(t), "truth"))}
                     {move || match (estimate(), truth()) {
                         (Some(e), Some(t)) => Some(row("Error", Some([e[0] - t[0], e[1] - t[1], e[2] - t[2]]), "error")),
@@ -156,6 +168,17 @@ pub fn ForcePanel() -> impl IntoView {
                     }}
                 </tbody>
             </table>
+            {move || match (estimate(), physics()) {
+                (Some(e), Some(p)) => {
+                    let d = Disagreement::between(e, p);
+                    Some(view! {
+                        <p id="force-disagreement" class:warning=d.beyond_tolerance()
+                            role=if d.beyond_tolerance() { "alert" } else { "status" }
+                            data-delta=format!("{:.4}", d.delta_n)>{d.text()}</p>
+                    })
+                }
+                _ => None,
+            }}
             {move || {
                 domain().map(|_| view! { <p class="caveat" id="force-caveat">{BUNDLED_FORCE_CAVEAT}</p> })
             }}

@@ -1,6 +1,7 @@
 //! The page's components, one concern each. They share the [`Studio`](crate::studio::Studio) state
 //! through Leptos' context.
 
+pub mod catheter_view;
 pub mod composer;
 pub mod force_panel;
 pub mod model_bar;

@@ -35,7 +35,9 @@ fn execute(studio: Studio, command: Command) {
         | Command::Grow
         | Command::Shrink
         | Command::First
-        | Command::Last => {}
+        | Command::Last
+        | Command::ResetView
+        | Command::ToggleProjection => {}
     }
 }
 

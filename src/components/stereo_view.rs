@@ -1,10 +1,11 @@
 //! The two views side by side: the images with H-Net's masks and the label masks overlaid, the
 //! tip force as arrows, and the brush, eraser, zoom and pan that correct the labels.
 
-use hnet_twin::carm::{Biplane, CArm};
+use hnet_twin::carm::CArm;
 use leptos::prelude::*;
 use wasm_bindgen::{Clamped, JsCast};
 
+use crate::catheter_3d::{epipolar_line, pair_views};
 use crate::imaging::{WORK_SIZE, estimate_tip, force_arrow, overlay, project, rgba};
 use crate::keymap::{self, Command, Scope, tooltip};
 use crate::studio::{CANVAS_SIDE, PointerTool, Studio, ViewTransform, view_index};
@@ -15,9 +16,11 @@ const PREDICTION_COLOUR: [u8; 3] = [0, 200, 255];
 /// Colour of the label masks.
 const LABEL_COLOUR: [u8; 3] = [255, 110, 0];
 /// Colour of the estimated force arrow.
-const ESTIMATE_ARROW: &str = "#ffd400";
+pub(crate) const ESTIMATE_ARROW: &str = "#ffd400";
 /// Colour of the true force arrow (twin pairs).
-const TRUE_ARROW: &str = "#3ddc84";
+pub(crate) const TRUE_ARROW: &str = "#3ddc84";
+/// Colour of the pointer's epipolar line, drawn in the other view.
+const EPIPOLAR_LINE: &str = "#c9a6ff";
 
 /// The toolbar and both views.
 #[component]
@@ -104,17 +107,20 @@ pub fn StereoView() -> impl IntoView {
         <p class="legend">
             <span class="arrow estimate"></span>"H-Net's force estimate "
             <span class="arrow truth"></span>"true force (twin) · arrows: "
-            {crate::imaging::ARROW_PX_PER_NEWTON}" px per N, projected on each view"
+            {crate::imaging::ARROW_PX_PER_NEWTON}" px per N, projected on each view · "
+            <span class="arrow epipolar"></span>"epipolar line of the pointer in the other view"
         </p>
     }
 }
 
-fn context_2d(canvas: &web_sys::HtmlCanvasElement) -> Option<web_sys::CanvasRenderingContext2d> {
+pub(crate) fn context_2d(
+    canvas: &web_sys::HtmlCanvasElement,
+) -> Option<web_sys::CanvasRenderingContext2d> {
     canvas.get_context("2d").ok()??.dyn_into().ok()
 }
 
 /// Draws an arrow from `from` to `to` (canvas pixels).
-fn draw_arrow(
+pub(crate) fn draw_arrow(
     ctx: &web_sys::CanvasRenderingContext2d,
     from: [f64; 2],
     to: [f64; 2],
@@ -190,6 +196,15 @@ fn ViewCanvas(view: View) -> impl IntoView {
             }),
     );
 
+    // The epipolar line, in this view, of the pointer on the other view (image pixels).
+    let epipolar = Memo::new(move |_| {
+        let (other, at) = studio.epipolar_pointer.get()?;
+        if other == view {
+            return None;
+        }
+        studio.with_shown(|pair| epipolar_line(&pair_views(pair?), view, at))
+    });
+
     Effect::new(move |_| {
         let Some(canvas) = canvas.get() else { return };
         let Some(ctx) = context_2d(&canvas) else {
@@ -242,7 +257,7 @@ fn ViewCanvas(view: View) -> impl IntoView {
                     (Some(project(&carm, *tip_mm)), carm)
                 }
                 PairSource::Upload { .. } => {
-                    let default = Biplane::cardiac(WORK_SIZE);
+                    let default = pair_views(pair);
                     let carm = if view == View::A {
                         default.a
                     } else {
@@ -275,6 +290,20 @@ fn ViewCanvas(view: View) -> impl IntoView {
                 colour,
                 dashed,
             );
+        }
+        if let Some([from, to]) = epipolar.get() {
+            let (from, to) = (t.to_canvas(from), t.to_canvas(to));
+            ctx.set_line_width(1.5);
+            ctx.set_stroke_style_str(EPIPOLAR_LINE);
+            let dash = js_sys::Array::new();
+            dash.push(&6.0.into());
+            dash.push(&4.0.into());
+            let _ = ctx.set_line_dash(&dash);
+            ctx.begin_path();
+            ctx.move_to(from[0], from[1]);
+            ctx.line_to(to[0], to[1]);
+            ctx.stroke();
+            let _ = ctx.set_line_dash(&js_sys::Array::new());
         }
         if let (Some(p), Some(_)) = (pointer.get(), studio.tool.get().mask_tool()) {
             let r = studio.brush_radius.get() * t.scale;
@@ -330,6 +359,9 @@ fn ViewCanvas(view: View) -> impl IntoView {
     let on_move = move |ev: web_sys::PointerEvent| {
         let Some(p) = canvas_point(&ev) else { return };
         pointer.set(Some(p));
+        studio
+            .epipolar_pointer
+            .set(Some((view, transform.get_untracked().to_image(p))));
         match gesture.get_value() {
             Some(Gesture::Stroke(last)) => {
                 let at = transform.get_untracked().to_image(p);
@@ -442,7 +474,13 @@ fn ViewCanvas(view: View) -> impl IntoView {
                 data-label-pixels=move || label_pixels().to_string()
                 data-predicted-pixels=move || predicted_pixels().map(|n| n.to_string()).unwrap_or_default()
                 on:pointerdown=on_down on:pointermove=on_move on:pointerup=on_up
-                on:pointercancel=on_up on:pointerleave=move |_| pointer.set(None)
+                on:pointercancel=on_up on:pointerleave=move |_| {
+                    pointer.set(None);
+                    if studio.epipolar_pointer.get_untracked().is_some_and(|(v, _)| v == view) {
+                        studio.epipolar_pointer.set(None);
+                    }
+                }
+                data-epipolar=move || epipolar.get().map(|[a, b]| format!("{:.1},{:.1},{:.1},{:.1}", a[0], a[1], b[0], b[1])).unwrap_or_default()
                 on:wheel=on_wheel on:contextmenu=|ev| ev.prevent_default()
                 tabindex="0" role="img" aria-label=description on:keydown=on_key></canvas>
             <figcaption>

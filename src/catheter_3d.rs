@@ -1,0 +1,635 @@
+//! The catheter in 3D and its physics-checked tip force, for the pair on screen: each view's mask
+//! gives a centreline ([`hnet_twin::centreline`]), the two are matched along epipolar lines and
+//! triangulated ([`hnet_twin::reconstruction`]), and the twin's Kirchhoff rod is fitted to the
+//! result ([`hnet_twin::rod_fit`]); its tip force is the physics estimate shown beside H-Net's.
+//!
+//! Where the numbers come from:
+//!
+//! - **Views.** A twin pair carries the C-arms it was rendered with (at
+//!   [`crate::imaging::WORK_SIZE`]); an uploaded pair is read with the page's default views, the
+//!   biplane the twin tab starts with (frontal and left lateral), as its force arrows are.
+//! - **Catheter.** A twin pair's own settings (stiffness, length, pre-curve and its exact base
+//!   pose); for an uploaded pair, the catheter set on the twin tab's sliders, clamped at the
+//!   twin's nominal base, whose position and orientation are then fitted too (a real pair's base
+//!   is not known exactly).
+//! - **Masks.** The label masks when the pair has them (the twin's exact masks, H-Net's masks
+//!   accepted as labels, or the user's strokes), else H-Net's predicted masks (soft, as they come
+//!   out of the network).
+//!
+//! Every way this can fail is a [`Catheter3dError`] naming the step and keeping the cause; the
+//! page shows it in the 3D panel and nothing else changes. Browser-free: it builds and is tested
+//! natively (about 20 ms per pair there).
+//!
+//! The 3D drawing's own geometry is here too ([`CArmSketch`], [`force_arrow_mm`]); its camera is
+//! [`crate::orbit_camera`].
+
+use hnet_twin::carm::{Biplane, CArm, CameraMatrix};
+use hnet_twin::centreline::{CentrelineError, Mask};
+use hnet_twin::physics_force::{PhysicsError, PhysicsEstimate, PhysicsSetup, physics_estimate};
+use hnet_twin::reconstruction::{EpipolarGeometry, ReconstructionError, clip_line};
+use hnet_twin::rod::{RodBase, RodConfig};
+use hnet_twin::rod_fit::RodFitError;
+use hnet_twin::scene::SceneParams;
+
+use crate::imaging::WORK_SIZE;
+use crate::twin_live::TwinControls;
+use crate::workspace::{LabeledPair, PairSource, View};
+
+/// Which masks a reconstruction was made from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MaskSource {
+    /// The pair's label masks.
+    Labels,
+    /// H-Net's predicted masks.
+    Predicted,
+}
+
+impl MaskSource {
+    /// In words: `the label masks` or `H-Net's masks`.
+    pub fn phrase(self) -> &'static str {
+        match self {
+            MaskSource::Labels => "the label masks",
+            MaskSource::Predicted => "H-Net's masks",
+        }
+    }
+}
+
+/// Both views' masks at [`WORK_SIZE`], as a reconstruction reads them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PairMasks<'a> {
+    /// Label masks (0 background, 255 catheter).
+    Labels([&'a [u8]; 2]),
+    /// H-Net's catheter probabilities in `[0, 1]`.
+    Predicted([&'a [f32]; 2]),
+}
+
+impl<'a> PairMasks<'a> {
+    /// The masks of `pair` to reconstruct from: its labels when it has them, else `predicted`
+    /// (H-Net's masks of view A and view B), else none.
+    pub fn of(
+        pair: &'a LabeledPair,
+        predicted: Option<[&'a [f32]; 2]>,
+    ) -> Result<Self, Catheter3dError> {
+        if pair.masks_labeled {
+            Ok(Self::Labels([pair.mask(View::A), pair.mask(View::B)]))
+        } else {
+            predicted
+                .map(Self::Predicted)
+                .ok_or(Catheter3dError::NoMasks)
+        }
+    }
+
+    /// Where they came from.
+    pub fn source(&self) -> MaskSource {
+        match self {
+            Self::Labels(_) => MaskSource::Labels,
+            Self::Predicted(_) => MaskSource::Predicted,
+        }
+    }
+
+    fn mask(&self, index: usize) -> Mask<'a> {
+        match self {
+            Self::Labels(m) => Mask::coverage8(WORK_SIZE, WORK_SIZE, m[index]),
+            Self::Predicted(m) => Mask::soft(WORK_SIZE, WORK_SIZE, m[index]),
+        }
+    }
+}
+
+/// How the pair's two views see the world, and the catheter the rod model assumes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PairGeometry {
+    /// View A's and view B's C-arms at [`WORK_SIZE`].
+    pub views: Biplane,
+    /// The catheter's flexible section.
+    pub rod: RodConfig,
+    /// Where it is clamped.
+    pub base: RodBase,
+    /// Whether the base pose is exact (twin pairs); if not, the fit moves and turns it.
+    pub base_known: bool,
+}
+
+/// The views of `pair`: the twin's own, or the page's default biplane for an uploaded pair.
+pub fn pair_views(pair: &LabeledPair) -> Biplane {
+    match &pair.source {
+        PairSource::Twin { views, .. } => *views,
+        PairSource::Upload { .. } => default_views(),
+    }
+}
+
+/// The page's default views: the biplane the twin tab starts with, at [`WORK_SIZE`].
+pub fn default_views() -> Biplane {
+    TwinControls::default().views()
+}
+
+impl PairGeometry {
+    /// The geometry of `pair`; `catheter` (the twin tab's sliders) sets the catheter of an
+    /// uploaded pair.
+    pub fn of(pair: &LabeledPair, catheter: &TwinControls) -> Result<Self, Catheter3dError> {
+        let template = RodConfig::default();
+        match &pair.source {
+            PairSource::Twin {
+                views, settings, ..
+            } => {
+                let scene: SceneParams = serde_json::from_value(settings["scene"].clone())
+                    .map_err(|e| Catheter3dError::TwinSettings(e.to_string()))?;
+                let (rod, base) = scene.rod(&template);
+                Ok(Self {
+                    views: *views,
+                    rod,
+                    base,
+                    base_known: true,
+                })
+            }
+            PairSource::Upload { .. } => {
+                let (rod, base) = catheter.scene().rod(&template);
+                Ok(Self {
+                    views: default_views(),
+                    rod,
+                    base,
+                    base_known: false,
+                })
+            }
+        }
+    }
+
+    /// Both views' camera matrices.
+    pub fn cameras(&self) -> [CameraMatrix; 2] {
+        [self.views.a.camera_matrix(), self.views.b.camera_matrix()]
+    }
+}
+
+/// The epipolar line in view `to` of the point `at` (image pixels) of the other view, clipped
+/// to the image: its two end points in `to`'s pixels. `None` when the cameras are unusable or
+/// the line misses the image.
+pub fn epipolar_line(views: &Biplane, to: View, at: [f64; 2]) -> Option<[[f64; 2]; 2]> {
+    let geometry =
+        EpipolarGeometry::new(&views.a.camera_matrix(), &views.b.camera_matrix()).ok()?;
+    let line = match to {
+        View::B => geometry.line_in_b(at),
+        View::A => geometry.line_in_a(at),
+    };
+    let size = match to {
+        View::A => views.a.image_size,
+        View::B => views.b.image_size,
+    };
+    clip_line(line, size.width as f64, size.height as f64)
+}
+
+/// The reconstructed catheter and the rod fitted to it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Catheter3d {
+    /// The masks it was made from.
+    pub masks: MaskSource,
+    /// The 3D centreline, mm (world frame), from where the catheter enters both images to its
+    /// tip.
+    pub centreline_mm: Vec<[f64; 3]>,
+    /// Its length, mm.
+    pub length_mm: f64,
+    /// Mean reprojection error of its points, pixels.
+    pub mean_residual_px: f64,
+    /// Whether its last point is the tip, seen in both views.
+    pub tip_seen: bool,
+    /// The physics estimate: the tip force of the fitted rod, N (world frame).
+    pub force_n: [f64; 3],
+    /// Root mean square distance of the centreline from the fitted rod, mm.
+    pub rms_mm: f64,
+    /// The fitted rod's centreline, mm, from its base to its tip.
+    pub rod_mm: Vec<[f64; 3]>,
+    /// Whether the base pose was fitted too (uploaded pairs).
+    pub base_fitted: bool,
+}
+
+impl Catheter3d {
+    /// The physics estimate in the page's force type.
+    pub fn force_f32(&self) -> [f32; 3] {
+        self.force_n.map(|f| f as f32)
+    }
+
+    /// The catheter's tip (the last centreline point), mm.
+    pub fn tip_mm(&self) -> [f64; 3] {
+        *self
+            .centreline_mm
+            .last()
+            .expect("a reconstruction has points")
+    }
+
+    /// One sentence for screen readers and the panel.
+    pub fn summary(&self) -> String {
+        let f = self.force_n;
+        let magnitude = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+        format!(
+            "catheter {:.0} mm reconstructed from {} ({}, {:.2} px mean reprojection error); \
+             physics force ({:+.3}, {:+.3}, {:+.3}) N, |F| {magnitude:.3} N, from a rod fitted \
+             within {:.2} mm RMS{}",
+            self.length_mm,
+            self.masks.phrase(),
+            if self.tip_seen {
+                "tip seen in both views"
+            } else {
+                "tip outside a view"
+            },
+            self.mean_residual_px,
+            f[0],
+            f[1],
+            f[2],
+            self.rms_mm,
+            if self.base_fitted {
+                " (its base pose fitted too)"
+            } else {
+                ""
+            },
+        )
+    }
+}
+
+/// Why the pair gives no 3D catheter.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum Catheter3dError {
+    /// Neither label masks nor H-Net's masks.
+    #[error("no masks to reconstruct from: label the catheter in both views, or run H-Net")]
+    NoMasks,
+    /// A twin pair whose recorded settings cannot be read.
+    #[error("the pair's twin settings cannot be read ({0})")]
+    TwinSettings(String),
+    /// A view's mask gives no centreline (empty, two blobs, not one tube, too short).
+    #[error("no centreline in {}", .masks.phrase())]
+    Centreline {
+        /// The masks read.
+        masks: MaskSource,
+        /// Why.
+        #[source]
+        source: CentrelineError,
+    },
+    /// The centrelines cannot be matched in 3D (unusable cameras, no overlap, along the
+    /// epipolar lines).
+    #[error("the two views cannot be matched in 3D")]
+    Reconstruction(#[source] ReconstructionError),
+    /// No rod fits the reconstruction.
+    #[error("no physics estimate")]
+    Fit(#[source] RodFitError),
+    /// The best rod stays far from the reconstruction: the catheter's settings, the views or the
+    /// masks do not describe this catheter, and its force would mean nothing.
+    #[error(
+        "no physics estimate: the best-fitting rod stays {rms_mm:.2} mm RMS from the reconstructed \
+         catheter (at most {MAX_FIT_RMS_MM} mm accepted); the catheter's settings, the C-arm \
+         geometry or the masks do not match this pair"
+    )]
+    PoorFit {
+        /// RMS distance of the reconstruction from the fitted rod, mm.
+        rms_mm: f64,
+    },
+}
+
+/// Largest RMS distance between the reconstruction and the fitted rod for which the rod's force
+/// is shown, mm. A twin pair's exact masks fit within 0.04 mm at the working size, and the
+/// crate's tests fit true masks at 128 px within 0.3 mm; 1 mm is 2.4 pixels at the isocentre
+/// (0.42 mm per pixel at 224 px), far beyond any mask's own error, so a worse fit means the rod
+/// model does not describe what was reconstructed.
+pub const MAX_FIT_RMS_MM: f64 = 1.0;
+
+/// Reconstructs the catheter of `masks` seen with `geometry` and fits the rod to it.
+pub fn reconstruct_pair(
+    geometry: &PairGeometry,
+    masks: &PairMasks<'_>,
+) -> Result<Catheter3d, Catheter3dError> {
+    let mut setup = PhysicsSetup::new(geometry.cameras(), geometry.rod.clone(), geometry.base);
+    setup.fit.fit_base_position = !geometry.base_known;
+    setup.fit.fit_base_rotation = !geometry.base_known;
+    let PhysicsEstimate {
+        reconstruction,
+        fit,
+        ..
+    } = physics_estimate([masks.mask(0), masks.mask(1)], &setup).map_err(|e| match e {
+        PhysicsError::Centreline(source) => Catheter3dError::Centreline {
+            masks: masks.source(),
+            source,
+        },
+        PhysicsError::Reconstruction(e) => Catheter3dError::Reconstruction(e),
+        PhysicsError::Fit(e) => Catheter3dError::Fit(e),
+    })?;
+    if fit.rms_mm.is_nan() || fit.rms_mm > MAX_FIT_RMS_MM {
+        return Err(Catheter3dError::PoorFit { rms_mm: fit.rms_mm });
+    }
+    Ok(Catheter3d {
+        masks: masks.source(),
+        centreline_mm: reconstruction.points_mm.iter().map(|p| p.0).collect(),
+        length_mm: reconstruction.arc_mm.last().copied().unwrap_or(0.0),
+        mean_residual_px: reconstruction.mean_residual_px,
+        tip_seen: reconstruction.tip_seen,
+        force_n: fit.force_n.0,
+        rms_mm: fit.rms_mm,
+        rod_mm: fit.shape.points_mm.iter().map(|p| p.0).collect(),
+        base_fitted: !geometry.base_known,
+    })
+}
+
+/// The C-arms are drawn at this fraction of their size about the isocentre, the catheter at full
+/// size: a cardiac C-arm's source is 750 mm from the isocentre and its detector 450 mm beyond
+/// it, against a catheter of about 50 mm, which would be a few pixels in a drawing of the whole.
+/// Scaled about the isocentre, every direction and angle stays true.
+pub const CARM_SKETCH_SCALE: f64 = 0.1;
+
+/// What the 3D view draws of one C-arm, mm (world frame, scaled by [`CARM_SKETCH_SCALE`] about
+/// the isocentre).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CArmSketch {
+    /// The X-ray source (focal spot).
+    pub source_mm: [f64; 3],
+    /// The detector's corners, in order around it (top-left, top-right, bottom-right,
+    /// bottom-left as the image shows them).
+    pub detector_mm: [[f64; 3]; 4],
+}
+
+impl CArmSketch {
+    /// The sketch of `carm`.
+    pub fn of(carm: &CArm) -> Self {
+        let r = carm.rotation();
+        let (u, v, beam) = (r.row(0), r.row(1), r.row(2));
+        let source = carm.source_mm();
+        let centre = source + beam * carm.source_to_detector_mm;
+        let half_u = carm.image_size.width as f64 * carm.pixel_pitch_mm / 2.0;
+        let half_v = carm.image_size.height as f64 * carm.pixel_pitch_mm / 2.0;
+        let corner = |su: f64, sv: f64| {
+            ((centre + u * (su * half_u) + v * (sv * half_v)) * CARM_SKETCH_SCALE).0
+        };
+        Self {
+            source_mm: (source * CARM_SKETCH_SCALE).0,
+            detector_mm: [
+                corner(-1.0, -1.0),
+                corner(1.0, -1.0),
+                corner(1.0, 1.0),
+                corner(-1.0, 1.0),
+            ],
+        }
+    }
+}
+
+/// Millimetres per newton of the 3D force arrows (0.3 N: 30 mm, beside a 50 mm catheter).
+pub const ARROW_MM_PER_NEWTON: f64 = 100.0;
+
+/// The 3D arrow of `force_n` (N) from `tip_mm`: its start and end, mm.
+pub fn force_arrow_mm(tip_mm: [f64; 3], force_n: [f32; 3]) -> [[f64; 3]; 2] {
+    let end = [0, 1, 2].map(|i| tip_mm[i] + f64::from(force_n[i]) * ARROW_MM_PER_NEWTON);
+    [tip_mm, end]
+}
+
+/// The catheter's points and the sketch's, for framing the 3D view.
+pub fn scene_points(catheter: &Catheter3d, views: &Biplane) -> Vec<[f64; 3]> {
+    let mut points = catheter.centreline_mm.clone();
+    for carm in views.views() {
+        let sketch = CArmSketch::of(carm);
+        points.push(sketch.source_mm);
+        points.extend(sketch.detector_mm);
+    }
+    points
+}
+
+#[cfg(all(test, not(target_arch = "wasm32")))]
+mod tests {
+    use super::*;
+    use crate::error_text::with_causes;
+    use crate::twin_live::XrayBackground;
+    use crate::workspace::PairSource;
+    use hnet_twin::vec3::Vec3;
+
+    /// Distance between two points, mm.
+    fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
+        (Vec3(a) - Vec3(b)).norm()
+    }
+
+    fn twin(controls: TwinControls) -> LabeledPair {
+        controls
+            .render("t".into(), &XrayBackground::phantom())
+            .unwrap()
+    }
+
+    fn run(pair: &LabeledPair) -> Result<Catheter3d, Catheter3dError> {
+        let geometry = PairGeometry::of(pair, &TwinControls::default())?;
+        reconstruct_pair(&geometry, &PairMasks::of(pair, None)?)
+    }
+
+    #[test]
+    fn a_twin_pair_gives_its_catheter_and_force() {
+        for force in [[0.15, 0.05, -0.10], [-0.2, 0.1, -0.05]] {
+            let controls = TwinControls {
+                force_n: force,
+                ..TwinControls::default()
+            };
+            let pair = twin(controls);
+            let start = std::time::Instant::now();
+            let c = run(&pair).unwrap();
+            let millis = start.elapsed().as_secs_f64() * 1e3;
+            let error = (0..3)
+                .map(|i| (c.force_n[i] - force[i]).abs())
+                .fold(0.0, f64::max);
+            eprintln!(
+                "{force:?}: physics {:?} N, error {error:.4} N, {:.1} mm, rms {:.3} mm, {millis:.0} ms",
+                c.force_n, c.length_mm, c.rms_mm
+            );
+            assert!(error < 0.03, "{:?} N vs {force:?} N", c.force_n);
+            assert!(c.tip_seen && c.length_mm > 30.0, "{}", c.summary());
+            assert_eq!(c.masks, MaskSource::Labels);
+            assert!(!c.base_fitted);
+            // The reconstructed tip is the twin's.
+            let PairSource::Twin { tip_mm, .. } = &pair.source else {
+                unreachable!()
+            };
+            assert!(distance(c.tip_mm(), *tip_mm) < 2.0);
+            assert!(c.summary().starts_with("catheter "), "{}", c.summary());
+        }
+    }
+
+    #[test]
+    fn h_nets_masks_are_used_when_the_pair_has_no_labels() {
+        let mut pair = twin(TwinControls::default());
+        let soft: Vec<Vec<f32>> = [&pair.mask_a, &pair.mask_b]
+            .iter()
+            .map(|m| m.iter().map(|&v| f32::from(v) / 255.0).collect())
+            .collect();
+        pair.masks_labeled = false;
+        assert_eq!(
+            PairMasks::of(&pair, None).unwrap_err(),
+            Catheter3dError::NoMasks
+        );
+        let masks = PairMasks::of(&pair, Some([&soft[0], &soft[1]])).unwrap();
+        assert_eq!(masks.source(), MaskSource::Predicted);
+        let geometry = PairGeometry::of(&pair, &TwinControls::default()).unwrap();
+        let c = reconstruct_pair(&geometry, &masks).unwrap();
+        assert_eq!(c.masks, MaskSource::Predicted);
+    }
+
+    #[test]
+    fn an_uploaded_pair_is_read_with_the_default_views_and_a_fitted_base() {
+        let twin_pair = twin(TwinControls::default());
+        let mut pair = LabeledPair::new(
+            "u".into(),
+            PairSource::Upload {
+                view_a: "a.png".into(),
+                view_b: "b.png".into(),
+            },
+            twin_pair.view_a.clone(),
+            twin_pair.view_b.clone(),
+        );
+        pair.mask_a = twin_pair.mask_a.clone();
+        pair.mask_b = twin_pair.mask_b.clone();
+        pair.masks_labeled = true;
+        let geometry = PairGeometry::of(&pair, &TwinControls::default()).unwrap();
+        assert_eq!(geometry.views, pair_views(&twin_pair));
+        assert!(!geometry.base_known);
+        let c = reconstruct_pair(&geometry, &PairMasks::of(&pair, None).unwrap()).unwrap();
+        assert!(c.base_fitted);
+        assert!(c.summary().contains("base pose fitted"));
+    }
+
+    /// Each bad input is a typed error with a message naming the step and the view.
+    #[test]
+    fn bad_masks_and_cameras_get_their_message() {
+        let good = twin(TwinControls::default());
+        let message = |pair: &LabeledPair| with_causes(&run(pair).unwrap_err());
+
+        let mut empty = good.clone();
+        empty.mask_b.fill(0);
+        assert_eq!(
+            message(&empty),
+            "no centreline in the label masks: view B: the mask is empty (no pixel reaches half \
+             coverage)"
+        );
+
+        let mut two = good.clone();
+        crate::workspace::paint_disc(
+            &mut two.mask_a,
+            WORK_SIZE,
+            20.0,
+            20.0,
+            6.0,
+            crate::workspace::Tool::Brush,
+        );
+        let text = message(&two);
+        assert!(
+            text.starts_with(
+                "no centreline in the label masks: view A: the mask has 2 separate blobs"
+            ),
+            "{text}"
+        );
+
+        // Two views from the same place: no depth.
+        let mut same = good.clone();
+        if let PairSource::Twin { views, .. } = &mut same.source {
+            views.b = views.a;
+        }
+        let text = message(&same);
+        assert!(
+            text.starts_with("the two views cannot be matched in 3D: the two views' centres are"),
+            "{text}"
+        );
+
+        // A degenerate camera: no detector (zero pixel pitch gives an infinite focal length).
+        let mut flat = good.clone();
+        if let PairSource::Twin { views, .. } = &mut flat.source {
+            views.a.source_to_detector_mm = 0.0;
+        }
+        let text = message(&flat);
+        assert!(
+            text.starts_with(
+                "the two views cannot be matched in 3D: view A: unusable camera matrix"
+            ),
+            "{text}"
+        );
+
+        // A straight catheter in the plane of both sources (view B tilted cranially from view
+        // A): it runs along the epipolar lines, no crossing locates a point in depth.
+        let near = twin(TwinControls {
+            force_n: [0.0, 0.1, -0.05],
+            precurve_radius_mm: 0.0,
+            view_b_deg: [0.0, 60.0],
+            ..TwinControls::default()
+        });
+        let text = message(&near);
+        assert!(
+            text.starts_with(
+                "the two views cannot be matched in 3D: only 0 points of the two centrelines lie on \
+                 each other's epipolar lines"
+            ),
+            "{text}"
+        );
+
+        let mut unreadable = good.clone();
+        if let PairSource::Twin { settings, .. } = &mut unreadable.source {
+            settings["scene"] = serde_json::json!("nonsense");
+        }
+        assert!(message(&unreadable).starts_with("the pair's twin settings cannot be read"));
+    }
+
+    #[test]
+    fn a_rod_that_does_not_fit_is_reported() {
+        let pair = twin(TwinControls::default());
+        let geometry = PairGeometry::of(&pair, &TwinControls::default()).unwrap();
+        let masks = PairMasks::of(&pair, None).unwrap();
+        // A catheter far too stiff to bend this way within the largest force considered.
+        let stiff = PairGeometry {
+            rod: geometry.rod.clone().with_bending_stiffness(1e9),
+            ..geometry.clone()
+        };
+        let err = reconstruct_pair(&stiff, &masks).unwrap_err();
+        assert!(matches!(err, Catheter3dError::PoorFit { .. }), "{err:?}");
+        assert!(
+            with_causes(&err).starts_with("no physics estimate: the best-fitting rod stays"),
+            "{err}"
+        );
+        // Views where the straight catheter nearly lies in the plane of both sources: the rod
+        // solver fails around the forces that would fit.
+        let ill = twin(TwinControls {
+            force_n: [0.0, 0.1, -0.05],
+            precurve_radius_mm: 0.0,
+            view_b_deg: [5.0, 60.0],
+            ..TwinControls::default()
+        });
+        let text = with_causes(&run(&ill).unwrap_err());
+        assert!(
+            text.starts_with("no physics estimate: the rod fit did not converge"),
+            "{text}"
+        );
+        // A rod that cannot be solved at all.
+        let mut broken = geometry.clone();
+        broken.rod.length_mm = 0.0;
+        let err = reconstruct_pair(&broken, &masks).unwrap_err();
+        assert!(
+            with_causes(&err).starts_with(
+                "no physics estimate: the rod solver failed at the fit's starting point"
+            ),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn the_epipolar_line_of_a_point_passes_through_its_match() {
+        let views = default_views();
+        let point = Vec3::new(5.0, -3.0, -20.0);
+        let [a, b] = [views.a.project(point), views.b.project(point)];
+        let [p, q] = epipolar_line(&views, View::B, [a.u, a.v]).unwrap();
+        // The distance of b from the segment's line.
+        let (dx, dy) = (q[0] - p[0], q[1] - p[1]);
+        let off = ((b.u - p[0]) * dy - (b.v - p[1]) * dx).abs() / dx.hypot(dy);
+        assert!(off < 1e-6, "{off}");
+        let [p, _] = epipolar_line(&views, View::A, [b.u, b.v]).unwrap();
+        assert!(
+            p.iter()
+                .all(|c| (0.0..=WORK_SIZE as f64 + 1e-6).contains(c))
+        );
+    }
+
+    #[test]
+    fn the_sketch_keeps_the_c_arms_directions() {
+        let views = default_views();
+        let a = CArmSketch::of(&views.a);
+        // View A's source is posterior (-y), its detector anterior, at a tenth of their size.
+        assert!((a.source_mm[1] + 75.0).abs() < 1e-9, "{:?}", a.source_mm);
+        let centre_y = a.detector_mm.iter().map(|c| c[1]).sum::<f64>() / 4.0;
+        assert!((centre_y - 45.0).abs() < 1e-9);
+        assert!((distance(a.detector_mm[0], a.detector_mm[1]) - 15.0).abs() < 1e-9);
+        let b = CArmSketch::of(&views.b);
+        assert!(b.source_mm[0] < -74.0, "{:?}", b.source_mm);
+        let arrow = force_arrow_mm([1.0, 2.0, 3.0], [0.1, 0.0, -0.2]);
+        assert!((distance(arrow[0], arrow[1]) - 0.05f64.sqrt() * 100.0).abs() < 1e-4);
+    }
+}
