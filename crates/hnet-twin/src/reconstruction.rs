@@ -52,6 +52,10 @@ pub struct ReconstructionSettings {
     pub max_tip_epipolar_px: f64,
     /// Fewest well-conditioned matches for a reconstruction.
     pub min_matches: usize,
+    /// Smallest angle between the two views' rays at the reconstructed points (median over the
+    /// curve), degrees: below it depth is too poorly determined to trust the shape (views a few
+    /// degrees apart can match and triangulate consistently into a stretched, wrong catheter).
+    pub min_triangulation_deg: f64,
 }
 
 impl Default for ReconstructionSettings {
@@ -62,6 +66,7 @@ impl Default for ReconstructionSettings {
             min_well_conditioned: 0.5,
             max_tip_epipolar_px: 3.0,
             min_matches: 5,
+            min_triangulation_deg: 10.0,
         }
     }
 }
@@ -119,6 +124,16 @@ pub enum ReconstructionError {
         matches: usize,
         /// Least accepted.
         needed: usize,
+    },
+    /// The two views look at the catheter from nearly the same direction.
+    #[error(
+        "the two views see the catheter only {angle_deg:.1}° apart ({min_deg}° needed): depth cannot be triangulated reliably from so narrow an angle"
+    )]
+    NarrowAngle {
+        /// Median angle between the views' rays at the catheter, degrees.
+        angle_deg: f64,
+        /// Least accepted, degrees.
+        min_deg: f64,
     },
     /// The catheter lies along the epipolar lines over most of its length.
     #[error(
@@ -460,6 +475,24 @@ pub fn reconstruct(
         residuals.push(residual);
     }
 
+    // The angle between the two rays at each point: too narrow, and depth is guesswork.
+    let mut angles: Vec<f64> = points
+        .iter()
+        .map(|p| {
+            let (ra, rb) = (*p - geometry.centre_mm(0), *p - geometry.centre_mm(1));
+            let cos = ra.dot(rb) / (ra.norm() * rb.norm()).max(1e-12);
+            cos.clamp(-1.0, 1.0).acos().to_degrees()
+        })
+        .collect();
+    angles.sort_by(f64::total_cmp);
+    let angle_deg = angles.get(angles.len() / 2).copied().unwrap_or(0.0);
+    if !(angle_deg >= settings.min_triangulation_deg) {
+        return Err(ReconstructionError::NarrowAngle {
+            angle_deg,
+            min_deg: settings.min_triangulation_deg,
+        });
+    }
+
     // Equal arc-length steps.
     let mut arc = vec![0.0];
     for w in points.windows(2) {
@@ -682,6 +715,26 @@ pub(crate) mod tests {
         let err = reconstruct(&line, &good, &line, &zoomed, &settings).unwrap_err();
         assert!(
             matches!(err, ReconstructionError::NoBaseline { .. }),
+            "{err}"
+        );
+        // Two views 3° apart see a curved catheter consistently, but give it no reliable depth.
+        let near = crate::carm::CArm::cardiac(3.0, 0.0, 128);
+        let curve: Vec<Vec3> = (0..40)
+            .map(|k| {
+                let t = k as f64 / 39.0;
+                Vec3::new(20.0 * t * t, 10.0 * t, 40.0 * t - 20.0)
+            })
+            .collect();
+        let err = reconstruct(
+            &centreline_of(&views.a, &curve),
+            &good,
+            &centreline_of(&near, &curve),
+            &near.camera_matrix(),
+            &settings,
+        )
+        .unwrap_err();
+        assert!(
+            matches!(err, ReconstructionError::NarrowAngle { .. }),
             "{err}"
         );
     }
