@@ -264,3 +264,112 @@ mod tests {
         zip::ZipArchive::new(std::io::Cursor::new(bytes)).unwrap()
     }
 }
+
+// Property tests (issue #13, docs/reliability.md): whatever pairs the page holds, the export is
+// a zip that hnet_twin's reader opens with the same ids, splits, forces, pixels and masks.
+#[cfg(all(test, not(target_arch = "wasm32")))]
+mod properties {
+    use super::*;
+    use crate::imaging::properties::cases;
+    use proptest::prelude::*;
+
+    /// Deterministic pixels from a seed (random bytes per case would be slow to shrink).
+    fn pixels(seed: u64, len: usize, mask: bool) -> Vec<u8> {
+        let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        (0..len)
+            .map(|_| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                let v = (state >> 24) as u8;
+                if mask {
+                    if v > 200 { 255 } else { 0 }
+                } else {
+                    v
+                }
+            })
+            .collect()
+    }
+
+    fn component() -> impl Strategy<Value = f32> {
+        prop_oneof![-0.5f32..0.5, Just(0.0), Just(-0.0)]
+    }
+
+    fn pair() -> impl Strategy<Value = LabeledPair> {
+        (
+            any::<u64>(),
+            ("\\PC{0,16}", "\\PC{0,16}"),
+            any::<bool>(),
+            proptest::option::of([component(), component(), component()]),
+            proptest::option::of(prop_oneof![
+                Just(Split::Train),
+                Just(Split::Val),
+                Just(Split::Test)
+            ]),
+        )
+            .prop_map(|(seed, (a, b), masks_labeled, force_n, split)| {
+                let rgb = WORK_SIZE * WORK_SIZE * 3;
+                let grey = WORK_SIZE * WORK_SIZE;
+                LabeledPair {
+                    id: String::new(),
+                    source: PairSource::Upload {
+                        view_a: a,
+                        view_b: b,
+                    },
+                    view_a: pixels(seed, rgb, false),
+                    view_b: pixels(seed ^ 1, rgb, false),
+                    mask_a: pixels(seed ^ 2, grey, true),
+                    mask_b: pixels(seed ^ 3, grey, true),
+                    masks_labeled,
+                    force_n,
+                    split,
+                }
+            })
+    }
+
+    proptest! {
+        // Each case encodes and decodes four 224x224 PNGs per pair: few cases.
+        #![proptest_config(cases(12))]
+
+        #[test]
+        fn exported_pairs_read_back_exactly(mut pairs in proptest::collection::vec(pair(), 1..5)) {
+            for (i, pair) in pairs.iter_mut().enumerate() {
+                pair.id = format!("pair-{:04}", i + 1);
+            }
+            let complete: Vec<&LabeledPair> = pairs.iter().filter(|p| p.is_complete()).collect();
+            let export = match dataset_zip(&pairs) {
+                Ok(export) => export,
+                Err(ExportError::NothingComplete) => {
+                    prop_assert!(complete.is_empty());
+                    return Ok(());
+                }
+                Err(e) => return Err(TestCaseError::fail(e.to_string())),
+            };
+            let dir = std::env::temp_dir().join(format!("hnet-studio-prop-export-{}", std::process::id()));
+            let _ = std::fs::remove_dir_all(&dir);
+            zip::ZipArchive::new(std::io::Cursor::new(&export.zip[..]))
+                .unwrap()
+                .extract(&dir)
+                .unwrap();
+            let dataset = hnet_twin::dataset::Dataset::open(&dir.join(DATASET_NAME)).unwrap();
+            prop_assert_eq!(dataset.header.samples, complete.len());
+            prop_assert_eq!(dataset.rows.len(), complete.len());
+            let splits = export_splits(&pairs);
+            for row in &dataset.rows {
+                let index = pairs.iter().position(|p| p.id == row.id).unwrap();
+                let pair = &pairs[index];
+                prop_assert_eq!(Some(row.split), splits[index]);
+                let want = pair.force_n.unwrap();
+                prop_assert_eq!(row.force_n.map(|f| (f as f32).to_bits()), want.map(f32::to_bits));
+                let PairSource::Upload { view_a, view_b } = &pair.source else { unreachable!() };
+                prop_assert_eq!(&row.extra[1], &("view_a_file".to_string(), view_a.clone()));
+                prop_assert_eq!(&row.extra[2], &("view_b_file".to_string(), view_b.clone()));
+                let loaded = dataset.load_pair(row, None).unwrap();
+                prop_assert!(loaded.view_a == pair.view_a && loaded.view_b == pair.view_b);
+                let mask = |m: &[f32]| m.iter().map(|v| (v * 255.0).round() as u8).collect::<Vec<u8>>();
+                prop_assert!(mask(&loaded.mask_a) == pair.mask_a && mask(&loaded.mask_b) == pair.mask_b);
+            }
+            std::fs::remove_dir_all(dir).ok();
+        }
+    }
+}

@@ -307,3 +307,226 @@ mod tests {
         assert_eq!(binarize(&[0.2, 0.5, 0.9]), vec![0, 255, 255]);
     }
 }
+
+// Property tests (issue #13, docs/reliability.md): any upload is decoded within the size limits
+// or refused with an error, never a panic or an allocation beyond the limits.
+#[cfg(all(test, not(target_arch = "wasm32")))]
+pub(crate) mod properties {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Refuses any single allocation above 2 GiB, so that an image whose header claims a huge
+    /// size aborts this test binary (a visible failure) rather than exhausting CI's memory. The
+    /// decoder's own limit is 512 MiB.
+    struct CappedAllocator;
+
+    const ALLOCATION_CAP: usize = 2 << 30;
+
+    // SAFETY: forwards to the system allocator; refusing (a null pointer) is allowed.
+    unsafe impl std::alloc::GlobalAlloc for CappedAllocator {
+        unsafe fn alloc(&self, layout: std::alloc::Layout) -> *mut u8 {
+            if layout.size() > ALLOCATION_CAP {
+                return std::ptr::null_mut();
+            }
+            unsafe { std::alloc::System.alloc(layout) }
+        }
+        unsafe fn dealloc(&self, ptr: *mut u8, layout: std::alloc::Layout) {
+            unsafe { std::alloc::System.dealloc(ptr, layout) }
+        }
+        unsafe fn alloc_zeroed(&self, layout: std::alloc::Layout) -> *mut u8 {
+            if layout.size() > ALLOCATION_CAP {
+                return std::ptr::null_mut();
+            }
+            unsafe { std::alloc::System.alloc_zeroed(layout) }
+        }
+        unsafe fn realloc(&self, ptr: *mut u8, layout: std::alloc::Layout, new: usize) -> *mut u8 {
+            if new > ALLOCATION_CAP {
+                return std::ptr::null_mut();
+            }
+            unsafe { std::alloc::System.realloc(ptr, layout, new) }
+        }
+    }
+
+    #[global_allocator]
+    static ALLOCATOR: CappedAllocator = CappedAllocator;
+
+    pub(crate) fn cases(ci: u32) -> proptest::test_runner::Config {
+        proptest::test_runner::Config::with_cases(
+            std::env::var("PROPTEST_CASES")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(ci),
+        )
+    }
+
+    /// A small test image in `format`.
+    fn encoded(format: image::ImageFormat, grey: bool) -> Vec<u8> {
+        let rgb = image::RgbImage::from_fn(16, 12, |x, y| {
+            image::Rgb([(x * 15) as u8, (y * 20) as u8, ((x + y) * 7) as u8])
+        });
+        let image = if grey {
+            image::DynamicImage::ImageLuma8(image::DynamicImage::ImageRgb8(rgb).to_luma8())
+        } else {
+            image::DynamicImage::ImageRgb8(rgb)
+        };
+        let mut bytes = Vec::new();
+        image
+            .write_to(&mut std::io::Cursor::new(&mut bytes), format)
+            .unwrap();
+        bytes
+    }
+
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut crc = !0u32;
+        for &b in bytes {
+            crc ^= u32::from(b);
+            for _ in 0..8 {
+                crc = (crc >> 1) ^ (0xEDB8_8320 & (crc & 1).wrapping_neg());
+            }
+        }
+        !crc
+    }
+
+    /// A PNG whose header (IHDR) claims `width` x `height`, `depth` bits and `colour` type, with
+    /// a correct checksum so that the decoder believes it; the pixel data stays the original's.
+    fn png_claiming(width: u32, height: u32, depth: u8, colour: u8) -> Vec<u8> {
+        let mut png = encoded(image::ImageFormat::Png, false);
+        // Signature (8), IHDR length (4) and type (4), then the 13 bytes of IHDR data.
+        png[16..20].copy_from_slice(&width.to_be_bytes());
+        png[20..24].copy_from_slice(&height.to_be_bytes());
+        png[24] = depth;
+        png[25] = colour;
+        let crc = crc32(&png[12..29]);
+        png[29..33].copy_from_slice(&crc.to_be_bytes());
+        png
+    }
+
+    /// A JPEG whose frame header (SOF0) claims `width` x `height`.
+    fn jpeg_claiming(width: u16, height: u16) -> Vec<u8> {
+        let mut jpeg = encoded(image::ImageFormat::Jpeg, false);
+        let sof = jpeg
+            .windows(2)
+            .position(|w| w == [0xFF, 0xC0])
+            .expect("a baseline JPEG");
+        // Marker (2), length (2), precision (1), then height and width.
+        jpeg[sof + 5..sof + 7].copy_from_slice(&height.to_be_bytes());
+        jpeg[sof + 7..sof + 9].copy_from_slice(&width.to_be_bytes());
+        jpeg
+    }
+
+    #[derive(Debug, Clone)]
+    enum Edit {
+        Replace(usize, u8),
+        Insert(usize, u8),
+        Remove(usize),
+        Truncate(usize),
+    }
+
+    fn edits() -> impl Strategy<Value = Vec<Edit>> {
+        let edit = prop_oneof![
+            4 => (any::<usize>(), any::<u8>()).prop_map(|(i, b)| Edit::Replace(i, b)),
+            2 => (any::<usize>(), any::<u8>()).prop_map(|(i, b)| Edit::Insert(i, b)),
+            2 => any::<usize>().prop_map(Edit::Remove),
+            1 => any::<usize>().prop_map(Edit::Truncate),
+        ];
+        proptest::collection::vec(edit, 1..8)
+    }
+
+    fn mutate(mut bytes: Vec<u8>, edits: &[Edit]) -> Vec<u8> {
+        for edit in edits {
+            let n = bytes.len();
+            match *edit {
+                Edit::Replace(i, b) if n > 0 => bytes[i % n] = b,
+                Edit::Insert(i, b) => bytes.insert(i % (n + 1), b),
+                Edit::Remove(i) if n > 0 => {
+                    bytes.remove(i % n);
+                }
+                Edit::Truncate(i) => bytes.truncate(i % (n + 1)),
+                _ => {}
+            }
+        }
+        bytes
+    }
+
+    /// Decodes `bytes` both ways the page does; a result must respect the limits.
+    fn decode_both_ways(bytes: &[u8]) -> Result<(), TestCaseError> {
+        if let Ok(rgb) = decode_to_rgb("p.png", bytes, 32) {
+            prop_assert_eq!(rgb.len(), 32 * 32 * 3);
+        }
+        if let Ok(grey) = decode_radiograph("p.png", bytes) {
+            prop_assert!(grey.width <= RADIOGRAPH_SIDE as usize);
+            prop_assert!(grey.height <= RADIOGRAPH_SIDE as usize);
+            prop_assert_eq!(grey.data.len(), grey.width * grey.height);
+        }
+        Ok(())
+    }
+
+    proptest! {
+        #![proptest_config(cases(256))]
+
+        #[test]
+        fn any_bytes_are_an_image_or_an_error(
+            head in prop_oneof![
+                Just(&b""[..]),
+                Just(&b"\x89PNG\r\n\x1a\n"[..]),
+                Just(&[0xFF, 0xD8, 0xFF][..]),
+            ],
+            bytes in proptest::collection::vec(any::<u8>(), 0..512),
+        ) {
+            let bytes = [head, &bytes].concat();
+            decode_both_ways(&bytes)?;
+        }
+
+        #[test]
+        fn a_mutated_png_or_jpeg_is_an_image_or_an_error(
+            jpeg in any::<bool>(),
+            grey in any::<bool>(),
+            edits in edits(),
+        ) {
+            let format = if jpeg { image::ImageFormat::Jpeg } else { image::ImageFormat::Png };
+            decode_both_ways(&mutate(encoded(format, grey), &edits))?;
+        }
+    }
+
+    proptest! {
+        // A claimed size within the limit may decode a large (mostly empty) image: fewer cases.
+        #![proptest_config(cases(48))]
+
+        #[test]
+        fn a_png_claiming_any_size_is_refused_or_decoded_within_the_limits(
+            width in prop_oneof![1u32..64, 1u32..=MAX_UPLOAD_SIDE, any::<u32>()],
+            height in prop_oneof![1u32..64, 1u32..=MAX_UPLOAD_SIDE, any::<u32>()],
+            depth in prop_oneof![Just(8u8), Just(16u8), any::<u8>()],
+            colour in prop_oneof![Just(2u8), Just(6u8), any::<u8>()],
+        ) {
+            let png = png_claiming(width, height, depth, colour);
+            let result = decode_to_rgb("claims.png", &png, 32);
+            if width > MAX_UPLOAD_SIDE || height > MAX_UPLOAD_SIDE {
+                let err = result.unwrap_err();
+                prop_assert!(err.problem.contains("limit") || err.problem.contains("decoded"), "{}", err);
+            }
+            decode_both_ways(&png)?;
+        }
+
+        #[test]
+        fn a_jpeg_claiming_any_size_is_refused_or_decoded_within_the_limits(
+            width in prop_oneof![1u16..64, any::<u16>()],
+            height in prop_oneof![1u16..64, any::<u16>()],
+        ) {
+            let jpeg = jpeg_claiming(width, height);
+            let result = decode_to_rgb("claims.jpg", &jpeg, 32);
+            if u32::from(width) > MAX_UPLOAD_SIDE || u32::from(height) > MAX_UPLOAD_SIDE {
+                prop_assert!(result.is_err());
+            }
+            decode_both_ways(&jpeg)?;
+        }
+    }
+
+    #[test]
+    fn uploads_over_the_byte_limit_are_refused_before_decoding() {
+        let mut bytes = encoded(image::ImageFormat::Png, false);
+        bytes.resize(MAX_UPLOAD_BYTES + 1, 0);
+        let err = decode_to_rgb("big.png", &bytes, 32).unwrap_err();
+        assert!(err.problem.contains("the limit is 40 MB"), "{err}");
+    }
+}

@@ -547,6 +547,8 @@ pub fn parse_newtons(axis: &str, text: &str) -> Result<f32, String> {
     }
     hnet_twin::force_table::parse_newtons(trimmed)
         .map(|v| v as f32)
+        // A finite f64 beyond f32's range (1e39) would become an infinite label.
+        .filter(|v| v.is_finite())
         .ok_or_else(|| format!("{axis} is `{trimmed}`, not a number of newtons"))
 }
 
@@ -799,5 +801,124 @@ mod tests {
         ]);
         assert_eq!((applied, unknown), (1, vec!["pair-0099".to_string()]));
         assert_eq!(ws.pairs[0].force_n, Some([0.1, 0.0, 0.0]));
+    }
+}
+
+/// Regression (found by `typed_forces_are_finite_or_an_error`): a typed force beyond f32's
+/// range was read as an infinite label.
+#[cfg(all(test, not(target_arch = "wasm32")))]
+#[test]
+fn typed_forces_beyond_f32_are_refused() {
+    let err = parse_newtons("Fx", "6445156245511322000000000000000000000000").unwrap_err();
+    assert!(err.contains("not a number of newtons"), "{err}");
+    assert!(parse_newtons("Fx", "1e39").is_err());
+    assert_eq!(parse_newtons("Fx", "0.25"), Ok(0.25));
+}
+
+// Property tests (issue #13, docs/reliability.md): force-label files and typed forces give
+// labels or an error, never a panic or a non-finite label, and labels round-trip exactly.
+#[cfg(all(test, not(target_arch = "wasm32")))]
+mod properties {
+    use super::*;
+    use crate::imaging::properties::cases;
+    use proptest::prelude::*;
+
+    /// A force component a label may hold: plausible, any `f32` bits in the range.
+    fn component() -> impl Strategy<Value = f32> {
+        prop_oneof![-0.5f32..0.5, Just(0.0), Just(-0.0), 1e-30f32..1e-20]
+    }
+
+    proptest! {
+        #![proptest_config(cases(256))]
+
+        #[test]
+        fn any_bytes_are_labels_or_an_error(
+            header in prop_oneof![Just(""), Just("id,fx,fy,fz\n"), Just("ID, FZ ,fy,note,Fx\n")],
+            bytes in proptest::collection::vec(any::<u8>(), 0..256),
+        ) {
+            let bytes = [header.as_bytes(), &bytes].concat();
+            if let Ok(labels) = parse_force_labels("f.csv", &bytes) {
+                prop_assert!(!labels.is_empty());
+                for (id, force) in labels {
+                    prop_assert!(!id.is_empty());
+                    prop_assert!(force.iter().all(|f| f.is_finite()), "{:?}", force);
+                    prop_assert!(implausible_label(force).is_none());
+                }
+            }
+        }
+
+        #[test]
+        fn typed_forces_are_finite_or_an_error(text in prop_oneof![
+            "\\PC{0,16}",
+            any::<f64>().prop_map(|v| v.to_string()),
+            any::<f32>().prop_map(|v| v.to_string()),
+        ]) {
+            if let Ok(v) = parse_newtons("Fx", &text) {
+                prop_assert!(v.is_finite(), "`{}` read as {}", text, v);
+            }
+        }
+
+        #[test]
+        fn force_labels_round_trip_exactly(
+            labels in proptest::collection::btree_map(
+                "[a-zA-Z0-9_.-]{1,12}",
+                [component(), component(), component()],
+                1..12,
+            ),
+            comma_decimals in any::<bool>(),
+        ) {
+            let mut csv = String::from("id,fx,fy,fz\n");
+            for (id, [x, y, z]) in &labels {
+                if comma_decimals {
+                    // As a spreadsheet in a comma-decimal locale writes them.
+                    let c = |v: f32| format!("\"{}\"", v.to_string().replace('.', ","));
+                    csv.push_str(&format!("{id},{},{},{}\n", c(*x), c(*y), c(*z)));
+                } else {
+                    csv.push_str(&format!("{id},{x},{y},{z}\n"));
+                }
+            }
+            let read = parse_force_labels("f.csv", csv.as_bytes()).unwrap();
+            prop_assert_eq!(read.len(), labels.len());
+            for ((id, force), (want_id, want)) in read.iter().zip(&labels) {
+                prop_assert_eq!(id, want_id);
+                prop_assert_eq!(force.map(f32::to_bits), want.map(f32::to_bits), "{}", csv);
+            }
+        }
+
+        /// What the page keeps in IndexedDB beside the images (storage.rs' record, wasm-only,
+        /// holds these fields): a pair's metadata round-trips exactly through JSON.
+        #[test]
+        fn pair_metadata_round_trips_exactly(
+            id in "[a-zA-Z0-9_.-]{1,16}",
+            names in ("\\PC{0,20}", "\\PC{0,20}"),
+            twin in proptest::option::of(([component(), component(), component()], [any::<f64>(), any::<f64>(), any::<f64>()])),
+            force in proptest::option::of([component(), component(), component()]),
+            split in proptest::option::of(prop_oneof![Just(Split::Train), Just(Split::Val), Just(Split::Test)]),
+            masks_labeled in any::<bool>(),
+        ) {
+            let source = match twin {
+                Some((true_force_n, tip_mm)) if tip_mm.iter().all(|v| v.is_finite()) => PairSource::Twin {
+                    true_force_n,
+                    tip_mm,
+                    views: Biplane::cardiac(WORK_SIZE),
+                    settings: serde_json::json!({"force_n": true_force_n, "seed": 3}),
+                },
+                _ => PairSource::Upload { view_a: names.0, view_b: names.1 },
+            };
+            let pair = LabeledPair {
+                id,
+                source,
+                view_a: vec![1, 2, 3],
+                view_b: vec![4, 5, 6],
+                mask_a: vec![0],
+                mask_b: vec![255],
+                masks_labeled,
+                force_n: force,
+                split,
+            };
+            let json = serde_json::to_string(&pair).unwrap();
+            let back: LabeledPair = serde_json::from_str(&json).unwrap();
+            prop_assert_eq!(back, pair);
+        }
     }
 }

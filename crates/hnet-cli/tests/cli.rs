@@ -401,3 +401,144 @@ fn a_time_budget_ends_training_cleanly_with_the_best_checkpoint() {
     assert!(!dir.join("other").exists());
     std::fs::remove_dir_all(dir).ok();
 }
+
+// Property tests (issue #13, docs/reliability.md): `hnet train --config FILE` with arbitrary or
+// mutated settings ends with an error naming the file (or, for valid settings, goes on to the
+// data), never a panic. Through the binary: `TrainingConfig::load` has no library path.
+mod config_properties {
+    use super::{hnet, scratch};
+    use proptest::prelude::*;
+
+    fn cases(ci: u32) -> proptest::test_runner::Config {
+        proptest::test_runner::Config::with_cases(
+            std::env::var("PROPTEST_CASES")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(ci),
+        )
+    }
+
+    /// Runs `hnet train` on a config file holding `bytes`, with no dataset: what it says.
+    fn train_with_config(dir: &std::path::Path, bytes: &[u8]) -> Result<String, TestCaseError> {
+        let config = dir.join("config.json");
+        std::fs::write(&config, bytes).unwrap();
+        let out = hnet()
+            .args(["train", "--config"])
+            .arg(&config)
+            .arg("--data")
+            .arg(dir.join("no-data"))
+            .arg("--out")
+            .arg(dir.join("run"))
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        prop_assert!(!out.status.success());
+        prop_assert!(out.status.code() == Some(1), "{:?}: {}", out.status, stderr);
+        prop_assert!(!stderr.contains("panicked"), "{}", stderr);
+        Ok(stderr)
+    }
+
+    fn valid_config(model: &str, size: (usize, usize), batch: usize, epochs: usize) -> String {
+        format!(
+            r#"{{"name": "prop", "model": {model}, "image_size": {{"width": {}, "height": {}}},
+              "loss": {{"beta_a": 1.0, "beta_b": 1.0, "beta_force": 1.0}},
+              "learning_rate": 0.001, "rmsprop_alpha": 0.9, "rmsprop_momentum": 0.0,
+              "rmsprop_epsilon": 1e-7, "batch_size": {batch}, "epochs": {epochs}, "patience": 3,
+              "seed": 1, "max_train_samples": null, "max_valid_samples": 4, "num_workers": 1}}"#,
+            size.0, size.1
+        )
+    }
+
+    fn hnet_model(depth: usize, size: (usize, usize)) -> String {
+        format!(
+            r#"{{"architecture": "hnet", "in_channels": 3, "filters": 4, "depth": {depth},
+                 "image_size": {{"width": {}, "height": {}}}, "share_weights": true,
+                 "force_hidden": [8, 4]}}"#,
+            size.0, size.1
+        )
+    }
+
+    #[derive(Debug, Clone)]
+    enum Edit {
+        Replace(usize, u8),
+        Insert(usize, u8),
+        Remove(usize),
+    }
+
+    fn mutate(mut bytes: Vec<u8>, edits: &[Edit]) -> Vec<u8> {
+        for edit in edits {
+            let n = bytes.len();
+            match *edit {
+                Edit::Replace(i, b) if n > 0 => bytes[i % n] = b,
+                Edit::Insert(i, b) => bytes.insert(i % (n + 1), b),
+                Edit::Remove(i) if n > 0 => {
+                    bytes.remove(i % n);
+                }
+                _ => {}
+            }
+        }
+        bytes
+    }
+
+    fn edits() -> impl Strategy<Value = Vec<Edit>> {
+        // Digits and JSON punctuation make the edits land as other numbers and shapes.
+        let byte = prop_oneof![
+            any::<u8>(),
+            proptest::sample::select(b"0123456789-.e,:{}[]\"".to_vec())
+        ];
+        let edit = prop_oneof![
+            (any::<usize>(), byte.clone()).prop_map(|(i, b)| Edit::Replace(i, b)),
+            (any::<usize>(), byte).prop_map(|(i, b)| Edit::Insert(i, b)),
+            any::<usize>().prop_map(Edit::Remove),
+        ];
+        proptest::collection::vec(edit, 1..6)
+    }
+
+    proptest! {
+        #![proptest_config(cases(48))]
+
+        #[test]
+        fn any_bytes_as_a_training_config_are_an_error_naming_it(
+            bytes in proptest::collection::vec(any::<u8>(), 0..256)
+        ) {
+            let dir = scratch("prop-config-bytes");
+            let stderr = train_with_config(&dir, &bytes)?;
+            prop_assert!(stderr.contains("config.json"), "{}", stderr);
+        }
+
+        #[test]
+        fn a_mutated_training_config_is_an_error_never_a_panic(edits in edits(), depth in 1usize..4) {
+            let dir = scratch("prop-config-mutated");
+            let size = (16 << depth, 8 << depth);
+            let text = valid_config(&hnet_model(depth, size), size, 2, 1);
+            let stderr = train_with_config(&dir, &mutate(text.into_bytes(), &edits))?;
+            // Either the settings are refused (naming the file) or they are fine and the
+            // missing data is what stops the run.
+            prop_assert!(stderr.contains("config.json") || stderr.contains("no-data"), "{}", stderr);
+        }
+
+        #[test]
+        fn valid_training_configs_load(
+            depth in 1usize..5,
+            [w, h] in [1usize..8, 1usize..8],
+            batch in 1usize..64,
+            epochs in 1usize..1000,
+            architecture in proptest::sample::select(vec!["hnet", "unet", "fcn", "hrnet", "ynet"]),
+        ) {
+            let dir = scratch("prop-config-valid");
+            let (model, size) = match architecture {
+                "hnet" => {
+                    let size = (w << depth, h << depth);
+                    (hnet_model(depth, size), size)
+                }
+                "unet" => (format!(r#"{{"architecture": "unet", "base_filters": 4, "depth": {depth}}}"#), (w << depth, h << depth)),
+                "fcn" => (r#"{"architecture": "fcn", "base_filters": 4}"#.to_string(), (32 * w, 32 * h)),
+                "hrnet" => (r#"{"architecture": "hrnet", "width": 4}"#.to_string(), (16 * w, 16 * h)),
+                _ => (r#"{"architecture": "ynet", "base_filters": 4, "hidden": [8, 4]}"#.to_string(), (8 * w, 8 * h)),
+            };
+            let stderr = train_with_config(&dir, valid_config(&model, size, batch, epochs).as_bytes())?;
+            // The settings were accepted: what stops the run is the missing dataset.
+            prop_assert!(stderr.contains("no-data") && !stderr.contains("not a valid training config"), "{}", stderr);
+        }
+    }
+}

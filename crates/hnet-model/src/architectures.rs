@@ -280,6 +280,7 @@ macro_rules! architectures {
                 let header = weights::read_header(bytes, source)?;
                 let bad_config = |problem| WeightsError::new(source, WeightsProblem::BadConfig(problem));
                 let spec = ModelSpec::from_settings_json(&header.architecture, &header.config_json)
+                    .and_then(|spec| weights::check_layer_counts(&spec).map(|()| spec))
                     .map_err(bad_config)?;
                 let model = match spec.init(device).map_err(|e| bad_config(ConfigProblem::Invalid(e)))? {
                     $(Self::$variant(m) => Self::$variant(weights::apply(m, bytes, source)?),)+

@@ -154,3 +154,283 @@ fn files_written_before_named_sizes_keep_their_height_and_width() {
     let (_, read, _) = HNet::from_weights_bytes(&bytes, &device, "old.bpk").unwrap();
     assert_eq!(read.image_size, ImageSize::new(32, 16));
 }
+
+// ---------------------------------------------------------------------------------------------
+// Property tests (issue #13, docs/reliability.md): arbitrary and mutated weights files are an
+// error, never a panic or an unbounded allocation, and a saved network loads back exactly.
+// ---------------------------------------------------------------------------------------------
+
+/// Refuses any single allocation above 2 GiB, so that a file whose header claims a huge network
+/// aborts this test binary (a visible failure) instead of exhausting CI's memory.
+struct CappedAllocator;
+
+const ALLOCATION_CAP: usize = 2 << 30;
+
+// SAFETY: forwards to the system allocator; refusing (a null pointer) is allowed by `GlobalAlloc`.
+unsafe impl std::alloc::GlobalAlloc for CappedAllocator {
+    unsafe fn alloc(&self, layout: std::alloc::Layout) -> *mut u8 {
+        if layout.size() > ALLOCATION_CAP {
+            return std::ptr::null_mut();
+        }
+        unsafe { std::alloc::System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: std::alloc::Layout) {
+        unsafe { std::alloc::System.dealloc(ptr, layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: std::alloc::Layout) -> *mut u8 {
+        if layout.size() > ALLOCATION_CAP {
+            return std::ptr::null_mut();
+        }
+        unsafe { std::alloc::System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: std::alloc::Layout, new: usize) -> *mut u8 {
+        if new > ALLOCATION_CAP {
+            return std::ptr::null_mut();
+        }
+        unsafe { std::alloc::System.realloc(ptr, layout, new) }
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: CappedAllocator = CappedAllocator;
+
+mod properties {
+    use std::collections::BTreeMap;
+    use std::sync::OnceLock;
+
+    use burn::module::Module;
+    use burn::tensor::Device;
+    use hnet_model::architectures::StereoModel;
+    use hnet_model::weights;
+    use hnet_model::{HNet, HNetConfig};
+    use hnet_units::ImageSize;
+    use proptest::prelude::*;
+    use proptest::test_runner::Config;
+
+    fn cases(ci: u32) -> Config {
+        Config::with_cases(
+            std::env::var("PROPTEST_CASES")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(ci),
+        )
+    }
+
+    #[derive(Debug, Clone)]
+    enum Edit {
+        Replace(usize, u8),
+        Insert(usize, u8),
+        Remove(usize),
+        Truncate(usize),
+    }
+
+    fn edits() -> impl Strategy<Value = Vec<Edit>> {
+        let edit = prop_oneof![
+            4 => (any::<usize>(), any::<u8>()).prop_map(|(i, b)| Edit::Replace(i, b)),
+            2 => (any::<usize>(), any::<u8>()).prop_map(|(i, b)| Edit::Insert(i, b)),
+            2 => any::<usize>().prop_map(Edit::Remove),
+            1 => any::<usize>().prop_map(Edit::Truncate),
+        ];
+        proptest::collection::vec(edit, 1..8)
+    }
+
+    fn mutate(mut bytes: Vec<u8>, edits: &[Edit], window: usize) -> Vec<u8> {
+        // Edits land in the first `window` bytes (the header and metadata) half of the time,
+        // where a flip changes what the file claims rather than one weight's value.
+        for (k, edit) in edits.iter().enumerate() {
+            let n = bytes.len();
+            let span = if k % 2 == 0 { n.min(window) } else { n };
+            match *edit {
+                Edit::Replace(i, b) if span > 0 => bytes[i % span] = b,
+                Edit::Insert(i, b) => bytes.insert(i % (span + 1), b),
+                Edit::Remove(i) if span > 0 => {
+                    bytes.remove(i % span);
+                }
+                Edit::Truncate(i) => bytes.truncate(i % (n + 1)),
+                _ => {}
+            }
+        }
+        bytes
+    }
+
+    fn small() -> HNetConfig {
+        HNetConfig::new()
+            .with_filters(2)
+            .with_depth(1)
+            .with_image_size(ImageSize::square(8))
+            .with_force_hidden([4, 2])
+    }
+
+    /// A valid, small weights file (made once).
+    fn valid_file() -> &'static [u8] {
+        static FILE: OnceLock<Vec<u8>> = OnceLock::new();
+        FILE.get_or_init(|| {
+            let device = Device::flex();
+            small()
+                .init(&device)
+                .unwrap()
+                .to_weights_bytes(&small(), &BTreeMap::new())
+                .unwrap()
+        })
+    }
+
+    /// Loads `bytes` every way the CLI and the page do; each must return, never panic.
+    fn load_every_way(bytes: &[u8]) {
+        let device = Device::flex();
+        let _ = weights::read_header(bytes, "p.bpk");
+        let _ = HNet::from_weights_bytes(bytes, &device, "p.bpk");
+        let _ = StereoModel::from_weights_bytes(bytes, &device, "p.bpk");
+    }
+
+    /// A settings value as a weights file may claim it: small, zero, huge or past `usize`.
+    fn claimed_size() -> impl Strategy<Value = serde_json::Value> {
+        prop_oneof![
+            3 => (0u64..40).prop_map(serde_json::Value::from),
+            1 => Just(serde_json::Value::from(0)),
+            1 => (1u64 << 20..1 << 40).prop_map(serde_json::Value::from),
+            1 => any::<u64>().prop_map(serde_json::Value::from),
+            1 => Just(serde_json::Value::from(-1)),
+            1 => Just(serde_json::Value::from(1.5)),
+        ]
+    }
+
+    /// The settings of any architecture with claimed sizes (what `hnet.config` may hold).
+    fn claimed_settings() -> impl Strategy<Value = (String, String)> {
+        let size = || claimed_size();
+        prop_oneof![
+            (
+                size(),
+                size(),
+                size(),
+                size(),
+                size(),
+                size(),
+                size(),
+                any::<bool>()
+            )
+                .prop_map(|(c, f, d, w, h, h0, h1, share)| (
+                    "hnet".to_string(),
+                    serde_json::json!({"in_channels": c, "filters": f, "depth": d,
+                        "image_size": {"width": w, "height": h}, "share_weights": share,
+                        "force_hidden": [h0, h1]})
+                    .to_string()
+                )),
+            (size(), size()).prop_map(|(f, d)| (
+                "unet".to_string(),
+                serde_json::json!({"base_filters": f, "depth": d}).to_string()
+            )),
+            size().prop_map(|f| (
+                "fcn".to_string(),
+                serde_json::json!({"base_filters": f}).to_string()
+            )),
+            size().prop_map(|w| (
+                "hrnet".to_string(),
+                serde_json::json!({"width": w}).to_string()
+            )),
+            (size(), size(), size()).prop_map(|(f, h0, h1)| (
+                "ynet".to_string(),
+                serde_json::json!({"base_filters": f, "hidden": [h0, h1]}).to_string()
+            )),
+        ]
+    }
+
+    proptest! {
+        #![proptest_config(cases(128))]
+
+        #[test]
+        fn any_bytes_are_an_error_never_a_panic(
+            magic in any::<bool>(),
+            bytes in proptest::collection::vec(any::<u8>(), 0..1024),
+        ) {
+            let mut bytes = bytes;
+            if magic {
+                // Past the magic-number check, into burnpack's own parser.
+                let head = burn_pack::MAGIC_NUMBER.to_le_bytes();
+                bytes.splice(0..0, head);
+            }
+            load_every_way(&bytes);
+        }
+
+        #[test]
+        fn a_mutated_weights_file_is_an_error_or_a_network(edits in edits()) {
+            load_every_way(&mutate(valid_file().to_vec(), &edits, 512));
+        }
+
+        #[test]
+        fn settings_claiming_any_size_are_an_error_or_a_network((architecture, settings) in claimed_settings()) {
+            // Real tensors (the small H-Net's) under a header that claims other settings.
+            let device = Device::flex();
+            let bytes = weights::encode(
+                small().init(&device).unwrap(),
+                &architecture,
+                &settings,
+                &BTreeMap::new(),
+                "claims.bpk",
+            )
+            .unwrap();
+            load_every_way(&bytes);
+        }
+    }
+
+    proptest! {
+        #![proptest_config(cases(32))]
+
+        #[test]
+        fn saved_networks_load_back_exactly(
+            filters in 1usize..5,
+            depth in 1usize..3,
+            [w, h] in [1usize..4, 1usize..4],
+            share_weights in any::<bool>(),
+            hidden in [1usize..6, 1usize..6],
+            provenance in proptest::collection::btree_map("[a-z_.]{1,12}", "\\PC{0,20}", 0..4),
+        ) {
+            let config = HNetConfig::new()
+                .with_filters(filters)
+                .with_depth(depth)
+                .with_image_size(ImageSize::new(w << depth, h << depth))
+                .with_share_weights(share_weights)
+                .with_force_hidden(hidden);
+            let device = Device::flex();
+            let model = config.init(&device).unwrap();
+            let bytes = model.to_weights_bytes(&config, &provenance).unwrap();
+            let (loaded, loaded_config, header) = HNet::from_weights_bytes(&bytes, &device, "rt.bpk").unwrap();
+            prop_assert_eq!(&loaded_config, &config);
+            prop_assert_eq!(&header.provenance, &provenance);
+            prop_assert_eq!(loaded.num_params(), model.num_params());
+            // Every parameter, bit for bit: the reloaded network writes the same file.
+            prop_assert!(loaded.to_weights_bytes(&config, &provenance).unwrap() == bytes);
+            let (any, spec, _) = StereoModel::from_weights_bytes(&bytes, &device, "rt.bpk").unwrap();
+            prop_assert_eq!(spec.name(), "hnet");
+            prop_assert_eq!(any.num_params(), model.num_params());
+        }
+    }
+}
+
+/// Regression (found by `settings_claiming_any_size_are_an_error_or_a_network`): a U-Net weights
+/// file claiming a depth of 2^40 tried to allocate its layer list and aborted; a depth of 0
+/// underflowed. Both are now refused as out-of-range settings, as are zero or huge filter counts.
+#[test]
+fn baseline_settings_claiming_impossible_sizes_are_refused() {
+    let device = Device::flex();
+    for (architecture, settings) in [
+        ("unet", r#"{"base_filters": 16, "depth": 1099511627776}"#),
+        ("unet", r#"{"base_filters": 16, "depth": 0}"#),
+        ("unet", r#"{"base_filters": 1099511627776, "depth": 4}"#),
+        ("fcn", r#"{"base_filters": 0}"#),
+        ("hrnet", r#"{"width": 1099511627776}"#),
+        ("ynet", r#"{"base_filters": 4, "hidden": [0, 8]}"#),
+    ] {
+        let model = config().init(&device).unwrap();
+        let bytes = weights::encode(model, architecture, settings, &provenance(), "x.bpk").unwrap();
+        let err =
+            hnet_model::architectures::StereoModel::from_weights_bytes(&bytes, &device, "x.bpk")
+                .expect_err(settings);
+        assert!(
+            matches!(
+                err.problem,
+                WeightsProblem::BadConfig(weights::ConfigProblem::OutOfRange(..))
+            ),
+            "{architecture} {settings}: {err}"
+        );
+    }
+}

@@ -260,3 +260,452 @@ fn bad_rows_and_files_are_named_and_skippable() {
     assert_eq!(Dataset::open(&out).unwrap().rows[0].id, "frame_03");
     fs::remove_dir_all(root).ok();
 }
+
+/// Regression (found by `dataset_headers_round_trip_exactly` and
+/// `sample_records_round_trip_exactly`): serde_json's default float parser read these values
+/// back one ulp off; the workspace now enables its `float_roundtrip` feature.
+#[test]
+fn headers_and_records_keep_every_float_bit_for_bit() {
+    for value in [-0.9825891323239336f64, -1.6964455841479201e-254] {
+        let header = hnet_twin::dataset::DatasetHeader::new(
+            hnet_units::ImageSize::new(0, 0),
+            0,
+            serde_json::json!([value]),
+        );
+        let back: hnet_twin::dataset::DatasetHeader =
+            serde_json::from_slice(&hnet_twin::dataset::header_json(&header)).unwrap();
+        assert_eq!(back, header);
+        let json = serde_json::to_vec_pretty(&[value]).unwrap();
+        let back: [f64; 1] = serde_json::from_slice(&json).unwrap();
+        assert_eq!(back[0].to_bits(), value.to_bits(), "{value:e}");
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Property tests (issue #13, docs/reliability.md): every reader of the dataset format turns
+// arbitrary and mutated bytes into an error, never a panic, and what the writers write reads
+// back exactly. Case counts suit CI's two cores; `PROPTEST_CASES` raises them for a long run.
+// ---------------------------------------------------------------------------------------------
+
+mod properties {
+    use std::path::Path;
+
+    use hnet_twin::carm::CArm;
+    use hnet_twin::dataset::{
+        Dataset, DatasetHeader, HEADER_FILE, MANIFEST_FILE, ManifestRow, SAMPLES_DIR, Split,
+        header_json, manifest_csv, parse_manifest, record_path,
+    };
+    use hnet_twin::force_table::{parse_newtons, read_force_table};
+    use hnet_twin::raster::Rect;
+    use hnet_twin::rod::RodConfig;
+    use hnet_twin::scene::SceneParams;
+    use hnet_twin::simulate::{SampleRecord, ViewRecord, read_sample_record};
+    use hnet_twin::synthetic_xray::{Anatomy, PatchLayout};
+    use hnet_twin::vec3::Vec3;
+    use hnet_units::ImageSize;
+    use proptest::prelude::*;
+    use proptest::test_runner::Config;
+
+    /// Cases per property in CI, unless `PROPTEST_CASES` says otherwise.
+    fn cases(ci: u32) -> Config {
+        Config::with_cases(
+            std::env::var("PROPTEST_CASES")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(ci),
+        )
+    }
+
+    /// One edit of a valid file: a byte replaced, inserted or removed, or the file cut short.
+    #[derive(Debug, Clone)]
+    enum Edit {
+        Replace(usize, u8),
+        Insert(usize, u8),
+        Remove(usize),
+        Truncate(usize),
+    }
+
+    fn edits() -> impl Strategy<Value = Vec<Edit>> {
+        let edit = prop_oneof![
+            4 => (any::<usize>(), any::<u8>()).prop_map(|(i, b)| Edit::Replace(i, b)),
+            2 => (any::<usize>(), any::<u8>()).prop_map(|(i, b)| Edit::Insert(i, b)),
+            2 => any::<usize>().prop_map(Edit::Remove),
+            1 => any::<usize>().prop_map(Edit::Truncate),
+        ];
+        proptest::collection::vec(edit, 1..8)
+    }
+
+    /// `bytes` with `edits` applied (positions taken modulo the length).
+    fn mutate(mut bytes: Vec<u8>, edits: &[Edit]) -> Vec<u8> {
+        for edit in edits {
+            let n = bytes.len();
+            match *edit {
+                Edit::Replace(i, b) if n > 0 => bytes[i % n] = b,
+                Edit::Insert(i, b) => bytes.insert(i % (n + 1), b),
+                Edit::Remove(i) if n > 0 => {
+                    bytes.remove(i % n);
+                }
+                Edit::Truncate(i) => bytes.truncate(i % (n + 1)),
+                _ => {}
+            }
+        }
+        bytes
+    }
+
+    /// A finite `f64` of any magnitude, subnormals and signed zeros included.
+    fn finite() -> impl Strategy<Value = f64> {
+        prop_oneof![
+            any::<f64>().prop_filter("finite", |v| v.is_finite()),
+            -1.0f64..1.0,
+            Just(0.0),
+            Just(-0.0),
+        ]
+    }
+
+    fn split() -> impl Strategy<Value = Split> {
+        prop_oneof![Just(Split::Train), Just(Split::Val), Just(Split::Test)]
+    }
+
+    /// Free text for extra manifest columns: commas, quotes, new lines and non-ASCII included.
+    fn text() -> impl Strategy<Value = String> {
+        "[a-zA-Z0-9 ,\"\r\n.éß_-]{0,12}"
+    }
+
+    /// Valid manifest rows: unique valid ids, finite forces, the same extra columns on every row.
+    fn rows() -> impl Strategy<Value = Vec<ManifestRow>> {
+        (
+            proptest::collection::btree_set("[a-zA-Z0-9_-][a-zA-Z0-9._-]{0,20}", 0..12),
+            proptest::collection::vec("[a-z][a-z0-9_ ,\"]{0,8}", 0..4),
+        )
+            .prop_flat_map(|(ids, mut columns)| {
+                // Extra columns must not take the name of a known one, nor repeat.
+                columns.retain(|c| !["id", "split", "fx", "fy", "fz"].contains(&c.as_str()));
+                columns.sort();
+                columns.dedup();
+                let n_extra = columns.len();
+                let ids: Vec<String> = ids.into_iter().collect();
+                let n = ids.len();
+                (
+                    Just(ids),
+                    Just(columns),
+                    proptest::collection::vec(
+                        (
+                            split(),
+                            [finite(), finite(), finite()],
+                            proptest::collection::vec(text(), n_extra),
+                        ),
+                        n,
+                    ),
+                )
+            })
+            .prop_map(|(ids, columns, values)| {
+                ids.into_iter()
+                    .zip(values)
+                    .map(|(id, (split, force_n, extra))| ManifestRow {
+                        id,
+                        split,
+                        force_n,
+                        extra: columns.iter().cloned().zip(extra).collect(),
+                    })
+                    .collect()
+            })
+    }
+
+    /// JSON values for a header's free-form `source` (finite numbers: JSON has no others).
+    fn json_value() -> impl Strategy<Value = serde_json::Value> {
+        let leaf = prop_oneof![
+            Just(serde_json::Value::Null),
+            any::<bool>().prop_map(serde_json::Value::from),
+            any::<i64>().prop_map(serde_json::Value::from),
+            any::<u64>().prop_map(serde_json::Value::from),
+            finite().prop_map(serde_json::Value::from),
+            "\\PC{0,10}".prop_map(serde_json::Value::from),
+        ];
+        leaf.prop_recursive(3, 24, 4, |inner| {
+            prop_oneof![
+                proptest::collection::vec(inner.clone(), 0..4).prop_map(serde_json::Value::from),
+                proptest::collection::btree_map("\\PC{0,6}", inner, 0..4)
+                    .prop_map(|m| serde_json::Value::Object(m.into_iter().collect())),
+            ]
+        })
+    }
+
+    fn header() -> impl Strategy<Value = DatasetHeader> {
+        (any::<usize>(), any::<usize>(), any::<usize>(), json_value()).prop_map(
+            |(width, height, samples, source)| {
+                DatasetHeader::new(ImageSize::new(width, height), samples, source)
+            },
+        )
+    }
+
+    fn vec3() -> impl Strategy<Value = Vec3> {
+        [finite(), finite(), finite()].prop_map(Vec3)
+    }
+
+    fn carm() -> impl Strategy<Value = CArm> {
+        (
+            [finite(), finite(), finite(), finite(), finite()],
+            1usize..5000,
+            1usize..5000,
+        )
+            .prop_map(|(v, w, h)| CArm {
+                primary_deg: v[0],
+                secondary_deg: v[1],
+                source_to_isocentre_mm: v[2],
+                source_to_detector_mm: v[3],
+                pixel_pitch_mm: v[4],
+                image_size: ImageSize::new(w, h),
+            })
+    }
+
+    fn view_record() -> impl Strategy<Value = ViewRecord> {
+        let row = || [finite(), finite(), finite(), finite()];
+        let layout = (
+            proptest::option::of(prop_oneof![
+                Just(Anatomy::Heart),
+                Just(Anatomy::Aorta),
+                Just(Anatomy::Svc)
+            ]),
+            [finite(), finite(), finite(), finite()],
+            proptest::collection::vec(any::<u8>(), 0..20),
+            proptest::collection::vec(any::<bool>(), 0..20),
+        )
+            .prop_map(|(anatomy, region, permutation, dark)| PatchLayout {
+                anatomy,
+                region: Rect(region),
+                permutation,
+                dark,
+            });
+        (
+            carm(),
+            [row(), row(), row()],
+            proptest::option::of(("\\PC{0,12}", layout)),
+        )
+            .prop_map(|(carm, camera_matrix, background)| ViewRecord {
+                carm,
+                camera_matrix,
+                background,
+            })
+    }
+
+    fn sample_record() -> impl Strategy<Value = SampleRecord> {
+        let scene = (
+            vec3(),
+            [finite(), finite(), finite()],
+            vec3(),
+            [finite(), finite(), finite()],
+        )
+            .prop_map(
+                |(tip_force_n, [ei, length, curvature], base, [tilt, azimuth, roll])| SceneParams {
+                    tip_force_n,
+                    bending_stiffness_n_m2: ei,
+                    length_mm: length,
+                    precurvature_per_mm: curvature,
+                    base_position_mm: base,
+                    base_tilt_deg: tilt,
+                    base_azimuth_deg: azimuth,
+                    base_roll_deg: roll,
+                },
+            );
+        (
+            scene,
+            (finite(), finite()),
+            proptest::collection::vec(vec3(), 0..16),
+            proptest::collection::vec(finite(), 0..16),
+            [view_record(), view_record()],
+        )
+            .prop_map(
+                |(scene, (length, diameter), centreline_mm, arc_mm, views)| {
+                    let rod = RodConfig {
+                        length_mm: length,
+                        diameter_mm: diameter,
+                        ..RodConfig::default()
+                    };
+                    SampleRecord {
+                        scene,
+                        rod,
+                        centreline_mm,
+                        arc_mm,
+                        views,
+                    }
+                },
+            )
+    }
+
+    /// A scratch dataset folder for one property, reused by its cases.
+    fn folder(name: &str) -> std::path::PathBuf {
+        let dir = super::scratch(&format!("prop-{name}"));
+        std::fs::create_dir_all(dir.join(SAMPLES_DIR)).unwrap();
+        dir
+    }
+
+    fn valid_header_bytes() -> Vec<u8> {
+        header_json(&DatasetHeader::new(
+            ImageSize::new(48, 32),
+            3,
+            serde_json::json!({"generator": "hnet-twin", "seed": 7, "twin": {"size": [48, 32]}}),
+        ))
+    }
+
+    fn valid_manifest_bytes() -> Vec<u8> {
+        b"id,split,fx,fy,fz,note\n000001,train,0.1,-0.25,0.001,\"a, \"\"b\"\"\"\n\
+          000002,val,0,0,-0.3,x\n000003,test,1e-3,2,3,\n"
+            .to_vec()
+    }
+
+    proptest! {
+        #![proptest_config(cases(256))]
+
+        #[test]
+        fn any_bytes_as_a_manifest_are_rows_or_an_error(bytes in proptest::collection::vec(any::<u8>(), 0..512)) {
+            let _ = parse_manifest(&bytes, Path::new("m.csv"));
+        }
+
+        #[test]
+        fn a_mutated_manifest_is_rows_or_an_error_naming_it(edits in edits()) {
+            let bytes = mutate(valid_manifest_bytes(), &edits);
+            if let Err(e) = parse_manifest(&bytes, Path::new("m.csv")) {
+                prop_assert!(e.to_string().starts_with("m.csv: "), "{}", e);
+            }
+        }
+
+        #[test]
+        fn manifests_round_trip_exactly(rows in rows()) {
+            let bytes = manifest_csv(&rows);
+            let back = parse_manifest(&bytes, Path::new("m.csv"));
+            prop_assert!(back.is_ok(), "{:?}\n{}", back, String::from_utf8_lossy(&bytes));
+            let back = back.unwrap();
+            // Bit-exact forces (a -0 stays -0).
+            for (a, b) in back.iter().zip(&rows) {
+                prop_assert_eq!(a.force_n.map(f64::to_bits), b.force_n.map(f64::to_bits));
+            }
+            prop_assert_eq!(back, rows);
+        }
+
+        #[test]
+        fn any_bytes_as_a_dataset_header_are_an_error_or_a_header(bytes in proptest::collection::vec(any::<u8>(), 0..256)) {
+            let _ = serde_json::from_slice::<DatasetHeader>(&bytes);
+        }
+
+        #[test]
+        fn a_mutated_dataset_header_is_an_error_or_a_header(edits in edits()) {
+            let _ = serde_json::from_slice::<DatasetHeader>(&mutate(valid_header_bytes(), &edits));
+        }
+
+        #[test]
+        fn dataset_headers_round_trip_exactly(header in header()) {
+            let back: DatasetHeader = serde_json::from_slice(&header_json(&header)).unwrap();
+            prop_assert_eq!(back, header);
+        }
+
+        #[test]
+        fn sample_records_round_trip_exactly(record in sample_record()) {
+            let json = serde_json::json!({ "manifest": {}, "record": record });
+            #[derive(serde::Deserialize)]
+            struct File {
+                record: SampleRecord,
+            }
+            let bytes = serde_json::to_vec_pretty(&json).unwrap();
+            let back: File = serde_json::from_slice(&bytes).unwrap();
+            prop_assert_eq!(back.record, record);
+        }
+
+        #[test]
+        fn any_bytes_as_a_force_table_are_rows_or_an_error(bytes in proptest::collection::vec(any::<u8>(), 0..512)) {
+            let _ = read_force_table(&bytes, &["id", "image"]);
+        }
+
+        #[test]
+        fn a_mutated_force_table_is_rows_or_an_error(edits in edits()) {
+            let valid = b"image,FX,fy,fz,note\na.png,0.1,-0.2,0.3,x\nb.png,\"0,05\",0,0,\nc.png,1e-3,2,3,y\n";
+            if let Ok(rows) = read_force_table(&mutate(valid.to_vec(), &edits), &["image", "id"]) {
+                for row in rows.into_iter().flatten() {
+                    prop_assert!(row.force_n.iter().all(|f| f.is_finite()));
+                    prop_assert!(!row.key.is_empty());
+                }
+            }
+        }
+
+        #[test]
+        fn force_tables_round_trip_exactly(
+            rows in proptest::collection::vec(("[a-zA-Z0-9_.-]{1,16}", [finite(), finite(), finite()]), 0..16)
+        ) {
+            let mut csv = String::from("id,fx,fy,fz\n");
+            for (key, [x, y, z]) in &rows {
+                csv.push_str(&format!("{key},{x},{y},{z}\n"));
+            }
+            let back = read_force_table(csv.as_bytes(), &["id"]).unwrap();
+            prop_assert_eq!(back.len(), rows.len());
+            for (line, (read, (key, force))) in back.into_iter().zip(&rows).enumerate() {
+                let read = read.unwrap();
+                prop_assert_eq!(&read.key, key);
+                prop_assert_eq!(read.line, line as u64 + 2);
+                prop_assert_eq!(read.force_n.map(f64::to_bits), force.map(f64::to_bits));
+            }
+        }
+
+        #[test]
+        fn newtons_parse_exactly_or_not_at_all(value in finite(), text in "\\PC{0,24}") {
+            prop_assert_eq!(parse_newtons(&value.to_string()).map(f64::to_bits), Some(value.to_bits()));
+            prop_assert_eq!(parse_newtons(&format!(" {value} ")).map(f64::to_bits), Some(value.to_bits()));
+            if let Some(v) = parse_newtons(&text) {
+                prop_assert!(v.is_finite());
+            }
+        }
+    }
+
+    proptest! {
+        // Each case writes files; fewer of them.
+        #![proptest_config(cases(64))]
+
+        #[test]
+        fn opening_a_mutated_dataset_is_an_error_or_a_dataset(
+            header_edits in proptest::option::of(edits()),
+            manifest_edits in proptest::option::of(edits()),
+        ) {
+            let dir = folder("open");
+            let header = match &header_edits {
+                Some(e) => mutate(valid_header_bytes(), e),
+                None => valid_header_bytes(),
+            };
+            let manifest = match &manifest_edits {
+                Some(e) => mutate(valid_manifest_bytes(), e),
+                None => valid_manifest_bytes(),
+            };
+            std::fs::write(dir.join(HEADER_FILE), header).unwrap();
+            std::fs::write(dir.join(MANIFEST_FILE), manifest).unwrap();
+            match Dataset::open(&dir) {
+                Ok(dataset) => prop_assert_eq!(dataset.header.format, "hnet-dataset"),
+                Err(e) => prop_assert!(e.to_string().contains(&dir.display().to_string()), "{}", e),
+            }
+        }
+
+        #[test]
+        fn datasets_written_then_opened_read_back_exactly(header in header(), rows in rows()) {
+            let dir = folder("reopen");
+            std::fs::write(dir.join(HEADER_FILE), header_json(&header)).unwrap();
+            std::fs::write(dir.join(MANIFEST_FILE), manifest_csv(&rows)).unwrap();
+            let dataset = Dataset::open(&dir).unwrap();
+            prop_assert_eq!(dataset.header, header);
+            prop_assert_eq!(dataset.rows, rows);
+        }
+
+        #[test]
+        fn a_mutated_sample_record_is_an_error_or_a_record(record in sample_record(), edits in edits()) {
+            let dir = folder("record");
+            std::fs::write(dir.join(HEADER_FILE), valid_header_bytes()).unwrap();
+            std::fs::write(dir.join(MANIFEST_FILE), valid_manifest_bytes()).unwrap();
+            let dataset = Dataset::open(&dir).unwrap();
+            let json = serde_json::json!({ "manifest": {}, "record": record });
+            let bytes = mutate(serde_json::to_vec_pretty(&json).unwrap(), &edits);
+            std::fs::write(dir.join(record_path("000001")), bytes).unwrap();
+            if let Err(e) = read_sample_record(&dataset, "000001") {
+                prop_assert!(e.to_string().contains("000001.json"), "{}", e);
+            }
+            // Arbitrary bytes, too.
+            let bytes: Vec<u8> = record.arc_mm.iter().flat_map(|v| v.to_le_bytes()).collect();
+            std::fs::write(dir.join(record_path("000002")), bytes).unwrap();
+            prop_assert!(read_sample_record(&dataset, "000002").is_err());
+        }
+    }
+}

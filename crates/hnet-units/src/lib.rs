@@ -183,4 +183,81 @@ mod tests {
         assert_eq!(size.to_string(), "320×240");
         assert!(!size.is_square() && ImageSize::square(64).is_square());
     }
+
+    // Property tests (issue #13, docs/reliability.md).
+    mod properties {
+        use std::format;
+        use std::string::String;
+        use std::vec::Vec;
+
+        use proptest::prelude::*;
+
+        use super::*;
+
+        fn cases() -> proptest::test_runner::Config {
+            proptest::test_runner::Config::with_cases(
+                std::env::var("PROPTEST_CASES")
+                    .ok()
+                    .and_then(|v| v.parse().ok())
+                    .unwrap_or(256),
+            )
+        }
+
+        proptest! {
+            #![proptest_config(cases())]
+
+            #[test]
+            fn sizes_round_trip_exactly_in_both_readers(width in any::<usize>(), height in any::<usize>()) {
+                let size = ImageSize::new(width, height);
+                let json = serde_json::to_string(&size).unwrap();
+                prop_assert_eq!(serde_json::from_str::<ImageSize>(&json).unwrap(), size);
+                let mut de = serde_json::Deserializer::from_str(&json);
+                prop_assert_eq!(width_height_or_named(&mut de).unwrap(), size);
+                // The old arrays, each in its own order.
+                let array = format!("[{height}, {width}]");
+                prop_assert_eq!(serde_json::from_str::<ImageSize>(&array).unwrap(), size);
+                let array = format!("[{width}, {height}]");
+                let mut de = serde_json::Deserializer::from_str(&array);
+                prop_assert_eq!(width_height_or_named(&mut de).unwrap(), size);
+            }
+
+            #[test]
+            fn any_text_is_a_size_or_an_error(text in "\\PC{0,40}", bytes in proptest::collection::vec(any::<u8>(), 0..64)) {
+                let _ = serde_json::from_str::<ImageSize>(&text);
+                let _ = serde_json::from_slice::<ImageSize>(&bytes);
+                let mut de = serde_json::Deserializer::from_str(&text);
+                let _ = width_height_or_named(&mut de);
+            }
+
+            #[test]
+            fn json_shaped_like_a_size_is_a_size_or_an_error(
+                keys in proptest::collection::vec(prop_oneof!["width", "height", "w", "\\PC{0,4}"], 0..4),
+                values in proptest::collection::vec(prop_oneof![
+                    any::<u64>().prop_map(|v| format!("{v}")),
+                    any::<i64>().prop_map(|v| format!("{v}")),
+                    any::<f64>().prop_map(|v| format!("{v:?}")),
+                    Just(String::from("null")),
+                    Just(String::from("18446744073709551616")),
+                    Just(String::from("[1, 2]")),
+                ], 0..4),
+                array in any::<bool>(),
+            ) {
+                let json = if array {
+                    format!("[{}]", values.join(", "))
+                } else {
+                    let fields: Vec<String> = keys
+                        .iter()
+                        .zip(values.iter().chain(core::iter::repeat(&String::from("1"))))
+                        .map(|(k, v)| format!("{}: {v}", serde_json::to_string(k).unwrap()))
+                        .collect();
+                    format!("{{{}}}", fields.join(", "))
+                };
+                if let Ok(size) = serde_json::from_str::<ImageSize>(&json) {
+                    // Whatever parses writes back as the same size.
+                    let back = serde_json::to_string(&size).unwrap();
+                    prop_assert_eq!(serde_json::from_str::<ImageSize>(&back).unwrap(), size);
+                }
+            }
+        }
+    }
 }
