@@ -486,7 +486,8 @@ pub fn reconstruct(
         .collect();
     angles.sort_by(f64::total_cmp);
     let angle_deg = angles.get(angles.len() / 2).copied().unwrap_or(0.0);
-    if !(angle_deg >= settings.min_triangulation_deg) {
+    // NaN angles (degenerate rays) fail too.
+    if angle_deg.is_nan() || angle_deg < settings.min_triangulation_deg {
         return Err(ReconstructionError::NarrowAngle {
             angle_deg,
             min_deg: settings.min_triangulation_deg,
