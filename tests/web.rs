@@ -20,7 +20,7 @@ use wasm_bindgen_test::*;
 wasm_bindgen_test_configure!(run_in_browser);
 
 fn small_hnet(device: &Device) -> (HNet, HNetConfig) {
-    let config = HNetConfig::new().with_image_size([32, 32]);
+    let config = HNetConfig::new().with_image_size(hnet_units::ImageSize::square(32));
     (config.init(device).unwrap(), config)
 }
 
