@@ -162,26 +162,24 @@ where
         .x_desc("test pair")
         .y_desc("force (N)")
         .draw()?;
-    chart
-        .draw_series(LineSeries::new(
-            shown
-                .iter()
-                .enumerate()
-                .map(|(i, p)| (i as f64, f64::from(p.truth[axis]))),
-            BLACK.stroke_width(2),
-        ))?
-        .label("true")
-        .legend(|(x, y)| PathElement::new([(x, y), (x + 18, y)], BLACK.stroke_width(2)));
-    chart
-        .draw_series(LineSeries::new(
-            shown
-                .iter()
-                .enumerate()
-                .map(|(i, p)| (i as f64, f64::from(p.predicted[axis]))),
-            RED.stroke_width(2),
-        ))?
-        .label("predicted")
-        .legend(|(x, y)| PathElement::new([(x, y), (x + 18, y)], RED.stroke_width(2)));
+    /// A curve of the figure: its label, colour and which force of a pair it draws.
+    type Curve = (&'static str, RGBColor, fn(&ForcePrediction) -> [f32; 3]);
+    let curves: [Curve; 2] = [
+        ("true", BLACK, |p| p.truth),
+        ("predicted", RED, |p| p.predicted),
+    ];
+    for (label, colour, force) in curves {
+        chart
+            .draw_series(LineSeries::new(
+                shown
+                    .iter()
+                    .enumerate()
+                    .map(|(i, p)| (i as f64, f64::from(force(p)[axis]))),
+                colour.stroke_width(2),
+            ))?
+            .label(label)
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], colour.stroke_width(2)));
+    }
     chart
         .configure_series_labels()
         .background_style(WHITE.mix(0.8))
