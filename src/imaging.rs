@@ -313,51 +313,14 @@ mod tests {
 #[cfg(all(test, not(target_arch = "wasm32")))]
 pub(crate) mod properties {
     use super::*;
+    pub(crate) use hnet_mutations::cases;
+    use hnet_mutations::{edits, mutate};
     use proptest::prelude::*;
 
-    /// Refuses any single allocation above 2 GiB, so that an image whose header claims a huge
-    /// size aborts this test binary (a visible failure) rather than exhausting CI's memory. The
+    /// An image whose header claims a huge size fails visibly (see `hnet_mutations`); the
     /// decoder's own limit is 512 MiB.
-    struct CappedAllocator;
-
-    const ALLOCATION_CAP: usize = 2 << 30;
-
-    // SAFETY: forwards to the system allocator; refusing (a null pointer) is allowed.
-    unsafe impl std::alloc::GlobalAlloc for CappedAllocator {
-        unsafe fn alloc(&self, layout: std::alloc::Layout) -> *mut u8 {
-            if layout.size() > ALLOCATION_CAP {
-                return std::ptr::null_mut();
-            }
-            unsafe { std::alloc::System.alloc(layout) }
-        }
-        unsafe fn dealloc(&self, ptr: *mut u8, layout: std::alloc::Layout) {
-            unsafe { std::alloc::System.dealloc(ptr, layout) }
-        }
-        unsafe fn alloc_zeroed(&self, layout: std::alloc::Layout) -> *mut u8 {
-            if layout.size() > ALLOCATION_CAP {
-                return std::ptr::null_mut();
-            }
-            unsafe { std::alloc::System.alloc_zeroed(layout) }
-        }
-        unsafe fn realloc(&self, ptr: *mut u8, layout: std::alloc::Layout, new: usize) -> *mut u8 {
-            if new > ALLOCATION_CAP {
-                return std::ptr::null_mut();
-            }
-            unsafe { std::alloc::System.realloc(ptr, layout, new) }
-        }
-    }
-
     #[global_allocator]
-    static ALLOCATOR: CappedAllocator = CappedAllocator;
-
-    pub(crate) fn cases(ci: u32) -> proptest::test_runner::Config {
-        proptest::test_runner::Config::with_cases(
-            std::env::var("PROPTEST_CASES")
-                .ok()
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(ci),
-        )
-    }
+    static ALLOCATOR: hnet_mutations::CappedAllocator = hnet_mutations::CappedAllocator;
 
     /// A small test image in `format`.
     fn encoded(format: image::ImageFormat, grey: bool) -> Vec<u8> {
@@ -412,40 +375,6 @@ pub(crate) mod properties {
         jpeg[sof + 5..sof + 7].copy_from_slice(&height.to_be_bytes());
         jpeg[sof + 7..sof + 9].copy_from_slice(&width.to_be_bytes());
         jpeg
-    }
-
-    #[derive(Debug, Clone)]
-    enum Edit {
-        Replace(usize, u8),
-        Insert(usize, u8),
-        Remove(usize),
-        Truncate(usize),
-    }
-
-    fn edits() -> impl Strategy<Value = Vec<Edit>> {
-        let edit = prop_oneof![
-            4 => (any::<usize>(), any::<u8>()).prop_map(|(i, b)| Edit::Replace(i, b)),
-            2 => (any::<usize>(), any::<u8>()).prop_map(|(i, b)| Edit::Insert(i, b)),
-            2 => any::<usize>().prop_map(Edit::Remove),
-            1 => any::<usize>().prop_map(Edit::Truncate),
-        ];
-        proptest::collection::vec(edit, 1..8)
-    }
-
-    fn mutate(mut bytes: Vec<u8>, edits: &[Edit]) -> Vec<u8> {
-        for edit in edits {
-            let n = bytes.len();
-            match *edit {
-                Edit::Replace(i, b) if n > 0 => bytes[i % n] = b,
-                Edit::Insert(i, b) => bytes.insert(i % (n + 1), b),
-                Edit::Remove(i) if n > 0 => {
-                    bytes.remove(i % n);
-                }
-                Edit::Truncate(i) => bytes.truncate(i % (n + 1)),
-                _ => {}
-            }
-        }
-        bytes
     }
 
     /// Decodes `bytes` both ways the page does; a result must respect the limits.

@@ -407,16 +407,8 @@ fn a_time_budget_ends_training_cleanly_with_the_best_checkpoint() {
 // data), never a panic. Through the binary: `TrainingConfig::load` has no library path.
 mod config_properties {
     use super::{hnet, scratch};
+    use hnet_mutations::{cases, mutate};
     use proptest::prelude::*;
-
-    fn cases(ci: u32) -> proptest::test_runner::Config {
-        proptest::test_runner::Config::with_cases(
-            std::env::var("PROPTEST_CASES")
-                .ok()
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(ci),
-        )
-    }
 
     /// Runs `hnet train` on a config file holding `bytes`, with no dataset: what it says.
     fn train_with_config(dir: &std::path::Path, bytes: &[u8]) -> Result<String, TestCaseError> {
@@ -458,40 +450,12 @@ mod config_properties {
         )
     }
 
-    #[derive(Debug, Clone)]
-    enum Edit {
-        Replace(usize, u8),
-        Insert(usize, u8),
-        Remove(usize),
-    }
-
-    fn mutate(mut bytes: Vec<u8>, edits: &[Edit]) -> Vec<u8> {
-        for edit in edits {
-            let n = bytes.len();
-            match *edit {
-                Edit::Replace(i, b) if n > 0 => bytes[i % n] = b,
-                Edit::Insert(i, b) => bytes.insert(i % (n + 1), b),
-                Edit::Remove(i) if n > 0 => {
-                    bytes.remove(i % n);
-                }
-                _ => {}
-            }
-        }
-        bytes
-    }
-
-    fn edits() -> impl Strategy<Value = Vec<Edit>> {
+    fn edits() -> impl Strategy<Value = Vec<hnet_mutations::Edit>> {
         // Digits and JSON punctuation make the edits land as other numbers and shapes.
-        let byte = prop_oneof![
+        hnet_mutations::edits_writing(prop_oneof![
             any::<u8>(),
             proptest::sample::select(b"0123456789-.e,:{}[]\"".to_vec())
-        ];
-        let edit = prop_oneof![
-            (any::<usize>(), byte.clone()).prop_map(|(i, b)| Edit::Replace(i, b)),
-            (any::<usize>(), byte).prop_map(|(i, b)| Edit::Insert(i, b)),
-            any::<usize>().prop_map(Edit::Remove),
-        ];
-        proptest::collection::vec(edit, 1..6)
+        ])
     }
 
     proptest! {

@@ -160,39 +160,9 @@ fn files_written_before_named_sizes_keep_their_height_and_width() {
 // error, never a panic or an unbounded allocation, and a saved network loads back exactly.
 // ---------------------------------------------------------------------------------------------
 
-/// Refuses any single allocation above 2 GiB, so that a file whose header claims a huge network
-/// aborts this test binary (a visible failure) instead of exhausting CI's memory.
-struct CappedAllocator;
-
-const ALLOCATION_CAP: usize = 2 << 30;
-
-// SAFETY: forwards to the system allocator; refusing (a null pointer) is allowed by `GlobalAlloc`.
-unsafe impl std::alloc::GlobalAlloc for CappedAllocator {
-    unsafe fn alloc(&self, layout: std::alloc::Layout) -> *mut u8 {
-        if layout.size() > ALLOCATION_CAP {
-            return std::ptr::null_mut();
-        }
-        unsafe { std::alloc::System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: std::alloc::Layout) {
-        unsafe { std::alloc::System.dealloc(ptr, layout) }
-    }
-    unsafe fn alloc_zeroed(&self, layout: std::alloc::Layout) -> *mut u8 {
-        if layout.size() > ALLOCATION_CAP {
-            return std::ptr::null_mut();
-        }
-        unsafe { std::alloc::System.alloc_zeroed(layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: std::alloc::Layout, new: usize) -> *mut u8 {
-        if new > ALLOCATION_CAP {
-            return std::ptr::null_mut();
-        }
-        unsafe { std::alloc::System.realloc(ptr, layout, new) }
-    }
-}
-
+/// A file whose header claims a huge network fails visibly (see `hnet_mutations`).
 #[global_allocator]
-static ALLOCATOR: CappedAllocator = CappedAllocator;
+static ALLOCATOR: hnet_mutations::CappedAllocator = hnet_mutations::CappedAllocator;
 
 mod properties {
     use std::collections::BTreeMap;
@@ -203,55 +173,9 @@ mod properties {
     use hnet_model::architectures::StereoModel;
     use hnet_model::weights;
     use hnet_model::{HNet, HNetConfig};
+    use hnet_mutations::{cases, edits, mutate_near_start};
     use hnet_units::ImageSize;
     use proptest::prelude::*;
-    use proptest::test_runner::Config;
-
-    fn cases(ci: u32) -> Config {
-        Config::with_cases(
-            std::env::var("PROPTEST_CASES")
-                .ok()
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(ci),
-        )
-    }
-
-    #[derive(Debug, Clone)]
-    enum Edit {
-        Replace(usize, u8),
-        Insert(usize, u8),
-        Remove(usize),
-        Truncate(usize),
-    }
-
-    fn edits() -> impl Strategy<Value = Vec<Edit>> {
-        let edit = prop_oneof![
-            4 => (any::<usize>(), any::<u8>()).prop_map(|(i, b)| Edit::Replace(i, b)),
-            2 => (any::<usize>(), any::<u8>()).prop_map(|(i, b)| Edit::Insert(i, b)),
-            2 => any::<usize>().prop_map(Edit::Remove),
-            1 => any::<usize>().prop_map(Edit::Truncate),
-        ];
-        proptest::collection::vec(edit, 1..8)
-    }
-
-    fn mutate(mut bytes: Vec<u8>, edits: &[Edit], window: usize) -> Vec<u8> {
-        // Edits land in the first `window` bytes (the header and metadata) half of the time,
-        // where a flip changes what the file claims rather than one weight's value.
-        for (k, edit) in edits.iter().enumerate() {
-            let n = bytes.len();
-            let span = if k % 2 == 0 { n.min(window) } else { n };
-            match *edit {
-                Edit::Replace(i, b) if span > 0 => bytes[i % span] = b,
-                Edit::Insert(i, b) => bytes.insert(i % (span + 1), b),
-                Edit::Remove(i) if span > 0 => {
-                    bytes.remove(i % span);
-                }
-                Edit::Truncate(i) => bytes.truncate(i % (n + 1)),
-                _ => {}
-            }
-        }
-        bytes
-    }
 
     fn small() -> HNetConfig {
         HNetConfig::new()
@@ -353,7 +277,7 @@ mod properties {
 
         #[test]
         fn a_mutated_weights_file_is_an_error_or_a_network(edits in edits()) {
-            load_every_way(&mutate(valid_file().to_vec(), &edits, 512));
+            load_every_way(&mutate_near_start(valid_file().to_vec(), &edits, 512));
         }
 
         #[test]

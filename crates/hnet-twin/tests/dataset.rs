@@ -290,6 +290,7 @@ fn headers_and_records_keep_every_float_bit_for_bit() {
 mod properties {
     use std::path::Path;
 
+    use hnet_mutations::{cases, edits, mutate};
     use hnet_twin::carm::CArm;
     use hnet_twin::dataset::{
         Dataset, DatasetHeader, HEADER_FILE, MANIFEST_FILE, ManifestRow, SAMPLES_DIR, Split,
@@ -304,53 +305,6 @@ mod properties {
     use hnet_twin::vec3::Vec3;
     use hnet_units::ImageSize;
     use proptest::prelude::*;
-    use proptest::test_runner::Config;
-
-    /// Cases per property in CI, unless `PROPTEST_CASES` says otherwise.
-    fn cases(ci: u32) -> Config {
-        Config::with_cases(
-            std::env::var("PROPTEST_CASES")
-                .ok()
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(ci),
-        )
-    }
-
-    /// One edit of a valid file: a byte replaced, inserted or removed, or the file cut short.
-    #[derive(Debug, Clone)]
-    enum Edit {
-        Replace(usize, u8),
-        Insert(usize, u8),
-        Remove(usize),
-        Truncate(usize),
-    }
-
-    fn edits() -> impl Strategy<Value = Vec<Edit>> {
-        let edit = prop_oneof![
-            4 => (any::<usize>(), any::<u8>()).prop_map(|(i, b)| Edit::Replace(i, b)),
-            2 => (any::<usize>(), any::<u8>()).prop_map(|(i, b)| Edit::Insert(i, b)),
-            2 => any::<usize>().prop_map(Edit::Remove),
-            1 => any::<usize>().prop_map(Edit::Truncate),
-        ];
-        proptest::collection::vec(edit, 1..8)
-    }
-
-    /// `bytes` with `edits` applied (positions taken modulo the length).
-    fn mutate(mut bytes: Vec<u8>, edits: &[Edit]) -> Vec<u8> {
-        for edit in edits {
-            let n = bytes.len();
-            match *edit {
-                Edit::Replace(i, b) if n > 0 => bytes[i % n] = b,
-                Edit::Insert(i, b) => bytes.insert(i % (n + 1), b),
-                Edit::Remove(i) if n > 0 => {
-                    bytes.remove(i % n);
-                }
-                Edit::Truncate(i) => bytes.truncate(i % (n + 1)),
-                _ => {}
-            }
-        }
-        bytes
-    }
 
     /// A finite `f64` of any magnitude, subnormals and signed zeros included.
     fn finite() -> impl Strategy<Value = f64> {

@@ -194,17 +194,8 @@ mod tests {
 
         use super::*;
 
-        fn cases() -> proptest::test_runner::Config {
-            proptest::test_runner::Config::with_cases(
-                std::env::var("PROPTEST_CASES")
-                    .ok()
-                    .and_then(|v| v.parse().ok())
-                    .unwrap_or(256),
-            )
-        }
-
         proptest! {
-            #![proptest_config(cases())]
+            #![proptest_config(hnet_mutations::cases(256))]
 
             #[test]
             fn sizes_round_trip_exactly_in_both_readers(width in any::<usize>(), height in any::<usize>()) {
