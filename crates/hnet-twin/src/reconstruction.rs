@@ -569,16 +569,7 @@ pub(crate) mod tests {
 
     /// Distance from `p` to the true centreline (the flexible section and its proximal shaft).
     pub(crate) fn distance_to_truth(shape: &RodShape, p: Vec3) -> f64 {
-        let mut curve = vec![shape.points_mm[0] - shape.tangents[0] * PROXIMAL_SHAFT_MM];
-        curve.extend_from_slice(&shape.points_mm);
-        curve
-            .windows(2)
-            .map(|w| {
-                let ab = w[1] - w[0];
-                let t = ((p - w[0]).dot(ab) / ab.dot(ab)).clamp(0.0, 1.0);
-                (p - (w[0] + ab * t)).norm()
-            })
-            .fold(f64::INFINITY, f64::min)
+        crate::rod_fit::distances_to_rod(shape, PROXIMAL_SHAFT_MM, &[p])[0]
     }
 
     #[test]
