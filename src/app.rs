@@ -12,6 +12,7 @@ use crate::components::{
     sources::Sources,
     stereo_view::StereoView,
 };
+use crate::error_text::with_causes;
 use crate::storage;
 use crate::studio::{Studio, install_reconstruction, load_model};
 use crate::workspace::Workspace;
@@ -43,11 +44,18 @@ pub fn App() -> impl IntoView {
                     studio.error(format!(
                         "{} saved pair(s) could not be read: {}",
                         damaged.len(),
-                        damaged.join("; ")
+                        damaged
+                            .iter()
+                            .map(|e| with_causes(e))
+                            .collect::<Vec<_>>()
+                            .join("; ")
                     ));
                 }
             }
-            Err(e) => studio.error(format!("saved pairs could not be read: {e}")),
+            Err(e) => studio.error(format!(
+                "saved pairs could not be read: {}",
+                with_causes(&e)
+            )),
         }
     });
     install_shortcuts(studio);

@@ -1,10 +1,77 @@
 //! What the page asks of the browser: reading the user's files, saving a download, the clock,
 //! and letting the page repaint before long work. Nothing here talks to a network.
+//!
+//! [`JsError`] is how every browser call's failure reaches Rust: the JS error's message, made
+//! once from the `JsValue` the call threw.
 
 use js_sys::{Array, Promise, Uint8Array};
 use wasm_bindgen::JsCast;
 use wasm_bindgen::prelude::*;
 use wasm_bindgen_futures::JsFuture;
+
+/// A browser call that failed: the JS error's message (or, for a call that gave something else
+/// than what was asked for, what was missing). The cause below the page's own errors.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{message}")]
+pub struct JsError {
+    /// What the browser said.
+    pub message: String,
+}
+
+impl JsError {
+    /// A failure the browser did not word itself (`what` is missing or not of the right kind).
+    pub fn missing(what: &str) -> Self {
+        Self {
+            message: what.to_string(),
+        }
+    }
+}
+
+impl From<JsValue> for JsError {
+    /// An `Error` (a `DOMException` too) gives its message, a string itself; anything else is
+    /// shown as the browser's console would.
+    fn from(value: JsValue) -> Self {
+        let message = match value.dyn_ref::<js_sys::Error>() {
+            Some(error) => String::from(error.message()),
+            None => value.as_string().unwrap_or_else(|| format!("{value:?}")),
+        };
+        Self { message }
+    }
+}
+
+/// A file the user picked or dropped that could not be read.
+#[derive(Debug, thiserror::Error)]
+#[error("{file}: cannot be read")]
+pub struct FileReadError {
+    /// The file's name.
+    pub file: String,
+    /// What the browser said.
+    #[source]
+    pub cause: JsError,
+}
+
+/// A picked file that could not be used: not read, or its contents refused by the reader it
+/// was given to (whose error names the file).
+#[derive(Debug, thiserror::Error)]
+pub enum PickedFileError<E> {
+    /// The browser could not read it.
+    #[error(transparent)]
+    Read(#[from] FileReadError),
+    /// Its contents cannot be used.
+    #[error(transparent)]
+    Content(E),
+}
+
+/// A download that the browser could not offer.
+#[derive(Debug, thiserror::Error)]
+#[error("cannot save {file}")]
+pub struct DownloadError {
+    /// The download's file name.
+    pub file: String,
+    /// What the browser said.
+    #[source]
+    pub cause: JsError,
+}
 
 /// Milliseconds since the page started (`performance.now()`).
 pub fn now_ms() -> f64 {
@@ -15,11 +82,23 @@ pub fn now_ms() -> f64 {
 }
 
 /// The bytes of a file the user picked or dropped.
-pub async fn read_file(file: &web_sys::File) -> Result<Vec<u8>, String> {
+pub async fn read_file(file: &web_sys::File) -> Result<Vec<u8>, FileReadError> {
     let buffer = JsFuture::from(file.array_buffer())
         .await
-        .map_err(|e| format!("{}: cannot be read ({e:?})", file.name()))?;
+        .map_err(|e| FileReadError {
+            file: file.name(),
+            cause: e.into(),
+        })?;
     Ok(Uint8Array::new(&buffer).to_vec())
+}
+
+/// Reads a picked file and hands its name and bytes to `read` (a decoder or a parser).
+pub async fn read_file_with<T, E>(
+    file: &web_sys::File,
+    read: impl FnOnce(&str, &[u8]) -> Result<T, E>,
+) -> Result<T, PickedFileError<E>> {
+    let bytes = read_file(file).await?;
+    read(&file.name(), &bytes).map_err(PickedFileError::Content)
 }
 
 /// The files of a file list, in order.
@@ -32,22 +111,27 @@ pub fn files(list: Option<web_sys::FileList>) -> Vec<web_sys::File> {
 
 /// Offers `bytes` as a download named `name` (a `blob:` URL on a temporary link; the file is
 /// written by the browser, nothing is sent anywhere).
-pub fn download(name: &str, bytes: &[u8], mime: &str) -> Result<(), String> {
-    let fail = |e: JsValue| format!("cannot save {name}: {e:?}");
+pub fn download(name: &str, bytes: &[u8], mime: &str) -> Result<(), DownloadError> {
+    offer_download(name, bytes, mime).map_err(|cause| DownloadError {
+        file: name.to_string(),
+        cause,
+    })
+}
+
+fn offer_download(name: &str, bytes: &[u8], mime: &str) -> Result<(), JsError> {
     let parts = Array::of1(&Uint8Array::from(bytes));
     let options = web_sys::BlobPropertyBag::new();
     options.set_type(mime);
-    let blob =
-        web_sys::Blob::new_with_u8_array_sequence_and_options(&parts, &options).map_err(fail)?;
-    let url = web_sys::Url::create_object_url_with_blob(&blob).map_err(fail)?;
-    let document = web_sys::window()
-        .and_then(|w| w.document())
-        .ok_or("no document")?;
+    let blob = web_sys::Blob::new_with_u8_array_sequence_and_options(&parts, &options)?;
+    let url = web_sys::Url::create_object_url_with_blob(&blob)?;
+    let window = web_sys::window().ok_or_else(|| JsError::missing("no window"))?;
+    let document = window
+        .document()
+        .ok_or_else(|| JsError::missing("no document"))?;
     let link: web_sys::HtmlAnchorElement = document
-        .create_element("a")
-        .map_err(fail)?
+        .create_element("a")?
         .dyn_into()
-        .map_err(|_| "cannot create a link".to_string())?;
+        .map_err(|_| JsError::missing("cannot create a link"))?;
     link.set_href(&url);
     link.set_download(name);
     link.click();
@@ -55,10 +139,7 @@ pub fn download(name: &str, bytes: &[u8], mime: &str) -> Result<(), String> {
     let revoke = Closure::once_into_js(move || {
         let _ = web_sys::Url::revoke_object_url(&url);
     });
-    web_sys::window()
-        .ok_or("no window")?
-        .set_timeout_with_callback_and_timeout_and_arguments_0(revoke.unchecked_ref(), 10_000)
-        .map_err(fail)?;
+    window.set_timeout_with_callback_and_timeout_and_arguments_0(revoke.unchecked_ref(), 10_000)?;
     Ok(())
 }
 

@@ -1,7 +1,9 @@
 //! Files the page ships with, fetched from its own origin (the CSP allows nothing else).
 
-use wasm_bindgen::JsCast;
+use wasm_bindgen::{JsCast, JsValue};
 use wasm_bindgen_futures::JsFuture;
+
+use crate::browser::JsError;
 
 /// Path of the bundled H-Net weights, relative to the page.
 pub const BUNDLED_WEIGHTS: &str = "assets/hnet-cpu.bpk";
@@ -13,27 +15,64 @@ pub const BUNDLED_FORCE_CAVEAT: &str = "The bundled weights were trained at the 
     accurate (catheter IoU 0.92) but their force only coarse (RMSE 0.085 N, R² 0.40): read the \
     arrows as a direction and a rough size, not a measurement.";
 
+/// A file of the page's own that could not be fetched.
+#[derive(Debug, thiserror::Error)]
+pub enum FetchError {
+    /// The request failed (no network, refused by the CSP, no answer).
+    #[error("cannot fetch {path}")]
+    Request {
+        /// The file, relative to the page.
+        path: String,
+        /// What the browser said.
+        #[source]
+        cause: JsError,
+    },
+    /// The server answered with an error.
+    #[error("fetching {path}: HTTP {status}")]
+    Status {
+        /// The file, relative to the page.
+        path: String,
+        /// The HTTP status.
+        status: u16,
+    },
+    /// The answer's body could not be read.
+    #[error("reading {path}")]
+    Body {
+        /// The file, relative to the page.
+        path: String,
+        /// What the browser said.
+        #[source]
+        cause: JsError,
+    },
+}
+
 /// Fetches `path` from the page's origin. `Ok(None)` when the server has no such file.
-pub async fn fetch_bytes(path: &str) -> Result<Option<Vec<u8>>, String> {
-    let window = web_sys::window().ok_or("no window")?;
-    let response = JsFuture::from(window.fetch_with_str(path))
+pub async fn fetch_bytes(path: &str) -> Result<Option<Vec<u8>>, FetchError> {
+    let request = |cause: JsError| FetchError::Request {
+        path: path.to_string(),
+        cause,
+    };
+    let body = |cause: JsValue| FetchError::Body {
+        path: path.to_string(),
+        cause: cause.into(),
+    };
+    let window = web_sys::window().ok_or_else(|| request(JsError::missing("no window")))?;
+    let response: web_sys::Response = JsFuture::from(window.fetch_with_str(path))
         .await
-        .map_err(|e| format!("cannot fetch {path}: {e:?}"))?;
-    let response: web_sys::Response = response
+        .map_err(|e| request(e.into()))?
         .dyn_into()
-        .map_err(|_| format!("fetching {path} gave no response"))?;
+        .map_err(|_| request(JsError::missing("the answer is not a response")))?;
     if response.status() == 404 {
         return Ok(None);
     }
     if !response.ok() {
-        return Err(format!("fetching {path}: HTTP {}", response.status()));
+        return Err(FetchError::Status {
+            path: path.to_string(),
+            status: response.status(),
+        });
     }
-    let buffer = JsFuture::from(
-        response
-            .array_buffer()
-            .map_err(|e| format!("reading {path}: {e:?}"))?,
-    )
-    .await
-    .map_err(|e| format!("reading {path}: {e:?}"))?;
+    let buffer = JsFuture::from(response.array_buffer().map_err(body)?)
+        .await
+        .map_err(body)?;
     Ok(Some(js_sys::Uint8Array::new(&buffer).to_vec()))
 }

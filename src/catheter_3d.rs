@@ -131,7 +131,7 @@ impl PairGeometry {
                 views, settings, ..
             } => {
                 let scene: SceneParams = serde_json::from_value(settings["scene"].clone())
-                    .map_err(|e| Catheter3dError::TwinSettings(e.to_string()))?;
+                    .map_err(Catheter3dError::TwinSettings)?;
                 let (rod, base) = scene.rod(&template);
                 Ok(Self {
                     views: *views,
@@ -243,14 +243,14 @@ impl Catheter3d {
 }
 
 /// Why the pair gives no 3D catheter.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[derive(Debug, thiserror::Error)]
 pub enum Catheter3dError {
     /// Neither label masks nor H-Net's masks.
     #[error("no masks to reconstruct from: label the catheter in both views, or run H-Net")]
     NoMasks,
     /// A twin pair whose recorded settings cannot be read.
-    #[error("the pair's twin settings cannot be read ({0})")]
-    TwinSettings(String),
+    #[error("the pair's twin settings cannot be read")]
+    TwinSettings(#[source] serde_json::Error),
     /// A view's mask gives no centreline (empty, two blobs, not one tube, too short).
     #[error("no centreline in {}", .masks.phrase())]
     Centreline {
@@ -447,10 +447,10 @@ mod tests {
             .map(|m| m.iter().map(|&v| f32::from(v) / 255.0).collect())
             .collect();
         pair.masks_labeled = false;
-        assert_eq!(
-            PairMasks::of(&pair, None).unwrap_err(),
-            Catheter3dError::NoMasks
-        );
+        assert!(matches!(
+            PairMasks::of(&pair, None),
+            Err(Catheter3dError::NoMasks)
+        ));
         let masks = PairMasks::of(&pair, Some([&soft[0], &soft[1]])).unwrap();
         assert_eq!(masks.source(), MaskSource::Predicted);
         let geometry = PairGeometry::of(&pair, &TwinControls::default()).unwrap();

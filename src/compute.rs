@@ -7,6 +7,8 @@ use js_sys::{Function, Promise, Reflect};
 use wasm_bindgen::{JsCast, JsValue};
 use wasm_bindgen_futures::JsFuture;
 
+use crate::error_text::with_causes;
+
 /// What the user asked for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum BackendChoice {
@@ -167,6 +169,6 @@ pub async fn select_device(choice: BackendChoice) -> (Device, Backend) {
             WEBGPU.set(Some(device.clone()));
             (device, Backend::WebGpu)
         }
-        Err(e) => cpu(format!("WebGPU could not be set up ({e})")),
+        Err(e) => cpu(format!("WebGPU could not be set up ({})", with_causes(&e))),
     }
 }

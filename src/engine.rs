@@ -6,14 +6,13 @@ use std::rc::Rc;
 use burn::module::Module;
 use burn::tensor::Device;
 use hnet_model::architectures::{ModelSpec, StereoModel};
-use hnet_model::inference::StereoPair;
-use hnet_model::weights::WeightsHeader;
-use hnet_model::{HNet, HNetConfig};
+use hnet_model::inference::{PredictError, StereoPair};
+use hnet_model::weights::{WeightsError, WeightsHeader};
+use hnet_model::{HNet, HNetConfig, HNetConfigError};
 use hnet_units::ImageSize;
 
 use crate::browser::{now_ms, yield_to_browser};
 use crate::compute::Backend;
-use crate::error_text::with_causes;
 use crate::imaging::{WORK_SIZE, rescale_mask, rescale_rgb};
 
 /// Input size of the untrained network the page falls back to when it ships no weights, pixels.
@@ -67,6 +66,39 @@ pub struct Prediction {
     pub backend: &'static str,
 }
 
+/// Why the page has no network to run, or the network gave no prediction.
+#[derive(Debug, thiserror::Error)]
+pub enum EngineError {
+    /// The weights file cannot be read (the error names it).
+    #[error(transparent)]
+    Weights(#[from] WeightsError),
+    /// The weights file holds another network.
+    #[error("{file}: holds `{architecture}` weights; the page runs H-Net")]
+    NotHnet {
+        /// The weights file's name.
+        file: String,
+        /// The network it holds.
+        architecture: String,
+    },
+    /// The network takes images that are not square.
+    #[error("{file}: the network takes {size} images; the page runs square inputs only")]
+    NotSquare {
+        /// The weights file's name.
+        file: String,
+        /// Its input size.
+        size: ImageSize,
+    },
+    /// The untrained fallback network cannot be built.
+    #[error("the untrained H-Net cannot be built")]
+    Untrained(#[source] HNetConfigError),
+    /// The forward pass or the read-back failed.
+    #[error(transparent)]
+    Predict(#[from] PredictError),
+    /// The network gave no prediction for the pair.
+    #[error("H-Net returned no prediction")]
+    NoPrediction,
+}
+
 impl Engine {
     /// An engine from a weights file's bytes; the file must hold H-Net weights for square
     /// images.
@@ -76,20 +108,19 @@ impl Engine {
         origin: WeightsOrigin,
         device: Device,
         backend: Backend,
-    ) -> Result<Self, String> {
-        let (model, spec, header) =
-            StereoModel::from_weights_bytes(&bytes, &device, name).map_err(|e| with_causes(&e))?;
+    ) -> Result<Self, EngineError> {
+        let (model, spec, header) = StereoModel::from_weights_bytes(&bytes, &device, name)?;
         let (StereoModel::Hnet(model), ModelSpec::Hnet(config)) = (model, spec) else {
-            return Err(format!(
-                "{name}: holds `{}` weights; the page runs H-Net",
-                header.architecture
-            ));
+            return Err(EngineError::NotHnet {
+                file: name.to_string(),
+                architecture: header.architecture,
+            });
         };
         if !config.image_size.is_square() {
-            return Err(format!(
-                "{name}: the network takes {} images; the page runs square inputs only",
-                config.image_size
-            ));
+            return Err(EngineError::NotSquare {
+                file: name.to_string(),
+                size: config.image_size,
+            });
         }
         Ok(Self {
             weights_name: name.to_string(),
@@ -116,9 +147,9 @@ impl Engine {
     }
 
     /// An untrained H-Net (paper architecture at [`FALLBACK_INPUT`] pixels).
-    pub fn untrained(device: Device, backend: Backend) -> Result<Self, String> {
+    pub fn untrained(device: Device, backend: Backend) -> Result<Self, EngineError> {
         let config = HNetConfig::new().with_image_size(ImageSize::square(FALLBACK_INPUT));
-        let model = config.init(&device).map_err(|e| with_causes(&e))?;
+        let model = config.init(&device).map_err(EngineError::Untrained)?;
         Ok(Self::without_file(
             model,
             config.image_size,
@@ -129,7 +160,11 @@ impl Engine {
 
     /// Runs H-Net on two [`WORK_SIZE`] RGB images, resizing them to the network's input and
     /// its masks back. Yields to the browser first so that the busy state is painted.
-    pub async fn infer(self: Rc<Self>, view_a: &[u8], view_b: &[u8]) -> Result<Prediction, String> {
+    pub async fn infer(
+        self: Rc<Self>,
+        view_a: &[u8],
+        view_b: &[u8],
+    ) -> Result<Prediction, EngineError> {
         let side = self.input.width;
         let (a, b) = (
             rescale_rgb(view_a, WORK_SIZE, side),
@@ -147,13 +182,9 @@ impl Engine {
                 self.input,
                 &self.device,
             )
-            .await
-            .map_err(|e| with_causes(&e))?;
+            .await?;
         let millis = now_ms() - start;
-        let p = out
-            .into_iter()
-            .next()
-            .ok_or("H-Net returned no prediction")?;
+        let p = out.into_iter().next().ok_or(EngineError::NoPrediction)?;
         Ok(Prediction {
             mask_a: rescale_mask(&p.mask_a, side, WORK_SIZE),
             mask_b: rescale_mask(&p.mask_b, side, WORK_SIZE),

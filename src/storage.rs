@@ -8,26 +8,88 @@ use js_sys::{Array, Object, Promise, Reflect, Uint8Array};
 use wasm_bindgen::JsCast;
 use wasm_bindgen::prelude::*;
 use wasm_bindgen_futures::JsFuture;
-use web_sys::{IdbDatabase, IdbRequest, IdbTransactionMode};
+use web_sys::{IdbDatabase, IdbObjectStore, IdbRequest, IdbTransactionMode};
 
 use hnet_twin::dataset::{ImageRef, Split, encode_png};
 
-use crate::error_text::with_causes;
+use crate::browser::JsError;
 use crate::imaging::WORK_SIZE;
 use crate::workspace::{LabeledPair, PairSource};
 
 const DATABASE: &str = "hnet-studio";
 const STORE: &str = "pairs";
 
-fn js_error(context: &str, e: JsValue) -> String {
-    format!(
-        "{context}: {}",
-        e.as_string().unwrap_or_else(|| format!("{e:?}"))
-    )
+/// The browser's storage of pairs could not be used.
+#[derive(Debug, thiserror::Error)]
+pub enum StorageError {
+    /// The browser offers no IndexedDB (or not to this page).
+    #[error("this browser has no IndexedDB")]
+    NoIndexedDb,
+    /// The database could not be opened.
+    #[error("browser storage (IndexedDB `hnet-studio`) cannot be opened")]
+    Open(#[source] JsError),
+    /// A request to the store of pairs was refused or failed.
+    #[error("{action} the browser's store `pairs` failed")]
+    Request {
+        /// What was asked: `saving in`, `deleting from` or `reading`.
+        action: &'static str,
+        /// What the browser said.
+        #[source]
+        cause: JsError,
+    },
+    /// A pair's metadata could not be written as JSON.
+    #[error("{id}: its metadata cannot be written")]
+    Metadata {
+        /// The pair.
+        id: String,
+        /// Why.
+        #[source]
+        cause: serde_json::Error,
+    },
 }
 
-/// Waits for an IndexedDB request to succeed or fail.
-async fn settled(request: &IdbRequest) -> Result<JsValue, String> {
+impl StorageError {
+    /// The error of a failed request, for `map_err`.
+    fn request(action: &'static str) -> impl Fn(JsValue) -> Self {
+        move |e| Self::Request {
+            action,
+            cause: e.into(),
+        }
+    }
+}
+
+/// A saved record that cannot be read back as a pair: it is skipped (and left in storage).
+#[derive(Debug, thiserror::Error)]
+pub enum DamagedRecord {
+    /// It has no metadata.
+    #[error("a stored pair has no metadata")]
+    NoMetadata,
+    /// Its metadata is not what this page writes.
+    #[error("a stored pair's metadata cannot be read")]
+    Metadata(#[source] serde_json::Error),
+    /// An image or mask is missing.
+    #[error("stored pair {id} lacks `{key}`")]
+    Missing {
+        /// The pair.
+        id: String,
+        /// The image's key.
+        key: &'static str,
+    },
+    /// An image or mask is not a PNG.
+    #[error("stored pair {id}: `{key}` is damaged")]
+    Image {
+        /// The pair.
+        id: String,
+        /// The image's key.
+        key: &'static str,
+        /// The decoder's error.
+        #[source]
+        cause: image::ImageError,
+    },
+}
+
+/// Waits for an IndexedDB request to succeed or fail (with the request's `DOMException`).
+async fn settled(request: &IdbRequest) -> Result<JsValue, JsValue> {
     let promise = Promise::new(&mut |resolve, reject| {
         let ok_request = request.clone();
         let on_success = Closure::once_into_js(move |_: web_sys::Event| {
@@ -38,31 +100,27 @@ async fn settled(request: &IdbRequest) -> Result<JsValue, String> {
         });
         let err_request = request.clone();
         let on_error = Closure::once_into_js(move |_: web_sys::Event| {
-            let message = err_request
+            let error = err_request
                 .error()
                 .ok()
                 .flatten()
-                .map(|e| e.message())
-                .unwrap_or_else(|| "unknown error".into());
-            let _ = reject.call1(&JsValue::NULL, &JsValue::from_str(&message));
+                .map_or_else(|| JsValue::from_str("unknown error"), JsValue::from);
+            let _ = reject.call1(&JsValue::NULL, &error);
         });
         request.set_onsuccess(Some(on_success.unchecked_ref()));
         request.set_onerror(Some(on_error.unchecked_ref()));
     });
-    JsFuture::from(promise)
-        .await
-        .map_err(|e| js_error("browser storage", e))
+    JsFuture::from(promise).await
 }
 
-async fn open() -> Result<IdbDatabase, String> {
+async fn open() -> Result<IdbDatabase, StorageError> {
+    let open_error = |e: JsValue| StorageError::Open(e.into());
     let factory = web_sys::window()
-        .ok_or("no window")?
+        .ok_or_else(|| StorageError::Open(JsError::missing("no window")))?
         .indexed_db()
-        .map_err(|e| js_error("browser storage", e))?
-        .ok_or("this browser has no IndexedDB")?;
-    let request = factory
-        .open_with_u32(DATABASE, 1)
-        .map_err(|e| js_error("browser storage", e))?;
+        .map_err(open_error)?
+        .ok_or(StorageError::NoIndexedDb)?;
+    let request = factory.open_with_u32(DATABASE, 1).map_err(open_error)?;
     let upgrade = request.clone();
     let on_upgrade = Closure::once_into_js(move |_: web_sys::Event| {
         if let Ok(result) = upgrade.result()
@@ -74,9 +132,10 @@ async fn open() -> Result<IdbDatabase, String> {
     });
     request.set_onupgradeneeded(Some(on_upgrade.unchecked_ref()));
     settled(&request)
-        .await?
+        .await
+        .map_err(open_error)?
         .dyn_into::<IdbDatabase>()
-        .map_err(|_| "browser storage did not open".to_string())
+        .map_err(|_| StorageError::Open(JsError::missing("no database was opened")))
 }
 
 fn png(pixels: &[u8], channels: usize) -> Uint8Array {
@@ -101,7 +160,7 @@ struct Metadata {
 }
 
 /// Saves (or replaces) a pair.
-pub async fn save_pair(pair: &LabeledPair) -> Result<(), String> {
+pub async fn save_pair(pair: &LabeledPair) -> Result<(), StorageError> {
     let db = open().await?;
     let record = Object::new();
     let metadata = serde_json::to_string(&Metadata {
@@ -111,44 +170,65 @@ pub async fn save_pair(pair: &LabeledPair) -> Result<(), String> {
         force_n: pair.force_n,
         split: pair.split,
     })
-    .map_err(|e| with_causes(&e))?;
+    .map_err(|cause| StorageError::Metadata {
+        id: pair.id.clone(),
+        cause,
+    })?;
+    let failed = StorageError::request("saving in");
     let set = |key: &str, value: &JsValue| Reflect::set(&record, &key.into(), value);
-    set("metadata", &JsValue::from_str(&metadata)).map_err(|e| js_error("saving", e))?;
-    set("view_a", &png(&pair.view_a, 3)).map_err(|e| js_error("saving", e))?;
-    set("view_b", &png(&pair.view_b, 3)).map_err(|e| js_error("saving", e))?;
-    set("mask_a", &png(&pair.mask_a, 1)).map_err(|e| js_error("saving", e))?;
-    set("mask_b", &png(&pair.mask_b, 1)).map_err(|e| js_error("saving", e))?;
-    let store = db
-        .transaction_with_str_and_mode(STORE, IdbTransactionMode::Readwrite)
-        .and_then(|t| t.object_store(STORE))
-        .map_err(|e| js_error("saving", e))?;
-    let request = store
-        .put_with_key(&record, &JsValue::from_str(&pair.id))
-        .map_err(|e| js_error("saving", e))?;
-    settled(&request).await.map(|_| ())
+    set("metadata", &JsValue::from_str(&metadata)).map_err(&failed)?;
+    set("view_a", &png(&pair.view_a, 3)).map_err(&failed)?;
+    set("view_b", &png(&pair.view_b, 3)).map_err(&failed)?;
+    set("mask_a", &png(&pair.mask_a, 1)).map_err(&failed)?;
+    set("mask_b", &png(&pair.mask_b, 1)).map_err(&failed)?;
+    let request = store(&db, IdbTransactionMode::Readwrite)
+        .and_then(|store| store.put_with_key(&record, &JsValue::from_str(&pair.id)))
+        .map_err(&failed)?;
+    settled(&request).await.map_err(failed)?;
+    Ok(())
+}
+
+/// The store of pairs, in a transaction of `mode`.
+fn store(db: &IdbDatabase, mode: IdbTransactionMode) -> Result<IdbObjectStore, JsValue> {
+    db.transaction_with_str_and_mode(STORE, mode)?
+        .object_store(STORE)
 }
 
 /// Deletes a pair.
-pub async fn delete_pair(id: &str) -> Result<(), String> {
+pub async fn delete_pair(id: &str) -> Result<(), StorageError> {
     let db = open().await?;
-    let store = db
-        .transaction_with_str_and_mode(STORE, IdbTransactionMode::Readwrite)
-        .and_then(|t| t.object_store(STORE))
-        .map_err(|e| js_error("deleting", e))?;
-    let request = store
-        .delete(&JsValue::from_str(id))
-        .map_err(|e| js_error("deleting", e))?;
-    settled(&request).await.map(|_| ())
+    let failed = StorageError::request("deleting from");
+    let request = store(&db, IdbTransactionMode::Readwrite)
+        .and_then(|store| store.delete(&JsValue::from_str(id)))
+        .map_err(&failed)?;
+    settled(&request).await.map_err(failed)?;
+    Ok(())
 }
 
-fn decode(value: &JsValue, key: &str, channels: usize) -> Result<Vec<u8>, String> {
+/// The image or mask `key` of the stored pair `id`, as it was saved.
+fn decode(
+    value: &JsValue,
+    id: &str,
+    key: &'static str,
+    channels: usize,
+) -> Result<Vec<u8>, DamagedRecord> {
+    let missing = || DamagedRecord::Missing {
+        id: id.to_string(),
+        key,
+    };
     let bytes = Reflect::get(value, &key.into())
-        .map_err(|e| js_error("reading", e))?
+        .map_err(|_| missing())?
         .dyn_into::<Uint8Array>()
-        .map_err(|_| format!("stored pair lacks `{key}`"))?
+        .map_err(|_| missing())?
         .to_vec();
-    let image = image::load_from_memory_with_format(&bytes, image::ImageFormat::Png)
-        .map_err(|e| format!("stored `{key}` is damaged: {e}"))?;
+    let image =
+        image::load_from_memory_with_format(&bytes, image::ImageFormat::Png).map_err(|cause| {
+            DamagedRecord::Image {
+                id: id.to_string(),
+                key,
+                cause,
+            }
+        })?;
     Ok(if channels == 3 {
         image.to_rgb8().into_raw()
     } else {
@@ -156,46 +236,52 @@ fn decode(value: &JsValue, key: &str, channels: usize) -> Result<Vec<u8>, String
     })
 }
 
+/// A stored record as a pair.
+fn read_record(value: &JsValue) -> Result<LabeledPair, DamagedRecord> {
+    let metadata: Metadata = serde_json::from_str(
+        &Reflect::get(value, &"metadata".into())
+            .ok()
+            .and_then(|m| m.as_string())
+            .ok_or(DamagedRecord::NoMetadata)?,
+    )
+    .map_err(DamagedRecord::Metadata)?;
+    let id = &metadata.id;
+    Ok(LabeledPair {
+        view_a: decode(value, id, "view_a", 3)?,
+        view_b: decode(value, id, "view_b", 3)?,
+        mask_a: decode(value, id, "mask_a", 1)?,
+        mask_b: decode(value, id, "mask_b", 1)?,
+        id: metadata.id,
+        source: metadata.source,
+        masks_labeled: metadata.masks_labeled,
+        force_n: metadata.force_n,
+        split: metadata.split,
+    })
+}
+
 /// Loads every saved pair, sorted by id. Damaged records are skipped and reported.
-pub async fn load_pairs() -> Result<(Vec<LabeledPair>, Vec<String>), String> {
+pub async fn load_pairs() -> Result<(Vec<LabeledPair>, Vec<DamagedRecord>), StorageError> {
     let db = open().await?;
-    let store = db
-        .transaction_with_str(STORE)
-        .and_then(|t| t.object_store(STORE))
-        .map_err(|e| js_error("reading", e))?;
-    let request = store.get_all().map_err(|e| js_error("reading", e))?;
+    let failed = StorageError::request("reading");
+    let request = store(&db, IdbTransactionMode::Readonly)
+        .and_then(|store| store.get_all())
+        .map_err(&failed)?;
     let records: Array = settled(&request)
-        .await?
+        .await
+        .map_err(&failed)?
         .dyn_into()
-        .map_err(|_| "stored pairs are not a list".to_string())?;
+        .map_err(|_| StorageError::Request {
+            action: "reading",
+            cause: JsError::missing("the stored pairs are not a list"),
+        })?;
     let mut pairs = Vec::new();
-    let mut problems = Vec::new();
+    let mut damaged = Vec::new();
     for value in records.iter() {
-        let parsed = (|| -> Result<LabeledPair, String> {
-            let metadata: Metadata = serde_json::from_str(
-                &Reflect::get(&value, &"metadata".into())
-                    .ok()
-                    .and_then(|m| m.as_string())
-                    .ok_or("no metadata")?,
-            )
-            .map_err(|e| with_causes(&e))?;
-            Ok(LabeledPair {
-                id: metadata.id,
-                source: metadata.source,
-                view_a: decode(&value, "view_a", 3)?,
-                view_b: decode(&value, "view_b", 3)?,
-                mask_a: decode(&value, "mask_a", 1)?,
-                mask_b: decode(&value, "mask_b", 1)?,
-                masks_labeled: metadata.masks_labeled,
-                force_n: metadata.force_n,
-                split: metadata.split,
-            })
-        })();
-        match parsed {
+        match read_record(&value) {
             Ok(pair) => pairs.push(pair),
-            Err(e) => problems.push(e),
+            Err(e) => damaged.push(e),
         }
     }
     pairs.sort_by(|a, b| a.id.cmp(&b.id));
-    Ok((pairs, problems))
+    Ok((pairs, damaged))
 }

@@ -9,10 +9,10 @@ use std::rc::Rc;
 
 use leptos::prelude::*;
 
-use crate::bundled;
+use crate::bundled::{self, FetchError};
 use crate::catheter_3d::{Catheter3d, PairGeometry, PairMasks, pair_views, reconstruct_pair};
 use crate::compute::{self, BackendChoice};
-use crate::engine::{Engine, Prediction, WeightsOrigin};
+use crate::engine::{Engine, EngineError, Prediction, WeightsOrigin};
 use crate::error_text::with_causes;
 use crate::orbit_camera::OrbitCamera;
 use crate::storage;
@@ -266,7 +266,10 @@ impl Studio {
                     text: format!("{id} deleted"),
                     undo: Some(Undoable::Deletion(Box::new(removed))),
                 })),
-                Err(e) => studio.error(format!("{id}: not deleted from the browser: {e}")),
+                Err(e) => studio.error(format!(
+                    "{id}: not deleted from the browser: {}",
+                    with_causes(&e)
+                )),
             }
         });
         self.run_model();
@@ -322,7 +325,11 @@ impl Studio {
         let studio = *self;
         leptos::task::spawn_local(async move {
             if let Err(e) = storage::save_pair(&pair).await {
-                studio.error(format!("{}: not saved in the browser: {e}", pair.id));
+                studio.error(format!(
+                    "{}: not saved in the browser: {}",
+                    pair.id,
+                    with_causes(&e)
+                ));
             }
         });
     }
@@ -380,7 +387,7 @@ impl Studio {
                 Ok(prediction) => studio.predictions.update(|p| {
                     p.insert(id, prediction);
                 }),
-                Err(e) => studio.error(format!("H-Net failed on {id}: {e}")),
+                Err(e) => studio.error(format!("H-Net failed on {id}: {}", with_causes(&e))),
             }
             studio.busy.set(None);
             if studio.rerun.get_untracked() {
@@ -426,8 +433,9 @@ impl Studio {
                 self.draft.set(Some(pair));
             }
             Err(e) => self.error(format!(
-                "the catheter does not settle under this load ({e}); try a smaller force or a \
-                 stiffer catheter"
+                "the catheter does not settle under this load ({}); try a smaller force or a \
+                 stiffer catheter",
+                with_causes(&e)
             )),
         }
     }
@@ -513,11 +521,23 @@ impl Studio {
     }
 }
 
-/// Which backend to run on.
+/// Why no model could be loaded.
+#[derive(Debug, thiserror::Error)]
+enum LoadError {
+    /// The bundled weights could not be fetched.
+    #[error(transparent)]
+    Fetch(#[from] FetchError),
+    /// The weights give no network the page can run.
+    #[error(transparent)]
+    Engine(#[from] EngineError),
+}
+
+/// The engine of `weights` (else the bundled weights, else an untrained H-Net) on the backend
+/// the user chose.
 async fn load_engine(
     studio: Studio,
     weights: Option<(Rc<[u8]>, String, WeightsOrigin)>,
-) -> Result<Engine, String> {
+) -> Result<Engine, LoadError> {
     let (device, backend) = compute::select_device(studio.backend_choice.get_untracked()).await;
     let weights = match weights {
         Some(w) => Some(w),
@@ -531,10 +551,10 @@ async fn load_engine(
                 )
             }),
     };
-    match weights {
-        Some((bytes, name, origin)) => Engine::from_weights(bytes, &name, origin, device, backend),
-        None => Engine::untrained(device, backend),
-    }
+    Ok(match weights {
+        Some((bytes, name, origin)) => Engine::from_weights(bytes, &name, origin, device, backend)?,
+        None => Engine::untrained(device, backend)?,
+    })
 }
 
 /// Loads the model (bundled weights, or `weights`) on the chosen backend. On failure the model
@@ -557,13 +577,16 @@ pub fn load_model(studio: Studio, weights: Option<(Rc<[u8]>, String, WeightsOrig
                 studio.predictions.set(HashMap::new());
                 studio.run_model();
             }
-            Err(e) => match previous {
-                ModelState::Ready(engine) => {
-                    studio.model.set(ModelState::Ready(engine.clone()));
-                    studio.error(format!("{e}. Still using {}.", engine.weights_name));
+            Err(e) => {
+                let text = with_causes(&e);
+                match previous {
+                    ModelState::Ready(engine) => {
+                        studio.model.set(ModelState::Ready(engine.clone()));
+                        studio.error(format!("{text}. Still using {}.", engine.weights_name));
+                    }
+                    _ => studio.model.set(ModelState::Failed(text)),
                 }
-                _ => studio.model.set(ModelState::Failed(e)),
-            },
+            }
         }
     });
 }

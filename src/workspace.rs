@@ -538,18 +538,42 @@ pub struct ForceLabelError {
     pub table: ForceTableError,
 }
 
+/// A typed force component that is not a number of newtons.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TypedForceError {
+    /// Nothing was typed.
+    #[error("{axis} is empty: enter a number of newtons")]
+    Empty {
+        /// The component (`Fx`, `Fy` or `Fz`).
+        axis: String,
+    },
+    /// What was typed is not a finite number (of f32's range).
+    #[error("{axis} is `{text}`, not a number of newtons")]
+    NotNewtons {
+        /// The component (`Fx`, `Fy` or `Fz`).
+        axis: String,
+        /// What was typed, trimmed.
+        text: String,
+    },
+}
+
 /// Reads one typed force component in newtons (`axis` names it in the message), by the rule of
 /// [`hnet_twin::force_table::parse_newtons`].
-pub fn parse_newtons(axis: &str, text: &str) -> Result<f32, String> {
+pub fn parse_newtons(axis: &str, text: &str) -> Result<f32, TypedForceError> {
     let trimmed = text.trim();
     if trimmed.is_empty() {
-        return Err(format!("{axis} is empty: enter a number of newtons"));
+        return Err(TypedForceError::Empty {
+            axis: axis.to_string(),
+        });
     }
     hnet_twin::force_table::parse_newtons(trimmed)
         .map(|v| v as f32)
         // A finite f64 beyond f32's range (1e39) would become an infinite label.
         .filter(|v| v.is_finite())
-        .ok_or_else(|| format!("{axis} is `{trimmed}`, not a number of newtons"))
+        .ok_or_else(|| TypedForceError::NotNewtons {
+            axis: axis.to_string(),
+            text: trimmed.to_string(),
+        })
 }
 
 /// Why a force label is implausible (see [`implausible_tip_force`]), or `None`.
@@ -751,12 +775,12 @@ mod tests {
         assert_eq!(parse_newtons("Fx", "0,2"), Ok(0.2));
         assert_eq!(parse_newtons("Fx", ".5"), Ok(0.5));
         assert_eq!(
-            parse_newtons("Fy", ""),
-            Err("Fy is empty: enter a number of newtons".into())
+            parse_newtons("Fy", "").unwrap_err().to_string(),
+            "Fy is empty: enter a number of newtons"
         );
         assert_eq!(
-            parse_newtons("Fz", "abc"),
-            Err("Fz is `abc`, not a number of newtons".into())
+            parse_newtons("Fz", "abc").unwrap_err().to_string(),
+            "Fz is `abc`, not a number of newtons"
         );
         assert!(parse_newtons("Fz", "inf").is_err());
         assert!(implausible_label([5.0, 0.0, 0.0]).is_some());
@@ -810,7 +834,7 @@ mod tests {
 #[test]
 fn typed_forces_beyond_f32_are_refused() {
     let err = parse_newtons("Fx", "6445156245511322000000000000000000000000").unwrap_err();
-    assert!(err.contains("not a number of newtons"), "{err}");
+    assert!(err.to_string().contains("not a number of newtons"), "{err}");
     assert!(parse_newtons("Fx", "1e39").is_err());
     assert_eq!(parse_newtons("Fx", "0.25"), Ok(0.25));
 }

@@ -8,13 +8,14 @@ use std::rc::Rc;
 
 use burn::tensor::{Device, Tensor, TensorData};
 use hnet_model::{HNet, HNetConfig};
-use hnet_studio::browser::yield_to_browser;
+use hnet_studio::browser::{JsError, yield_to_browser};
 use hnet_studio::compute::{Backend, BackendChoice, select_device};
 use hnet_studio::engine::{Engine, WeightsOrigin};
+use hnet_studio::error_text::with_causes;
 use hnet_studio::imaging::WORK_SIZE;
 use hnet_studio::storage;
 use hnet_studio::twin_live::{TwinControls, XrayBackground};
-use wasm_bindgen::JsCast;
+use wasm_bindgen::{JsCast, JsValue};
 use wasm_bindgen_test::*;
 
 wasm_bindgen_test_configure!(run_in_browser);
@@ -143,7 +144,24 @@ async fn weights_of_another_network_are_refused_by_name() {
     )
     .err()
     .unwrap();
-    assert!(err.contains("junk.bpk"), "{err}");
+    let text = with_causes(&err);
+    assert!(text.starts_with("weights file 'junk.bpk': "), "{text}");
+}
+
+/// A browser call's failure reaches the page as the JS error's own message.
+#[wasm_bindgen_test]
+fn js_errors_keep_the_browsers_message() {
+    let message = |value: JsValue| JsError::from(value).message;
+    assert_eq!(message(js_sys::Error::new("boom").into()), "boom");
+    assert_eq!(
+        message(
+            web_sys::DomException::new_with_message("quota exceeded")
+                .unwrap()
+                .into()
+        ),
+        "quota exceeded"
+    );
+    assert_eq!(message(JsValue::from_str("refused")), "refused");
 }
 
 #[wasm_bindgen_test]

@@ -6,7 +6,7 @@
 use leptos::prelude::*;
 use wasm_bindgen::{Clamped, JsCast};
 
-use crate::browser::{files, read_file};
+use crate::browser::{files, read_file_with};
 use crate::error_text::with_causes;
 use crate::imaging::decode_radiograph;
 use crate::keymap::{self, Command, Scope};
@@ -239,12 +239,7 @@ pub fn Composer() -> impl IntoView {
         };
         input.set_value("");
         leptos::task::spawn_local(async move {
-            let result = async {
-                let bytes = read_file(&file).await?;
-                decode_radiograph(&file.name(), &bytes).map_err(|e| with_causes(&e))
-            }
-            .await;
-            match result {
+            match read_file_with(&file, decode_radiograph).await {
                 Ok(image) => {
                     let (style, seed) = background.with_untracked(|bg| (bg.style, bg.seed));
                     let mut bg = XrayBackground::radiograph(&file.name(), image);
@@ -254,7 +249,7 @@ pub fn Composer() -> impl IntoView {
                     rerender();
                     studio.info(format!("{} is the background source", file.name()));
                 }
-                Err(e) => studio.error(e),
+                Err(e) => studio.error(with_causes(&e)),
             }
         });
     };

@@ -5,7 +5,7 @@
 
 use leptos::prelude::*;
 
-use crate::browser::{files, read_file};
+use crate::browser::{files, read_file_with};
 use crate::bundled::BUNDLED_FORCE_CAVEAT;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
@@ -79,7 +79,7 @@ pub fn ForcePanel() -> impl IntoView {
             match parse_newtons(AXES[axis], text) {
                 Ok(v) => force[axis] = v,
                 Err(e) => {
-                    studio.error(e);
+                    studio.error(with_causes(&e));
                     return;
                 }
             }
@@ -96,11 +96,7 @@ pub fn ForcePanel() -> impl IntoView {
         };
         input.set_value("");
         leptos::task::spawn_local(async move {
-            let labels = match read_file(&file).await {
-                Ok(bytes) => parse_force_labels(&file.name(), &bytes).map_err(|e| with_causes(&e)),
-                Err(e) => Err(e),
-            };
-            match labels {
+            match read_file_with(&file, parse_force_labels).await {
                 Ok(labels) => {
                     let mut result = (0, Vec::new());
                     studio
@@ -120,7 +116,7 @@ pub fn ForcePanel() -> impl IntoView {
                         ));
                     }
                 }
-                Err(e) => studio.error(e),
+                Err(e) => studio.error(with_causes(&e)),
             }
         });
     };

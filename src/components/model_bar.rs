@@ -8,6 +8,7 @@ use leptos::prelude::*;
 use crate::browser::{files, read_file};
 use crate::compute::BackendChoice;
 use crate::engine::WeightsOrigin;
+use crate::error_text::with_causes;
 use crate::studio::{ModelState, Studio, load_model};
 
 /// The model bar.
@@ -46,7 +47,7 @@ pub fn ModelBar() -> impl IntoView {
                     studio,
                     Some((Rc::<[u8]>::from(bytes), file.name(), WeightsOrigin::File)),
                 ),
-                Err(e) => studio.error(e),
+                Err(e) => studio.error(with_causes(&e)),
             }
         });
     };

@@ -4,6 +4,7 @@
 use leptos::prelude::*;
 
 use crate::browser::download;
+use crate::error_text::with_causes;
 use crate::export::{DATASET_NAME, dataset_zip};
 use crate::studio::Studio;
 use crate::workspace::PairSource;
@@ -63,10 +64,10 @@ pub fn PairList() -> impl IntoView {
                             None => studio.info(text),
                         }
                     }
-                    Err(e) => studio.error(e),
+                    Err(e) => studio.error(with_causes(&e)),
                 }
             }
-            Err(e) => studio.error(e.to_string()),
+            Err(e) => studio.error(with_causes(&e)),
         }
     };
     // Deleting asks first; the notice then offers to undo it. The question is about the pair on

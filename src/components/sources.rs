@@ -4,10 +4,10 @@
 use hnet_twin::scene::Modality;
 use leptos::prelude::*;
 
-use crate::browser::{files, read_file};
+use crate::browser::{PickedFileError, files, read_file_with};
 use crate::components::composer::Composer;
 use crate::error_text::with_causes;
-use crate::imaging::{WORK_SIZE, decode_to_rgb};
+use crate::imaging::{ImageError, WORK_SIZE, decode_to_rgb};
 use crate::keymap::{self, Command, Scope};
 use crate::studio::{SourceTab, Studio};
 use crate::twin_live::TwinControls;
@@ -89,11 +89,11 @@ pub fn Sources() -> impl IntoView {
 type PickedView = (String, Vec<u8>);
 
 /// Reads and decodes one image file at the working size; the error names the file.
-async fn decode_view(file: &web_sys::File) -> Result<PickedView, String> {
-    let name = file.name();
-    let bytes = read_file(file).await?;
-    let rgb = decode_to_rgb(&name, &bytes, WORK_SIZE).map_err(|e| with_causes(&e))?;
-    Ok((name, rgb))
+async fn decode_view(file: &web_sys::File) -> Result<PickedView, PickedFileError<ImageError>> {
+    read_file_with(file, |name, bytes| {
+        Ok((name.to_string(), decode_to_rgb(name, bytes, WORK_SIZE)?))
+    })
+    .await
 }
 
 /// Adds the pair of two decoded views to the workspace and runs H-Net on it.
@@ -128,7 +128,7 @@ fn load_files(studio: Studio, mut picked: Vec<web_sys::File>) {
         let views = match (decode_view(&picked[0]).await, decode_view(&picked[1]).await) {
             (Ok(a), Ok(b)) => [a, b],
             (Err(e), _) | (_, Err(e)) => {
-                studio.error(e);
+                studio.error(with_causes(&e));
                 return;
             }
         };
@@ -158,7 +158,7 @@ fn UploadPair() -> impl IntoView {
                     Ok(decoded) => decoded,
                     Err(e) => {
                         picked.try_update(|p| p[view] = None);
-                        studio.error(format!("view {letter}: {e}"));
+                        studio.error(format!("view {letter}: {}", with_causes(&e)));
                         return;
                     }
                 };
