@@ -11,11 +11,19 @@ Measures, on the CPU with a fixed thread count:
 With --layers, instead times each convolution of the shared encoder-decoder at the shapes a
 training step gives it (forward, weight gradient, input gradient), as `hnet bench layers` does.
 
+With --onnx PATH, instead exports the network for inference to ONNX: one stereo pair (batch 1) of
+--size x --size RGB images in [0, 1] in (`view_a`, `view_b`, each [1, 3, H, W]), the two mask
+probabilities (`mask_a`, `mask_b`, [1, 1, H, W], after the sigmoid) and the force (`force`,
+[1, 3]) out, as the page's `HNet::predict_async` computes them; weights from seed 0 (the time
+does not depend on them). end2end/ort-bench/ times it in ONNX Runtime Web (bench/README.md).
+
 Usage: python bench/pytorch_hnet.py --size 64 --batch 8 --threads 2 [--layers] [--json]
+       python bench/pytorch_hnet.py --size 64 --onnx PATH
 """
 
 import argparse
 import json
+import os
 import time
 
 import torch
@@ -184,6 +192,65 @@ def report_layers(args):
           f"{totals['total_input_grad_ms']:11.1f}")
 
 
+class Inference(nn.Module):
+    """H-Net as the page runs it: mask probabilities (sigmoid of the logits) and the force."""
+
+    def __init__(self, model):
+        super().__init__()
+        self.model = model
+
+    def forward(self, view_a, view_b):
+        logits_a, logits_b, force = self.model(view_a, view_b)
+        return torch.sigmoid(logits_a), torch.sigmoid(logits_b), force
+
+
+# Every operator H-Net needs (Conv, ConvTranspose, MaxPool, ReduceMean, Gemm, ...) is in opset
+# 18, which ONNX Runtime Web 1.30 runs (end2end/ort-bench); torch 2.15 would default to 20.
+ONNX_OPSET = 18
+
+
+def export_onnx(args):
+    model = Inference(HNet()).eval()
+    shape = (1, 3, args.size, args.size)
+    a, b = torch.rand(shape), torch.rand(shape)
+    os.makedirs(os.path.dirname(os.path.abspath(args.onnx)), exist_ok=True)
+    torch.onnx.export(
+        model,
+        (a, b),
+        args.onnx,
+        input_names=["view_a", "view_b"],
+        output_names=["mask_a", "mask_b", "force"],
+        opset_version=ONNX_OPSET,
+        dynamo=True,
+        external_data=False,
+        verbose=False,
+    )
+    params = sum(p.numel() for p in model.parameters())
+    result = {"framework": f"pytorch {torch.__version__}", "onnx": args.onnx, "opset": ONNX_OPSET,
+              "params": params, "size": args.size, "batch": 1}
+    # Check the file against PyTorch where onnxruntime (Python) is installed.
+    try:
+        import onnxruntime
+    except ImportError:
+        onnxruntime = None
+    if onnxruntime is not None:
+        session = onnxruntime.InferenceSession(args.onnx, providers=["CPUExecutionProvider"])
+        got = session.run(None, {"view_a": a.numpy(), "view_b": b.numpy()})
+        with torch.no_grad():
+            want = model(a, b)
+        result["max_abs_diff_vs_pytorch"] = max(
+            float((torch.from_numpy(g) - w).abs().max()) for g, w in zip(got, want)
+        )
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return
+    line = (f"wrote {args.onnx}: H-Net ({params} parameters), one {args.size}x{args.size} pair, "
+            f"opset {ONNX_OPSET}")
+    if "max_abs_diff_vs_pytorch" in result:
+        line += f", max |ONNX Runtime - PyTorch| {result['max_abs_diff_vs_pytorch']:.2e}"
+    print(line)
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--size", type=int, default=64)
@@ -193,9 +260,13 @@ def main():
     parser.add_argument("--runs", type=int, default=10)
     parser.add_argument("--layers", action="store_true")
     parser.add_argument("--json", action="store_true")
+    parser.add_argument("--onnx", metavar="PATH", help="export the inference network to ONNX")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     torch.manual_seed(0)
+    if args.onnx:
+        export_onnx(args)
+        return
     if args.layers:
         report_layers(args)
         return

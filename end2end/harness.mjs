@@ -15,20 +15,30 @@ const TYPES = {
   ".json": "application/json",
   ".png": "image/png",
   ".bpk": "application/octet-stream",
+  ".onnx": "application/octet-stream",
 };
 
 /** Starts a static server for dist/ on a free port; returns { url, close }. */
 export async function serveDist() {
+  return serveFolder(DIST);
+}
+
+/** Starts a static server for the folder `root` on a free port, adding `headers` to every
+ * answer; returns { url, close }. */
+export async function serveFolder(root, headers = {}) {
   const server = createServer(async (req, res) => {
     const path = decodeURIComponent(new URL(req.url, "http://x").pathname);
-    const file = normalize(join(DIST, path === "/" ? "index.html" : path));
-    if (!file.startsWith(DIST)) {
+    const file = normalize(join(root, path === "/" ? "index.html" : path));
+    if (!file.startsWith(root)) {
       res.writeHead(403).end();
       return;
     }
     try {
       const body = await readFile(file);
-      res.writeHead(200, { "content-type": TYPES[extname(file)] ?? "application/octet-stream" });
+      res.writeHead(200, {
+        ...headers,
+        "content-type": TYPES[extname(file)] ?? "application/octet-stream",
+      });
       res.end(body);
     } catch {
       res.writeHead(404).end("not found");
