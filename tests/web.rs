@@ -36,6 +36,27 @@ fn hnet_forward_pass_on_the_cpu_backend() {
     assert_eq!(out.force.dims(), [1, 3]);
 }
 
+/// The project's convolution kernels (crates/hnet-conv) give Burn's results in the browser too,
+/// built for wasm32 with SIMD128: forward passes of random convolutions and of H-Net's two layer
+/// shapes on flex, within the native tests' tolerance (the gradients, which the page never
+/// computes, are checked natively: crates/hnet-conv/tests/against_burn.rs).
+#[wasm_bindgen_test]
+fn the_project_convolutions_compute_what_burn_computes() {
+    use hnet_conv::conformance::{ConvCase, TOLERANCE};
+    let device = Device::flex();
+    let cases = (0..64)
+        .map(ConvCase::from_seed)
+        .filter(ConvCase::is_valid)
+        .chain([false, true].map(|transposed| ConvCase::h_net_layer(transposed, 3)));
+    let mut checked = 0;
+    for case in cases {
+        let error = case.forward_error(&device);
+        assert!(error <= TOLERANCE, "{case:?}: error {error:e}");
+        checked += 1;
+    }
+    assert!(checked >= 40, "only {checked} cases were valid");
+}
+
 /// Deterministic test images in `[0, 1]`.
 fn ramp(device: &Device, phase: f32) -> Tensor<4> {
     let values: Vec<f32> = (0..3 * 32 * 32)

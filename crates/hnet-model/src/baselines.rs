@@ -17,6 +17,7 @@ use burn::tensor::activation::relu;
 use burn::tensor::module::{interpolate, max_pool2d};
 use burn::tensor::ops::{InterpolateMode, InterpolateOptions, MaxPoolOptions};
 use burn::tensor::{Device, Tensor};
+use hnet_conv::{conv_transpose2d_module, conv2d_module};
 
 fn conv3x3(cin: usize, cout: usize, device: &Device) -> Conv2d {
     Conv2dConfig::new([cin, cout], [3, 3])
@@ -54,7 +55,10 @@ impl ConvBlock {
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        relu(self.second.forward(relu(self.first.forward(x))))
+        relu(conv2d_module(
+            &self.second,
+            relu(conv2d_module(&self.first, x)),
+        ))
     }
 }
 
@@ -117,9 +121,12 @@ impl UNet {
         }
         x = self.bottom.forward(x);
         for ((up, merge), skip) in self.up.iter().zip(&self.merge).zip(skips.into_iter().rev()) {
-            x = merge.forward(Tensor::cat(alloc::vec![relu(up.forward(x)), skip], 1));
+            x = merge.forward(Tensor::cat(
+                alloc::vec![relu(conv_transpose2d_module(up, x)), skip],
+                1,
+            ));
         }
-        self.head.forward(x)
+        conv2d_module(&self.head, x)
     }
 }
 
@@ -165,9 +172,9 @@ impl Fcn {
             x = pool2(block.forward(x));
             pooled.push(x.clone());
         }
-        let s32 = self.score_32.forward(pooled[4].clone());
-        let s16 = self.score_16.forward(pooled[3].clone()) + resize(s32, [h / 16, w / 16]);
-        let s8 = self.score_8.forward(pooled[2].clone()) + resize(s16, [h / 8, w / 8]);
+        let s32 = conv2d_module(&self.score_32, pooled[4].clone());
+        let s16 = conv2d_module(&self.score_16, pooled[3].clone()) + resize(s32, [h / 16, w / 16]);
+        let s8 = conv2d_module(&self.score_8, pooled[2].clone()) + resize(s16, [h / 8, w / 8]);
         resize(s8, [h, w])
     }
 }
@@ -201,8 +208,8 @@ impl BasicBlock {
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let y = relu(self.norm1.forward(self.conv1.forward(x.clone())));
-        relu(self.norm2.forward(self.conv2.forward(y)) + x)
+        let y = relu(self.norm1.forward(conv2d_module(&self.conv1, x.clone())));
+        relu(self.norm2.forward(conv2d_module(&self.conv2, y)) + x)
     }
 }
 
@@ -255,12 +262,15 @@ impl HrNet {
     /// Mask logits `[N, 1, H, W]` of images `[N, 3, H, W]` (H, W divisible by 16).
     pub fn forward(&self, images: Tensor<4>) -> Tensor<4> {
         let [_, _, h, w] = images.dims();
-        let x = relu(self.stem2.forward(relu(self.stem1.forward(images))));
+        let x = relu(conv2d_module(
+            &self.stem2,
+            relu(conv2d_module(&self.stem1, images)),
+        ));
         // Build the three branches, run their blocks, then exchange information.
         let mut branches = alloc::vec![x];
         for t in &self.transitions {
             let from = branches.last().expect("a branch").clone();
-            branches.push(relu(t.forward(from)));
+            branches.push(relu(conv2d_module(t, from)));
         }
         let branches: Vec<Tensor<4>> = branches
             .into_iter()
@@ -283,7 +293,10 @@ impl HrNet {
             .map(|to| {
                 let mut sum: Option<Tensor<4>> = None;
                 for (from, branch) in branches.iter().enumerate() {
-                    let y = resize(self.exchange[to][from].forward(branch.clone()), sizes[to]);
+                    let y = resize(
+                        conv2d_module(&self.exchange[to][from], branch.clone()),
+                        sizes[to],
+                    );
                     sum = Some(match sum {
                         Some(s) => s + y,
                         None => y,
@@ -295,7 +308,7 @@ impl HrNet {
         // HRNetV2 head: everything at the highest resolution, concatenated.
         let top = sizes[0];
         let joined = Tensor::cat(fused.into_iter().map(|f| resize(f, top)).collect(), 1);
-        let logits = self.classifier.forward(relu(self.head.forward(joined)));
+        let logits = conv2d_module(&self.classifier, relu(conv2d_module(&self.head, joined)));
         resize(logits, [h, w])
     }
 }

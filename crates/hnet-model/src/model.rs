@@ -13,6 +13,9 @@
 //! The force head global-average-pools the bottleneck and every decoder block output of each view
 //! (eq. 1, 2, 4), concatenates the pooled vectors of both views (eq. 5) and regresses the tip force
 //! `(Fx, Fy, Fz)` in newtons through dense layers of 64 and 32 units with ReLU and a linear output.
+//!
+//! The convolutions go through `hnet_conv` (the project's kernels on the flex CPU backend, Burn's
+//! own operations on every other backend); the weights and their files are burn-nn's modules.
 
 use alloc::vec::Vec;
 
@@ -27,6 +30,7 @@ use burn::tensor::activation::{relu, sigmoid};
 use burn::tensor::module::max_pool2d;
 use burn::tensor::ops::MaxPoolOptions;
 use burn::tensor::{Device, Tensor};
+use hnet_conv::{conv_transpose2d_module, conv2d_module};
 
 /// Settings of the network. The defaults are the paper's.
 #[derive(Config, Debug, PartialEq)]
@@ -183,7 +187,10 @@ impl DoubleConv {
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        relu(self.second.forward(relu(self.first.forward(x))))
+        relu(conv2d_module(
+            &self.second,
+            relu(conv2d_module(&self.first, x)),
+        ))
     }
 }
 
@@ -210,7 +217,7 @@ impl UpBlock {
     }
 
     fn forward(&self, x: Tensor<4>, skip: Tensor<4>) -> Tensor<4> {
-        let up = self.up.forward(x);
+        let up = conv_transpose2d_module(&self.up, x);
         self.conv.forward(Tensor::cat(alloc::vec![up, skip], 1))
     }
 }
@@ -264,7 +271,7 @@ impl SegmentationBranch {
             pooled.push(global_average_pool(x.clone()));
         }
         BranchOutput {
-            mask_logits: self.head.forward(x),
+            mask_logits: conv2d_module(&self.head, x),
             pooled: Tensor::cat(pooled, 1),
         }
     }

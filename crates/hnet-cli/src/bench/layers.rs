@@ -3,18 +3,20 @@
 //! Times every convolution of H-Net's shared encoder-decoder at the shapes one training step
 //! gives it (both views of each pair run through the shared branch, so a batch of `B` pairs is
 //! `2B` images): the forward pass, the gradient with respect to the weights, and the gradient with
-//! respect to the input, each through Burn's public tensor API with autodiff tracking only the
-//! tensor whose gradient is timed. `bench/pytorch_hnet.py --layers` times the same list.
+//! respect to the input, each through the model's convolution calls (`hnet_conv`: the project's
+//! kernels on flex, or Burn's own with `--kernels burn`) with autodiff tracking only the tensor
+//! whose gradient is timed. `bench/pytorch_hnet.py --layers` times the same list.
 
 use std::time::Instant;
 
-use burn::tensor::module::{conv_transpose2d, conv2d};
 use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 use burn::tensor::{Device, Distribution, Tensor};
+use hnet_conv::{conv_transpose2d, conv2d};
 use hnet_model::HNetConfig;
 use hnet_units::ImageSize;
 use serde::Serialize;
 
+use super::Kernels;
 use crate::backend::BackendChoice;
 
 /// How a layer convolves.
@@ -127,6 +129,9 @@ pub struct LayersBench {
     /// Backend to measure.
     #[arg(long, value_enum, default_value = "flex")]
     backend: BackendChoice,
+    /// Whose convolution kernels flex runs.
+    #[arg(long, value_enum, default_value = "project")]
+    kernels: Kernels,
     /// Image side in pixels.
     #[arg(long, default_value_t = 64)]
     size: usize,
@@ -136,6 +141,9 @@ pub struct LayersBench {
     /// Timed repetitions of each measurement (after one warm-up); the median is kept.
     #[arg(long, default_value_t = 10)]
     runs: usize,
+    /// Time only the layers whose name contains this (`encoder1`, `decoder4.first`, `up`).
+    #[arg(long)]
+    only: Option<String>,
     /// Print JSON.
     #[arg(long)]
     json: bool,
@@ -156,6 +164,7 @@ struct LayerTimes {
 #[derive(Serialize)]
 struct LayersResult {
     backend: &'static str,
+    kernels: Kernels,
     size: usize,
     batch: usize,
     images_per_convolution: usize,
@@ -257,15 +266,22 @@ fn time_layer(layer: &ConvLayer, images: usize, runs: usize, device: &Device) ->
 pub fn run(args: &LayersBench) -> anyhow::Result<()> {
     let config = HNetConfig::new().with_image_size(ImageSize::square(args.size));
     config.validate()?;
+    args.kernels.select();
     let device = args.backend.device()?.autodiff();
     let images = 2 * args.batch;
     let layers: Vec<LayerTimes> = hnet_convolutions(&config)
         .iter()
+        .filter(|layer| {
+            args.only
+                .as_ref()
+                .is_none_or(|only| layer.name.contains(only))
+        })
         .map(|layer| time_layer(layer, images, args.runs, &device))
         .collect();
     let total = |f: fn(&LayerTimes) -> f64| layers.iter().map(f).sum::<f64>();
     let result = LayersResult {
         backend: args.backend.name(),
+        kernels: args.kernels,
         size: args.size,
         batch: args.batch,
         images_per_convolution: images,
@@ -280,8 +296,15 @@ pub fn run(args: &LayersBench) -> anyhow::Result<()> {
         return Ok(());
     }
     println!(
-        "{}: H-Net convolutions at {}x{}, {} images each (batch of {} pairs), {} threads, median of {} runs (ms)",
-        result.backend, args.size, args.size, images, args.batch, result.threads, args.runs
+        "{} ({:?} kernels): H-Net convolutions at {}x{}, {} images each (batch of {} pairs), {} threads, median of {} runs (ms)",
+        result.backend,
+        result.kernels,
+        args.size,
+        args.size,
+        images,
+        args.batch,
+        result.threads,
+        args.runs
     );
     println!(
         "{:<18} {:>9} {:>11} {:>8} {:>12} {:>11}",

@@ -30,11 +30,31 @@ enum BenchCommand {
     Layers(layers::LayersBench),
 }
 
+/// Whose convolution kernels flex runs (`--kernels`): an A/B switch for the benchmarks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Kernels {
+    /// The project's (crates/hnet-conv), as every other command uses.
+    Project,
+    /// Burn flex's own convolutions.
+    Burn,
+}
+
+impl Kernels {
+    /// Makes the whole process use these kernels.
+    pub fn select(self) {
+        hnet_conv::use_project_kernels(self == Kernels::Project);
+    }
+}
+
 #[derive(clap::Args, Debug)]
 struct ModelBench {
     /// Backends to measure.
     #[arg(long, value_enum, value_delimiter = ',', default_value = "flex")]
     backend: Vec<BackendChoice>,
+    /// Whose convolution kernels flex runs.
+    #[arg(long, value_enum, default_value = "project")]
+    kernels: Kernels,
     /// Image side in pixels.
     #[arg(long, default_value_t = 64)]
     size: usize,
@@ -55,6 +75,7 @@ struct ModelBench {
 #[derive(Serialize)]
 struct ModelResult {
     backend: &'static str,
+    kernels: Kernels,
     params: usize,
     size: usize,
     batch: usize,
@@ -69,6 +90,7 @@ fn model(args: &ModelBench) -> anyhow::Result<()> {
     use burn::tensor::{Distribution, Tensor};
     use hnet_model::{HNetConfig, HNetLossConfig};
 
+    args.kernels.select();
     let mut results = Vec::new();
     for backend in &args.backend {
         let device = backend.device()?;
@@ -123,6 +145,7 @@ fn model(args: &ModelBench) -> anyhow::Result<()> {
         let infer_pair_s = start.elapsed().as_secs_f64() / args.runs as f64;
         results.push(ModelResult {
             backend: backend.name(),
+            kernels: args.kernels,
             params,
             size: args.size,
             batch: args.batch,
@@ -136,8 +159,9 @@ fn model(args: &ModelBench) -> anyhow::Result<()> {
     } else {
         for r in &results {
             println!(
-                "{}: H-Net ({} parameters) at {}x{}: training step (batch {}) {:.1} ms, inference per stereo pair {:.1} ms, {} threads",
+                "{} ({:?} kernels): H-Net ({} parameters) at {}x{}: training step (batch {}) {:.1} ms, inference per stereo pair {:.1} ms, {} threads",
                 r.backend,
+                r.kernels,
                 r.params,
                 r.size,
                 r.size,

@@ -1,0 +1,388 @@
+//! How the kernels plug into Burn: a backend extension (Burn's `#[backend_extension]`) with the
+//! two operations, implemented for flex by the project's kernels and for `Autodiff<Flex>` with a
+//! backward pass of its own. Other backends never reach it: [`crate::conv2d`] and
+//! [`crate::conv_transpose2d`] send them to Burn's own operations.
+
+use burn::backend::ops::ModuleOps;
+use burn::backend::tensor::FloatTensor;
+use burn::backend::{Backend, ExtensionType, Flex, backend_extension};
+use burn::tensor::DType;
+use burn::tensor::TensorData;
+use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
+use burn_flex::FlexTensor;
+
+use crate::geometry::ConvGeometry;
+use crate::kernels;
+
+/// A convolution's bias, when it has one.
+#[derive(ExtensionType)]
+pub enum ConvBias<B: Backend> {
+    /// One value per output channel, `[out_channels]`.
+    With(FloatTensor<B>),
+    /// No bias.
+    Without,
+}
+
+/// The convolutions the project computes itself. Their results equal Burn's `conv2d` and
+/// `conv_transpose2d` (same arguments, same shapes) to float rounding.
+#[backend_extension(Flex, Autodiff: cfg(feature = "autodiff"))]
+pub trait ProjectConvBackend: Backend {
+    /// `conv2d(x, weight, bias, options)`: x `[n, c, h, w]`, weight `[o, c, kh, kw]`.
+    fn project_conv2d(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        #[extension_type] bias: ConvBias<Self>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Self>;
+
+    /// `conv_transpose2d(x, weight, bias, options)`: x `[n, c, h, w]`, weight `[c, o, kh, kw]`.
+    fn project_conv_transpose2d(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        #[extension_type] bias: ConvBias<Self>,
+        options: ConvTransposeOptions<2>,
+    ) -> FloatTensor<Self>;
+}
+
+impl<B: Backend> ConvBias<B> {
+    fn into_option(self) -> Option<FloatTensor<B>> {
+        match self {
+            ConvBias::With(bias) => Some(bias),
+            ConvBias::Without => None,
+        }
+    }
+}
+
+/// A flex tensor's shape as four dimensions.
+fn dims4(t: &FlexTensor) -> [usize; 4] {
+    let shape = t.layout().shape();
+    core::array::from_fn(|i| shape.get(i).copied().unwrap_or(0))
+}
+
+/// Runs `read` on a flex tensor's values in row-major order (copying only when its layout is
+/// not contiguous).
+fn with_values<R>(t: &FlexTensor, read: impl FnOnce(&[f32]) -> R) -> R {
+    match t.as_slice::<f32>() {
+        Some(values) => read(values),
+        None => read(t.to_contiguous().as_slice::<f32>().expect("contiguous f32")),
+    }
+}
+
+/// A new contiguous flex tensor.
+fn flex_tensor(values: Vec<f32>, shape: [usize; 4]) -> FlexTensor {
+    FlexTensor::from_data(TensorData::new(values, shape))
+}
+
+/// True when the project's kernels compute these tensors: f32, four and one dimensions.
+fn f32_operands(x: &FlexTensor, weight: &FlexTensor, bias: Option<&FlexTensor>) -> bool {
+    let f32_rank = |t: &FlexTensor, rank: usize| {
+        t.dtype() == DType::F32 && t.layout().shape().num_dims() == rank
+    };
+    f32_rank(x, 4) && f32_rank(weight, 4) && bias.is_none_or(|b| f32_rank(b, 1))
+}
+
+/// What the forward pass of a covered convolution computes, on flex tensors.
+#[derive(Debug, Clone, Copy)]
+enum Direction {
+    /// `conv2d`: the kernels' forward.
+    Convolution,
+    /// `conv_transpose2d`: the adjoint convolution's input gradient.
+    Transposed,
+}
+
+fn bias_matches(g: &ConvGeometry, direction: Direction, bias: Option<&FlexTensor>) -> bool {
+    let channels = match direction {
+        Direction::Convolution => g.out_channels,
+        Direction::Transposed => g.in_channels,
+    };
+    bias.is_none_or(|b| b.layout().shape()[0] == channels)
+}
+
+/// The forward pass on flex, for a geometry the kernels cover.
+fn forward(
+    g: &ConvGeometry,
+    direction: Direction,
+    x: &FlexTensor,
+    weight: &FlexTensor,
+    bias: Option<&FlexTensor>,
+) -> FlexTensor {
+    with_values(x, |x| {
+        with_values(weight, |w| {
+            let run = |bias: Option<&[f32]>| match direction {
+                Direction::Convolution => {
+                    flex_tensor(kernels::forward(g, x, w, bias), g.output_shape())
+                }
+                Direction::Transposed => {
+                    let mut y = kernels::input_gradient(g, w, x);
+                    if let Some(bias) = bias {
+                        kernels::add_per_channel(&mut y, bias, g.input_plane());
+                    }
+                    flex_tensor(y, g.input_shape())
+                }
+            };
+            match bias {
+                Some(bias) => with_values(bias, |b| run(Some(b))),
+                None => run(None),
+            }
+        })
+    })
+}
+
+/// The gradients of a covered convolution's input, weight and bias, on flex.
+struct Gradients {
+    x: Option<FlexTensor>,
+    weight: Option<FlexTensor>,
+    bias: Option<FlexTensor>,
+}
+
+/// Which gradients to compute.
+#[derive(Debug, Clone, Copy)]
+struct Wanted {
+    x: bool,
+    weight: bool,
+    bias: bool,
+}
+
+fn gradients(
+    g: &ConvGeometry,
+    direction: Direction,
+    x: &FlexTensor,
+    weight: &FlexTensor,
+    dy: &FlexTensor,
+    wanted: Wanted,
+) -> Gradients {
+    let weight_shape = g.weight_shape();
+    with_values(x, |x_values| {
+        with_values(weight, |w| {
+            with_values(dy, |dy| match direction {
+                // y = conv(x): dx = raise(Wᵀ dy), dW = dy lower(x)ᵀ.
+                Direction::Convolution => Gradients {
+                    x: wanted
+                        .x
+                        .then(|| flex_tensor(kernels::input_gradient(g, w, dy), g.input_shape())),
+                    weight: wanted.weight.then(|| {
+                        flex_tensor(kernels::weight_gradient(g, x_values, dy), weight_shape)
+                    }),
+                    bias: wanted.bias.then(|| {
+                        let db = kernels::channel_sums(dy, g.out_channels, g.output_plane());
+                        FlexTensor::from_data(TensorData::new(db, [g.out_channels]))
+                    }),
+                },
+                // y = raise(Wᵀ x), the adjoint's input gradient: dx = conv(dy), dW = x lower(dy)ᵀ.
+                Direction::Transposed => Gradients {
+                    x: wanted
+                        .x
+                        .then(|| flex_tensor(kernels::forward(g, dy, w, None), g.output_shape())),
+                    weight: wanted.weight.then(|| {
+                        flex_tensor(kernels::weight_gradient(g, dy, x_values), weight_shape)
+                    }),
+                    bias: wanted.bias.then(|| {
+                        let db = kernels::channel_sums(dy, g.in_channels, g.input_plane());
+                        FlexTensor::from_data(TensorData::new(db, [g.in_channels]))
+                    }),
+                },
+            })
+        })
+    })
+}
+
+fn conv2d_geometry(
+    x: &FlexTensor,
+    weight: &FlexTensor,
+    bias: Option<&FlexTensor>,
+    options: &ConvOptions<2>,
+) -> Option<ConvGeometry> {
+    if !f32_operands(x, weight, bias) {
+        return None;
+    }
+    ConvGeometry::of_conv2d(dims4(x), dims4(weight), options)
+        .filter(|g| bias_matches(g, Direction::Convolution, bias))
+}
+
+fn conv_transpose2d_geometry(
+    x: &FlexTensor,
+    weight: &FlexTensor,
+    bias: Option<&FlexTensor>,
+    options: &ConvTransposeOptions<2>,
+) -> Option<ConvGeometry> {
+    if !f32_operands(x, weight, bias) {
+        return None;
+    }
+    ConvGeometry::of_conv_transpose2d(dims4(x), dims4(weight), options)
+        .filter(|g| bias_matches(g, Direction::Transposed, bias))
+}
+
+impl ProjectConvBackend for Flex {
+    fn project_conv2d(
+        x: FlexTensor,
+        weight: FlexTensor,
+        bias: ConvBias<Self>,
+        options: ConvOptions<2>,
+    ) -> FlexTensor {
+        let bias = bias.into_option();
+        match conv2d_geometry(&x, &weight, bias.as_ref(), &options) {
+            Some(g) => forward(&g, Direction::Convolution, &x, &weight, bias.as_ref()),
+            None => <Flex as ModuleOps<Flex>>::conv2d(x, weight, bias, options),
+        }
+    }
+
+    fn project_conv_transpose2d(
+        x: FlexTensor,
+        weight: FlexTensor,
+        bias: ConvBias<Self>,
+        options: ConvTransposeOptions<2>,
+    ) -> FlexTensor {
+        let bias = bias.into_option();
+        match conv_transpose2d_geometry(&x, &weight, bias.as_ref(), &options) {
+            Some(g) => forward(&g, Direction::Transposed, &x, &weight, bias.as_ref()),
+            None => <Flex as ModuleOps<Flex>>::conv_transpose2d(x, weight, bias, options),
+        }
+    }
+}
+
+#[cfg(feature = "autodiff")]
+mod autodiff {
+    use burn::backend::Autodiff;
+    use burn::backend::Flex;
+    use burn::backend::autodiff::checkpoint::base::Checkpointer;
+    use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
+    use burn::backend::autodiff::grads::Gradients as GradientStore;
+    use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+    use burn::backend::ops::ModuleOps;
+    use burn::backend::tensor::FloatTensor;
+    use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
+    use burn_flex::FlexTensor;
+
+    use super::{
+        ConvBias, Direction, ProjectConvBackend, Wanted, conv_transpose2d_geometry,
+        conv2d_geometry, forward, gradients,
+    };
+    use crate::geometry::ConvGeometry;
+
+    /// The backward step of a covered convolution: its inputs, kept from the forward pass.
+    #[derive(Debug)]
+    struct ConvBackward;
+
+    #[derive(Debug, Clone)]
+    struct ConvState {
+        geometry: ConvGeometry,
+        direction: Direction,
+        x: FlexTensor,
+        weight: FlexTensor,
+    }
+
+    impl<const N: usize> Backward<Flex, N> for ConvBackward {
+        type State = ConvState;
+
+        fn backward(
+            self,
+            ops: Ops<Self::State, N>,
+            grads: &mut GradientStore,
+            _checkpointer: &mut Checkpointer,
+        ) {
+            let dy = grads.consume::<Flex>(&ops.node);
+            let parent = |i: usize| ops.parents.get(i).cloned().flatten();
+            let (x_node, weight_node, bias_node) = (parent(0), parent(1), parent(2));
+            let s = ops.state;
+            let wanted = Wanted {
+                x: x_node.is_some(),
+                weight: weight_node.is_some(),
+                bias: bias_node.is_some(),
+            };
+            let computed = gradients(&s.geometry, s.direction, &s.x, &s.weight, &dy, wanted);
+            for (node, gradient) in [
+                (x_node, computed.x),
+                (weight_node, computed.weight),
+                (bias_node, computed.bias),
+            ] {
+                if let (Some(node), Some(gradient)) = (node, gradient) {
+                    grads.register::<Flex>(node.id, gradient);
+                }
+            }
+        }
+    }
+
+    /// Records a covered convolution on the autodiff graph (when any operand is tracked) and
+    /// computes its forward pass.
+    fn tracked<C: CheckpointStrategy>(
+        geometry: ConvGeometry,
+        direction: Direction,
+        x: FloatTensor<Autodiff<Flex, C>>,
+        weight: FloatTensor<Autodiff<Flex, C>>,
+        bias: Option<FloatTensor<Autodiff<Flex, C>>>,
+    ) -> FloatTensor<Autodiff<Flex, C>> {
+        let run = |bias: Option<&FlexTensor>| {
+            forward(
+                &geometry,
+                direction,
+                x.primitive(),
+                weight.primitive(),
+                bias,
+            )
+        };
+        let state = || ConvState {
+            geometry,
+            direction,
+            x: x.primitive().clone(),
+            weight: weight.primitive().clone(),
+        };
+        match &bias {
+            Some(b) => match ConvBackward
+                .prepare::<C>([x.node(), weight.node(), b.node()])
+                .compute_bound()
+                .stateful()
+            {
+                OpsKind::Tracked(prep) => prep.finish(state(), run(Some(b.primitive()))),
+                OpsKind::UnTracked(prep) => prep.finish(run(Some(b.primitive()))),
+            },
+            None => match ConvBackward
+                .prepare::<C>([x.node(), weight.node()])
+                .compute_bound()
+                .stateful()
+            {
+                OpsKind::Tracked(prep) => prep.finish(state(), run(None)),
+                OpsKind::UnTracked(prep) => prep.finish(run(None)),
+            },
+        }
+    }
+
+    impl<C: CheckpointStrategy> ProjectConvBackend for Autodiff<Flex, C> {
+        fn project_conv2d(
+            x: FloatTensor<Self>,
+            weight: FloatTensor<Self>,
+            bias: ConvBias<Self>,
+            options: ConvOptions<2>,
+        ) -> FloatTensor<Self> {
+            let bias = bias.into_option();
+            let geometry = conv2d_geometry(
+                x.primitive(),
+                weight.primitive(),
+                bias.as_ref().map(|b| b.primitive()),
+                &options,
+            );
+            match geometry {
+                Some(g) => tracked::<C>(g, Direction::Convolution, x, weight, bias),
+                None => <Self as ModuleOps<Self>>::conv2d(x, weight, bias, options),
+            }
+        }
+
+        fn project_conv_transpose2d(
+            x: FloatTensor<Self>,
+            weight: FloatTensor<Self>,
+            bias: ConvBias<Self>,
+            options: ConvTransposeOptions<2>,
+        ) -> FloatTensor<Self> {
+            let bias = bias.into_option();
+            let geometry = conv_transpose2d_geometry(
+                x.primitive(),
+                weight.primitive(),
+                bias.as_ref().map(|b| b.primitive()),
+                &options,
+            );
+            match geometry {
+                Some(g) => tracked::<C>(g, Direction::Transposed, x, weight, bias),
+                None => <Self as ModuleOps<Self>>::conv_transpose2d(x, weight, bias, options),
+            }
+        }
+    }
+}

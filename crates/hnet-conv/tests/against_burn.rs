@@ -1,0 +1,106 @@
+//! The project's kernels against Burn's own convolutions on flex: random shapes, strides,
+//! paddings, dilations and batch sizes, forward and every gradient, within
+//! `conformance::TOLERANCE`. Uncovered convolutions (groups) must fall back to Burn exactly, and
+//! the burn-nn module helpers must give the module's own `forward`.
+
+use burn::nn::PaddingConfig2d;
+use burn::nn::conv::{Conv2dConfig, ConvTranspose2dConfig};
+use burn::tensor::ops::ConvOptions;
+use burn::tensor::{Device, Tensor, module};
+use hnet_conv::conformance::{ConvCase, TOLERANCE, relative_error};
+use proptest::prelude::*;
+
+fn check(case: &ConvCase) -> Result<(), TestCaseError> {
+    let forward = case.forward_error(&Device::flex());
+    prop_assert!(
+        forward <= TOLERANCE,
+        "forward error {forward:e} for {case:?}"
+    );
+    let [x, weight, bias] = case.gradient_errors(&Device::flex().autodiff());
+    prop_assert!(
+        x <= TOLERANCE && weight <= TOLERANCE && bias <= TOLERANCE,
+        "gradient errors x {x:e}, weight {weight:e}, bias {bias:e} for {case:?}"
+    );
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(hnet_mutations::cases(48))]
+
+    #[test]
+    fn random_convolutions_match_burn(seed in any::<u64>()) {
+        let case = ConvCase::from_seed(seed);
+        prop_assume!(case.is_valid());
+        check(&case)?;
+    }
+}
+
+#[test]
+fn h_net_layers_match_burn() {
+    for transposed in [false, true] {
+        check(&ConvCase::h_net_layer(transposed, 7)).unwrap();
+    }
+}
+
+#[test]
+fn flex_and_autodiff_flex_reach_the_project_kernels() {
+    use burn::tensor::DType;
+    assert!(hnet_conv::runs_on_project_kernels(
+        &Device::flex(),
+        DType::F32
+    ));
+    assert!(hnet_conv::runs_on_project_kernels(
+        &Device::flex().autodiff(),
+        DType::F32
+    ));
+    assert!(!hnet_conv::runs_on_project_kernels(
+        &Device::flex(),
+        DType::F64
+    ));
+}
+
+#[test]
+fn grouped_convolutions_fall_back_to_burn() {
+    let device = Device::flex();
+    let x = Tensor::<4>::random([2, 4, 6, 6], burn::tensor::Distribution::Default, &device);
+    let w = Tensor::<4>::random([6, 2, 3, 3], burn::tensor::Distribution::Default, &device);
+    let options = ConvOptions::new([1, 1], [1, 1], [1, 1], 2);
+    let ours = hnet_conv::conv2d(x.clone(), w.clone(), None, options.clone());
+    let burn = module::conv2d(x, w, None, options);
+    assert_eq!(relative_error(ours, burn), 0.0);
+}
+
+#[test]
+fn module_helpers_give_the_modules_forward() {
+    let device = Device::flex();
+    for (size, kernel, stride, padding) in [
+        ([9, 7], 3, 1, PaddingConfig2d::Same),
+        ([9, 8], 3, 2, PaddingConfig2d::Same),
+        ([6, 5], 2, 2, PaddingConfig2d::Same),
+        ([7, 7], 1, 1, PaddingConfig2d::Valid),
+        ([7, 6], 3, 1, PaddingConfig2d::Explicit(1, 2, 0, 1)),
+    ] {
+        let conv = Conv2dConfig::new([3, 4], [kernel, kernel])
+            .with_stride([stride, stride])
+            .with_padding(padding)
+            .init(&device);
+        let x = Tensor::<4>::random(
+            [2, 3, size[0], size[1]],
+            burn::tensor::Distribution::Default,
+            &device,
+        );
+        let error = relative_error(hnet_conv::conv2d_module(&conv, x.clone()), conv.forward(x));
+        assert!(error <= TOLERANCE, "{size:?} {kernel} {stride}: {error:e}");
+    }
+    let up = ConvTranspose2dConfig::new([4, 3], [3, 3])
+        .with_stride([2, 2])
+        .with_padding([1, 1])
+        .with_padding_out([1, 1])
+        .init(&device);
+    let x = Tensor::<4>::random([2, 4, 5, 4], burn::tensor::Distribution::Default, &device);
+    let error = relative_error(
+        hnet_conv::conv_transpose2d_module(&up, x.clone()),
+        up.forward(x),
+    );
+    assert!(error <= TOLERANCE, "transposed: {error:e}");
+}
