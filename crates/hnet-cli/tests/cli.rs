@@ -9,15 +9,39 @@ fn hnet() -> Command {
     Command::new(env!("CARGO_BIN_EXE_hnet"))
 }
 
-fn run(args: &[&str]) -> Output {
-    let output = hnet().args(args).output().expect("hnet runs");
+/// Runs `command`, which must succeed: its output.
+fn succeeds(command: &mut Command) -> Output {
+    let output = command.output().expect("hnet runs");
     assert!(
         output.status.success(),
-        "hnet {} failed:\n{}",
-        args.join(" "),
+        "{command:?} failed:\n{}",
         String::from_utf8_lossy(&output.stderr)
     );
     output
+}
+
+/// Runs `command`, which must fail: what it says.
+fn fails(command: &mut Command) -> String {
+    let output = command.output().expect("hnet runs");
+    assert!(!output.status.success(), "{command:?} succeeded");
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+fn run(args: &[&str]) -> Output {
+    succeeds(hnet().args(args))
+}
+
+/// `hnet train --data DATA --out RUNS --config CONFIG`, to add to and run.
+fn train(data: &Path, runs: &Path, config: &Path) -> Command {
+    let mut command = hnet();
+    command
+        .args(["train", "--data"])
+        .arg(data)
+        .arg("--out")
+        .arg(runs)
+        .arg("--config")
+        .arg(config);
+    command
 }
 
 fn scratch(name: &str) -> PathBuf {
@@ -27,40 +51,50 @@ fn scratch(name: &str) -> PathBuf {
     dir
 }
 
-/// A small config for tests: H-Net at 48x32 (non-square, so that a width/height mix-up anywhere
-/// from the dataset to the report fails), 8 filters, 2 levels; the baselines at 32x32.
-fn tiny_config(dir: &Path, architecture: &str, epochs: usize) -> PathBuf {
-    let hnet_size = r#"{"width": 48, "height": 32}"#;
-    let square = r#"{"width": 32, "height": 32}"#;
-    let size = if architecture == "hnet" {
-        hnet_size
-    } else {
-        square
-    };
-    let model = match architecture {
+/// The `model` settings of a small `architecture` for `(width, height)` images, with `depth`
+/// levels where the network has a depth.
+fn model_json(architecture: &str, depth: usize, (width, height): (usize, usize)) -> String {
+    match architecture {
         "hnet" => format!(
-            r#"{{"architecture": "hnet", "in_channels": 3, "filters": 8, "depth": 2,
-                 "image_size": {hnet_size}, "share_weights": true, "force_hidden": [16, 8]}}"#
+            r#"{{"architecture": "hnet", "in_channels": 3, "filters": 8, "depth": {depth},
+                 "image_size": {{"width": {width}, "height": {height}}}, "share_weights": true,
+                 "force_hidden": [16, 8]}}"#
         ),
-        "unet" => r#"{"architecture": "unet", "base_filters": 4, "depth": 2}"#.to_string(),
+        "unet" => format!(r#"{{"architecture": "unet", "base_filters": 4, "depth": {depth}}}"#),
         "fcn" => r#"{"architecture": "fcn", "base_filters": 4}"#.to_string(),
         "hrnet" => r#"{"architecture": "hrnet", "width": 4}"#.to_string(),
         "ynet" => r#"{"architecture": "ynet", "base_filters": 4, "hidden": [16, 8]}"#.to_string(),
         other => panic!("{other}"),
+    }
+}
+
+/// A training config's text: `model` on `(width, height)` images.
+fn config_json(
+    model: &str,
+    (width, height): (usize, usize),
+    batch: usize,
+    epochs: usize,
+) -> String {
+    format!(
+        r#"{{"name": "tiny", "model": {model}, "image_size": {{"width": {width}, "height": {height}}},
+          "loss": {{"beta_a": 1.0, "beta_b": 1.0, "beta_force": 1.0}},
+          "learning_rate": 0.001, "rmsprop_alpha": 0.9, "rmsprop_momentum": 0.0,
+          "rmsprop_epsilon": 1e-7, "batch_size": {batch}, "epochs": {epochs}, "patience": 20,
+          "seed": 1, "max_train_samples": null, "max_valid_samples": null, "num_workers": 1}}"#
+    )
+}
+
+/// A small config for tests: H-Net at 48x32 (non-square, so that a width/height mix-up anywhere
+/// from the dataset to the report fails), 8 filters, 2 levels; the baselines at 32x32.
+fn tiny_config(dir: &Path, architecture: &str, epochs: usize) -> PathBuf {
+    let size = if architecture == "hnet" {
+        (48, 32)
+    } else {
+        (32, 32)
     };
     let path = dir.join(format!("{architecture}.json"));
-    std::fs::write(
-        &path,
-        format!(
-            r#"{{"name": "tiny", "model": {model}, "image_size": {size},
-              "loss": {{"beta_a": 1.0, "beta_b": 1.0, "beta_force": 1.0}},
-              "learning_rate": 0.001, "rmsprop_alpha": 0.9, "rmsprop_momentum": 0.0,
-              "rmsprop_epsilon": 1e-7, "batch_size": 8, "epochs": {epochs}, "patience": 20,
-              "seed": 1, "max_train_samples": null, "max_valid_samples": null,
-              "num_workers": 1}}"#
-        ),
-    )
-    .unwrap();
+    let model = model_json(architecture, 2, size);
+    std::fs::write(&path, config_json(&model, size, 8, epochs)).unwrap();
     path
 }
 
@@ -97,10 +131,7 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
     let data = simulate(&dir, 400);
     let config = tiny_config(&dir, "hnet", 8);
     let runs = dir.join("run");
-    let mut child = hnet()
-        .args(["train", "--data", data.to_str().unwrap(), "--out"])
-        .arg(&runs)
-        .args(["--config", config.to_str().unwrap()])
+    let mut child = train(&data, &runs, &config)
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
@@ -120,14 +151,8 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
     );
 
     // A plain second start refuses to overwrite the run.
-    let again = hnet()
-        .args(["train", "--data", data.to_str().unwrap(), "--out"])
-        .arg(&runs)
-        .args(["--config", config.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(!again.status.success());
-    assert!(String::from_utf8_lossy(&again.stderr).contains("--resume"));
+    let again = fails(&mut train(&data, &runs, &config));
+    assert!(again.contains("--resume"), "{again}");
 
     run(&["train", "--resume", "--out", runs.to_str().unwrap()]);
     let metrics = std::fs::read_to_string(runs.join("metrics.csv")).unwrap();
@@ -199,17 +224,8 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
             "takes 48×32 images, not 64×64",
         ),
     ] {
-        let out = hnet()
-            .arg("eval")
-            .args(&args)
-            .args(["--data", data.to_str().unwrap()])
-            .output()
-            .unwrap();
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert!(
-            !out.status.success() && stderr.contains(message),
-            "{stderr}"
-        );
+        let stderr = fails(hnet().arg("eval").args(&args).arg("--data").arg(&data));
+        assert!(stderr.contains(message), "{stderr}");
     }
     assert_eq!(std::fs::read_dir(&runs).unwrap().count(), files_before);
 
@@ -239,17 +255,7 @@ fn every_baseline_trains_and_evaluates_in_the_same_harness() {
     ] {
         let config = tiny_config(&dir, architecture, 1);
         let runs = dir.join(architecture);
-        run(&[
-            "train",
-            "--data",
-            data.to_str().unwrap(),
-            "--out",
-            runs.to_str().unwrap(),
-            "--config",
-            config.to_str().unwrap(),
-            "--seed",
-            "9",
-        ]);
+        succeeds(train(&data, &runs, &config).args(["--seed", "9"]));
         // The run folder keeps the settings it ran with, the seed override included.
         let saved: serde_json::Value =
             serde_json::from_slice(&std::fs::read(runs.join("config.json")).unwrap()).unwrap();
@@ -304,15 +310,13 @@ fn every_baseline_trains_and_evaluates_in_the_same_harness() {
 fn bad_input_gets_a_clear_error_naming_the_file() {
     let dir = scratch("errors");
     // Not a dataset.
-    let out = hnet()
-        .args(["train", "--out"])
-        .arg(dir.join("run"))
-        .args(["--data"])
-        .arg(dir.join("nowhere"))
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = fails(
+        hnet()
+            .args(["train", "--out"])
+            .arg(dir.join("run"))
+            .arg("--data")
+            .arg(dir.join("nowhere")),
+    );
     assert!(
         err.contains("nowhere") && err.contains("dataset.json"),
         "{err}"
@@ -322,15 +326,13 @@ fn bad_input_gets_a_clear_error_naming_the_file() {
     let run_dir = dir.join("corrupt");
     std::fs::create_dir_all(&run_dir).unwrap();
     std::fs::write(run_dir.join("model.bpk"), b"not weights").unwrap();
-    let out = hnet()
-        .args(["eval", "--run"])
-        .arg(&run_dir)
-        .args(["--data"])
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = fails(
+        hnet()
+            .args(["eval", "--run"])
+            .arg(&run_dir)
+            .arg("--data")
+            .arg(&dir),
+    );
     assert!(err.contains("model.bpk"), "{err}");
 
     // A forces CSV with a NaN.
@@ -340,19 +342,17 @@ fn bad_input_gets_a_clear_error_naming_the_file() {
     image::GrayImage::new(8, 8).save(a.join("f.png")).unwrap();
     image::GrayImage::new(8, 8).save(b.join("f.png")).unwrap();
     std::fs::write(dir.join("forces.csv"), "image,fx,fy,fz\nf.png,0,NaN,0\n").unwrap();
-    let out = hnet()
-        .args(["import", "--view-a"])
-        .arg(&a)
-        .arg("--view-b")
-        .arg(&b)
-        .arg("--forces")
-        .arg(dir.join("forces.csv"))
-        .arg("--out")
-        .arg(dir.join("imported"))
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = fails(
+        hnet()
+            .args(["import", "--view-a"])
+            .arg(&a)
+            .arg("--view-b")
+            .arg(&b)
+            .arg("--forces")
+            .arg(dir.join("forces.csv"))
+            .arg("--out")
+            .arg(dir.join("imported")),
+    );
     assert!(
         err.contains("forces.csv") && err.contains("line 2"),
         "{err}"
@@ -366,17 +366,7 @@ fn a_time_budget_ends_training_cleanly_with_the_best_checkpoint() {
     let data = simulate(&dir, 60);
     let config = tiny_config(&dir, "hnet", 5);
     let runs = dir.join("run");
-    let out = run(&[
-        "train",
-        "--data",
-        data.to_str().unwrap(),
-        "--out",
-        runs.to_str().unwrap(),
-        "--config",
-        config.to_str().unwrap(),
-        "--time-budget",
-        "0s",
-    ]);
+    let out = succeeds(train(&data, &runs, &config).args(["--time-budget", "0s"]));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
         stderr.contains(
@@ -391,13 +381,15 @@ fn a_time_budget_ends_training_cleanly_with_the_best_checkpoint() {
     );
     assert!(runs.join("model.bpk").is_file());
     // A bad budget is refused before anything is written.
-    let bad = hnet()
-        .args(["train", "--data", data.to_str().unwrap(), "--out"])
-        .arg(dir.join("other"))
-        .args(["--time-budget", "ten minutes"])
-        .output()
-        .unwrap();
-    assert!(String::from_utf8_lossy(&bad.stderr).contains("is not a duration"));
+    let bad = fails(
+        hnet()
+            .args(["train", "--data"])
+            .arg(&data)
+            .arg("--out")
+            .arg(dir.join("other"))
+            .args(["--time-budget", "ten minutes"]),
+    );
+    assert!(bad.contains("is not a duration"), "{bad}");
     assert!(!dir.join("other").exists());
     std::fs::remove_dir_all(dir).ok();
 }
@@ -406,7 +398,7 @@ fn a_time_budget_ends_training_cleanly_with_the_best_checkpoint() {
 // mutated settings ends with an error naming the file (or, for valid settings, goes on to the
 // data), never a panic. Through the binary: `TrainingConfig::load` has no library path.
 mod config_properties {
-    use super::{hnet, scratch};
+    use super::{config_json, hnet, model_json, scratch};
     use hnet_mutations::{cases, mutate};
     use proptest::prelude::*;
 
@@ -428,26 +420,6 @@ mod config_properties {
         prop_assert!(out.status.code() == Some(1), "{:?}: {}", out.status, stderr);
         prop_assert!(!stderr.contains("panicked"), "{}", stderr);
         Ok(stderr)
-    }
-
-    fn valid_config(model: &str, size: (usize, usize), batch: usize, epochs: usize) -> String {
-        format!(
-            r#"{{"name": "prop", "model": {model}, "image_size": {{"width": {}, "height": {}}},
-              "loss": {{"beta_a": 1.0, "beta_b": 1.0, "beta_force": 1.0}},
-              "learning_rate": 0.001, "rmsprop_alpha": 0.9, "rmsprop_momentum": 0.0,
-              "rmsprop_epsilon": 1e-7, "batch_size": {batch}, "epochs": {epochs}, "patience": 3,
-              "seed": 1, "max_train_samples": null, "max_valid_samples": 4, "num_workers": 1}}"#,
-            size.0, size.1
-        )
-    }
-
-    fn hnet_model(depth: usize, size: (usize, usize)) -> String {
-        format!(
-            r#"{{"architecture": "hnet", "in_channels": 3, "filters": 4, "depth": {depth},
-                 "image_size": {{"width": {}, "height": {}}}, "share_weights": true,
-                 "force_hidden": [8, 4]}}"#,
-            size.0, size.1
-        )
     }
 
     fn edits() -> impl Strategy<Value = Vec<hnet_mutations::Edit>> {
@@ -474,7 +446,7 @@ mod config_properties {
         fn a_mutated_training_config_is_an_error_never_a_panic(edits in edits(), depth in 1usize..4) {
             let dir = scratch("prop-config-mutated");
             let size = (16 << depth, 8 << depth);
-            let text = valid_config(&hnet_model(depth, size), size, 2, 1);
+            let text = config_json(&model_json("hnet", depth, size), size, 2, 1);
             let stderr = train_with_config(&dir, &mutate(text.into_bytes(), &edits))?;
             // Either the settings are refused (naming the file) or they are fine and the
             // missing data is what stops the run.
@@ -490,17 +462,15 @@ mod config_properties {
             architecture in proptest::sample::select(vec!["hnet", "unet", "fcn", "hrnet", "ynet"]),
         ) {
             let dir = scratch("prop-config-valid");
-            let (model, size) = match architecture {
-                "hnet" => {
-                    let size = (w << depth, h << depth);
-                    (hnet_model(depth, size), size)
-                }
-                "unet" => (format!(r#"{{"architecture": "unet", "base_filters": 4, "depth": {depth}}}"#), (w << depth, h << depth)),
-                "fcn" => (r#"{"architecture": "fcn", "base_filters": 4}"#.to_string(), (32 * w, 32 * h)),
-                "hrnet" => (r#"{"architecture": "hrnet", "width": 4}"#.to_string(), (16 * w, 16 * h)),
-                _ => (r#"{"architecture": "ynet", "base_filters": 4, "hidden": [8, 4]}"#.to_string(), (8 * w, 8 * h)),
+            // Sizes each network can take: divisible by what it halves them by.
+            let size = match architecture {
+                "hnet" | "unet" => (w << depth, h << depth),
+                "fcn" => (32 * w, 32 * h),
+                "hrnet" => (16 * w, 16 * h),
+                _ => (8 * w, 8 * h),
             };
-            let stderr = train_with_config(&dir, valid_config(&model, size, batch, epochs).as_bytes())?;
+            let model = model_json(architecture, depth, size);
+            let stderr = train_with_config(&dir, config_json(&model, size, batch, epochs).as_bytes())?;
             // The settings were accepted: what stops the run is the missing dataset.
             prop_assert!(stderr.contains("no-data") && !stderr.contains("not a valid training config"), "{}", stderr);
         }
