@@ -5,6 +5,7 @@
 //! - `fig5-error-{x,y,z}`: histograms of the force error per axis (Fig. 5 a-c);
 //! - `fig5-loss`, `fig5-miou`, `fig5-force-mae`: training and validation curves (Fig. 5 d-f).
 
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
@@ -14,6 +15,7 @@ use hnet_twin::dataset::{Dataset, Split};
 use hnet_units::ImageSize;
 use image::{Rgb, RgbImage};
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use crate::backend::BackendChoice;
@@ -85,10 +87,7 @@ enum Figure<'a> {
 }
 
 impl Figure<'_> {
-    fn draw<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>) -> anyhow::Result<()>
-    where
-        DB::ErrorType: 'static,
-    {
+    fn draw<DB: PlotBackend>(&self, area: &DrawingArea<DB, Shift>) -> anyhow::Result<()> {
         area.fill(&WHITE)?;
         match *self {
             Figure::Force { axis, predictions } => force_plot(area, axis, predictions),
@@ -123,6 +122,12 @@ impl Figure<'_> {
     }
 }
 
+/// A plotters backend whose errors `anyhow` can carry: every figure is drawn on SVG and on a
+/// bitmap.
+trait PlotBackend: DrawingBackend<ErrorType: 'static> {}
+
+impl<B: DrawingBackend<ErrorType: 'static>> PlotBackend for B {}
+
 fn range_of(values: impl Iterator<Item = f64>) -> (f64, f64) {
     let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
         (lo.min(v), hi.max(v))
@@ -134,52 +139,48 @@ fn range_of(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
-fn force_plot<DB: DrawingBackend>(
-    area: &DrawingArea<DB, Shift>,
-    axis: usize,
-    predictions: &[ForcePrediction],
-) -> anyhow::Result<()>
-where
-    DB::ErrorType: 'static,
-{
-    let shown = &predictions[..predictions.len().min(80)];
-    let (lo, hi) = range_of(
-        shown
-            .iter()
-            .flat_map(|p| [f64::from(p.truth[axis]), f64::from(p.predicted[axis])]),
-    );
+/// A chart of the report: `f64` on both axes.
+type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// A chart as every figure of the report has: its caption, the `(x, y)` ranges with the axes'
+/// descriptions, and `y_labels` pixels for the y axis' tick labels.
+fn chart<'a, DB: PlotBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+    caption: &str,
+    (x, y): (Range<f64>, Range<f64>),
+    [x_desc, y_desc]: [&str; 2],
+    y_labels: u32,
+) -> anyhow::Result<Chart<'a, DB>> {
     let mut chart = ChartBuilder::on(area)
-        .caption(
-            format!("F{} on {} test pairs", AXES[axis], shown.len()),
-            ("sans-serif", 22),
-        )
+        .caption(caption, ("sans-serif", 22))
         .margin(12)
         .x_label_area_size(36)
-        .y_label_area_size(56)
-        .build_cartesian_2d(0f64..shown.len() as f64, lo..hi)?;
+        .y_label_area_size(y_labels)
+        .build_cartesian_2d(x, y)?;
     chart
         .configure_mesh()
-        .x_desc("test pair")
-        .y_desc("force (N)")
+        .x_desc(x_desc)
+        .y_desc(y_desc)
         .draw()?;
-    /// A curve of the figure: its label, colour and which force of a pair it draws.
-    type Curve = (&'static str, RGBColor, fn(&ForcePrediction) -> [f32; 3]);
-    let curves: [Curve; 2] = [
-        ("true", BLACK, |p| p.truth),
-        ("predicted", RED, |p| p.predicted),
-    ];
-    for (label, colour, force) in curves {
-        chart
-            .draw_series(LineSeries::new(
-                shown
-                    .iter()
-                    .enumerate()
-                    .map(|(i, p)| (i as f64, f64::from(force(p)[axis]))),
-                colour.stroke_width(2),
-            ))?
-            .label(label)
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], colour.stroke_width(2)));
-    }
+    Ok(chart)
+}
+
+/// Draws `points` as a line of `colour`, named `label` in the legend.
+fn line<'a, DB: PlotBackend + 'a>(
+    chart: &mut Chart<'a, DB>,
+    points: impl IntoIterator<Item = (f64, f64)>,
+    colour: RGBColor,
+    label: &str,
+) -> anyhow::Result<()> {
+    chart
+        .draw_series(LineSeries::new(points, colour.stroke_width(2)))?
+        .label(label)
+        .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], colour.stroke_width(2)));
+    Ok(())
+}
+
+/// Draws the legend of the chart's lines.
+fn legend<'a, DB: PlotBackend + 'a>(chart: &mut Chart<'a, DB>) -> anyhow::Result<()> {
     chart
         .configure_series_labels()
         .background_style(WHITE.mix(0.8))
@@ -188,14 +189,45 @@ where
     Ok(())
 }
 
-fn error_histogram<DB: DrawingBackend>(
+fn force_plot<DB: PlotBackend>(
     area: &DrawingArea<DB, Shift>,
     axis: usize,
     predictions: &[ForcePrediction],
-) -> anyhow::Result<()>
-where
-    DB::ErrorType: 'static,
-{
+) -> anyhow::Result<()> {
+    let shown = &predictions[..predictions.len().min(80)];
+    let (lo, hi) = range_of(
+        shown
+            .iter()
+            .flat_map(|p| [f64::from(p.truth[axis]), f64::from(p.predicted[axis])]),
+    );
+    let mut chart = chart(
+        area,
+        &format!("F{} on {} test pairs", AXES[axis], shown.len()),
+        (0f64..shown.len() as f64, lo..hi),
+        ["test pair", "force (N)"],
+        56,
+    )?;
+    /// A curve of the figure: its label, colour and which force of a pair it draws.
+    type Curve = (&'static str, RGBColor, fn(&ForcePrediction) -> [f32; 3]);
+    let curves: [Curve; 2] = [
+        ("true", BLACK, |p| p.truth),
+        ("predicted", RED, |p| p.predicted),
+    ];
+    for (label, colour, force) in curves {
+        let points = shown
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (i as f64, f64::from(force(p)[axis])));
+        line(&mut chart, points, colour, label)?;
+    }
+    legend(&mut chart)
+}
+
+fn error_histogram<DB: PlotBackend>(
+    area: &DrawingArea<DB, Shift>,
+    axis: usize,
+    predictions: &[ForcePrediction],
+) -> anyhow::Result<()> {
     let errors: Vec<f64> = predictions
         .iter()
         .map(|p| f64::from(p.predicted[axis] - p.truth[axis]))
@@ -209,20 +241,13 @@ where
         counts[b] += 1;
     }
     let top = f64::from(*counts.iter().max().unwrap_or(&1)) * 1.1;
-    let mut chart = ChartBuilder::on(area)
-        .caption(
-            format!("F{} error ({} pairs)", AXES[axis], errors.len()),
-            ("sans-serif", 22),
-        )
-        .margin(12)
-        .x_label_area_size(36)
-        .y_label_area_size(48)
-        .build_cartesian_2d(-limit..limit, 0f64..top.max(1.0))?;
-    chart
-        .configure_mesh()
-        .x_desc("predicted - measured (N)")
-        .y_desc("pairs")
-        .draw()?;
+    let mut chart = chart(
+        area,
+        &format!("F{} error ({} pairs)", AXES[axis], errors.len()),
+        (-limit..limit, 0f64..top.max(1.0)),
+        ["predicted - measured (N)", "pairs"],
+        48,
+    )?;
     chart.draw_series(counts.iter().enumerate().map(|(i, &c)| {
         let x0 = -limit + i as f64 * width;
         Rectangle::new(
@@ -233,15 +258,12 @@ where
     Ok(())
 }
 
-fn curve<DB: DrawingBackend>(
+fn curve<DB: PlotBackend>(
     area: &DrawingArea<DB, Shift>,
     rows: &[EpochRow],
     metric: &str,
     title: &str,
-) -> anyhow::Result<()>
-where
-    DB::ErrorType: 'static,
-{
+) -> anyhow::Result<()> {
     let series = |split: &str| -> Vec<(f64, f64)> {
         rows.iter()
             .filter(|r| r.split == split)
@@ -251,34 +273,22 @@ where
     let (train, valid) = (series("train"), series("valid"));
     let epochs = rows.iter().map(|r| r.epoch).max().unwrap_or(1) as f64;
     let (lo, hi) = range_of(train.iter().chain(&valid).map(|p| p.1));
-    let mut chart = ChartBuilder::on(area)
-        .caption(title, ("sans-serif", 22))
-        .margin(12)
-        .x_label_area_size(36)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0.5f64..epochs + 0.5, lo..hi)?;
-    chart
-        .configure_mesh()
-        .x_desc("epoch")
-        .y_desc(metric)
-        .draw()?;
+    let mut chart = chart(
+        area,
+        title,
+        (0.5f64..epochs + 0.5, lo..hi),
+        ["epoch", metric],
+        60,
+    )?;
     for (points, colour, label) in [(train, BLUE, "training"), (valid, RED, "validation")] {
-        chart
-            .draw_series(LineSeries::new(points.clone(), colour.stroke_width(2)))?
-            .label(label)
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], colour.stroke_width(2)));
+        line(&mut chart, points.clone(), colour, label)?;
         chart.draw_series(
             points
                 .into_iter()
                 .map(|p| Circle::new(p, 3, colour.filled())),
         )?;
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
-    Ok(())
+    legend(&mut chart)
 }
 
 /// Fig. 3: rows of (view A, view B, view A with its predicted mask, view B with its mask).
@@ -360,23 +370,15 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     let device = args.backend.device()?;
     let model = load_run(&run, &device)?;
     let (_, predictions) = evaluate(&model, &data, Split::Test, &device, 16, false)?;
-    let mut written = Vec::new();
+    // Each figure with its file stem and size in pixels.
+    let mut figures = Vec::new();
     if !predictions.is_empty() {
+        let predictions = &predictions;
         for (axis, name) in AXES.iter().enumerate() {
-            let stem = format!("fig4-force-{name}");
-            Figure::Force {
-                axis,
-                predictions: &predictions,
-            }
-            .save(&out, &stem, (900, 420))?;
-            written.push(stem);
-            let stem = format!("fig5-error-{name}");
-            Figure::Errors {
-                axis,
-                predictions: &predictions,
-            }
-            .save(&out, &stem, (520, 420))?;
-            written.push(stem);
+            let force = Figure::Force { axis, predictions };
+            figures.push((force, format!("fig4-force-{name}"), (900, 420)));
+            let errors = Figure::Errors { axis, predictions };
+            figures.push((errors, format!("fig5-error-{name}"), (520, 420)));
         }
     }
     for (metric, stem, title) in [
@@ -385,19 +387,22 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         (Quantity::ForceMae.name(), "fig5-force-mae", "Force MAE (N)"),
     ] {
         if rows.iter().any(|r| r.values.contains_key(metric)) {
-            Figure::Curve {
-                rows: &rows,
+            let rows = &rows;
+            let curve = Figure::Curve {
+                rows,
                 metric,
                 title,
-            }
-            .save(&out, stem, (620, 420))?;
-            written.push(stem.to_string());
+            };
+            figures.push((curve, stem.to_string(), (620, 420)));
         }
+    }
+    for (figure, stem, size) in &figures {
+        figure.save(&out, stem, *size)?;
     }
     let sheet = sample_sheet(&model, &data, &out, &device)?;
     eprintln!(
         "wrote {} figures (SVG and PNG){} to {}",
-        written.len(),
+        figures.len(),
         if sheet.is_some() {
             " and fig3-samples.png"
         } else {
