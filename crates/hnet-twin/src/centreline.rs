@@ -253,6 +253,17 @@ const NEIGHBOURS: [(isize, isize); 8] = [
     (1, 1),
 ];
 
+/// The 8-neighbours of pixel `i` (row-major) that lie inside a `width` x `height` image, each
+/// with whether it is a diagonal one.
+fn neighbours(i: usize, width: usize, height: usize) -> impl Iterator<Item = (usize, bool)> {
+    let (x, y) = ((i % width) as isize, (i / width) as isize);
+    NEIGHBOURS.into_iter().filter_map(move |(dx, dy)| {
+        let (nx, ny) = (x + dx, y + dy);
+        (nx >= 0 && ny >= 0 && nx < width as isize && ny < height as isize)
+            .then(|| (ny as usize * width + nx as usize, dx != 0 && dy != 0))
+    })
+}
+
 /// Extracts the centreline of the catheter in `mask`; `view` names the view in errors.
 pub fn extract_centreline(
     mask: &Mask<'_>,
@@ -459,13 +470,7 @@ fn largest_blob(
         stack.push(start);
         while let Some(i) = stack.pop() {
             pixels.push(i);
-            let (x, y) = ((i % width) as isize, (i / width) as isize);
-            for (dx, dy) in NEIGHBOURS {
-                let (nx, ny) = (x + dx, y + dy);
-                if nx < 0 || ny < 0 || nx >= width as isize || ny >= height as isize {
-                    continue;
-                }
-                let j = ny as usize * width + nx as usize;
+            for (j, _) in neighbours(i, width, height) {
                 if inside[j] && label[j] == usize::MAX {
                     label[j] = id;
                     stack.push(j);
@@ -554,17 +559,11 @@ fn geodesic(
         if d > far_distance {
             (far, far_distance) = (i, d);
         }
-        let (x, y) = ((i % width) as isize, (i / width) as isize);
-        for (dx, dy) in NEIGHBOURS {
-            let (nx, ny) = (x + dx, y + dy);
-            if nx < 0 || ny < 0 || nx >= width as isize || ny >= height as isize {
-                continue;
-            }
-            let j = ny as usize * width + nx as usize;
+        for (j, diagonal) in neighbours(i, width, height) {
             if !in_blob[j] {
                 continue;
             }
-            let nd = d + if dx != 0 && dy != 0 { 7 } else { 5 };
+            let nd = d + if diagonal { 7 } else { 5 };
             if nd < distance[j] {
                 distance[j] = nd;
                 previous[j] = Some(i);
@@ -788,12 +787,31 @@ fn quantile(values: &[f64], q: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::ops::Range;
+
     use crate::carm::CArm;
     use crate::catheter::CatheterDesign;
     use crate::raster::to_byte;
     use crate::render::{PROXIMAL_SHAFT_MM, rasterize_catheter};
     use crate::rod::{RodBase, RodConfig, RodShape, solve};
     use crate::vec3::{Mat3, Vec3};
+
+    /// Sets the pixels `xs` × `ys` of a mask `width` pixels wide to `value`.
+    fn fill<T: Copy>(mask: &mut [T], width: usize, xs: Range<usize>, ys: Range<usize>, value: T) {
+        for y in ys {
+            mask[y * width + xs.start..y * width + xs.end].fill(value);
+        }
+    }
+
+    /// The centreline of view `view`'s `w` x `h` byte mask, with the default settings.
+    fn centreline8(
+        w: usize,
+        h: usize,
+        mask: &[u8],
+        view: &str,
+    ) -> Result<Centreline, CentrelineError> {
+        extract_centreline(&Mask::coverage8(w, h, mask), view, &Default::default())
+    }
 
     /// Distance from `p` to the polyline `line`.
     fn distance_to(line: &[[f64; 2]], p: [f64; 2]) -> f64 {
@@ -925,13 +943,8 @@ mod tests {
         // A horizontal bar from u = 20 to u = 50 at v = 30 in a 64 x 64 mask.
         let (w, h) = (64, 64);
         let mut mask = vec![0u8; w * h];
-        for y in 28..33 {
-            for x in 20..51 {
-                mask[y * w + x] = 255;
-            }
-        }
-        let line =
-            extract_centreline(&Mask::coverage8(w, h, &mask), "A", &Default::default()).unwrap();
+        fill(&mut mask, w, 20..51, 28..33, 255);
+        let line = centreline8(w, h, &mask, "A").unwrap();
         assert!(!line.proximal_at_border && !line.tip_at_border);
         // u = 20 is 20 px from the border, u = 51 is 13 px from it.
         assert!(line.points_px[0][0] > 45.0, "{:?}", line.points_px[0]);
@@ -953,25 +966,15 @@ mod tests {
     fn bad_masks_are_named_errors() {
         let (w, h) = (40, 30);
         let empty = vec![0u8; w * h];
-        let err = extract_centreline(&Mask::coverage8(w, h, &empty), "A", &Default::default())
-            .unwrap_err();
+        let err = centreline8(w, h, &empty, "A").unwrap_err();
         assert!(matches!(err, CentrelineError::Empty { .. }), "{err}");
         assert!(err.to_string().starts_with("view A: the mask is empty"));
 
         // Two bars of 5 x 20 and 4 x 15 pixels.
         let mut two = vec![0u8; w * h];
-        for y in 0..20 {
-            for x in 5..10 {
-                two[y * w + x] = 255;
-            }
-        }
-        for y in 5..20 {
-            for x in 25..29 {
-                two[y * w + x] = 255;
-            }
-        }
-        let err =
-            extract_centreline(&Mask::coverage8(w, h, &two), "B", &Default::default()).unwrap_err();
+        fill(&mut two, w, 5..10, 0..20, 255);
+        fill(&mut two, w, 25..29, 5..20, 255);
+        let err = centreline8(w, h, &two, "B").unwrap_err();
         assert_eq!(
             err,
             CentrelineError::SeveralBlobs {
@@ -985,58 +988,30 @@ mod tests {
         );
         // A speck beside the catheter is ignored.
         let mut speck = two.clone();
-        for y in 5..20 {
-            for x in 25..29 {
-                speck[y * w + x] = 0;
-            }
-        }
+        fill(&mut speck, w, 25..29, 5..20, 0);
         speck[25 * w + 30] = 255;
-        assert!(
-            extract_centreline(&Mask::coverage8(w, h, &speck), "B", &Default::default()).is_ok()
-        );
+        assert!(centreline8(w, h, &speck, "B").is_ok());
 
         // A hairpin: two legs side by side, one of them reaching the border.
         let mut hairpin = vec![0u8; w * h];
-        for y in 5..h {
-            for x in 10..15 {
-                hairpin[y * w + x] = 255;
-            }
-        }
-        for y in 5..20 {
-            for x in 15..20 {
-                hairpin[y * w + x] = 255;
-            }
-        }
-        let err = extract_centreline(&Mask::coverage8(w, h, &hairpin), "A", &Default::default())
-            .unwrap_err();
+        fill(&mut hairpin, w, 10..15, 5..h, 255);
+        fill(&mut hairpin, w, 15..20, 5..20, 255);
+        let err = centreline8(w, h, &hairpin, "A").unwrap_err();
         assert!(matches!(err, CentrelineError::NotATube { .. }), "{err}");
         assert!(err.to_string().contains("times as wide"), "{err}");
         // A branch off the catheter's side.
         let n = 60;
         let mut branch = vec![0u8; n * n];
-        for y in 0..50 {
-            for x in 28..33 {
-                branch[y * n + x] = 255;
-            }
-        }
-        for y in 20..25 {
-            for x in 33..50 {
-                branch[y * n + x] = 255;
-            }
-        }
-        let err = extract_centreline(&Mask::coverage8(n, n, &branch), "A", &Default::default())
-            .unwrap_err();
+        fill(&mut branch, n, 28..33, 0..50, 255);
+        fill(&mut branch, n, 33..50, 20..25, 255);
+        let err = centreline8(n, n, &branch, "A").unwrap_err();
         assert!(
             err.to_string().contains("lie off the centreline's tube"),
             "{err}"
         );
 
         let mut dot = vec![0.0f32; w * h];
-        for y in 10..14 {
-            for x in 10..14 {
-                dot[y * w + x] = 0.9;
-            }
-        }
+        fill(&mut dot, w, 10..14, 10..14, 0.9);
         let err =
             extract_centreline(&Mask::soft(w, h, &dot), "A", &Default::default()).unwrap_err();
         assert!(matches!(err, CentrelineError::TooShort { .. }), "{err}");

@@ -542,7 +542,7 @@ pub fn reconstruct(
 pub(crate) mod tests {
     use super::*;
     use crate::carm::{Biplane, CArm};
-    use crate::centreline::{CentrelineSettings, Mask, extract_centreline};
+    use crate::centreline::{CentrelineError, CentrelineSettings, Mask, extract_centreline};
     use crate::render::PROXIMAL_SHAFT_MM;
     use crate::rod::RodShape;
     use crate::scene::{Backgrounds, Modality, StereoSample, TwinConfig, generate};
@@ -555,16 +555,30 @@ pub(crate) mod tests {
         (config, sample)
     }
 
-    /// Both views' centrelines from the sample's masks.
-    pub(crate) fn centrelines(sample: &StereoSample, size: usize) -> [Centreline; 2] {
-        [0, 1].map(|i| {
-            extract_centreline(
-                &Mask::coverage8(size, size, &sample.views[i].mask),
-                ["A", "B"][i],
-                &CentrelineSettings::default(),
-            )
-            .unwrap()
-        })
+    /// The centreline of view `view` (0 for A, 1 for B) from its `size`-pixel mask.
+    pub(crate) fn mask_centreline(
+        mask: &[u8],
+        size: usize,
+        view: usize,
+    ) -> Result<Centreline, CentrelineError> {
+        extract_centreline(
+            &Mask::coverage8(size, size, mask),
+            ["A", "B"][view],
+            &CentrelineSettings::default(),
+        )
+    }
+
+    /// The sample's catheter reconstructed from its true masks at `size` pixels.
+    pub(crate) fn reconstruct_true_masks(sample: &StereoSample, size: usize) -> Reconstruction {
+        let [a, b] = [0, 1].map(|i| mask_centreline(&sample.views[i].mask, size, i).unwrap());
+        reconstruct(
+            &a,
+            &sample.views[0].camera,
+            &b,
+            &sample.views[1].camera,
+            &ReconstructionSettings::default(),
+        )
+        .unwrap()
     }
 
     /// Distance from `p` to the true centreline (the flexible section and its proximal shaft).
@@ -572,27 +586,21 @@ pub(crate) mod tests {
         crate::rod_fit::distances_to_rod(shape, PROXIMAL_SHAFT_MM, &[p])[0]
     }
 
+    /// How far `r` is from the true catheter `shape`: the mean distance of its points and the
+    /// distance of its last point from the true tip, mm.
+    pub(crate) fn errors_to_truth(r: &Reconstruction, shape: &RodShape) -> (f64, f64) {
+        let distances = crate::rod_fit::distances_to_rod(shape, PROXIMAL_SHAFT_MM, &r.points_mm);
+        let mean = distances.iter().sum::<f64>() / distances.len() as f64;
+        (mean, (r.last_mm() - shape.tip_mm()).norm())
+    }
+
     #[test]
     fn a_twin_pair_is_reconstructed_from_its_true_masks() {
         let size = 128;
         for index in 0..3 {
             let (_, sample) = bench_sample(size, 5, index);
-            let [a, b] = centrelines(&sample, size);
-            let r = reconstruct(
-                &a,
-                &sample.views[0].camera,
-                &b,
-                &sample.views[1].camera,
-                &ReconstructionSettings::default(),
-            )
-            .unwrap();
-            let errors: Vec<f64> = r
-                .points_mm
-                .iter()
-                .map(|&p| distance_to_truth(&sample.shape, p))
-                .collect();
-            let mean = errors.iter().sum::<f64>() / errors.len() as f64;
-            let tip = (r.last_mm() - sample.shape.tip_mm()).norm();
+            let r = reconstruct_true_masks(&sample, size);
+            let (mean, tip) = errors_to_truth(&r, &sample.shape);
             assert!(r.tip_seen);
             assert!(mean < 0.3, "sample {index}: mean error {mean} mm");
             assert!(tip < 1.0, "sample {index}: tip error {tip} mm");

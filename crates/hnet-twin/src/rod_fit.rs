@@ -648,7 +648,9 @@ pub fn fit_rod_to_reconstruction(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::reconstruction::tests::{bench_sample, centrelines, distance_to_truth};
+    use crate::reconstruction::tests::{
+        bench_sample, distance_to_truth, errors_to_truth, mask_centreline, reconstruct_true_masks,
+    };
     use crate::reconstruction::{ReconstructionSettings, reconstruct};
     use crate::scene::{SceneParams, SceneSampling, sample_rng};
 
@@ -700,15 +702,7 @@ mod tests {
         let size = 128;
         for index in 0..2 {
             let (config, sample) = bench_sample(size, 5, index);
-            let [a, b] = centrelines(&sample, size);
-            let r = reconstruct(
-                &a,
-                &sample.views[0].camera,
-                &b,
-                &sample.views[1].camera,
-                &ReconstructionSettings::default(),
-            )
-            .unwrap();
+            let r = reconstruct_true_masks(&sample, size);
             let (rod_config, base) = sample.params.rod(&config.rod);
             let fit = fit_rod_to_reconstruction(&rod_config, &base, &r, &RodFitSettings::default())
                 .unwrap();
@@ -1013,7 +1007,6 @@ mod tests {
 
     fn measure(case: &Case<'_>, pairs: u64) {
         let (_, config, degrade, assume, settings) = case;
-        use crate::centreline::{CentrelineSettings, Mask, extract_centreline};
         use crate::scene::{Backgrounds, generate};
         use std::time::{Duration, Instant};
 
@@ -1029,13 +1022,7 @@ mod tests {
             let masks = [0, 1].map(|i| degrade(&sample.views[i].mask));
             let start = Instant::now();
             let lines: Vec<_> = (0..2)
-                .map(|i| {
-                    extract_centreline(
-                        &Mask::coverage8(size, size, &masks[i]),
-                        ["A", "B"][i],
-                        &CentrelineSettings::default(),
-                    )
-                })
+                .map(|i| mask_centreline(&masks[i], size, i))
                 .collect();
             let t_lines = start.elapsed();
             let (a, b) = match (&lines[0], &lines[1]) {
@@ -1066,13 +1053,7 @@ mod tests {
             times[0] += t_lines;
             times[1] += t_reconstruct - t_lines;
             times[2] += t_fit - t_reconstruct;
-            let errors: Vec<f64> = r
-                .points_mm
-                .iter()
-                .map(|&p| distance_to_truth(&sample.shape, p))
-                .collect();
-            let mean = errors.iter().sum::<f64>() / errors.len() as f64;
-            let tip = (r.last_mm() - sample.shape.tip_mm()).norm();
+            let (mean, tip) = errors_to_truth(&r, &sample.shape);
             line_errors.push(mean);
             if r.tip_seen {
                 tip_errors.push(tip);
