@@ -616,50 +616,52 @@ pub fn parse_force_labels(
 mod tests {
     use super::*;
 
-    fn pair(ws: &Workspace) -> LabeledPair {
+    /// A workspace of `n` black uploaded pairs, `pair-0001` to `pair-000n`.
+    fn workspace(n: usize) -> Workspace {
+        let mut ws = Workspace::default();
         let rgb = vec![0u8; WORK_SIZE * WORK_SIZE * 3];
-        LabeledPair::new(
-            ws.next_id(),
-            PairSource::Upload {
+        for _ in 0..n {
+            let source = PairSource::Upload {
                 view_a: "a.png".into(),
                 view_b: "b.png".into(),
-            },
-            rgb.clone(),
-            rgb,
-        )
+            };
+            ws.add(LabeledPair::new(
+                ws.next_id(),
+                source,
+                rgb.clone(),
+                rgb.clone(),
+            ));
+        }
+        ws
     }
 
-    fn stroke(ws: &mut Workspace, view: View, from: [f64; 2], to: [f64; 2], r: f64, tool: Tool) {
+    /// One stroke of `tool` from `from` to `to`, radius `r`, on the current pair's `view`.
+    fn stroke(ws: &mut Workspace, view: View, tool: Tool, [from, to]: [[f64; 2]; 2], r: f64) {
         ws.begin_stroke(view);
         ws.stroke_to(from, to, r, tool);
         ws.end_stroke();
     }
 
+    /// A brush stroke.
+    fn brush(ws: &mut Workspace, view: View, from: [f64; 2], to: [f64; 2], r: f64) {
+        stroke(ws, view, Tool::Brush, [from, to], r);
+    }
+
+    /// An eraser stroke.
+    fn erase(ws: &mut Workspace, view: View, from: [f64; 2], to: [f64; 2], r: f64) {
+        stroke(ws, view, Tool::Eraser, [from, to], r);
+    }
+
     #[test]
     fn strokes_undo_and_redo_one_at_a_time() {
-        let mut ws = Workspace::default();
-        ws.add(pair(&ws));
-        stroke(
-            &mut ws,
-            View::A,
-            [10.0, 10.0],
-            [40.0, 10.0],
-            3.0,
-            Tool::Brush,
-        );
+        let mut ws = workspace(1);
+        brush(&mut ws, View::A, [10.0, 10.0], [40.0, 10.0], 3.0);
         let painted = ws.current().unwrap().mask_a.clone();
         // A 30 px long, 6 px wide stroke with round ends.
         let n = painted.iter().filter(|&&m| m == 255).count();
         assert!((180..=230).contains(&n), "{n}");
         assert!(ws.current().unwrap().masks_labeled);
-        stroke(
-            &mut ws,
-            View::A,
-            [20.0, 10.0],
-            [20.0, 10.0],
-            5.0,
-            Tool::Eraser,
-        );
+        erase(&mut ws, View::A, [20.0, 10.0], [20.0, 10.0], 5.0);
         assert!(ws.current().unwrap().labeled_pixels(View::A) < n);
 
         assert!(ws.undo().is_some());
@@ -671,30 +673,21 @@ mod tests {
         assert!(ws.redo().is_some());
         assert_eq!(ws.current().unwrap().mask_a, painted);
         // A new stroke clears what could be redone.
-        stroke(&mut ws, View::B, [5.0, 5.0], [6.0, 6.0], 2.0, Tool::Brush);
+        brush(&mut ws, View::B, [5.0, 5.0], [6.0, 6.0], 2.0);
         assert!(ws.redo().is_none());
         assert_eq!(ws.can_undo_redo(), (true, false));
     }
 
     #[test]
     fn a_stroke_that_changes_nothing_is_no_undo_step() {
-        let mut ws = Workspace::default();
-        ws.add(pair(&ws));
-        stroke(
-            &mut ws,
-            View::A,
-            [10.0, 10.0],
-            [12.0, 10.0],
-            2.0,
-            Tool::Eraser,
-        );
+        let mut ws = workspace(1);
+        erase(&mut ws, View::A, [10.0, 10.0], [12.0, 10.0], 2.0);
         assert_eq!(ws.can_undo_redo(), (false, false));
     }
 
     #[test]
     fn pre_labels_are_one_undo_step_for_both_views() {
-        let mut ws = Workspace::default();
-        ws.add(pair(&ws));
+        let mut ws = workspace(1);
         let full = vec![255u8; WORK_SIZE * WORK_SIZE];
         assert!(ws.set_masks([full.clone(), full.clone()]).is_some());
         assert_eq!(ws.current().unwrap().mask_b, full);
@@ -717,9 +710,7 @@ mod tests {
 
     #[test]
     fn ids_do_not_repeat_after_removal() {
-        let mut ws = Workspace::default();
-        ws.add(pair(&ws));
-        ws.add(pair(&ws));
+        let mut ws = workspace(2);
         assert_eq!(ws.pairs[1].id, "pair-0002");
         ws.select(0);
         assert_eq!(ws.remove_current().unwrap().pair.id, "pair-0001");
@@ -730,19 +721,9 @@ mod tests {
 
     #[test]
     fn a_deleted_pair_comes_back_where_it_was_with_its_history() {
-        let mut ws = Workspace::default();
-        for _ in 0..3 {
-            ws.add(pair(&ws));
-        }
+        let mut ws = workspace(3);
         ws.select(1);
-        stroke(
-            &mut ws,
-            View::A,
-            [10.0, 10.0],
-            [60.0, 10.0],
-            3.0,
-            Tool::Brush,
-        );
+        brush(&mut ws, View::A, [10.0, 10.0], [60.0, 10.0], 3.0);
         ws.set_force("pair-0002", Some([0.1, 0.2, -0.1]));
         let before = ws.pairs.clone();
         let removed = ws.remove_current().unwrap();
@@ -758,7 +739,7 @@ mod tests {
         // Edits of the restored pair go back where they were in time: here a newer stroke on
         // pair-0001 is undone first.
         ws.select(0);
-        stroke(&mut ws, View::A, [5.0, 5.0], [20.0, 5.0], 2.0, Tool::Brush);
+        brush(&mut ws, View::A, [5.0, 5.0], [20.0, 5.0], 2.0);
         ws.select(1);
         let again = ws.remove_current().unwrap();
         ws.restore(again);
@@ -817,8 +798,7 @@ mod tests {
             "{err}"
         );
 
-        let mut ws = Workspace::default();
-        ws.add(pair(&ws));
+        let mut ws = workspace(1);
         let (applied, unknown) = ws.apply_force_labels(&[
             ("pair-0001".into(), [0.1, 0.0, 0.0]),
             ("pair-0099".into(), [0.0; 3]),

@@ -7,6 +7,7 @@ use leptos::prelude::*;
 use wasm_bindgen::{Clamped, JsCast};
 
 use crate::browser::{files, read_file_with};
+use crate::components::on_slider;
 use crate::error_text::with_causes;
 use crate::imaging::decode_radiograph;
 use crate::keymap::{self, Command, Scope};
@@ -294,11 +295,7 @@ pub fn Composer() -> impl IntoView {
                 <span>"Region size"</span>
                 <input id="background-region-size" type="range" min="0.1" max="0.8" step="0.01"
                     prop:value=move || background.with(|bg| bg.region_side()).to_string()
-                    on:input=move |ev| {
-                        if let Ok(side) = event_target_value(&ev).parse::<f64>() {
-                            background.update(|bg| bg.resize_region(side));
-                        }
-                    }
+                    on:input=on_slider(move |side| background.update(|bg| bg.resize_region(side)))
                     on:change=move |_| rerender()/>
             </label>
             <fieldset class="style">

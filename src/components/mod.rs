@@ -9,3 +9,14 @@ pub mod pair_list;
 pub mod shortcuts;
 pub mod sources;
 pub mod stereo_view;
+
+use leptos::prelude::event_target_value;
+
+/// The `input` handler of a range slider: `set` gets the slider's value.
+pub(crate) fn on_slider(set: impl Fn(f64) + 'static) -> impl Fn(web_sys::Event) + 'static {
+    move |ev| {
+        if let Ok(value) = event_target_value(&ev).parse::<f64>() {
+            set(value);
+        }
+    }
+}

@@ -6,6 +6,7 @@ use leptos::prelude::*;
 
 use crate::browser::{PickedFileError, files, read_file_with};
 use crate::components::composer::Composer;
+use crate::components::on_slider;
 use crate::error_text::with_causes;
 use crate::imaging::{ImageError, WORK_SIZE, decode_to_rgb};
 use crate::keymap::{self, Command, Scope};
@@ -242,12 +243,10 @@ fn slider(
             <span>{label}</span>
             <input id=id type="range" min=range[0] max=range[1] step=range[2]
                 prop:value=move || twin.with(get).to_string()
-                on:input=move |ev| {
-                    if let Ok(v) = event_target_value(&ev).parse::<f64>() {
-                        twin.update(|t| set(t, v));
-                        studio.render_twin();
-                    }
-                }
+                on:input=on_slider(move |v| {
+                    twin.update(|t| set(t, v));
+                    studio.render_twin();
+                })
                 on:change=move |_| studio.run_model()/>
             <output>{move || format!("{:.2} {unit}", twin.with(get))}</output>
         </label>

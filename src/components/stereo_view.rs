@@ -6,6 +6,7 @@ use leptos::prelude::*;
 use wasm_bindgen::{Clamped, JsCast};
 
 use crate::catheter_3d::{epipolar_line, pair_views};
+use crate::components::on_slider;
 use crate::imaging::{WORK_SIZE, estimate_tip, force_arrow, overlay, project, rgba};
 use crate::keymap::{self, Command, Scope, tooltip};
 use crate::studio::{CANVAS_SIDE, PointerTool, Studio, ViewTransform, view_index};
@@ -37,6 +38,20 @@ pub fn StereoView() -> impl IntoView {
             </button>
         }
     };
+    // A slider and a checkbox bound to a setting.
+    let slider = |id: &'static str, [min, max, step]: [&'static str; 3], value: RwSignal<f64>| {
+        view! {
+            <input id=id type="range" min=min max=max step=step
+                prop:value=move || value.get().to_string()
+                on:input=on_slider(move |v| value.set(v))/>
+        }
+    };
+    let checkbox = |id: &'static str, value: RwSignal<bool>| {
+        view! {
+            <input id=id type="checkbox" prop:checked=move || value.get()
+                on:change=move |ev| value.set(event_target_checked(&ev))/>
+        }
+    };
     let can = move || studio.workspace.with(|ws| ws.can_undo_redo());
     let has_prediction = move || {
         studio
@@ -57,13 +72,7 @@ pub fn StereoView() -> impl IntoView {
                 {tool_button(PointerTool::Pan, "tool-pan", "Pan", Command::Pan)}
             </span>
             <label class="slider compact">"Size"
-                <input id="brush-size" type="range" min="1" max="20" step="0.5"
-                    prop:value=move || studio.brush_radius.get().to_string()
-                    on:input=move |ev| {
-                        if let Ok(r) = event_target_value(&ev).parse::<f64>() {
-                            studio.brush_radius.set(r);
-                        }
-                    }/>
+                {slider("brush-size", ["1", "20", "0.5"], studio.brush_radius)}
                 <output>{move || format!("{:.1} px", studio.brush_radius.get())}</output>
             </label>
             <span class="group">
@@ -73,23 +82,13 @@ pub fn StereoView() -> impl IntoView {
                     on:click=move |_| studio.undo_redo(true)>"Redo"</button>
             </span>
             <span class="group">
-                <label><input id="show-prediction" type="checkbox"
-                    prop:checked=move || studio.show_prediction.get()
-                    on:change=move |ev| studio.show_prediction.set(event_target_checked(&ev))/>
+                <label>{checkbox("show-prediction", studio.show_prediction)}
                     <span class="swatch prediction"></span>"H-Net masks"</label>
-                <label><input id="show-label" type="checkbox"
-                    prop:checked=move || studio.show_label.get()
-                    on:change=move |ev| studio.show_label.set(event_target_checked(&ev))/>
+                <label>{checkbox("show-label", studio.show_label)}
                     <span class="swatch label"></span>"Labels"</label>
             </span>
             <label class="slider compact">"Opacity"
-                <input id="opacity" type="range" min="0" max="1" step="0.05"
-                    prop:value=move || studio.opacity.get().to_string()
-                    on:input=move |ev| {
-                        if let Ok(o) = event_target_value(&ev).parse::<f64>() {
-                            studio.opacity.set(o);
-                        }
-                    }/>
+                {slider("opacity", ["0", "1", "0.05"], studio.opacity)}
             </label>
             <button id="reset-zoom" title=tooltip("Fit both views", Command::FitViews)
                 on:click=move |_| studio.fit_views()>"Fit"</button>
