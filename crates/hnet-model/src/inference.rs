@@ -6,7 +6,7 @@
 
 use alloc::vec::Vec;
 
-use burn::tensor::{DataError, Device, ExecutionError, Tensor, TensorData};
+use burn::tensor::{DataError, Device, ExecutionError, Tensor, TensorData, Transaction};
 use hnet_units::ImageSize;
 
 use crate::model::{HNet, HNetOutput};
@@ -143,40 +143,46 @@ fn to_vec(data: TensorData) -> Result<Vec<f32>, ReadbackError> {
     data.try_into_vec::<f32>().map_err(ReadbackError::Data)
 }
 
+/// Host copies of a batch's outputs as [`HNet::forward_batch`] registered them for reading
+/// (`read`: what the device returned), split per pair. (Burn returns every registered output;
+/// one that were missing would read as empty, giving no predictions rather than a panic.)
+fn read_predictions(
+    size: ImageSize,
+    read: Result<Vec<TensorData>, ExecutionError>,
+) -> Result<Vec<StereoPrediction>, PredictError> {
+    let mut outputs = read.map_err(ReadbackError::Device)?.into_iter().map(to_vec);
+    let mut next = || outputs.next().unwrap_or_else(|| Ok(Vec::new()));
+    let (mask_a, mask_b, force) = (next()?, next()?, next()?);
+    Ok(split_predictions(size, mask_a, mask_b, force))
+}
+
 impl HNet {
-    /// Runs a batch of `pairs`: mask probabilities `[B, H·W]` of both views and the force `[B, 3]`.
-    fn masks_and_force(
+    /// Runs a batch of `pairs` and registers, for one read-back, the mask probabilities
+    /// `[B, H·W]` of both views and the force `[B, 3]`.
+    fn forward_batch(
         &self,
         pairs: &[StereoPair<'_>],
         size: ImageSize,
         device: &Device,
-    ) -> Result<[Tensor<2>; 3], InputSizeError> {
+    ) -> Result<Transaction, InputSizeError> {
         let (a, b) = stereo_batch(pairs, size, device)?;
         let output: HNetOutput = self.forward(a, b);
         let batch = pairs.len() as i32;
-        Ok([
-            output.mask_a().reshape([batch, -1]),
-            output.mask_b().reshape([batch, -1]),
-            output.force,
-        ])
+        Ok(Transaction::default()
+            .register(output.mask_a().reshape([batch, -1]))
+            .register(output.mask_b().reshape([batch, -1]))
+            .register(output.force))
     }
 
-    /// Runs `pairs` (each image of `size`) and reads the results back,
-    /// blocking until the device is done. Use [`HNet::predict_async`] in the browser.
+    /// Runs `pairs` (each image of `size`) and reads the results back, blocking until the device
+    /// is done. Use [`HNet::predict_async`] in the browser.
     pub fn predict(
         &self,
         pairs: &[StereoPair<'_>],
         size: ImageSize,
         device: &Device,
     ) -> Result<Vec<StereoPrediction>, PredictError> {
-        let [mask_a, mask_b, force] = self.masks_and_force(pairs, size, device)?;
-        let read = |t: Tensor<2>| to_vec(t.into_data());
-        Ok(split_predictions(
-            size,
-            read(mask_a)?,
-            read(mask_b)?,
-            read(force)?,
-        ))
+        read_predictions(size, self.forward_batch(pairs, size, device)?.try_execute())
     }
 
     /// Like [`HNet::predict`], but waits for the device asynchronously (required on WebGPU in
@@ -187,19 +193,8 @@ impl HNet {
         size: ImageSize,
         device: &Device,
     ) -> Result<Vec<StereoPrediction>, PredictError> {
-        let [mask_a, mask_b, force] = self.masks_and_force(pairs, size, device)?;
-        let read = |t: Tensor<2>| async move {
-            t.into_data_async()
-                .await
-                .map_err(ReadbackError::Device)
-                .and_then(to_vec)
-        };
-        Ok(split_predictions(
-            size,
-            read(mask_a).await?,
-            read(mask_b).await?,
-            read(force).await?,
-        ))
+        let read = self.forward_batch(pairs, size, device)?.execute_async();
+        read_predictions(size, read.await)
     }
 }
 

@@ -4,6 +4,7 @@ use burn::module::{Module, ModuleVisitor, Param};
 use burn::optim::{GradientsParams, RmsPropConfig};
 use burn::tensor::Gradients;
 use burn::tensor::{Device, Distribution, Tensor, Tolerance};
+use hnet_model::inference::{StereoPair, host_values, stereo_batch};
 use hnet_model::model::ForceScale;
 use hnet_model::{HNet, HNetConfig, HNetLossConfig};
 use hnet_units::ImageSize;
@@ -42,6 +43,53 @@ fn outputs_have_the_documented_shapes() {
     let mask = out.mask_a().into_data();
     let values = mask.as_slice::<f32>().unwrap();
     assert!(values.iter().all(|p| (0.0..=1.0).contains(p)));
+}
+
+#[test]
+fn predict_gives_each_pair_its_masks_and_force() {
+    let device = Device::flex();
+    let size = ImageSize::new(32, 16);
+    let model = small_config().with_image_size(size).init(&device).unwrap();
+    let image = |seed: u8| -> Vec<u8> {
+        (0..size.pixels() * 3)
+            .map(|i| (i as u8).wrapping_mul(seed))
+            .collect()
+    };
+    let views = [image(3), image(5), image(7), image(11)];
+    let pairs = [
+        StereoPair {
+            view_a: &views[0],
+            view_b: &views[1],
+        },
+        StereoPair {
+            view_a: &views[2],
+            view_b: &views[3],
+        },
+    ];
+    let predictions = model.predict(&pairs, size, &device).unwrap();
+    // The same as the forward pass of the batch, split per pair.
+    let (a, b) = stereo_batch(&pairs, size, &device).unwrap();
+    let out = model.forward(a, b);
+    let mask_a = host_values(out.mask_a()).unwrap();
+    let mask_b = host_values(out.mask_b()).unwrap();
+    let force = host_values(out.force).unwrap();
+    assert_eq!(predictions.len(), 2);
+    let close = |x: &[f32], y: &[f32]| x.iter().zip(y).all(|(x, y)| (x - y).abs() < 1e-6);
+    for (i, p) in predictions.iter().enumerate() {
+        let pixels = i * size.pixels()..(i + 1) * size.pixels();
+        assert_eq!(p.size, size);
+        assert_eq!(p.mask_a.len(), size.pixels());
+        assert!(close(&p.mask_a, &mask_a[pixels.clone()]), "pair {i}");
+        assert!(close(&p.mask_b, &mask_b[pixels]), "pair {i}");
+        assert!(close(&p.force, &force[3 * i..3 * i + 3]), "pair {i}");
+    }
+    // An image of another size is refused by name.
+    let short = [StereoPair {
+        view_a: &views[0][3..],
+        view_b: &views[1],
+    }];
+    let err = model.predict(&short, size, &device).unwrap_err();
+    assert!(err.to_string().starts_with("pair 0 view A: "), "{err}");
 }
 
 #[test]
