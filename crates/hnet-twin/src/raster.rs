@@ -132,15 +132,10 @@ impl GreyImage {
 
     /// Separable Gaussian blur with standard deviation `sigma_px` (no-op for `sigma_px <= 0`).
     pub fn blurred(&self, sigma_px: f64) -> GreyImage {
-        let kernel = gaussian_kernel(sigma_px);
-        if kernel.len() == 1 {
-            return self.clone();
-        }
-        let horizontal = convolve(&self.data, self.width, self.height, 1, &kernel, true);
         GreyImage {
             width: self.width,
             height: self.height,
-            data: convolve(&horizontal, self.width, self.height, 1, &kernel, false),
+            data: gaussian_blur(&self.data, self.width, self.height, 1, sigma_px),
         }
     }
 
@@ -198,17 +193,29 @@ impl RgbImage {
 
     /// Separable Gaussian blur of every channel.
     pub fn blurred(&self, sigma_px: f64) -> RgbImage {
-        let kernel = gaussian_kernel(sigma_px);
-        if kernel.len() == 1 {
-            return self.clone();
-        }
-        let horizontal = convolve(&self.data, self.width, self.height, 3, &kernel, true);
         RgbImage {
             width: self.width,
             height: self.height,
-            data: convolve(&horizontal, self.width, self.height, 3, &kernel, false),
+            data: gaussian_blur(&self.data, self.width, self.height, 3, sigma_px),
         }
     }
+}
+
+/// `data` (`channels` values per pixel, row-major) blurred by a separable Gaussian of standard
+/// deviation `sigma_px` (a copy for `sigma_px <= 0`).
+fn gaussian_blur(
+    data: &[f32],
+    width: usize,
+    height: usize,
+    channels: usize,
+    sigma_px: f64,
+) -> Vec<f32> {
+    let kernel = gaussian_kernel(sigma_px);
+    if kernel.len() == 1 {
+        return data.to_vec();
+    }
+    let horizontal = convolve(data, width, height, channels, &kernel, true);
+    convolve(&horizontal, width, height, channels, &kernel, false)
 }
 
 /// `[0, 1]` to a byte, rounding to nearest.

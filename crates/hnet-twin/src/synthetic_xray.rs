@@ -249,17 +249,21 @@ pub fn compose(
 ) -> GreyImage {
     let grid = rule.grid;
     let crop = source.image.crop_resampled(layout.region, width, height);
-    let edge = |i: usize, size: usize| i * size / grid;
-    // Mean radiograph value of each source patch.
-    let mut means = vec![0.0f32; grid * grid];
-    for (cell, mean) in means.iter_mut().enumerate() {
+    // Pixel bounds `(x0, x1, y0, y1)` of a cell (row-major in the grid).
+    let bounds = |cell: usize| {
+        let edge = |i: usize, size: usize| i * size / grid;
         let (r, c) = (cell / grid, cell % grid);
-        let (x0, x1, y0, y1) = (
+        (
             edge(c, width),
             edge(c + 1, width),
             edge(r, height),
             edge(r + 1, height),
-        );
+        )
+    };
+    // Mean radiograph value of each source patch.
+    let mut means = vec![0.0f32; grid * grid];
+    for (cell, mean) in means.iter_mut().enumerate() {
+        let (x0, x1, y0, y1) = bounds(cell);
         let mut sum = 0.0;
         for y in y0..y1 {
             sum += crop.data[y * width + x0..y * width + x1]
@@ -276,20 +280,8 @@ pub fn compose(
         } else {
             rule.bright_level
         };
-        let (r, c) = (cell / grid, cell % grid);
-        let (sr, sc) = (source_cell / grid, source_cell % grid);
-        let (x0, x1, y0, y1) = (
-            edge(c, width),
-            edge(c + 1, width),
-            edge(r, height),
-            edge(r + 1, height),
-        );
-        let (sx0, sx1, sy0, sy1) = (
-            edge(sc, width),
-            edge(sc + 1, width),
-            edge(sr, height),
-            edge(sr + 1, height),
-        );
+        let (x0, x1, y0, y1) = bounds(cell);
+        let (sx0, sx1, sy0, sy1) = bounds(source_cell);
         for y in y0..y1 {
             // Cells can differ by a pixel when the size is not a multiple of the grid.
             let sy = sy0 + (y - y0) * (sy1 - sy0) / (y1 - y0);
