@@ -750,12 +750,17 @@ pub(crate) mod tests {
                 Vec3::new(t, -t, 0.03 * t)
             })
             .collect();
-        let (a, b) = (
-            centreline_of(&views.a, &points),
-            centreline_of(&views.b, &points),
-        );
-        let (pa, pb) = (views.a.camera_matrix(), views.b.camera_matrix());
-        let err = reconstruct(&a, &pa, &b, &pb, &ReconstructionSettings::default()).unwrap_err();
+        // The catheter through `in_a` as view A sees it and through `in_b` as view B does.
+        let seen = |in_a: &[Vec3], in_b: &[Vec3]| {
+            reconstruct(
+                &centreline_of(&views.a, in_a),
+                &views.a.camera_matrix(),
+                &centreline_of(&views.b, in_b),
+                &views.b.camera_matrix(),
+                &ReconstructionSettings::default(),
+            )
+        };
+        let err = seen(&points, &points).unwrap_err();
         assert!(
             matches!(err, ReconstructionError::AlongEpipolarLines { fraction, .. } if fraction < 0.5),
             "{err}"
@@ -766,14 +771,7 @@ pub(crate) mod tests {
             .iter()
             .map(|p| Vec3::new(p.x(), p.y(), p.x()))
             .collect();
-        let r = reconstruct(
-            &centreline_of(&views.a, &crossing),
-            &pa,
-            &centreline_of(&views.b, &crossing),
-            &pb,
-            &ReconstructionSettings::default(),
-        )
-        .unwrap();
+        let r = seen(&crossing, &crossing).unwrap();
         assert!((r.points_mm[0] - crossing[0]).norm() < 1e-6);
         assert!((r.last_mm() - crossing[40]).norm() < 1e-6);
         // Views of different stretches do not match.
@@ -781,14 +779,7 @@ pub(crate) mod tests {
             .iter()
             .map(|p| *p + Vec3::new(0.0, 0.0, 60.0))
             .collect();
-        let err = reconstruct(
-            &centreline_of(&views.a, &crossing),
-            &pa,
-            &centreline_of(&views.b, &high),
-            &pb,
-            &ReconstructionSettings::default(),
-        )
-        .unwrap_err();
+        let err = seen(&crossing, &high).unwrap_err();
         assert!(
             matches!(err, ReconstructionError::NoOverlap { .. }),
             "{err}"

@@ -333,13 +333,22 @@ mod tests {
         solve(&RodConfig::default(), &base, Vec3::ZERO).unwrap()
     }
 
+    /// The tests' catheter diameter, mm.
+    const DIAMETER_MM: f64 = 2.33;
+
+    /// The frontal view at `size` pixels and the straight catheter rasterised in it.
+    fn straight_tube(size: usize) -> (CArm, TubeRaster) {
+        let view = CArm::cardiac(0.0, 0.0, size);
+        let design = CatheterDesign::default();
+        let tube = rasterize_catheter(&straight_catheter(), DIAMETER_MM, &design, &view);
+        (view, tube)
+    }
+
     #[test]
     fn the_mask_covers_the_projected_tube_and_nothing_else() {
-        let view = CArm::cardiac(0.0, 0.0, 224);
-        let shape = straight_catheter();
-        let tube = rasterize_catheter(&shape, 2.33, &CatheterDesign::default(), &view);
+        let (view, tube) = straight_tube(224);
         // The tube's projected width at the isocentre, in pixels.
-        let width_px = 2.33 / view.isocentre_mm_per_px();
+        let width_px = DIAMETER_MM / view.isocentre_mm_per_px();
         // Area: from the tip (with its round cap) down to the image's bottom edge.
         let tip_v = view.project(Vec3::new(0.0, 0.0, 25.0)).v;
         let length_px = 224.0 - tip_v;
@@ -366,13 +375,7 @@ mod tests {
 
     #[test]
     fn electrodes_attenuate_far_more_than_the_shaft() {
-        let view = CArm::cardiac(0.0, 0.0, 224);
-        let tube = rasterize_catheter(
-            &straight_catheter(),
-            2.33,
-            &CatheterDesign::default(),
-            &view,
-        );
+        let (view, tube) = straight_tube(224);
         let row_of = |z: f64| view.project(Vec3::new(0.0, 0.0, z)).v as usize;
         // Tip electrode near z = +24 mm, shaft at z = 0.
         let tip = tube.attenuation[row_of(23.5) * 224 + 112];
@@ -386,13 +389,7 @@ mod tests {
 
     #[test]
     fn xray_frames_show_the_catheter_dark() {
-        let view = CArm::cardiac(0.0, 0.0, 64);
-        let tube = rasterize_catheter(
-            &straight_catheter(),
-            2.33,
-            &CatheterDesign::default(),
-            &view,
-        );
+        let (view, tube) = straight_tube(64);
         let background = GreyImage::filled(64, 64, 0.7);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
         let frame = render_xray(&background, &tube, &XRayDetector::default(), &mut rng);
