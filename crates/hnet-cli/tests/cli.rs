@@ -1,87 +1,16 @@
 //! The `hnet` command end to end: simulate, train (killed and resumed), evaluate, report, and
 //! clear errors for bad input.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Output, Stdio};
 use std::time::{Duration, Instant};
 
-fn hnet() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_hnet"))
-}
-
-/// Runs `command`, which must succeed: its output.
-fn succeeds(command: &mut Command) -> Output {
-    let output = command.output().expect("hnet runs");
-    assert!(
-        output.status.success(),
-        "{command:?} failed:\n{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    output
-}
-
-/// Runs `command`, which must fail: what it says.
-fn fails(command: &mut Command) -> String {
-    let output = command.output().expect("hnet runs");
-    assert!(!output.status.success(), "{command:?} succeeded");
-    String::from_utf8_lossy(&output.stderr).into_owned()
-}
+use common::{config_json, fails, hnet, model_json, scratch, succeeds, train};
 
 fn run(args: &[&str]) -> Output {
     succeeds(hnet().args(args))
-}
-
-/// `hnet train --data DATA --out RUNS --config CONFIG`, to add to and run.
-fn train(data: &Path, runs: &Path, config: &Path) -> Command {
-    let mut command = hnet();
-    command
-        .args(["train", "--data"])
-        .arg(data)
-        .arg("--out")
-        .arg(runs)
-        .arg("--config")
-        .arg(config);
-    command
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("hnet-cli-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-/// The `model` settings of a small `architecture` for `(width, height)` images, with `depth`
-/// levels where the network has a depth.
-fn model_json(architecture: &str, depth: usize, (width, height): (usize, usize)) -> String {
-    match architecture {
-        "hnet" => format!(
-            r#"{{"architecture": "hnet", "in_channels": 3, "filters": 8, "depth": {depth},
-                 "image_size": {{"width": {width}, "height": {height}}}, "share_weights": true,
-                 "force_hidden": [16, 8]}}"#
-        ),
-        "unet" => format!(r#"{{"architecture": "unet", "base_filters": 4, "depth": {depth}}}"#),
-        "fcn" => r#"{"architecture": "fcn", "base_filters": 4}"#.to_string(),
-        "hrnet" => r#"{"architecture": "hrnet", "width": 4}"#.to_string(),
-        "ynet" => r#"{"architecture": "ynet", "base_filters": 4, "hidden": [16, 8]}"#.to_string(),
-        other => panic!("{other}"),
-    }
-}
-
-/// A training config's text: `model` on `(width, height)` images.
-fn config_json(
-    model: &str,
-    (width, height): (usize, usize),
-    batch: usize,
-    epochs: usize,
-) -> String {
-    format!(
-        r#"{{"name": "tiny", "model": {model}, "image_size": {{"width": {width}, "height": {height}}},
-          "loss": {{"beta_a": 1.0, "beta_b": 1.0, "beta_force": 1.0}},
-          "learning_rate": 0.001, "rmsprop_alpha": 0.9, "rmsprop_momentum": 0.0,
-          "rmsprop_epsilon": 1e-7, "batch_size": {batch}, "epochs": {epochs}, "patience": 20,
-          "seed": 1, "max_train_samples": null, "max_valid_samples": null, "num_workers": 1}}"#
-    )
 }
 
 /// A small config for tests: H-Net at 48x32 (non-square, so that a width/height mix-up anywhere
@@ -398,7 +327,7 @@ fn a_time_budget_ends_training_cleanly_with_the_best_checkpoint() {
 // mutated settings ends with an error naming the file (or, for valid settings, goes on to the
 // data), never a panic. Through the binary: `TrainingConfig::load` has no library path.
 mod config_properties {
-    use super::{config_json, hnet, model_json, scratch};
+    use crate::common::{config_json, hnet, model_json, scratch};
     use hnet_mutations::{cases, mutate};
     use proptest::prelude::*;
 
