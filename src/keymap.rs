@@ -317,37 +317,35 @@ mod tests {
 
     #[test]
     fn keys_find_their_command_in_their_scope_only() {
-        assert_eq!(
-            command(Scope::Page, "R", false, false),
-            Some(Command::RunModel)
-        );
-        assert_eq!(command(Scope::Page, "z", true, false), Some(Command::Undo));
-        assert_eq!(command(Scope::Page, "Z", true, true), Some(Command::Redo));
-        assert_eq!(command(Scope::Page, "y", true, false), Some(Command::Redo));
-        // Ctrl with another key is the browser's (copy, paste, ...).
-        assert_eq!(command(Scope::Page, "c", true, false), None);
-        assert_eq!(command(Scope::Page, "ArrowLeft", false, false), None);
-        assert_eq!(
-            command(Scope::View, "ArrowLeft", false, false),
-            Some(Command::Left)
-        );
-        assert_eq!(
-            command(Scope::Region, "+", false, true),
-            Some(Command::Grow)
-        );
-        assert_eq!(
-            command(Scope::Tabs, "End", false, false),
-            Some(Command::Last)
-        );
-        assert_eq!(
-            command(Scope::Scene, "O", false, false),
-            Some(Command::ToggleProjection)
-        );
-        assert_eq!(
-            command(Scope::Scene, "ArrowUp", false, true),
-            Some(Command::Up)
-        );
-        assert_eq!(command(Scope::Page, "Home", false, false), None);
+        // (scope, key, Ctrl, Shift): the command, if any.
+        let cases = [
+            ((Scope::Page, "R", false, false), Some(Command::RunModel)),
+            ((Scope::Page, "z", true, false), Some(Command::Undo)),
+            ((Scope::Page, "Z", true, true), Some(Command::Redo)),
+            ((Scope::Page, "y", true, false), Some(Command::Redo)),
+            // Ctrl with another key is the browser's (copy, paste, ...).
+            ((Scope::Page, "c", true, false), None),
+            ((Scope::Page, "ArrowLeft", false, false), None),
+            (
+                (Scope::View, "ArrowLeft", false, false),
+                Some(Command::Left),
+            ),
+            ((Scope::Region, "+", false, true), Some(Command::Grow)),
+            ((Scope::Tabs, "End", false, false), Some(Command::Last)),
+            (
+                (Scope::Scene, "O", false, false),
+                Some(Command::ToggleProjection),
+            ),
+            ((Scope::Scene, "ArrowUp", false, true), Some(Command::Up)),
+            ((Scope::Page, "Home", false, false), None),
+        ];
+        for ((scope, key, control, shift), expected) in cases {
+            assert_eq!(
+                command(scope, key, control, shift),
+                expected,
+                "{scope:?} {key} (Ctrl {control}, Shift {shift})"
+            );
+        }
     }
 
     #[test]

@@ -469,27 +469,16 @@ mod tests {
         assert!(!text.contains(BATCH_EVENT), "{text}");
         let lines: Vec<&str> = text.lines().collect();
         // Three progress lines (the last batch ends the split instead), then the split's line.
-        assert!(
-            lines[0].starts_with("epoch 1/18 train 8/32 pairs (25%), "),
-            "{text}"
-        );
+        for (line, start) in [
+            (0, "epoch 1/18 train 8/32 pairs (25%), "),
+            (2, "epoch 1/18 train 24/32 pairs (75%)"),
+            (3, "epoch 1/18 train 32 pairs in "),
+            (4, "epoch 1/18 valid 8/16 pairs (50%)"),
+            (5, "epoch 1/18 valid 16 pairs in "),
+        ] {
+            assert!(lines[line].starts_with(start), "line {line}: {text}");
+        }
         assert!(lines[0].contains(" pairs/s, ETA "), "{text}");
-        assert!(
-            lines[2].starts_with("epoch 1/18 train 24/32 pairs (75%)"),
-            "{text}"
-        );
-        assert!(
-            lines[3].starts_with("epoch 1/18 train 32 pairs in "),
-            "{text}"
-        );
-        assert!(
-            lines[4].starts_with("epoch 1/18 valid 8/16 pairs (50%)"),
-            "{text}"
-        );
-        assert!(
-            lines[5].starts_with("epoch 1/18 valid 16 pairs in "),
-            "{text}"
-        );
         assert_eq!(lines.len(), 6, "{text}");
 
         // At the default interval, a short epoch writes only the split lines.
