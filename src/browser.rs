@@ -101,6 +101,25 @@ pub async fn read_file_with<T, E>(
     read(&file.name(), &bytes).map_err(PickedFileError::Content)
 }
 
+/// The files picked in the `<input type="file">` that `event` came from, in order; the input is
+/// emptied, so that picking the same file again is a change again.
+pub fn take_picked_files(event: &web_sys::Event) -> Vec<web_sys::File> {
+    let Some(input) = event
+        .target()
+        .and_then(|t| t.dyn_into::<web_sys::HtmlInputElement>().ok())
+    else {
+        return Vec::new();
+    };
+    let picked = files(input.files());
+    input.set_value("");
+    picked
+}
+
+/// The first of [`take_picked_files`].
+pub fn take_picked_file(event: &web_sys::Event) -> Option<web_sys::File> {
+    take_picked_files(event).into_iter().next()
+}
+
 /// The files of a file list, in order.
 pub fn files(list: Option<web_sys::FileList>) -> Vec<web_sys::File> {
     let Some(list) = list else {

@@ -25,6 +25,13 @@ fn small_hnet(device: &Device) -> (HNet, HNetConfig) {
     (config.init(device).unwrap(), config)
 }
 
+/// A small H-Net on the CPU, and its weights file.
+fn small_hnet_weights() -> (HNet, Vec<u8>) {
+    let (model, config) = small_hnet(&Device::flex());
+    let bytes = model.to_weights_bytes(&config, &BTreeMap::new()).unwrap();
+    (model, bytes)
+}
+
 #[wasm_bindgen_test]
 fn hnet_forward_pass_on_the_cpu_backend() {
     let device = Device::flex();
@@ -79,8 +86,7 @@ async fn asking_for_the_cpu_gives_the_cpu() {
 async fn webgpu_when_available_computes_what_the_cpu_computes() {
     let (device, backend) = select_device(BackendChoice::WebGpu).await;
     let cpu = Device::flex();
-    let (model, config) = small_hnet(&cpu);
-    let bytes = model.to_weights_bytes(&config, &BTreeMap::new()).unwrap();
+    let (model, bytes) = small_hnet_weights();
     let (on_device, _, _) = HNet::from_weights_bytes(&bytes, &device, "test").unwrap();
     let expected = model.forward(ramp(&cpu, 0.0), ramp(&cpu, 1.0));
     let got = on_device.forward(ramp(&device, 0.0), ramp(&device, 1.0));
@@ -131,9 +137,7 @@ async fn asking_for_webgpu_again_gives_webgpu_again() {
 #[wasm_bindgen_test]
 async fn the_engine_runs_on_a_twin_pair_at_the_working_size() {
     let (device, backend) = select_device(BackendChoice::Cpu).await;
-    let cpu = Device::flex();
-    let (model, config) = small_hnet(&cpu);
-    let bytes = model.to_weights_bytes(&config, &BTreeMap::new()).unwrap();
+    let (_, bytes) = small_hnet_weights();
     let engine = Rc::new(
         Engine::from_weights(
             Rc::from(bytes),

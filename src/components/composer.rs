@@ -6,7 +6,7 @@
 use leptos::prelude::*;
 use wasm_bindgen::{Clamped, JsCast};
 
-use crate::browser::{files, read_file_with};
+use crate::browser::{read_file_with, take_picked_file};
 use crate::components::on_slider;
 use crate::error_text::with_causes;
 use crate::imaging::decode_radiograph;
@@ -234,11 +234,9 @@ pub fn Composer() -> impl IntoView {
         }
     };
     let on_file = move |ev: leptos::ev::Event| {
-        let input: web_sys::HtmlInputElement = event_target(&ev);
-        let Some(file) = files(input.files()).into_iter().next() else {
+        let Some(file) = take_picked_file(&ev) else {
             return;
         };
-        input.set_value("");
         leptos::task::spawn_local(async move {
             match read_file_with(&file, decode_radiograph).await {
                 Ok(image) => {

@@ -5,7 +5,7 @@
 
 use leptos::prelude::*;
 
-use crate::browser::{files, read_file_with};
+use crate::browser::{read_file_with, take_picked_file};
 use crate::bundled::BUNDLED_FORCE_CAVEAT;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
@@ -90,11 +90,9 @@ pub fn ForcePanel() -> impl IntoView {
         }
     };
     let on_import = move |ev: leptos::ev::Event| {
-        let input: web_sys::HtmlInputElement = event_target(&ev);
-        let Some(file) = files(input.files()).into_iter().next() else {
+        let Some(file) = take_picked_file(&ev) else {
             return;
         };
-        input.set_value("");
         leptos::task::spawn_local(async move {
             match read_file_with(&file, parse_force_labels).await {
                 Ok(labels) => {

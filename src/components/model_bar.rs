@@ -5,7 +5,7 @@ use std::rc::Rc;
 
 use leptos::prelude::*;
 
-use crate::browser::{files, read_file};
+use crate::browser::{read_file, take_picked_file};
 use crate::compute::BackendChoice;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
@@ -36,11 +36,9 @@ pub fn ModelBar() -> impl IntoView {
         load_model(studio, weights);
     };
     let on_weights = move |ev: leptos::ev::Event| {
-        let input: web_sys::HtmlInputElement = event_target(&ev);
-        let Some(file) = files(input.files()).into_iter().next() else {
+        let Some(file) = take_picked_file(&ev) else {
             return;
         };
-        input.set_value("");
         leptos::task::spawn_local(async move {
             match read_file(&file).await {
                 Ok(bytes) => load_model(

@@ -4,7 +4,7 @@
 use hnet_twin::scene::Modality;
 use leptos::prelude::*;
 
-use crate::browser::{PickedFileError, files, read_file_with};
+use crate::browser::{PickedFileError, files, read_file_with, take_picked_file, take_picked_files};
 use crate::components::composer::Composer;
 use crate::components::on_slider;
 use crate::error_text::with_causes;
@@ -148,11 +148,9 @@ fn UploadPair() -> impl IntoView {
     let dragging = RwSignal::new(false);
     let pick = move |view: usize| {
         move |ev: leptos::ev::Event| {
-            let input: web_sys::HtmlInputElement = event_target(&ev);
-            let Some(file) = files(input.files()).into_iter().next() else {
+            let Some(file) = take_picked_file(&ev) else {
                 return;
             };
-            input.set_value("");
             leptos::task::spawn_local(async move {
                 let letter = ["A", "B"][view];
                 let decoded = match decode_view(&file).await {
@@ -215,12 +213,7 @@ fn UploadPair() -> impl IntoView {
             </div>
             <label class="file-button">"Pick both…"
                 <input id="file-pair" type="file" multiple accept="image/png,image/jpeg"
-                    on:change=move |ev| {
-                        let input: web_sys::HtmlInputElement = event_target(&ev);
-                        let picked = files(input.files());
-                        input.set_value("");
-                        load_files(studio, picked);
-                    }/>
+                    on:change=move |ev| load_files(studio, take_picked_files(&ev))/>
             </label>
         </div>
     }
