@@ -129,6 +129,7 @@ fn forward(
 }
 
 /// The gradients of a covered convolution's input, weight and bias, on flex.
+#[cfg(feature = "autodiff")]
 struct Gradients {
     x: Option<FlexTensor>,
     weight: Option<FlexTensor>,
@@ -136,6 +137,7 @@ struct Gradients {
 }
 
 /// Which gradients to compute.
+#[cfg(feature = "autodiff")]
 #[derive(Debug, Clone, Copy)]
 struct Wanted {
     x: bool,
@@ -143,6 +145,7 @@ struct Wanted {
     bias: bool,
 }
 
+#[cfg(feature = "autodiff")]
 fn gradients(
     g: &ConvGeometry,
     direction: Direction,

@@ -9,8 +9,8 @@
 //! `W` is the OIHW weight seen as an `out_channels x taps` matrix. A pointwise convolution
 //! (1x1, stride 1, no padding) skips the lowering: the image is its own lowered matrix.
 //!
-//! With the `rayon` feature, images run on rayon's workers (one product each, single-threaded);
-//! a batch of one image gives the product itself all threads instead.
+//! The products are [`crate::products`]'. With the `rayon` feature, images run on rayon's
+//! workers, one image per task (a single image gives gemm all the threads).
 
 use alloc::vec;
 use alloc::vec::Vec;
@@ -18,106 +18,7 @@ use core::cell::Cell;
 
 use crate::geometry::ConvGeometry;
 use crate::lowering::{lower, raise_adding};
-
-/// A read-only matrix view: element `(r, c)` is `data[r * row_stride + c * col_stride]`.
-#[derive(Clone, Copy)]
-struct MatrixView<'a> {
-    data: &'a [f32],
-    rows: usize,
-    cols: usize,
-    row_stride: usize,
-    col_stride: usize,
-}
-
-impl<'a> MatrixView<'a> {
-    /// A row-major `rows x cols` matrix.
-    fn row_major(data: &'a [f32], rows: usize, cols: usize) -> Self {
-        Self {
-            data,
-            rows,
-            cols,
-            row_stride: cols,
-            col_stride: 1,
-        }
-    }
-
-    /// The transpose of this matrix, without moving any element.
-    fn transposed(self) -> Self {
-        Self {
-            rows: self.cols,
-            cols: self.rows,
-            row_stride: self.col_stride,
-            col_stride: self.row_stride,
-            ..self
-        }
-    }
-
-    /// True when every element this view names lies inside `data`.
-    fn in_bounds(&self) -> bool {
-        self.rows == 0
-            || self.cols == 0
-            || (self.rows - 1) * self.row_stride + (self.cols - 1) * self.col_stride
-                < self.data.len()
-    }
-}
-
-/// Whether a product may use several threads itself.
-#[derive(Clone, Copy)]
-enum Threads {
-    /// The calling thread only (images already run in parallel).
-    One,
-    /// Every rayon worker (a batch of one image).
-    All,
-}
-
-/// `dst = lhs · rhs`, or `dst += lhs · rhs` when `accumulate`; `dst` is row-major.
-fn multiply(dst: &mut [f32], accumulate: bool, lhs: MatrixView, rhs: MatrixView, threads: Threads) {
-    let (m, k, n) = (lhs.rows, lhs.cols, rhs.cols);
-    assert!(
-        rhs.rows == k && dst.len() == m * n && lhs.in_bounds() && rhs.in_bounds(),
-        "matrix product of mismatched shapes"
-    );
-    if m == 0 || n == 0 {
-        return;
-    }
-    if k == 0 {
-        if !accumulate {
-            dst.fill(0.0);
-        }
-        return;
-    }
-    let parallelism = match threads {
-        #[cfg(feature = "rayon")]
-        Threads::All => gemm::Parallelism::Rayon(0),
-        _ => gemm::Parallelism::None,
-    };
-    // SAFETY: `dst` holds `m x n` elements, row-major (checked above), and is borrowed mutably;
-    // every element either operand view names is inside its slice (`in_bounds`, checked above).
-    // gemm only reads `dst` when `read_dst` is true.
-    unsafe {
-        gemm::gemm(
-            m,
-            n,
-            k,
-            dst.as_mut_ptr(),
-            1,
-            n as isize,
-            accumulate,
-            lhs.data.as_ptr(),
-            lhs.col_stride as isize,
-            lhs.row_stride as isize,
-            rhs.data.as_ptr(),
-            rhs.col_stride as isize,
-            rhs.row_stride as isize,
-            1.0,
-            1.0,
-            false,
-            false,
-            false,
-            parallelism,
-        );
-    }
-}
+use crate::products::{MatrixView, Threads, broadcast_product, gemm_product};
 
 std::thread_local! {
     /// Each thread's buffer for a lowered image, kept between calls so that the pages it
@@ -136,13 +37,21 @@ fn with_lowered_buffer<R>(len: usize, work: impl FnOnce(&mut [f32]) -> R) -> R {
     result
 }
 
-/// Calls `work(n, chunk, threads)` for every image `n` and its chunk of `out`
-/// (`out.len() / batch` elements each): in parallel over images with `rayon`.
-fn for_each_image(
-    batch: usize,
-    out: &mut [f32],
-    work: impl Fn(usize, &mut [f32], Threads) + Send + Sync,
-) {
+/// Runs `work` on the lowered matrix of one image `x`: `x` itself for a pointwise convolution,
+/// else this thread's buffer holding `lower(x)`.
+fn with_lowered_image<R>(g: &ConvGeometry, x: &[f32], work: impl FnOnce(&[f32]) -> R) -> R {
+    if g.is_pointwise() {
+        return work(x);
+    }
+    with_lowered_buffer(g.taps() * g.output_plane(), |lowered| {
+        lower(g, x, lowered);
+        work(lowered)
+    })
+}
+
+/// Calls `work(n, chunk)` for every image `n` and its chunk of `out` (`out.len() / batch`
+/// elements each): in parallel over images with `rayon`.
+fn for_each_image(batch: usize, out: &mut [f32], work: impl Fn(usize, &mut [f32]) + Send + Sync) {
     if batch == 0 || out.is_empty() {
         return;
     }
@@ -152,11 +61,11 @@ fn for_each_image(
         use rayon::prelude::*;
         out.par_chunks_mut(per_image)
             .enumerate()
-            .for_each(|(n, chunk)| work(n, chunk, Threads::One));
+            .for_each(|(n, chunk)| work(n, chunk));
         return;
     }
     for (n, chunk) in out.chunks_mut(per_image).enumerate() {
-        work(n, chunk, Threads::All);
+        work(n, chunk);
     }
 }
 
@@ -165,27 +74,18 @@ pub fn forward(g: &ConvGeometry, x: &[f32], weight: &[f32], bias: Option<&[f32]>
     let (taps, plane, out_plane) = (g.taps(), g.input_plane(), g.output_plane());
     assert_eq!(x.len(), g.batch * g.in_channels * plane, "input size");
     assert_eq!(weight.len(), g.out_channels * taps, "weight size");
-    let weight = MatrixView::row_major(weight, g.out_channels, taps);
     let mut y = vec![0.0; g.batch * g.out_channels * out_plane];
-    for_each_image(g.batch, &mut y, |n, y, threads| {
+    for_each_image(g.batch, &mut y, |n, y| {
         if let Some(bias) = bias {
             for (row, &b) in y.chunks_exact_mut(out_plane).zip(bias) {
                 row.fill(b);
             }
         }
         let x = &x[n * g.in_channels * plane..][..g.in_channels * plane];
-        let mut multiply_by = |lowered: &[f32]| {
-            let lowered = MatrixView::row_major(lowered, taps, out_plane);
-            multiply(y, bias.is_some(), weight, lowered, threads);
-        };
-        if g.is_pointwise() {
-            multiply_by(x);
-        } else {
-            with_lowered_buffer(taps * out_plane, |lowered| {
-                lower(g, x, lowered);
-                multiply_by(lowered);
-            });
-        }
+        with_lowered_image(g, x, |lowered| {
+            let shape = (g.out_channels, out_plane, taps);
+            broadcast_product(y, bias.is_some(), shape, weight, (taps, 1), lowered);
+        });
     });
     y
 }
@@ -202,14 +102,14 @@ pub fn input_gradient(g: &ConvGeometry, weight: &[f32], dy: &[f32]) -> Vec<f32> 
     assert_eq!(weight.len(), g.out_channels * taps, "weight size");
     let weight_t = MatrixView::row_major(weight, g.out_channels, taps).transposed();
     let mut dx = vec![0.0; g.batch * g.in_channels * plane];
-    for_each_image(g.batch, &mut dx, |n, dx, threads| {
+    for_each_image(g.batch, &mut dx, |n, dx| {
         let dy = &dy[n * g.out_channels * out_plane..][..g.out_channels * out_plane];
         let dy = MatrixView::row_major(dy, g.out_channels, out_plane);
         if g.is_pointwise() {
-            multiply(dx, false, weight_t, dy, threads);
+            gemm_product(dx, false, weight_t, dy, threads(g.batch));
         } else {
             with_lowered_buffer(taps * out_plane, |lowered| {
-                multiply(lowered, false, weight_t, dy, threads);
+                gemm_product(lowered, false, weight_t, dy, threads(g.batch));
                 raise_adding(g, lowered, dx);
             });
         }
@@ -231,24 +131,16 @@ pub fn weight_gradient(g: &ConvGeometry, x: &[f32], dy: &[f32]) -> Vec<f32> {
     let groups = parallel_groups(g.batch);
     let per_group = g.batch.div_ceil(groups);
     let mut partials = vec![0.0; groups * weight_len];
-    for_each_image(groups, &mut partials, |group, dw, threads| {
+    for_each_image(groups, &mut partials, |group, dw| {
         let images = group * per_group..((group + 1) * per_group).min(g.batch);
         for (i, n) in images.enumerate() {
             let x = &x[n * g.in_channels * plane..][..g.in_channels * plane];
             let dy = &dy[n * g.out_channels * out_plane..][..g.out_channels * out_plane];
             let dy = MatrixView::row_major(dy, g.out_channels, out_plane);
-            let mut add_product = |lowered: &[f32]| {
+            with_lowered_image(g, x, |lowered| {
                 let lowered_t = MatrixView::row_major(lowered, taps, out_plane).transposed();
-                multiply(dw, i > 0, dy, lowered_t, threads);
-            };
-            if g.is_pointwise() {
-                add_product(x);
-            } else {
-                with_lowered_buffer(taps * out_plane, |lowered| {
-                    lower(g, x, lowered);
-                    add_product(lowered);
-                });
-            }
+                gemm_product(dw, i > 0, dy, lowered_t, threads(groups));
+            });
         }
     });
     let (first, rest) = partials.split_at_mut(weight_len);
@@ -283,6 +175,16 @@ pub fn add_per_channel(y: &mut [f32], bias: &[f32], plane: usize) {
     }
     for (row, b) in y.chunks_exact_mut(plane).zip(bias.iter().cycle()) {
         row.iter_mut().for_each(|v| *v += b);
+    }
+}
+
+/// The threads one image's product may use: all of them when there is only one image (or
+/// group), else one (the images already run in parallel).
+fn threads(images: usize) -> Threads {
+    if images > 1 {
+        Threads::One
+    } else {
+        Threads::All
     }
 }
 

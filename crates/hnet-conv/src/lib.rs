@@ -4,8 +4,8 @@
 //! (one small product per input channel) and its forward pass through an NHWC copy and tiled
 //! im2col; on H-Net's layers both are several times slower than PyTorch on the same cores. Here a
 //! 2-D convolution and a transposed 2-D convolution are each lowered to one matrix product per
-//! image ([`lowering`]), computed by the same `gemm` crate flex uses, with the weight gradient as
-//! one accumulating product per image ([`kernels`]).
+//! image ([`lowering`]), computed by register-blocked products written for these shapes
+//! ([`products`]), with the weight gradient as one accumulating product per image ([`kernels`]).
 //!
 //! Model code calls [`conv2d_module`] / [`conv_transpose2d_module`] where it would call a
 //! burn-nn module's `forward` (or [`conv2d`] / [`conv_transpose2d`] where it would call Burn's
@@ -22,6 +22,7 @@ pub mod conformance;
 pub mod geometry;
 pub mod kernels;
 pub mod lowering;
+pub mod products;
 
 use core::sync::atomic::{AtomicBool, Ordering};
 
