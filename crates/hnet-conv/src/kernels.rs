@@ -75,6 +75,9 @@ pub fn forward(g: &ConvGeometry, x: &[f32], weight: &[f32], bias: Option<&[f32]>
     assert_eq!(x.len(), g.batch * g.in_channels * plane, "input size");
     assert_eq!(weight.len(), g.out_channels * taps, "weight size");
     let mut y = vec![0.0; g.batch * g.out_channels * out_plane];
+    // Output rows lowered (and multiplied) at a time: about BAND_PIXELS pixels, so that the band's
+    // lowered matrix stays in cache instead of being written whole and read back.
+    let band_rows = (BAND_PIXELS / g.width.output).clamp(1, g.height.output);
     for_each_image(g.batch, &mut y, |n, y| {
         if let Some(bias) = bias {
             for (row, &b) in y.chunks_exact_mut(out_plane).zip(bias) {
@@ -82,13 +85,34 @@ pub fn forward(g: &ConvGeometry, x: &[f32], weight: &[f32], bias: Option<&[f32]>
             }
         }
         let x = &x[n * g.in_channels * plane..][..g.in_channels * plane];
-        with_lowered_image(g, x, |lowered| {
+        if g.is_pointwise() {
             let shape = (g.out_channels, out_plane, taps);
-            broadcast_product(y, bias.is_some(), shape, weight, (taps, 1), lowered);
-        });
+            broadcast_product((y, out_plane), bias.is_some(), shape, weight, (taps, 1), x);
+            return;
+        }
+        for first in (0..g.height.output).step_by(band_rows) {
+            let rows = first..(first + band_rows).min(g.height.output);
+            let pixels = rows.len() * g.width.output;
+            with_lowered_buffer(taps * pixels, |lowered| {
+                crate::lowering::lower_band(g, x, rows.clone(), lowered);
+                let columns = &mut y[first * g.width.output..];
+                let shape = (g.out_channels, pixels, taps);
+                broadcast_product(
+                    (columns, out_plane),
+                    bias.is_some(),
+                    shape,
+                    weight,
+                    (taps, 1),
+                    lowered,
+                );
+            });
+        }
     });
     y
 }
+
+/// Output pixels per band of the forward pass (at least one output row).
+const BAND_PIXELS: usize = 256;
 
 /// The gradient of the forward convolution's input: `dx[n] = raise(Wᵀ · dy[n])`, NCHW,
 /// `[batch, in_channels, input]`.

@@ -10,18 +10,31 @@ use crate::geometry::ConvGeometry;
 /// Writes the lowered `input` (one image, `in_channels x input_plane`) into `lowered`
 /// (`taps x output_plane`). Every element of `lowered` is written.
 pub fn lower(g: &ConvGeometry, input: &[f32], lowered: &mut [f32]) {
-    let (plane, out_plane) = (g.input_plane(), g.output_plane());
+    lower_band(g, input, 0..g.height.output, lowered);
+}
+
+/// [`lower`] for a band of output rows only: `lowered` is `taps x (rows.len() * output width)`,
+/// the columns of those output pixels.
+pub fn lower_band(
+    g: &ConvGeometry,
+    input: &[f32],
+    rows: core::ops::Range<usize>,
+    lowered: &mut [f32],
+) {
+    let plane = g.input_plane();
     let (out_w, in_w) = (g.width.output, g.width.input);
+    let out_plane = rows.len() * out_w;
     debug_assert_eq!(input.len(), g.in_channels * plane);
     debug_assert_eq!(lowered.len(), g.taps() * out_plane);
+    let first_row = rows.start;
     let mut rows = lowered.chunks_exact_mut(out_plane);
     for channel in input.chunks_exact(plane) {
         for i in 0..g.height.kernel {
             for j in 0..g.width.kernel {
                 let row = rows.next().expect("one row per tap");
                 let inside = g.width.outputs_inside(j);
-                for (oh, line) in row.chunks_exact_mut(out_w).enumerate() {
-                    let Some(ih) = g.height.input_index(oh, i) else {
+                for (band_row, line) in row.chunks_exact_mut(out_w).enumerate() {
+                    let Some(ih) = g.height.input_index(first_row + band_row, i) else {
                         line.fill(0.0);
                         continue;
                     };

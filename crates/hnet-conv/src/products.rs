@@ -139,20 +139,21 @@ fn has_avx2() -> bool {
     std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
 }
 
-/// `C (m x n, row-major) = A · B` (or `+=` when `accumulate`), where `A(i, kk)` is
-/// `a[i * a_row + kk * a_col]` and `B` is `k x n` row-major.
+/// `C (m x n) = A · B` (or `+=` when `accumulate`), where row `i` of `C` starts at
+/// `c[i * c_stride]`, `A(i, kk)` is `a[i * a_row + kk * a_col]` and `B` is `k x n` row-major.
 pub fn broadcast_product(
-    c: &mut [f32],
+    (c, c_stride): (&mut [f32], usize),
     accumulate: bool,
     (m, n, k): (usize, usize, usize),
     a: &[f32],
     (a_row, a_col): (usize, usize),
     b: &[f32],
 ) {
-    assert!(c.len() == m * n && b.len() == k * n, "product shapes");
+    assert!(b.len() == k * n && c_stride >= n, "product shapes");
     if m == 0 || n == 0 {
         return;
     }
+    assert!(c.len() >= (m - 1) * c_stride + n, "C outside its slice");
     assert!(
         k == 0 || (m - 1) * a_row + (k - 1) * a_col < a.len(),
         "A outside its slice"
@@ -161,19 +162,26 @@ pub fn broadcast_product(
     #[cfg(target_arch = "x86_64")]
     if has_avx2() {
         // SAFETY: this CPU has AVX2 and FMA (checked just above).
-        unsafe { broadcast_avx2(c, accumulate, shape, a, (a_row, a_col), b) };
+        unsafe { broadcast_avx2((c, c_stride), accumulate, shape, a, (a_row, a_col), b) };
         return;
     }
     #[cfg(target_arch = "wasm32")]
-    return broadcast_body::<simd128::Simd128, 4, 3>(c, accumulate, shape, a, (a_row, a_col), b);
+    return broadcast_body::<simd128::Simd128, 4, 3>(
+        (c, c_stride),
+        accumulate,
+        shape,
+        a,
+        (a_row, a_col),
+        b,
+    );
     #[allow(unreachable_code)]
-    broadcast_body::<f32, 4, 8>(c, accumulate, shape, a, (a_row, a_col), b)
+    broadcast_body::<f32, 4, 8>((c, c_stride), accumulate, shape, a, (a_row, a_col), b)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn broadcast_avx2(
-    c: &mut [f32],
+    c: (&mut [f32], usize),
     accumulate: bool,
     shape: (usize, usize, usize),
     a: &[f32],
@@ -188,7 +196,7 @@ fn broadcast_avx2(
 /// `VECTORS` vectors of `B`'s columns.
 #[inline(always)]
 fn broadcast_body<L: Lanes, const R: usize, const VECTORS: usize>(
-    c: &mut [f32],
+    (c, c_stride): (&mut [f32], usize),
     accumulate: bool,
     (m, n, k): (usize, usize, usize),
     a: &[f32],
@@ -237,7 +245,7 @@ fn broadcast_body<L: Lanes, const R: usize, const VECTORS: usize>(
             let mut acc = [[L::zero(); VECTORS]; R];
             if accumulate && full {
                 for (i, acc) in acc.iter_mut().enumerate().take(rows) {
-                    let from = &c[(block * R + i) * n + j0..][..strip];
+                    let from = &c[(block * R + i) * c_stride + j0..][..strip];
                     for (v, acc) in acc.iter_mut().enumerate() {
                         // SAFETY: `from` holds `strip` values.
                         *acc = unsafe { L::load(from.as_ptr().add(v * L::WIDTH)) };
@@ -262,7 +270,7 @@ fn broadcast_body<L: Lanes, const R: usize, const VECTORS: usize>(
             }
             let mut tile = [0.0f32; 128];
             for (i, acc) in acc.iter().enumerate().take(rows) {
-                let out = &mut c[(block * R + i) * n + j0..][..width];
+                let out = &mut c[(block * R + i) * c_stride + j0..][..width];
                 if full {
                     for (v, value) in acc.iter().enumerate() {
                         // SAFETY: `out` holds `strip` values.
@@ -422,13 +430,13 @@ mod tests {
                 .collect();
             // A row-major, then A given as its transpose's column view.
             let mut c = vec![f32::NAN; m * n];
-            broadcast_product(&mut c, false, (m, n, k), &a, (k, 1), &b);
+            broadcast_product((&mut c, n), false, (m, n, k), &a, (k, 1), &b);
             assert_eq!(c, expected, "broadcast {m}x{n}x{k}");
             let a_t: Vec<f32> = (0..k * m).map(|x| a[x % m * k + x / m]).collect();
-            broadcast_product(&mut c, false, (m, n, k), &a_t, (1, m), &b);
+            broadcast_product((&mut c, n), false, (m, n, k), &a_t, (1, m), &b);
             assert_eq!(c, expected, "broadcast, A transposed {m}x{n}x{k}");
             let mut doubled = c.clone();
-            broadcast_product(&mut doubled, true, (m, n, k), &a, (k, 1), &b);
+            broadcast_product((&mut doubled, n), true, (m, n, k), &a, (k, 1), &b);
             assert_eq!(
                 doubled,
                 expected.iter().map(|v| 2.0 * v).collect::<Vec<_>>()

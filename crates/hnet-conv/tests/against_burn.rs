@@ -42,6 +42,21 @@ fn h_net_layers_match_burn() {
     }
 }
 
+/// Images wide enough that the forward pass lowers a few output rows at a time (bands of about
+/// 256 pixels), the last band partial, with and without stride.
+#[test]
+fn wide_images_lowered_in_bands_match_burn() {
+    for (stride, bias) in [(1, true), (2, false)] {
+        check(&ConvCase {
+            size: [9, 100],
+            stride: [stride, stride],
+            bias,
+            ..ConvCase::h_net_layer(false, 11)
+        })
+        .unwrap();
+    }
+}
+
 #[test]
 fn flex_and_autodiff_flex_reach_the_project_kernels() {
     use burn::tensor::DType;
