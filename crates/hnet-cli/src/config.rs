@@ -80,7 +80,7 @@ impl TrainingConfig {
     /// Checks that the settings describe a trainable run.
     pub fn check(&self) -> anyhow::Result<()> {
         // The same bounds as a weights file's settings: nothing absurd is ever allocated.
-        hnet_model::weights::check_layer_counts(&self.model)?;
+        self.model.check_layer_counts()?;
         let multiple = self.model.size_multiple();
         let ImageSize { width, height } = self.image_size;
         if [width, height].iter().any(|s| *s == 0 || s % multiple != 0) {

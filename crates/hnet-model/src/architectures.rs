@@ -280,7 +280,7 @@ macro_rules! architectures {
                 let header = weights::read_header(bytes, source)?;
                 let bad_config = |problem| WeightsError::new(source, WeightsProblem::BadConfig(problem));
                 let spec = ModelSpec::from_settings_json(&header.architecture, &header.config_json)
-                    .and_then(|spec| weights::check_layer_counts(&spec).map(|()| spec))
+                    .and_then(|spec| spec.check_layer_counts().map(|()| spec))
                     .map_err(bad_config)?;
                 let model = match spec.init(device).map_err(|e| bad_config(ConfigProblem::Invalid(e)))? {
                     $(Self::$variant(m) => Self::$variant(weights::apply(m, bytes, source)?),)+
@@ -307,6 +307,40 @@ architectures! {
 impl fmt::Display for ModelSpec {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.name())
+    }
+}
+
+impl ModelSpec {
+    /// Refuses settings whose sizes no real network has before anything is built from them: a
+    /// baseline's layers are allocated from its `depth` and filter counts as soon as it is built, so
+    /// a file claiming `depth: 2^40` would exhaust memory, and a zero depth or a filter count
+    /// shifted past `usize` would panic (found by the property tests, tests/weights.rs). H-Net's own
+    /// settings are checked by [`crate::HNetConfig::validate`]; its tensors are allocated lazily and then
+    /// compared with the file's.
+    pub fn check_layer_counts(&self) -> Result<(), ConfigProblem> {
+        const FILTERS: (usize, usize, &str) = (1, 4096, "1..=4096");
+        let check =
+            |name: &'static str, value: usize, (low, high, range): (usize, usize, &'static str)| {
+                if (low..=high).contains(&value) {
+                    Ok(())
+                } else {
+                    Err(ConfigProblem::OutOfRange(name, value, range))
+                }
+            };
+        match self {
+            ModelSpec::Hnet(_) => Ok(()),
+            ModelSpec::Unet(c) => {
+                check("depth", c.depth, (1, 16, "1..=16"))?;
+                check("base_filters", c.base_filters, FILTERS)
+            }
+            ModelSpec::Fcn(c) => check("base_filters", c.base_filters, FILTERS),
+            ModelSpec::Hrnet(c) => check("width", c.width, FILTERS),
+            ModelSpec::Ynet(c) => {
+                check("base_filters", c.base_filters, FILTERS)?;
+                check("hidden[0]", c.hidden[0], (1, 1 << 16, "1..=65536"))?;
+                check("hidden[1]", c.hidden[1], (1, 1 << 16, "1..=65536"))
+            }
+        }
     }
 }
 

@@ -110,39 +110,6 @@ pub enum ConfigProblem {
     OutOfRange(&'static str, usize, &'static str),
 }
 
-/// Refuses settings whose sizes no real network has before anything is built from them: a
-/// baseline's layers are allocated from its `depth` and filter counts as soon as it is built, so
-/// a file claiming `depth: 2^40` would exhaust memory, and a zero depth or a filter count
-/// shifted past `usize` would panic (found by the property tests, tests/weights.rs). H-Net's own
-/// settings are checked by [`HNetConfig::validate`]; its tensors are allocated lazily and then
-/// compared with the file's.
-pub fn check_layer_counts(spec: &crate::architectures::ModelSpec) -> Result<(), ConfigProblem> {
-    use crate::architectures::ModelSpec;
-    const FILTERS: (usize, usize, &str) = (1, 4096, "1..=4096");
-    let check =
-        |name: &'static str, value: usize, (low, high, range): (usize, usize, &'static str)| {
-            if (low..=high).contains(&value) {
-                Ok(())
-            } else {
-                Err(ConfigProblem::OutOfRange(name, value, range))
-            }
-        };
-    match spec {
-        ModelSpec::Hnet(_) => Ok(()),
-        ModelSpec::Unet(c) => {
-            check("depth", c.depth, (1, 16, "1..=16"))?;
-            check("base_filters", c.base_filters, FILTERS)
-        }
-        ModelSpec::Fcn(c) => check("base_filters", c.base_filters, FILTERS),
-        ModelSpec::Hrnet(c) => check("width", c.width, FILTERS),
-        ModelSpec::Ynet(c) => {
-            check("base_filters", c.base_filters, FILTERS)?;
-            check("hidden[0]", c.hidden[0], (1, 1 << 16, "1..=65536"))?;
-            check("hidden[1]", c.hidden[1], (1, 1 << 16, "1..=65536"))
-        }
-    }
-}
-
 /// A weights file that could not be read or written, with the file's name.
 #[derive(Debug, thiserror::Error)]
 #[error("weights file '{source_name}': {problem}")]
