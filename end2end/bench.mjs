@@ -2,10 +2,13 @@
 // WebGPU where the browser offers an adapter (here: SwiftShader, a software adapter); and the
 // time of the catheter's 3D reconstruction and rod fit (centrelines, matching, triangulation,
 // Levenberg-Marquardt) per twin pair, on the page's thread (WebAssembly).
+// Also the time to the first inference: from opening the page to the model loaded on the CPU, and
+// to the twin tab's first estimate.
 // Usage, after `trunk build`: node end2end/bench.mjs [runs]   (docs/benchmarks.md)
+// HNET_DIST=<folder> times another build (e.g. scripts/bundle-size.sh's release page).
 import { statSync, readdirSync } from "node:fs";
-import { join, resolve } from "node:path";
-import { serveDist, launchBrowser, openPage, waitForModel } from "./harness.mjs";
+import { join } from "node:path";
+import { DIST, serveDist, launchBrowser, openPage, waitForModel } from "./harness.mjs";
 
 const runs = Number(process.argv[2] ?? 10);
 const server = await serveDist();
@@ -13,8 +16,10 @@ const context = await launchBrowser();
 const results = [];
 try {
   for (const choice of ["cpu", "webgpu"]) {
+    const opened = performance.now();
     const { page } = await openPage(context, server.url);
     await waitForModel(page);
+    const modelReadyMs = performance.now() - opened;
     await page.selectOption("#backend-choice", choice);
     // The model reloads on the chosen device; wait until the model bar names it (a browser
     // without a WebGPU adapter stays on the CPU: then "webgpu" is timed on the CPU).
@@ -28,6 +33,7 @@ try {
     const backend = await page.textContent("#backend");
     await page.click("#tab-twin");
     await page.waitForSelector("#force-verdict", { timeout: 120_000 });
+    const firstEstimateMs = performance.now() - opened;
     const times = [];
     for (let i = 0; i < runs; i++) {
       await page.waitForFunction(() => !document.querySelector("#busy"));
@@ -44,6 +50,9 @@ try {
       runs,
       median_ms: times[Math.floor(times.length / 2)],
       min_ms: times[0],
+      // Only meaningful for the first choice (a fresh page: the CPU; the second reloads the model).
+      model_ready_ms: Math.round(modelReadyMs),
+      first_estimate_ms: Math.round(firstEstimateMs),
     });
     await page.close();
   }
@@ -80,6 +89,6 @@ try {
   await context.close();
   await server.close();
 }
-const dist = resolve(new URL("..", import.meta.url).pathname, "dist");
+const dist = DIST;
 const wasm = readdirSync(dist).filter((f) => f.endsWith(".wasm"));
 console.log(JSON.stringify({ results, wasm: wasm.map((f) => ({ file: f, bytes: statSync(join(dist, f)).size })) }, null, 2));

@@ -5,7 +5,10 @@ import { tmpdir } from "node:os";
 import { extname, join, normalize, resolve } from "node:path";
 import { chromium } from "playwright-core";
 
-const DIST = resolve(new URL("..", import.meta.url).pathname, "dist");
+// HNET_DIST serves another build (e.g. scripts/bundle-size.sh's release page).
+export const DIST = process.env.HNET_DIST
+  ? resolve(process.env.HNET_DIST)
+  : resolve(new URL("..", import.meta.url).pathname, "dist");
 const TYPES = {
   ".html": "text/html",
   ".js": "text/javascript",
