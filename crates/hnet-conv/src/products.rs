@@ -4,10 +4,11 @@
 //!   rows along the pixels) and `A` small (the weight, packed once per call). A register-blocked
 //!   micro-kernel broadcasts a few elements of `A` against a strip of `B`'s columns, copied
 //!   contiguous first (its rows are a whole image apart, which would make them collide in the same
-//!   cache sets). On H-Net's 3x3, 32 -> 32 convolution over a 64 x 64 image (32 x 4096 x 288) it
-//!   ran about 1.5x faster than `gemm` 0.19 single-threaded (docs/benchmarks.md).
+//!   cache sets).
 //! - [`gemm_product`], the input and weight gradients: the `gemm` crate (the one flex's own
-//!   matmul uses), which measured faster than our micro-kernels on those two shapes.
+//!   matmul uses). Which product serves which pass was chosen from timings during development
+//!   (docs/benchmarks.md, "The project's convolution kernels"); `hnet bench layers` shows the
+//!   result layer by layer.
 //!
 //! Each product is one body written over a small vector type ([`Lanes`]): AVX2 with FMA on
 //! x86-64 (chosen at run time), SIMD128 on wasm32, one value at a time elsewhere.
