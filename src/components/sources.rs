@@ -1,6 +1,7 @@
 //! Where pairs come from: two image files (picked or dropped), or the live digital twin with its
 //! sliders; and the synthetic X-ray background composer.
 
+use hnet_twin::carm::{SECONDARY_DEG, VIEW_A_PRIMARY_DEG, VIEW_B_PRIMARY_DEG};
 use hnet_twin::scene::Modality;
 use leptos::prelude::*;
 
@@ -219,6 +220,11 @@ fn UploadPair() -> impl IntoView {
     }
 }
 
+/// A C-arm angle range (degrees) as a slider's `[min, max, step]`: whole degrees.
+fn with_step([min, max]: [f64; 2]) -> [f64; 3] {
+    [min, max, 1.0]
+}
+
 /// One labelled slider bound to a field of the twin's controls. Moving it re-renders the twin;
 /// releasing it runs H-Net.
 fn slider(
@@ -283,10 +289,10 @@ fn TwinSliders() -> impl IntoView {
             </fieldset>
             <fieldset>
                 <legend>"C-arm"</legend>
-                {slider(studio, "twin-a-primary", "View A LAO/RAO", "°", [-90.0, 90.0, 1.0], |t| t.view_a_deg[0], |t, v| t.view_a_deg[0] = v)}
-                {slider(studio, "twin-a-secondary", "View A cranial/caudal", "°", [-40.0, 40.0, 1.0], |t| t.view_a_deg[1], |t, v| t.view_a_deg[1] = v)}
-                {slider(studio, "twin-b-primary", "View B LAO/RAO", "°", [-90.0, 180.0, 1.0], |t| t.view_b_deg[0], |t, v| t.view_b_deg[0] = v)}
-                {slider(studio, "twin-b-secondary", "View B cranial/caudal", "°", [-40.0, 40.0, 1.0], |t| t.view_b_deg[1], |t, v| t.view_b_deg[1] = v)}
+                {slider(studio, "twin-a-primary", "View A LAO/RAO", "°", with_step(VIEW_A_PRIMARY_DEG), |t| t.view_a_deg[0], |t, v| t.view_a_deg[0] = v)}
+                {slider(studio, "twin-a-secondary", "View A cranial/caudal", "°", with_step(SECONDARY_DEG), |t| t.view_a_deg[1], |t, v| t.view_a_deg[1] = v)}
+                {slider(studio, "twin-b-primary", "View B LAO/RAO", "°", with_step(VIEW_B_PRIMARY_DEG), |t| t.view_b_deg[0], |t, v| t.view_b_deg[0] = v)}
+                {slider(studio, "twin-b-secondary", "View B cranial/caudal", "°", with_step(SECONDARY_DEG), |t| t.view_b_deg[1], |t, v| t.view_b_deg[1] = v)}
                 <label class="slider">
                     <span>"Images"</span>
                     <select id="twin-modality" on:change=modality>

@@ -10,6 +10,8 @@ use hnet_model::architectures::ModelSpec;
 use hnet_units::ImageSize;
 use serde::{Deserialize, Serialize};
 
+use crate::data::twin_stream::TwinStreamConfig;
+
 /// How the learning rates change over a run.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
@@ -72,8 +74,13 @@ pub struct TrainingConfig {
     pub max_train_samples: Option<usize>,
     /// Use at most this many validation pairs (all when absent).
     pub max_valid_samples: Option<usize>,
-    /// Threads decoding batches.
+    /// Threads decoding batches (or simulating them, with `stream`).
     pub num_workers: usize,
+    /// Train on pairs the twin simulates during training, fresh every epoch, instead of the
+    /// dataset's train split (which then only gives the force statistics); validation stays
+    /// the dataset's val split.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stream: Option<TwinStreamConfig>,
 }
 
 impl TrainingConfig {
@@ -101,6 +108,9 @@ impl TrainingConfig {
         }
         if self.batch_size == 0 || self.epochs == 0 {
             bail!("batch_size and epochs must be at least 1");
+        }
+        if let Some(stream) = &self.stream {
+            stream.check()?;
         }
         Ok(())
     }

@@ -1,7 +1,10 @@
-//! Datasets on disk to batches of tensors.
+//! Training pairs to batches of tensors: a dataset's split read from disk, or pairs the twin
+//! makes on the fly ([`twin_stream`]).
 //!
 //! A split is decoded, resized to the model's input size and kept in memory as bytes (about
 //! `2·(3+1)·H·W` bytes per pair), so that epochs after the first cost no PNG decoding.
+
+pub mod twin_stream;
 
 use std::sync::Arc;
 
@@ -10,7 +13,7 @@ use burn::data::dataloader::batcher::Batcher;
 use burn::data::dataset::{Dataset as BurnDataset, DatasetError};
 use burn::tensor::{Device, Tensor, TensorData};
 use hnet_model::inference::push_planar;
-use hnet_twin::dataset::{Dataset, ManifestRow, Split};
+use hnet_twin::dataset::{Dataset, LoadedPair, ManifestRow, Split};
 use hnet_units::ImageSize;
 use rayon::prelude::*;
 
@@ -27,8 +30,28 @@ pub struct StereoItem {
     pub mask_b: Arc<[u8]>,
     /// Tip force in newtons.
     pub force_n: [f32; 3],
+    /// Whether the force is a label to learn from; off-bench pairs of a stream carry masks
+    /// only (see [`twin_stream`]).
+    pub force_known: bool,
     /// The pair's id.
     pub id: Arc<str>,
+}
+
+impl StereoItem {
+    /// A pair as the network reads it, with its tip force in newtons.
+    pub fn new(pair: LoadedPair, force_n: [f64; 3], force_known: bool, id: String) -> Self {
+        let mask =
+            |m: &[f32]| -> Arc<[u8]> { m.iter().map(|v| (v * 255.0).round() as u8).collect() };
+        Self {
+            view_a: pair.view_a.into(),
+            view_b: pair.view_b.into(),
+            mask_a: mask(&pair.mask_a),
+            mask_b: mask(&pair.mask_b),
+            force_n: force_n.map(|f| f as f32),
+            force_known,
+            id: id.into(),
+        }
+    }
 }
 
 /// The pairs of one split, in memory.
@@ -54,17 +77,7 @@ impl StereoSplit {
             .par_iter()
             .map(|row| -> anyhow::Result<StereoItem> {
                 let pair = dataset.load_pair(row, Some(size))?;
-                let mask = |m: &[f32]| -> Arc<[u8]> {
-                    m.iter().map(|v| (v * 255.0).round() as u8).collect()
-                };
-                Ok(StereoItem {
-                    view_a: pair.view_a.into(),
-                    view_b: pair.view_b.into(),
-                    mask_a: mask(&pair.mask_a),
-                    mask_b: mask(&pair.mask_b),
-                    force_n: row.force_n.map(|f| f as f32),
-                    id: row.id.as_str().into(),
-                })
+                Ok(StereoItem::new(pair, row.force_n, true, row.id.clone()))
             })
             .collect::<anyhow::Result<Vec<_>>>()
             .with_context(|| {
@@ -106,6 +119,8 @@ pub struct StereoBatch {
     pub mask_b: Tensor<4>,
     /// Tip forces `[B, 3]` in newtons.
     pub force: Tensor<2>,
+    /// `[B, 1]`: 1 for pairs whose force is a label, 0 for masks-only pairs.
+    pub force_known: Tensor<2>,
 }
 
 /// Turns pairs into [`StereoBatch`]es.
@@ -124,12 +139,14 @@ impl Batcher<StereoItem, StereoBatch> for StereoBatcher {
         let mut ma = Vec::with_capacity(n * h * w);
         let mut mb = Vec::with_capacity(n * h * w);
         let mut f = Vec::with_capacity(n * 3);
+        let mut known = Vec::with_capacity(n);
         for item in &items {
             push_planar(&item.view_a, &mut a);
             push_planar(&item.view_b, &mut b);
             ma.extend(item.mask_a.iter().map(|&v| f32::from(v) / 255.0));
             mb.extend(item.mask_b.iter().map(|&v| f32::from(v) / 255.0));
             f.extend_from_slice(&item.force_n);
+            known.push(if item.force_known { 1.0f32 } else { 0.0 });
         }
         let image = |data| Tensor::from_data(TensorData::new(data, [n, 3, h, w]), device);
         let mask = |data| Tensor::from_data(TensorData::new(data, [n, 1, h, w]), device);
@@ -139,6 +156,7 @@ impl Batcher<StereoItem, StereoBatch> for StereoBatcher {
             mask_a: mask(ma),
             mask_b: mask(mb),
             force: Tensor::from_data(TensorData::new(f, [n, 3]), device),
+            force_known: Tensor::from_data(TensorData::new(known, [n, 1]), device),
         }
     }
 }

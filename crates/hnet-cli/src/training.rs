@@ -12,10 +12,11 @@ mod trainee;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use burn::data::dataloader::DataLoaderBuilder;
+use burn::data::dataloader::{DataLoader, DataLoaderBuilder};
 use burn::module::{Module, ParamGroup};
 use burn::optim::RmsPropConfig;
 use burn::optim::lr_scheduler::LrSchedulerConfig;
@@ -35,7 +36,8 @@ use self::stopping::{StoppingRule, TimeBudget, parse_duration};
 use self::trainee::StereoTrainee;
 use crate::backend::BackendChoice;
 use crate::config::{LearningRateSchedule, TrainingConfig, builtin_config};
-use crate::data::{StereoBatcher, StereoSplit};
+use crate::data::twin_stream::{EpochCounting, TwinStream};
+use crate::data::{StereoBatch, StereoBatcher, StereoSplit};
 use crate::run_dir::{LOSS_METRIC, RunDir, RunInfo, log_name};
 
 /// What `hnet train` was asked to do.
@@ -107,49 +109,77 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
 
     let dataset = Dataset::open(&request.data)?;
     let started = Instant::now();
-    let train_split = StereoSplit::load(
-        &dataset,
-        Split::Train,
-        config.image_size,
-        config.max_train_samples,
-    )?;
     let valid_split = StereoSplit::load(
         &dataset,
         Split::Val,
         config.image_size,
         config.max_valid_samples,
     )?;
-    if train_split.items.is_empty() || valid_split.items.is_empty() {
-        bail!(
-            "{} needs pairs in both the train and val splits",
-            request.data.display()
-        );
+    if valid_split.items.is_empty() {
+        bail!("{} needs pairs in its val split", request.data.display());
     }
-    eprintln!(
-        "loaded {} training and {} validation pairs at {} in {:.1} s",
-        train_split.items.len(),
-        valid_split.items.len(),
-        config.image_size,
-        started.elapsed().as_secs_f64()
-    );
-
-    let train_pairs = train_split.items.len();
     let device: Device = request.backend.device()?;
     device.seed(config.seed);
     let batcher = StereoBatcher {
         size: config.image_size,
     };
-    let loader_train = DataLoaderBuilder::new(batcher.clone())
-        .batch_size(config.batch_size)
-        .shuffle(config.seed)
-        .num_workers(config.num_workers)
-        .set_device(device.clone().autodiff())
-        .build(train_split);
-    let loader_valid = DataLoaderBuilder::new(batcher)
-        .batch_size(config.batch_size)
-        .num_workers(config.num_workers)
-        .set_device(device.clone())
-        .build(valid_split);
+    let builder = || {
+        DataLoaderBuilder::new(batcher.clone())
+            .batch_size(config.batch_size)
+            .num_workers(config.num_workers)
+    };
+    let (loader_train, train_pairs): (Arc<dyn DataLoader<StereoBatch>>, usize) =
+        match &config.stream {
+            Some(stream) => {
+                let twin = TwinStream::new(
+                    stream,
+                    &dataset,
+                    config.image_size,
+                    resume_from.unwrap_or(0),
+                )?;
+                let epochs_started = twin.epochs_started();
+                let loader = builder()
+                    .shuffle(config.seed)
+                    .set_device(device.clone().autodiff())
+                    .build(twin);
+                eprintln!(
+                    "training on {} fresh twin pairs per epoch (stream seed {}{})",
+                    stream.pairs_per_epoch,
+                    stream.seed,
+                    match &stream.off_bench {
+                        Some(off) => format!(", {:.0} % off the bench", off.fraction * 100.0),
+                        None => String::new(),
+                    }
+                );
+                let counting = EpochCounting::new(loader, epochs_started);
+                (Arc::new(counting), stream.pairs_per_epoch)
+            }
+            None => {
+                let train_split = StereoSplit::load(
+                    &dataset,
+                    Split::Train,
+                    config.image_size,
+                    config.max_train_samples,
+                )?;
+                if train_split.items.is_empty() {
+                    bail!("{} needs pairs in its train split", request.data.display());
+                }
+                let pairs = train_split.items.len();
+                eprintln!("loaded {pairs} training pairs at {}", config.image_size);
+                let loader = builder()
+                    .shuffle(config.seed)
+                    .set_device(device.clone().autodiff())
+                    .build(train_split);
+                (loader, pairs)
+            }
+        };
+    eprintln!(
+        "loaded {} validation pairs at {} in {:.1} s",
+        valid_split.items.len(),
+        config.image_size,
+        started.elapsed().as_secs_f64()
+    );
+    let loader_valid = builder().set_device(device.clone()).build(valid_split);
 
     let net = config
         .model

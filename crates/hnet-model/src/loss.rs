@@ -70,18 +70,24 @@ impl HNetLoss {
             Some(output.force.clone()),
             [mask_a, mask_b],
             force,
+            None,
         )
     }
 
     /// The same loss for a network that may lack a head (the baselines: a segmentation-only
     /// network has no force, Y-Net no masks): an absent head's terms are zero. `mask_logits`
     /// are views A and B's logits, `masks` their targets.
+    ///
+    /// `force_known` (`[B, 1]`, 1 or 0) marks the pairs whose force is a label: the force term
+    /// is then the mean over those pairs only (zero when there are none), so that pairs with
+    /// masks alone teach segmentation without pulling the force head. `None`: every pair's.
     pub fn forward_heads(
         &self,
         mask_logits: Option<[Tensor<4>; 2]>,
         force: Option<Tensor<2>>,
         masks: [Tensor<4>; 2],
         target_force: Tensor<2>,
+        force_known: Option<Tensor<2>>,
     ) -> LossTerms {
         let device = target_force.device();
         let zero = || Tensor::<1>::zeros([1], &device);
@@ -93,13 +99,26 @@ impl HNetLoss {
             ),
             None => (zero(), zero()),
         };
-        let mse = match (force, self.config.force_std_n) {
-            (Some(force), None) => (force - target_force).square().mean(),
-            (Some(force), Some(std_n)) => {
-                let std = Tensor::<2>::from_floats([std_n.map(|s| s as f32)], &device);
-                ((force - target_force) / std).square().mean()
+        let mse = match force {
+            Some(force) => {
+                let error = match self.config.force_std_n {
+                    None => force - target_force,
+                    Some(std_n) => {
+                        let std = Tensor::<2>::from_floats([std_n.map(|s| s as f32)], &device);
+                        (force - target_force) / std
+                    }
+                };
+                let squared = error.square();
+                match force_known {
+                    None => squared.mean(),
+                    Some(known) => {
+                        // Sum over labelled pairs / (3 · their count), at least one pair.
+                        let labelled = known.clone().sum().clamp_min(1.0).mul_scalar(3.0);
+                        (squared * known).sum() / labelled
+                    }
+                }
             }
-            (None, _) => zero(),
+            None => zero(),
         };
         let total = bce_a.clone().mul_scalar(self.config.beta_a)
             + bce_b.clone().mul_scalar(self.config.beta_b)

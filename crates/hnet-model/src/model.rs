@@ -54,6 +54,14 @@ pub struct HNetConfig {
     /// Units of the two hidden dense layers of the force head.
     #[config(default = "[64, 32]")]
     pub force_hidden: [usize; 2],
+    /// Give the first convolution two more input channels holding each pixel's column and row,
+    /// scaled to `[-1, 1]` ("CoordConv", Liu et al., NeurIPS 2018). The force head only sees
+    /// globally averaged features, from which the paper's network must learn where the
+    /// catheter is through the convolutions' zero padding alone; with the position as an
+    /// input, averaged features carry the catheter's position and spread (its shape, hence
+    /// the force) from the first step. Off (absent or false) in the paper's design and in
+    /// weights written before it existed; see [`HNetConfig::uses_position_channels`].
+    pub position_channels: Option<bool>,
     /// When set, the force head's linear output is a standardised force that the network turns
     /// back into newtons (`F = mean + std · output`), so that it learns targets of unit scale
     /// while every output stays in newtons. Absent in weights written before it existed.
@@ -141,6 +149,12 @@ impl HNetConfig {
         Ok(())
     }
 
+    /// Whether the first convolution also reads each pixel's position
+    /// ([`HNetConfig::position_channels`]).
+    pub fn uses_position_channels(&self) -> bool {
+        self.position_channels == Some(true)
+    }
+
     /// Length of the pooled feature vector of one view: the bottleneck and every decoder block.
     pub fn pooled_features_per_view(&self) -> usize {
         (self.depth + 1) * self.filters
@@ -225,6 +239,8 @@ impl UpBlock {
 /// The per-view encoder-decoder with its segmentation head.
 #[derive(Module, Debug)]
 pub struct SegmentationBranch {
+    #[module(skip)]
+    position_channels: bool,
     encoder: Vec<DoubleConv>,
     bottleneck: DoubleConv,
     decoder: Vec<UpBlock>,
@@ -243,10 +259,17 @@ pub struct BranchOutput {
 impl SegmentationBranch {
     fn new(config: &HNetConfig, device: &Device) -> Self {
         let f = config.filters;
+        let first_in = config.in_channels
+            + if config.uses_position_channels() {
+                2
+            } else {
+                0
+            };
         let encoder = (0..config.depth)
-            .map(|i| DoubleConv::new(if i == 0 { config.in_channels } else { f }, f, device))
+            .map(|i| DoubleConv::new(if i == 0 { first_in } else { f }, f, device))
             .collect();
         Self {
+            position_channels: config.uses_position_channels(),
             encoder,
             bottleneck: DoubleConv::new(f, f, device),
             decoder: (0..config.depth).map(|_| UpBlock::new(f, device)).collect(),
@@ -257,7 +280,11 @@ impl SegmentationBranch {
     /// Runs images `[N, C, H, W]` through the branch.
     pub fn forward(&self, images: Tensor<4>) -> BranchOutput {
         let mut skips = Vec::with_capacity(self.encoder.len());
-        let mut x = images;
+        let mut x = if self.position_channels {
+            with_position_channels(images)
+        } else {
+            images
+        };
         for block in &self.encoder {
             x = block.forward(x);
             skips.push(x.clone());
@@ -275,6 +302,23 @@ impl SegmentationBranch {
             pooled: Tensor::cat(pooled, 1),
         }
     }
+}
+
+/// `images` `[N, C, H, W]` with two more channels: the column and the row of each pixel's
+/// centre, scaled linearly to `[-1, 1]` across the image (see
+/// [`HNetConfig::position_channels`]).
+fn with_position_channels(images: Tensor<4>) -> Tensor<4> {
+    let [n, _, h, w] = images.dims();
+    let across = |i: usize, len: usize| (2 * i + 1) as f32 / len as f32 - 1.0;
+    let mut planes = Vec::with_capacity(2 * h * w);
+    planes.extend((0..h * w).map(|p| across(p % w, w)));
+    planes.extend((0..h * w).map(|p| across(p / w, h)));
+    let planes = Tensor::<4>::from_data(
+        burn::tensor::TensorData::new(planes, [1, 2, h, w]),
+        &images.device(),
+    )
+    .expand([n, 2, h, w]);
+    Tensor::cat(alloc::vec![images, planes], 1)
 }
 
 /// Mean over height and width: `[N, C, H, W]` to `[N, C]`.

@@ -294,9 +294,35 @@ fn a_standardised_force_head_answers_in_newtons_and_its_loss_is_standardised() {
     let target = Tensor::<2>::from_floats([scale.mean_n.map(|v| v as f32)], &device);
     let off = target.clone() + Tensor::<2>::from_floats([scale.std_n.map(|v| v as f32)], &device);
     let masks = || Tensor::<4>::zeros([1, 1, 4, 4], &device);
-    let terms = loss.forward_heads(None, Some(off), [masks(), masks()], target);
+    let terms = loss.forward_heads(
+        None,
+        Some(off.clone()),
+        [masks(), masks()],
+        target.clone(),
+        None,
+    );
     terms.mse.into_data().assert_approx_eq::<f32>(
         &burn::tensor::TensorData::from([1.0f32]),
         Tolerance::absolute(1e-5),
     );
+
+    // A pair without a force label adds nothing to the force term, whatever its error; with
+    // no labelled pair in the batch the term is zero.
+    let wild = target.clone().add_scalar(100.0);
+    let two = |a: Tensor<2>, b: Tensor<2>| Tensor::cat(vec![a, b], 0);
+    let masks = || Tensor::<4>::zeros([2, 1, 4, 4], &device);
+    for (known, expected) in [([1.0f32, 0.0], 1.0f32), ([0.0, 0.0], 0.0)] {
+        let known = Tensor::<2>::from_floats([[known[0]], [known[1]]], &device);
+        let terms = loss.forward_heads(
+            None,
+            Some(two(off.clone(), wild.clone())),
+            [masks(), masks()],
+            two(target.clone(), target.clone()),
+            Some(known),
+        );
+        terms.mse.into_data().assert_approx_eq::<f32>(
+            &burn::tensor::TensorData::from([expected]),
+            Tolerance::absolute(1e-5),
+        );
+    }
 }

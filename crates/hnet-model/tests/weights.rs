@@ -21,27 +21,30 @@ fn provenance() -> BTreeMap<String, String> {
 #[test]
 fn a_saved_network_loads_back_identically_with_its_config() {
     let device = Device::flex();
-    let model = config().init(&device).unwrap();
-    let bytes = model.to_weights_bytes(&config(), &provenance()).unwrap();
-    let (loaded, loaded_config, header) =
-        HNet::from_weights_bytes(&bytes, &device, "model.bpk").unwrap();
-    assert_eq!(loaded_config, config());
-    assert_eq!(header.architecture, "hnet");
-    assert_eq!(header.provenance, provenance());
+    // The paper's network, and one with position channels on its first convolution.
+    for config in [config(), config().with_position_channels(Some(true))] {
+        let model = config.init(&device).unwrap();
+        let bytes = model.to_weights_bytes(&config, &provenance()).unwrap();
+        let (loaded, loaded_config, header) =
+            HNet::from_weights_bytes(&bytes, &device, "model.bpk").unwrap();
+        assert_eq!(loaded_config, config);
+        assert_eq!(header.architecture, "hnet");
+        assert_eq!(header.provenance, provenance());
 
-    let shape = [1, 3, 16, 16];
-    let a = Tensor::random(shape, Distribution::Default, &device);
-    let b = Tensor::random(shape, Distribution::Default, &device);
-    let expected = model.forward(a.clone(), b.clone());
-    let actual = loaded.forward(a, b);
-    actual
-        .force
-        .into_data()
-        .assert_eq(&expected.force.into_data(), true);
-    actual
-        .mask_logits_a
-        .into_data()
-        .assert_eq(&expected.mask_logits_a.into_data(), true);
+        let shape = [1, 3, 16, 16];
+        let a = Tensor::random(shape, Distribution::Default, &device);
+        let b = Tensor::random(shape, Distribution::Default, &device);
+        let expected = model.forward(a.clone(), b.clone());
+        let actual = loaded.forward(a, b);
+        actual
+            .force
+            .into_data()
+            .assert_eq(&expected.force.into_data(), true);
+        actual
+            .mask_logits_a
+            .into_data()
+            .assert_eq(&expected.mask_logits_a.into_data(), true);
+    }
 }
 
 #[test]
@@ -146,13 +149,17 @@ fn files_written_before_named_sizes_keep_their_height_and_width() {
     let device = Device::flex();
     let config = config().with_image_size(ImageSize::new(32, 16));
     let model = config.init(&device).unwrap();
+    // Nor did they have position channels.
     let old_json = serde_json::to_string(&config)
         .unwrap()
-        .replace(r#"{"width":32,"height":16}"#, "[16,32]");
+        .replace(r#"{"width":32,"height":16}"#, "[16,32]")
+        .replace(r#""position_channels":null,"#, "");
     assert!(old_json.contains("[16,32]"), "{old_json}");
+    assert!(!old_json.contains("position_channels"), "{old_json}");
     let bytes = weights::encode(model, "hnet", &old_json, &provenance(), "old.bpk").unwrap();
     let (_, read, _) = HNet::from_weights_bytes(&bytes, &device, "old.bpk").unwrap();
     assert_eq!(read.image_size, ImageSize::new(32, 16));
+    assert!(!read.uses_position_channels());
 }
 
 // ---------------------------------------------------------------------------------------------

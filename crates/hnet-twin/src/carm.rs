@@ -158,6 +158,15 @@ impl CArm {
     }
 }
 
+/// The C-arm angles a user can set on the page, degrees: view A's primary angle (LAO+, RAO-).
+/// Off-bench training pairs draw their views from the same ranges, so that the shipped
+/// model's masks are trained on every view the page can show.
+pub const VIEW_A_PRIMARY_DEG: [f64; 2] = [-90.0, 90.0];
+/// View B's primary angle range, degrees (a lateral plane swings further).
+pub const VIEW_B_PRIMARY_DEG: [f64; 2] = [-90.0, 180.0];
+/// Either view's secondary angle range (cranial+, caudal-), degrees.
+pub const SECONDARY_DEG: [f64; 2] = [-40.0, 40.0];
+
 /// The two views of a biplane system (or of the bench's two cameras).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Biplane {

@@ -722,8 +722,16 @@ mod folder {
                     ));
                 }
             }
-            let target = size.unwrap_or(first);
-            let resize = |img: image::DynamicImage| resized(img, target);
+            Ok(LoadedPair::of_images([a, b, ma, mb], size.unwrap_or(first)))
+        }
+    }
+
+    impl LoadedPair {
+        /// Views A and B and masks A and B, all of one size, at `size`: the one conversion of
+        /// a pair for a network, whether it was read from files or rendered just now.
+        pub fn of_images(images: [image::DynamicImage; 4], size: ImageSize) -> Self {
+            let [a, b, ma, mb] = images;
+            let resize = |img: image::DynamicImage| resized(img, size);
             let mask = |img: image::DynamicImage| -> Vec<f32> {
                 resize(img)
                     .to_luma8()
@@ -732,13 +740,50 @@ mod folder {
                     .map(|v| f32::from(v) / 255.0)
                     .collect()
             };
-            Ok(LoadedPair {
-                size: target,
+            LoadedPair {
+                size,
                 view_a: resize(a).to_rgb8().into_raw(),
                 view_b: resize(b).to_rgb8().into_raw(),
                 mask_a: mask(ma),
                 mask_b: mask(mb),
-            })
+            }
+        }
+
+        /// A twin sample rendered at `rendered` pixels as [`Dataset::load_pair`] would read it
+        /// back from the files [`crate::simulate::simulated_sample_files`] writes (lossless
+        /// PNG), at `size`: training on samples made on the fly sees the same pixels as
+        /// training on a simulated dataset.
+        pub fn from_sample(
+            sample: &crate::scene::StereoSample,
+            rendered: usize,
+            size: ImageSize,
+        ) -> Self {
+            use crate::scene::ViewPixels;
+            let side = rendered as u32;
+            let view = |pixels: &ViewPixels| -> image::DynamicImage {
+                match pixels {
+                    ViewPixels::Grey(g) => image::GrayImage::from_raw(side, side, g.clone())
+                        .map(image::DynamicImage::ImageLuma8),
+                    ViewPixels::Rgb(c) => image::RgbImage::from_raw(side, side, c.clone())
+                        .map(image::DynamicImage::ImageRgb8),
+                }
+                .expect("a rendered view has the twin's image size")
+            };
+            let mask = |m: &Vec<u8>| -> image::DynamicImage {
+                image::GrayImage::from_raw(side, side, m.clone())
+                    .map(image::DynamicImage::ImageLuma8)
+                    .expect("a rendered mask has the twin's image size")
+            };
+            let [a, b] = &sample.views;
+            Self::of_images(
+                [
+                    view(&a.pixels),
+                    view(&b.pixels),
+                    mask(&a.mask),
+                    mask(&b.mask),
+                ],
+                size,
+            )
         }
     }
 }

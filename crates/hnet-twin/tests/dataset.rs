@@ -5,7 +5,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use hnet_twin::carm::triangulate;
-use hnet_twin::dataset::{Dataset, Split};
+use hnet_twin::dataset::{Dataset, LoadedPair, Split};
 use hnet_twin::import::{ImportOptions, MaskThreshold, import_recordings};
 use hnet_twin::scene::{Backgrounds, Modality, TwinConfig};
 use hnet_twin::simulate::{read_sample_record, simulate_dataset};
@@ -132,6 +132,12 @@ fn a_simulated_dataset_reads_back_with_splits_masks_and_geometry() {
         .load_pair(row, Some(hnet_units::ImageSize::square(32)))
         .unwrap();
     assert_eq!(resized.mask_b.len(), 32 * 32);
+    // A pair rendered on the fly (training's stream) is the pair read back from the files.
+    let index: u64 = row.id.parse().unwrap();
+    let backgrounds = Backgrounds::phantom(&config.views);
+    let sample = hnet_twin::scene::generate(&config, &backgrounds, 5, index).unwrap();
+    let small = hnet_units::ImageSize::square(32);
+    assert_eq!(LoadedPair::from_sample(&sample, 64, small), resized);
 
     // The saved camera matrices reconstruct the saved 3D centreline.
     let record = read_sample_record(&dataset, &row.id).unwrap();

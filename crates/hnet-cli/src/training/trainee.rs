@@ -62,6 +62,7 @@ impl StereoTrainee {
             out.force.clone(),
             masks.clone(),
             batch.force.clone(),
+            Some(batch.force_known.clone()),
         );
         StereoStepOutput {
             total: terms.total,
@@ -74,6 +75,7 @@ impl StereoTrainee {
             target_masks: masks,
             predicted_force: out.force.map(|f| f.detach()),
             target_force: batch.force,
+            force_known: batch.force_known,
             summary: Arc::new(OnceLock::new()),
         }
     }
@@ -91,6 +93,7 @@ pub struct StereoStepOutput {
     target_masks: [Tensor<4>; 2],
     predicted_force: Option<Tensor<2>>,
     target_force: Tensor<2>,
+    force_known: Tensor<2>,
     summary: Arc<OnceLock<Result<StepSummary, String>>>,
 }
 
@@ -109,7 +112,8 @@ pub struct StepSummary {
     pub miou: Option<f64>,
     /// Mean Dice over both views and both classes.
     pub mdice: Option<f64>,
-    /// Force MAE over the three axes, N (networks that estimate the force).
+    /// Force MAE over the three axes and the pairs with a force label, N (networks that
+    /// estimate the force; `None` also when no pair in the batch has a label).
     pub force_mae: Option<f64>,
 }
 
@@ -143,8 +147,10 @@ impl StereoStepOutput {
                 let force_mae = match &self.predicted_force {
                     Some(p) => {
                         let (p, t) = (host(p)?, host(&self.target_force)?);
+                        let known = host(&self.force_known)?;
                         let mut acc = ForceAccumulator::new();
-                        for (p, t) in p.chunks_exact(3).zip(t.chunks_exact(3)) {
+                        let labelled = p.chunks_exact(3).zip(t.chunks_exact(3)).zip(known);
+                        for ((p, t), _) in labelled.filter(|(_, k)| *k > 0.5) {
                             acc.push([p[0], p[1], p[2]], [t[0], t[1], t[2]]);
                         }
                         acc.finish().map(|m| m.overall.mae)

@@ -1,0 +1,402 @@
+//! Training pairs simulated by the catheter twin while the network trains.
+//!
+//! Every epoch sees pairs it never saw before: pair `j` of epoch `e` is the twin's sample
+//! `e·pairs_per_epoch + j` of the stream's seed, so a run is the same whether it ran in one go or
+//! was resumed, and data volume stops being bounded by what fits on disk. The bench pairs are
+//! made with the twin settings the dataset given to `hnet train --data` was simulated with (its
+//! val and test splits stay the fixed yardstick), rendered at that dataset's size and reduced to
+//! the network's exactly as a file read back from it would be.
+//!
+//! A share of pairs can be drawn *off the bench*: random catheters and base poses (the twin's
+//! `varied` scenes), random C-arm angles within the page's ranges, on the thorax phantom or on
+//! real chest radiographs. Their shape no longer follows from the force alone, so they carry
+//! their masks but not their force: the loss learns segmentation from them and force from the
+//! bench pairs only.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+
+use anyhow::{Context, bail};
+use burn::data::dataloader::{DataLoader, DataLoaderIterator};
+use burn::data::dataset::{Dataset as BurnDataset, DatasetError};
+use burn::tensor::Device;
+use hnet_twin::carm::{Biplane, CArm, SECONDARY_DEG, VIEW_A_PRIMARY_DEG, VIEW_B_PRIMARY_DEG};
+use hnet_twin::dataset::{Dataset, LoadedPair};
+use hnet_twin::scene::{Backgrounds, SceneSampling, TwinConfig, generate, sample_rng};
+use hnet_twin::synthetic_xray::BackgroundSource;
+use hnet_units::ImageSize;
+use rand::RngExt;
+use serde::{Deserialize, Serialize};
+
+use super::StereoItem;
+use crate::simulate::{background_files, load_radiograph};
+
+/// Settings of a training stream (`stream` in a training config).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TwinStreamConfig {
+    /// Fresh pairs per epoch.
+    pub pairs_per_epoch: usize,
+    /// Seed of the stream's pairs; must differ from the dataset's, whose val and test pairs
+    /// would otherwise come back as training pairs.
+    pub seed: u64,
+    /// Pairs drawn off the bench, for the masks (none when absent).
+    #[serde(default)]
+    pub off_bench: Option<OffBenchConfig>,
+}
+
+/// The share and the look of off-bench pairs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OffBenchConfig {
+    /// Fraction of each epoch's pairs drawn off the bench, in `[0, 1]`.
+    pub fraction: f64,
+    /// Chest radiographs (image files or folders of them) to cut backgrounds from; relative
+    /// paths are from the folder `hnet train` runs in. Without any, every off-bench pair is on
+    /// the thorax phantom.
+    #[serde(default)]
+    pub radiographs: Vec<PathBuf>,
+    /// Fraction of off-bench pairs on a radiograph rather than the phantom, when radiographs
+    /// are given.
+    #[serde(default = "half")]
+    pub radiograph_fraction: f64,
+}
+
+fn half() -> f64 {
+    0.5
+}
+
+impl TwinStreamConfig {
+    /// Checks the settings alone (the dataset is checked by [`TwinStream::new`]).
+    pub fn check(&self) -> anyhow::Result<()> {
+        if self.pairs_per_epoch == 0 {
+            bail!("stream.pairs_per_epoch must be at least 1");
+        }
+        if let Some(off) = &self.off_bench
+            && !((0.0..=1.0).contains(&off.fraction)
+                && (0.0..=1.0).contains(&off.radiograph_fraction))
+        {
+            bail!("stream.off_bench's fractions must lie in [0, 1]");
+        }
+        Ok(())
+    }
+}
+
+/// Salts that keep the stream's three random choices (bench pair, off-bench pair, which of the
+/// two) independent of each other.
+const OFF_BENCH_SALT: u64 = 0x6F66_665F_6265_6E63;
+const MIX_SALT: u64 = 0x6D69_785F_7061_6972;
+
+/// Step of the grid of C-arm angles at which the thorax phantom is rendered for off-bench
+/// views, degrees: a view takes the phantom of the nearest grid angles (the background only has
+/// to look like a thorax seen from about there).
+const PHANTOM_GRID_DEG: f64 = 20.0;
+
+/// Side of a rendered phantom radiograph, pixels (as [`Backgrounds::phantom`]).
+const PHANTOM_SIZE_PX: usize = 512;
+
+/// The twin's training pairs for the epoch in progress (a Burn dataset).
+pub struct TwinStream {
+    config: TwinStreamConfig,
+    twin: TwinConfig,
+    bench_backgrounds: Backgrounds,
+    radiographs: Vec<BackgroundSource>,
+    phantoms: Mutex<HashMap<(i32, i32), BackgroundSource>>,
+    size: ImageSize,
+    epochs_started: Arc<AtomicUsize>,
+}
+
+impl std::fmt::Debug for TwinStream {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TwinStream")
+            .field("config", &self.config)
+            .field("size", &self.size)
+            .finish_non_exhaustive()
+    }
+}
+
+impl TwinStream {
+    /// The stream of `config` for a network of input `size`, reproducing the twin settings of
+    /// `dataset`; `epochs_done` epochs are already trained (a resumed run continues the
+    /// stream where it stopped).
+    pub fn new(
+        config: &TwinStreamConfig,
+        dataset: &Dataset,
+        size: ImageSize,
+        epochs_done: usize,
+    ) -> anyhow::Result<Self> {
+        config.check()?;
+        let header_file = dataset.root.join("dataset.json");
+        let source = &dataset.header.source;
+        let twin: TwinConfig = source
+            .get("twin")
+            .cloned()
+            .context("it records no twin settings (it was not made by `hnet simulate`)")
+            .and_then(|t| serde_json::from_value(t).context("its twin settings do not parse"))
+            .with_context(|| {
+                format!(
+                    "stream: cannot reproduce '{}' with the twin",
+                    header_file.display()
+                )
+            })?;
+        if source.get("seed").and_then(|s| s.as_u64()) == Some(config.seed) {
+            bail!(
+                "stream.seed {} is the seed of '{}': its val and test pairs would be trained on; \
+                 choose another",
+                config.seed,
+                dataset.root.display()
+            );
+        }
+        let on_phantom = source
+            .get("backgrounds")
+            .and_then(|b| b.as_array())
+            .is_none_or(|names| {
+                names
+                    .iter()
+                    .all(|n| n.as_str().is_some_and(|n| n.starts_with("phantom:")))
+            });
+        if twin.modality.is_xray() && !on_phantom {
+            bail!(
+                "stream: '{}' was simulated on radiograph backgrounds; the stream reproduces \
+                 datasets simulated on the thorax phantom (radiographs go in \
+                 stream.off_bench.radiographs)",
+                header_file.display()
+            );
+        }
+        let radiographs = match &config.off_bench {
+            Some(off) if !off.radiographs.is_empty() => background_files(&off.radiographs)?
+                .iter()
+                .map(|p| load_radiograph(p))
+                .collect::<anyhow::Result<Vec<_>>>()
+                .context("stream.off_bench.radiographs")?,
+            _ => Vec::new(),
+        };
+        Ok(Self {
+            config: config.clone(),
+            bench_backgrounds: Backgrounds::phantom(&twin.views),
+            twin,
+            radiographs,
+            phantoms: Mutex::new(HashMap::new()),
+            size,
+            epochs_started: Arc::new(AtomicUsize::new(epochs_done)),
+        })
+    }
+
+    /// The counter of epochs begun, which [`EpochCounting`] advances.
+    pub fn epochs_started(&self) -> Arc<AtomicUsize> {
+        self.epochs_started.clone()
+    }
+
+    /// Pair `index` of the stream (over all epochs).
+    pub fn pair(&self, index: u64) -> anyhow::Result<StereoItem> {
+        let off_bench = self.config.off_bench.as_ref().is_some_and(|off| {
+            sample_rng(self.config.seed ^ MIX_SALT, index).random::<f64>() < off.fraction
+        });
+        let (sample, rendered) = if off_bench {
+            self.off_bench_sample(index)?
+        } else {
+            let sample = generate(&self.twin, &self.bench_backgrounds, self.config.seed, index)?;
+            (sample, self.twin.image_size)
+        };
+        let pair = LoadedPair::from_sample(&sample, rendered, self.size);
+        let force = sample.params.tip_force_n;
+        Ok(StereoItem::new(
+            pair,
+            force.0,
+            !off_bench,
+            format!("stream-{}-{index}", self.config.seed),
+        ))
+    }
+
+    /// An off-bench sample: varied scene, random C-arm angles, phantom or radiograph.
+    fn off_bench_sample(
+        &self,
+        index: u64,
+    ) -> anyhow::Result<(hnet_twin::scene::StereoSample, usize)> {
+        let off = self
+            .config
+            .off_bench
+            .as_ref()
+            .expect("only called with off-bench settings");
+        let seed = self.config.seed ^ OFF_BENCH_SALT;
+        let mut rng = sample_rng(seed, index);
+        let mut draw = |[lo, hi]: [f64; 2]| lo + (hi - lo) * rng.random::<f64>();
+        let angles = [
+            [draw(VIEW_A_PRIMARY_DEG), draw(SECONDARY_DEG)],
+            [draw(VIEW_B_PRIMARY_DEG), draw(SECONDARY_DEG)],
+        ];
+        let size = self.twin.image_size;
+        let views = Biplane {
+            a: CArm::cardiac(angles[0][0], angles[0][1], size),
+            b: CArm::cardiac(angles[1][0], angles[1][1], size),
+        };
+        let on_radiograph =
+            !self.radiographs.is_empty() && rng.random::<f64>() < off.radiograph_fraction;
+        let backgrounds = if on_radiograph {
+            Backgrounds::files(self.radiographs.clone())
+        } else {
+            Backgrounds {
+                per_view: [self.phantom_near(&views.a), self.phantom_near(&views.b)],
+            }
+        };
+        let twin = TwinConfig {
+            scene: SceneSampling::varied(),
+            views,
+            ..self.twin.clone()
+        };
+        Ok((generate(&twin, &backgrounds, seed, index)?, size))
+    }
+
+    /// The phantom rendered at the grid angles nearest to `view`'s (rendered once, kept).
+    fn phantom_near(&self, view: &CArm) -> Vec<BackgroundSource> {
+        let snap = |deg: f64| (deg / PHANTOM_GRID_DEG).round() as i32;
+        let key = (snap(view.primary_deg), snap(view.secondary_deg));
+        let mut cache = self.phantoms.lock().unwrap_or_else(|e| e.into_inner());
+        let source = cache.entry(key).or_insert_with(|| {
+            let at = CArm::cardiac(
+                f64::from(key.0) * PHANTOM_GRID_DEG,
+                f64::from(key.1) * PHANTOM_GRID_DEG,
+                view.image_size.width,
+            );
+            BackgroundSource::phantom(&at, PHANTOM_SIZE_PX)
+        });
+        vec![source.clone()]
+    }
+}
+
+impl BurnDataset<StereoItem> for TwinStream {
+    fn get(&self, index: usize) -> Result<StereoItem, DatasetError> {
+        let epoch = self
+            .epochs_started
+            .load(Ordering::Relaxed)
+            .saturating_sub(1);
+        let global = (epoch * self.config.pairs_per_epoch + index) as u64;
+        self.pair(global)
+            .map_err(|e| DatasetError::new(std::io::Error::other(format!("{e:#}"))))
+    }
+
+    fn len(&self) -> usize {
+        self.config.pairs_per_epoch
+    }
+}
+
+/// A data loader that counts the epochs it is iterated for, so that a [`TwinStream`] behind it
+/// serves the next epoch's pairs.
+pub struct EpochCounting<O> {
+    inner: Arc<dyn DataLoader<O>>,
+    epochs_started: Arc<AtomicUsize>,
+}
+
+impl<O> EpochCounting<O> {
+    /// Wraps `inner`, advancing `epochs_started` each time an epoch's iteration begins.
+    pub fn new(inner: Arc<dyn DataLoader<O>>, epochs_started: Arc<AtomicUsize>) -> Self {
+        Self {
+            inner,
+            epochs_started,
+        }
+    }
+}
+
+impl<O: 'static> DataLoader<O> for EpochCounting<O> {
+    fn iter<'a>(&'a self) -> Box<dyn DataLoaderIterator<O> + 'a> {
+        self.epochs_started.fetch_add(1, Ordering::Relaxed);
+        self.inner.iter()
+    }
+
+    fn num_items(&self) -> usize {
+        self.inner.num_items()
+    }
+
+    fn to_device(&self, device: &Device) -> Arc<dyn DataLoader<O>> {
+        Arc::new(Self::new(
+            self.inner.to_device(device),
+            self.epochs_started.clone(),
+        ))
+    }
+
+    fn slice(&self, start: usize, end: usize) -> Arc<dyn DataLoader<O>> {
+        Arc::new(Self::new(
+            self.inner.slice(start, end),
+            self.epochs_started.clone(),
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::data::{StereoBatch, StereoBatcher};
+    use burn::data::dataloader::DataLoaderBuilder;
+    use hnet_twin::scene::Modality;
+    use hnet_twin::simulate::simulate_dataset;
+
+    fn dataset(name: &str, seed: u64) -> Dataset {
+        let root = std::env::temp_dir().join(format!("hnet-stream-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let twin = TwinConfig::new(Modality::Xray2, 32);
+        let backgrounds = Backgrounds::phantom(&twin.views);
+        let names = ["phantom:+0/+0".to_string(), "phantom:+90/+0".to_string()];
+        simulate_dataset(&twin, &backgrounds, &names, 4, seed, &root, &|_| {}).unwrap();
+        Dataset::open(&root).unwrap()
+    }
+
+    /// The forces (N) and labels of one epoch of `loader`, in a fixed order.
+    fn epoch(loader: &dyn DataLoader<StereoBatch>) -> Vec<([u32; 3], bool)> {
+        let mut pairs = Vec::new();
+        for batch in loader.iter() {
+            let batch = batch.unwrap();
+            let forces = hnet_model::inference::host_values(batch.force).unwrap();
+            let known = hnet_model::inference::host_values(batch.force_known).unwrap();
+            for (f, k) in forces.chunks_exact(3).zip(known) {
+                pairs.push(([f[0].to_bits(), f[1].to_bits(), f[2].to_bits()], k > 0.5));
+            }
+        }
+        pairs.sort();
+        pairs
+    }
+
+    fn loader(stream: TwinStream) -> EpochCounting<StereoBatch> {
+        let counter = stream.epochs_started();
+        let size = ImageSize::square(16);
+        let inner = DataLoaderBuilder::new(StereoBatcher { size })
+            .batch_size(3)
+            .shuffle(1)
+            .set_device(Device::flex())
+            .build(stream);
+        EpochCounting::new(inner, counter)
+    }
+
+    #[test]
+    fn every_epoch_is_fresh_and_a_resumed_run_continues_the_stream() {
+        let data = dataset("fresh", 5);
+        let config = TwinStreamConfig {
+            pairs_per_epoch: 8,
+            seed: 11,
+            off_bench: Some(OffBenchConfig {
+                fraction: 0.5,
+                radiographs: Vec::new(),
+                radiograph_fraction: 0.5,
+            }),
+        };
+        let size = ImageSize::square(16);
+        let first = loader(TwinStream::new(&config, &data, size, 0).unwrap());
+        let (one, two) = (epoch(&first), epoch(&first));
+        assert_eq!(one.len(), 8);
+        assert!(
+            one.iter().all(|p| !two.contains(p)),
+            "epoch 2 repeats epoch 1"
+        );
+        // Some pairs are off the bench (masks only), most of each kind at this fraction.
+        let labelled = one.iter().chain(&two).filter(|p| p.1).count();
+        assert!((3..=13).contains(&labelled), "{labelled} of 16 labelled");
+        // A run resumed after one epoch trains on what the uninterrupted run's second was.
+        let resumed = loader(TwinStream::new(&config, &data, size, 1).unwrap());
+        assert_eq!(epoch(&resumed), two);
+
+        // The dataset's own seed would replay its val and test pairs: refused, naming it.
+        let same = TwinStreamConfig { seed: 5, ..config };
+        let error = TwinStream::new(&same, &data, size, 0).unwrap_err();
+        assert!(format!("{error:#}").contains("stream.seed 5"), "{error:#}");
+        std::fs::remove_dir_all(&data.root).ok();
+    }
+}
