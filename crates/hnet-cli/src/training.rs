@@ -77,6 +77,7 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
     };
     let config = &request.config;
     config.check()?;
+    let dataset = Dataset::open(&request.data)?;
     let resume_from = if request.resume {
         let saved = run
             .read_config()
@@ -95,19 +96,21 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
                 run.root().display()
             );
         }
-        std::fs::create_dir_all(run.root())
-            .with_context(|| format!("cannot create run folder '{}'", run.root().display()))?;
-        run.write_config(config)?;
         None
     };
-    run.write_info(&RunInfo {
-        // Absolute, so that `hnet eval` and `hnet report` find it from any folder.
-        data: std::fs::canonicalize(&request.data).unwrap_or_else(|_| request.data.clone()),
-        backend: request.backend.name().into(),
-        command: request.command.clone(),
-    })?;
-
-    let dataset = Dataset::open(&request.data)?;
+    // Everything that can refuse the data refuses it before a new run folder exists.
+    let stream = config
+        .stream
+        .as_ref()
+        .map(|stream| {
+            TwinStream::new(
+                stream,
+                &dataset,
+                config.image_size,
+                resume_from.unwrap_or(0),
+            )
+        })
+        .transpose()?;
     let started = Instant::now();
     let valid_split = StereoSplit::load(
         &dataset,
@@ -118,6 +121,18 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
     if valid_split.items.is_empty() {
         bail!("{} needs pairs in its val split", request.data.display());
     }
+    if !request.resume {
+        std::fs::create_dir_all(run.root())
+            .with_context(|| format!("cannot create run folder '{}'", run.root().display()))?;
+        run.write_config(config)?;
+    }
+    run.write_info(&RunInfo {
+        // Absolute, so that `hnet eval` and `hnet report` find it from any folder.
+        data: std::fs::canonicalize(&request.data).unwrap_or_else(|_| request.data.clone()),
+        backend: request.backend.name().into(),
+        command: request.command.clone(),
+    })?;
+
     let device: Device = request.backend.device()?;
     device.seed(config.seed);
     let batcher = StereoBatcher {
@@ -128,51 +143,36 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
             .batch_size(config.batch_size)
             .num_workers(config.num_workers)
     };
-    let (loader_train, train_pairs): (Arc<dyn DataLoader<StereoBatch>>, usize) =
-        match &config.stream {
-            Some(stream) => {
-                let twin = TwinStream::new(
-                    stream,
-                    &dataset,
-                    config.image_size,
-                    resume_from.unwrap_or(0),
-                )?;
-                let epochs_started = twin.epochs_started();
-                let loader = builder()
-                    .shuffle(config.seed)
-                    .set_device(device.clone().autodiff())
-                    .build(twin);
-                eprintln!(
-                    "training on {} fresh twin pairs per epoch (stream seed {}{})",
-                    stream.pairs_per_epoch,
-                    stream.seed,
-                    match &stream.off_bench {
-                        Some(off) => format!(", {:.0} % off the bench", off.fraction * 100.0),
-                        None => String::new(),
-                    }
-                );
-                let counting = EpochCounting::new(loader, epochs_started);
-                (Arc::new(counting), stream.pairs_per_epoch)
+    let (loader_train, train_pairs): (Arc<dyn DataLoader<StereoBatch>>, usize) = match stream {
+        Some(twin) => {
+            let epochs_started = twin.epochs_started();
+            let pairs = twin.pairs_per_epoch();
+            eprintln!("training on {}", twin.describe());
+            let loader = builder()
+                .shuffle(config.seed)
+                .set_device(device.clone().autodiff())
+                .build(twin);
+            (Arc::new(EpochCounting::new(loader, epochs_started)), pairs)
+        }
+        None => {
+            let train_split = StereoSplit::load(
+                &dataset,
+                Split::Train,
+                config.image_size,
+                config.max_train_samples,
+            )?;
+            if train_split.items.is_empty() {
+                bail!("{} needs pairs in its train split", request.data.display());
             }
-            None => {
-                let train_split = StereoSplit::load(
-                    &dataset,
-                    Split::Train,
-                    config.image_size,
-                    config.max_train_samples,
-                )?;
-                if train_split.items.is_empty() {
-                    bail!("{} needs pairs in its train split", request.data.display());
-                }
-                let pairs = train_split.items.len();
-                eprintln!("loaded {pairs} training pairs at {}", config.image_size);
-                let loader = builder()
-                    .shuffle(config.seed)
-                    .set_device(device.clone().autodiff())
-                    .build(train_split);
-                (loader, pairs)
-            }
-        };
+            let pairs = train_split.items.len();
+            eprintln!("loaded {pairs} training pairs at {}", config.image_size);
+            let loader = builder()
+                .shuffle(config.seed)
+                .set_device(device.clone().autodiff())
+                .build(train_split);
+            (loader, pairs)
+        }
+    };
     eprintln!(
         "loaded {} validation pairs at {} in {:.1} s",
         valid_split.items.len(),

@@ -187,6 +187,27 @@ impl TwinStream {
         self.epochs_started.clone()
     }
 
+    /// Pairs per epoch.
+    pub fn pairs_per_epoch(&self) -> usize {
+        self.config.pairs_per_epoch
+    }
+
+    /// What the stream trains on, in a line.
+    pub fn describe(&self) -> String {
+        let off_bench = match &self.config.off_bench {
+            Some(off) => format!(
+                ", {:.0} % off the bench ({} radiographs)",
+                off.fraction * 100.0,
+                self.radiographs.len()
+            ),
+            None => String::new(),
+        };
+        format!(
+            "{} fresh twin pairs per epoch (stream seed {}{off_bench})",
+            self.config.pairs_per_epoch, self.config.seed
+        )
+    }
+
     /// Pair `index` of the stream (over all epochs).
     pub fn pair(&self, index: u64) -> anyhow::Result<StereoItem> {
         let off_bench = self.config.off_bench.as_ref().is_some_and(|off| {
