@@ -174,6 +174,21 @@ impl RunDir {
         epochs
     }
 
+    /// Sets aside epoch `epoch`'s checkpoint (each part renamed to `*.bpk.non-finite`, kept for
+    /// inspection), so that `--resume` continues from the last checkpoint before it.
+    pub fn set_aside_checkpoint(&self, epoch: usize) -> anyhow::Result<()> {
+        let dir = self.checkpoint_dir();
+        for part in CHECKPOINT_PARTS {
+            let file = dir.join(format!("{part}-{epoch}.bpk"));
+            if file.is_file() {
+                let aside = dir.join(format!("{part}-{epoch}.bpk.non-finite"));
+                std::fs::rename(&file, &aside)
+                    .with_context(|| format!("cannot set aside '{}'", file.display()))?;
+            }
+        }
+        Ok(())
+    }
+
     /// Per-epoch means of every logged metric, from burn-train's logs, by epoch then split.
     pub fn epoch_metrics(&self) -> anyhow::Result<Vec<EpochRow>> {
         let mut rows = Vec::new();

@@ -32,7 +32,7 @@ use hnet_model::model::ForceScale;
 use hnet_twin::dataset::{Dataset, Split};
 
 use self::metrics::{Quantity, StepMetric};
-use self::stopping::{StoppingRule, TimeBudget, parse_duration};
+use self::stopping::{StoppingRule, TimeBudget, non_finite_epochs, parse_duration};
 use self::trainee::StereoTrainee;
 use crate::backend::BackendChoice;
 use crate::config::{LearningRateSchedule, TrainingConfig, builtin_config};
@@ -231,6 +231,11 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
     if let Some(error) = result.error {
         bail!("training failed: {error}");
     }
+    // A diverged epoch's checkpoint is set aside: `--resume` and the export use the ones before.
+    for epoch in non_finite_epochs(&run.epoch_metrics()?) {
+        run.set_aside_checkpoint(epoch)?;
+        eprintln!("epoch {epoch}'s loss was not finite: its checkpoint is set aside");
+    }
 
     export_best(request, &run, &device, started)
 }
@@ -327,6 +332,7 @@ fn export_best(
         .iter()
         .filter(|r| r.split == "valid" && available.contains(&r.epoch))
         .filter_map(|r| r.values.get(LOSS_METRIC).map(|l| (r.epoch, *l)))
+        .filter(|(_, loss)| loss.is_finite())
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .or_else(|| available.last().map(|e| (*e, f64::NAN)))
         .context("no checkpoint was written")?;

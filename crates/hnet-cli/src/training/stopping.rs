@@ -2,12 +2,28 @@
 //! for `patience` epochs (the paper's early stopping), or, with a time budget, at the end of the
 //! last epoch that fits in it, so that a run on a lent machine ends cleanly with its best
 //! checkpoint saved rather than being killed mid-epoch. At least one epoch always runs, and
-//! exporting the best checkpoint (seconds) comes after the budget.
+//! exporting the best checkpoint (seconds) comes after the budget. An epoch whose mean training
+//! or validation loss is not finite stops the run at once: nothing after it can recover, and
+//! `hnet train` then sets that epoch's checkpoint aside (see [`non_finite_epochs`]).
 
 use std::time::{Duration, Instant};
 
 use burn::train::EarlyStoppingStrategy;
-use burn::train::metric::store::EventStoreClient;
+use burn::train::metric::store::{Aggregate, EventStoreClient, Split};
+
+use crate::run_dir::{EpochRow, LOSS_METRIC};
+
+/// The epochs of `rows` whose mean loss (training or validation) is not finite.
+pub fn non_finite_epochs(rows: &[EpochRow]) -> Vec<usize> {
+    let mut epochs: Vec<usize> = rows
+        .iter()
+        .filter(|row| row.values.get(LOSS_METRIC).is_some_and(|l| !l.is_finite()))
+        .map(|row| row.epoch)
+        .collect();
+    epochs.sort_unstable();
+    epochs.dedup();
+    epochs
+}
 
 /// A wall-clock budget for the epochs of this session.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -61,6 +77,16 @@ impl<P> StoppingRule<P> {
 
 impl<P: EarlyStoppingStrategy> EarlyStoppingStrategy for StoppingRule<P> {
     fn should_stop(&mut self, epoch: usize, store: &EventStoreClient) -> bool {
+        for split in [Split::Train, Split::Valid] {
+            let loss = store.find_metric(LOSS_METRIC, epoch, Aggregate::Mean, &split);
+            if loss.is_some_and(|l| !l.is_finite()) {
+                eprintln!(
+                    "stopping after epoch {epoch}: its mean {split} loss is not finite \
+                     (the weights diverged; a smaller learning rate may help)"
+                );
+                return true;
+            }
+        }
         if self.patience.should_stop(epoch, store) {
             return true;
         }
@@ -111,6 +137,24 @@ pub fn parse_duration(text: &str) -> Result<Duration, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn epochs_whose_training_or_validation_loss_diverged_are_found_once() {
+        let row = |epoch, split: &str, loss| EpochRow {
+            epoch,
+            split: split.into(),
+            values: [(LOSS_METRIC.to_string(), loss)].into(),
+        };
+        let rows = [
+            row(1, "train", 1.2),
+            row(2, "train", f64::NAN),
+            row(3, "train", f64::INFINITY),
+            row(1, "valid", 1.1),
+            row(2, "valid", f64::NAN),
+            row(3, "valid", 0.9),
+        ];
+        assert_eq!(non_finite_epochs(&rows), [2, 3]);
+    }
 
     #[test]
     fn the_budget_stops_before_an_epoch_that_would_overrun_it() {
