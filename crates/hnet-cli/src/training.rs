@@ -112,15 +112,18 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
         })
         .transpose()?;
     let started = Instant::now();
-    let valid_split = StereoSplit::load(
-        &dataset,
-        Split::Val,
-        config.image_size,
-        config.max_valid_samples,
-    )?;
-    if valid_split.items.is_empty() {
-        bail!("{} needs pairs in its val split", request.data.display());
-    }
+    let load = |split: Split, limit: Option<usize>| -> anyhow::Result<StereoSplit> {
+        let pairs = StereoSplit::load(&dataset, split, config.image_size, limit)?;
+        if pairs.items.is_empty() {
+            bail!(
+                "{} needs pairs in its {} split",
+                request.data.display(),
+                split.name()
+            );
+        }
+        Ok(pairs)
+    };
+    let valid_split = load(Split::Val, config.max_valid_samples)?;
     if !request.resume {
         std::fs::create_dir_all(run.root())
             .with_context(|| format!("cannot create run folder '{}'", run.root().display()))?;
@@ -155,15 +158,7 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
             (Arc::new(EpochCounting::new(loader, epochs_started)), pairs)
         }
         None => {
-            let train_split = StereoSplit::load(
-                &dataset,
-                Split::Train,
-                config.image_size,
-                config.max_train_samples,
-            )?;
-            if train_split.items.is_empty() {
-                bail!("{} needs pairs in its train split", request.data.display());
-            }
+            let train_split = load(Split::Train, config.max_train_samples)?;
             let pairs = train_split.items.len();
             eprintln!("loaded {pairs} training pairs at {}", config.image_size);
             let loader = builder()
