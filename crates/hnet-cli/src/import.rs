@@ -1,4 +1,5 @@
-//! `hnet import`: real recordings into the dataset format.
+//! `hnet import`: real recordings into the dataset format: two folders of images, or two DICOM
+//! series (plane A and plane B of a biplane cine, [`crate::import_dicom`]).
 
 use std::path::PathBuf;
 
@@ -8,35 +9,44 @@ use hnet_twin::import::{ImportOptions, MaskThreshold, import_recordings};
 use crate::progress;
 
 #[derive(clap::Args, Debug)]
+#[command(group(clap::ArgGroup::new("input").required(true).args(["view_a", "dicom_a"])))]
 pub struct ImportArgs {
     /// Folder of view A images.
-    #[arg(long)]
-    view_a: PathBuf,
+    #[arg(long, requires = "view_b")]
+    view_a: Option<PathBuf>,
     /// Folder of view B images (same file names as view A).
+    #[arg(long, requires = "view_a", conflicts_with_all = ["dicom_a", "dicom_b"])]
+    view_b: Option<PathBuf>,
+    /// Plane A of a biplane DICOM (XA/RF) cine: a file, or a folder of its files.
+    #[arg(long, requires = "dicom_b", conflicts_with = "view_a")]
+    pub(crate) dicom_a: Option<PathBuf>,
+    /// Plane B of the cine, frame for frame with plane A.
+    #[arg(long, requires = "dicom_a")]
+    pub(crate) dicom_b: Option<PathBuf>,
+    /// CSV with a header: a key column and `fx,fy,fz` in newtons. For image folders the key is
+    /// the image (`image`, `file`, `frame` or `name`); for DICOM it is `frame`, the frame
+    /// number from 1 (frames without a row are not imported: the dataset format needs a force
+    /// for every pair).
     #[arg(long)]
-    view_b: PathBuf,
-    /// CSV with a header: an image column (`image`, `file`, `frame` or `name`) and `fx,fy,fz`
-    /// in newtons.
-    #[arg(long)]
-    forces: PathBuf,
+    pub(crate) forces: PathBuf,
     /// Output dataset folder.
     #[arg(long)]
-    out: PathBuf,
+    pub(crate) out: PathBuf,
     /// Mask threshold: a grey level 0-255 (the catheter is at or below it) or `otsu`.
     #[arg(long, default_value = "otsu", value_parser = parse_threshold)]
-    threshold: MaskThreshold,
+    pub(crate) threshold: MaskThreshold,
     /// The catheter is brighter than its background (masks take the pixels above the level).
     #[arg(long)]
-    bright_catheter: bool,
+    pub(crate) bright_catheter: bool,
     /// Resize every image to SIZE x SIZE pixels (otherwise all must have the same size).
     #[arg(long)]
-    size: Option<usize>,
+    pub(crate) size: Option<usize>,
     /// Report bad rows and images and go on instead of stopping at the first one.
     #[arg(long)]
-    skip_bad: bool,
+    pub(crate) skip_bad: bool,
     /// Seed of the 80/10/10 train/val/test split.
     #[arg(long, default_value_t = 0)]
-    seed: u64,
+    pub(crate) seed: u64,
 }
 
 fn parse_threshold(text: &str) -> Result<MaskThreshold, String> {
@@ -52,9 +62,12 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<()> {
     if args.size == Some(0) {
         bail!("--size must be at least 1");
     }
+    let (Some(view_a), Some(view_b)) = (&args.view_a, &args.view_b) else {
+        return crate::import_dicom::run(args);
+    };
     let options = ImportOptions {
-        view_a: args.view_a.clone(),
-        view_b: args.view_b.clone(),
+        view_a: view_a.clone(),
+        view_b: view_b.clone(),
         forces: args.forces.clone(),
         out: args.out.clone(),
         threshold: args.threshold,

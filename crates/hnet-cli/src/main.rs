@@ -7,11 +7,13 @@ use clap::{Parser, Subcommand};
 mod allocator;
 mod backend;
 mod bench;
+mod cine;
 mod config;
 mod contact_sheet;
 mod data;
 mod evaluation;
 mod import;
+mod import_dicom;
 mod info;
 mod physics_check;
 mod progress;
@@ -20,6 +22,7 @@ mod report;
 mod run_dir;
 mod simulate;
 mod study;
+mod trace;
 mod training;
 
 /// H-Net Studio: stereo catheter segmentation and 3D tip-force estimation.
@@ -36,7 +39,8 @@ enum Command {
     Info(info::InfoArgs),
     /// Generate a stereo dataset with the catheter digital twin.
     Simulate(simulate::SimulateArgs),
-    /// Turn real recordings (two image folders and a forces CSV) into a dataset.
+    /// Turn real recordings (two image folders, or a biplane DICOM cine, and a forces CSV) into
+    /// a dataset.
     Import(import::ImportArgs),
     /// Train H-Net (or a baseline) on a dataset.
     Train(training::TrainArgs),
@@ -48,6 +52,8 @@ enum Command {
     ContactSheet(contact_sheet::ContactSheetArgs),
     /// Measure throughput (see docs/benchmarks.md).
     Bench(bench::BenchArgs),
+    /// Run a trained model over every frame pair of a biplane DICOM cine: a force trace CSV.
+    Trace(trace::TraceArgs),
     /// Study what a dataset allows (`hnet study ceiling`: the force recoverable from its geometry).
     Study(study::StudyArgs),
 }
@@ -65,6 +71,7 @@ fn main() -> ExitCode {
         Command::ContactSheet(args) => contact_sheet::run(&args),
         Command::Bench(args) => bench::run(&args),
         Command::Study(args) => study::run(&args),
+        Command::Trace(args) => trace::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

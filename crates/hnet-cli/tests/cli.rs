@@ -405,3 +405,102 @@ mod config_properties {
         }
     }
 }
+
+/// A biplane DICOM cine (XA, written here from the twin's frames): imported into a dataset with
+/// its geometry, traced by the bundled model, and neither output carries a patient identifier.
+#[test]
+fn a_biplane_dicom_cine_imports_and_traces_without_patient_identifiers() {
+    let dir = scratch("dicom");
+    let cine = hnet_dicom::twin_cine(32, 4, 9).unwrap();
+    let (plane_a, folder_b) = (dir.join("plane-a.dcm"), dir.join("DOE_JANE_plane_b"));
+    std::fs::create_dir_all(&folder_b).unwrap();
+    std::fs::write(&plane_a, hnet_dicom::write_xa(&cine.planes[0])).unwrap();
+    std::fs::write(
+        folder_b.join("0001.dcm"),
+        hnet_dicom::write_xa(&cine.planes[1]),
+    )
+    .unwrap();
+    let mut forces = String::from("frame,fx,fy,fz\n");
+    for (i, f) in cine.forces_n.iter().enumerate() {
+        forces += &format!("{},{},{},{}\n", i + 1, f[0], f[1], f[2]);
+    }
+    std::fs::write(dir.join("forces.csv"), forces).unwrap();
+    let data = dir.join("data");
+    run(&[
+        "import",
+        "--dicom-a",
+        plane_a.to_str().unwrap(),
+        "--dicom-b",
+        folder_b.to_str().unwrap(),
+        "--forces",
+        dir.join("forces.csv").to_str().unwrap(),
+        "--out",
+        data.to_str().unwrap(),
+    ]);
+    let dataset = hnet_twin::dataset::Dataset::open(&data).unwrap();
+    assert_eq!(dataset.rows.len(), 4);
+    let record: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dataset.record_file("frame00002")).unwrap()).unwrap();
+    let views = &record["record"]["views"];
+    assert_eq!(views[0]["carm"]["primary_deg"], -20.0);
+    assert_eq!(views[1]["carm"]["primary_deg"], 70.0);
+
+    let trace = dir.join("trace.csv");
+    let weights = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/hnet-cpu.bpk");
+    let traced = |out: &Path, plane_b: &Path| {
+        let mut command = hnet();
+        command
+            .arg("trace")
+            .arg("--weights")
+            .arg(&weights)
+            .arg("--dicom-a")
+            .arg(&plane_a)
+            .arg("--dicom-b")
+            .arg(plane_b)
+            .arg("--out")
+            .arg(out);
+        command
+    };
+    succeeds(&mut traced(&trace, &folder_b));
+    let text = std::fs::read_to_string(&trace).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines[0], "frame,time_s,fx_n,fy_n,fz_n,magnitude_n");
+    assert_eq!(lines.len(), 5);
+    let second: Vec<f64> = lines[2].split(',').map(|v| v.parse().unwrap()).collect();
+    assert_eq!((second[0], second[1]), (2.0, 0.0667));
+    let magnitude = (second[2].powi(2) + second[3].powi(2) + second[4].powi(2)).sqrt();
+    assert!((magnitude - second[5]).abs() < 1e-5, "{}", lines[2]);
+
+    // No output names the patient, the hospital or the folders (which may be named after them).
+    let mut outputs = vec![trace.clone()];
+    for folder in [data.clone(), data.join("samples")] {
+        for entry in std::fs::read_dir(folder).unwrap() {
+            outputs.push(entry.unwrap().path());
+        }
+    }
+    for path in outputs.iter().filter(|p| p.is_file()) {
+        let bytes = String::from_utf8_lossy(&std::fs::read(path).unwrap()).into_owned();
+        for identifier in ["DOE", "PID-0042", "19611224", "ACC-7731", "Twin General"] {
+            assert!(
+                !bytes.contains(identifier),
+                "{} holds {identifier}",
+                path.display()
+            );
+        }
+    }
+
+    // Planes of different lengths: an error naming both, and nothing written.
+    let mut short = cine.planes[1].clone();
+    short.frames.truncate(3);
+    let plane_b_short = dir.join("plane-b-short.dcm");
+    std::fs::write(&plane_b_short, hnet_dicom::write_xa(&short)).unwrap();
+    let err = fails(&mut traced(&dir.join("none.csv"), &plane_b_short));
+    assert!(
+        err.contains("plane-a.dcm")
+            && err.contains("plane-b-short.dcm")
+            && err.contains("4 frames"),
+        "{err}"
+    );
+    assert!(!dir.join("none.csv").exists());
+    std::fs::remove_dir_all(dir).ok();
+}

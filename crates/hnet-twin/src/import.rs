@@ -154,16 +154,26 @@ fn pixels(image: &image::DynamicImage, size: ImageSize) -> (usize, Vec<u8>) {
 }
 
 fn mask_of(channels: usize, pixels: &[u8], options: &ImportOptions) -> Vec<u8> {
-    let mut grey = if channels == 3 {
+    let grey = if channels == 3 {
         luma(pixels)
     } else {
         pixels.to_vec()
     };
-    if options.bright_catheter {
+    recording_mask(grey, options.threshold, options.bright_catheter)
+}
+
+/// The catheter mask of a recorded 8-bit grey image by `threshold` (the one mask rule of every
+/// import: image folders here, DICOM cines in `hnet import --dicom-a/--dicom-b`).
+pub fn recording_mask(
+    mut grey: Vec<u8>,
+    threshold: MaskThreshold,
+    bright_catheter: bool,
+) -> Vec<u8> {
+    if bright_catheter {
         grey.iter_mut().for_each(|v| *v = 255 - *v);
     }
-    let level = match options.threshold {
-        MaskThreshold::Level(level) if options.bright_catheter => 255 - level,
+    let level = match threshold {
+        MaskThreshold::Level(level) if bright_catheter => 255 - level,
         MaskThreshold::Level(level) => level,
         MaskThreshold::Otsu => otsu_threshold(&grey),
     };
