@@ -5,9 +5,10 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use hnet_twin::import::is_image_file;
+use hnet_twin::off_bench::OffBench;
 use hnet_twin::raster::GreyImage;
 use hnet_twin::scene::{Backgrounds, MaskSource, Modality, SceneSampling, TwinConfig};
-use hnet_twin::simulate::simulate_dataset;
+use hnet_twin::simulate::{OFF_BENCH_VIEWS, simulate_dataset, simulate_off_bench_dataset};
 use hnet_twin::synthetic_xray::BackgroundSource;
 
 use crate::progress;
@@ -37,13 +38,29 @@ pub struct SimulateArgs {
     #[arg(long, default_value = "geometry", value_parser = parse_mask)]
     pub mask: MaskSource,
     /// How scenes are drawn: `bench` (the paper's bench: one catheter on a fixed base, a random
-    /// tip force) or `varied` (random catheters and base poses too; see docs/twin.md).
+    /// tip force), `varied` (random catheters and base poses too; see docs/twin.md) or
+    /// `off-bench` (varied scenes seen from random C-arm angles within the page's ranges, on the
+    /// phantom rendered from there, or on the `--background` radiographs when given).
     #[arg(long, default_value = "bench", value_parser = parse_scenes)]
-    pub scenes: SceneSampling,
+    pub scenes: Scenes,
 }
 
-fn parse_scenes(text: &str) -> Result<SceneSampling, String> {
-    SceneSampling::preset(text).ok_or_else(|| format!("`{text}` is not bench or varied"))
+/// What `--scenes` asks for.
+#[derive(Debug, Clone)]
+pub enum Scenes {
+    /// A preset of scene sampling, the twin's default views.
+    Preset(SceneSampling),
+    /// Off-bench pairs ([`OffBench`]).
+    OffBench,
+}
+
+fn parse_scenes(text: &str) -> Result<Scenes, String> {
+    if text == OFF_BENCH_VIEWS {
+        return Ok(Scenes::OffBench);
+    }
+    SceneSampling::preset(text)
+        .map(Scenes::Preset)
+        .ok_or_else(|| format!("`{text}` is not bench, varied or {OFF_BENCH_VIEWS}"))
 }
 
 pub fn parse_modality(text: &str) -> Result<Modality, String> {
@@ -62,7 +79,7 @@ fn parse_mask(text: &str) -> Result<MaskSource, String> {
 }
 
 /// The image files named by `paths` (folders expand to the images in them, sorted).
-pub fn background_files(paths: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
+fn background_files(paths: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
     let mut files = Vec::new();
     for path in paths {
         if path.is_dir() {
@@ -120,12 +137,18 @@ pub fn backgrounds(
             .collect();
         return Ok((backgrounds, names));
     }
+    let (sources, names) = radiographs(paths)?;
+    Ok((Backgrounds::files(sources), names))
+}
+
+/// The chest radiographs named by `paths` (files, or folders of images) and their names.
+pub fn radiographs(paths: &[PathBuf]) -> anyhow::Result<(Vec<BackgroundSource>, Vec<String>)> {
     let sources = background_files(paths)?
         .iter()
         .map(|p| load_radiograph(p))
         .collect::<anyhow::Result<Vec<_>>>()?;
     let names = sources.iter().map(|s| s.name.clone()).collect();
-    Ok((Backgrounds::files(sources), names))
+    Ok((sources, names))
 }
 
 pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
@@ -137,19 +160,45 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     }
     let mut config = TwinConfig::new(args.modality, args.size);
     config.mask = args.mask;
-    config.scene = args.scenes.clone();
-    let (backgrounds, names) = backgrounds(&config, &args.backgrounds)?;
     let bar = progress::bar(args.samples as u64, "simulating");
+    let progress = |done: usize| bar.set_position(done as u64);
     let start = Instant::now();
-    let report = simulate_dataset(
-        &config,
-        &backgrounds,
-        &names,
-        args.samples,
-        args.seed,
-        &args.out,
-        &|done| bar.set_position(done as u64),
-    )?;
+    let report = match &args.scenes {
+        Scenes::Preset(scenes) => {
+            config.scene = scenes.clone();
+            let (backgrounds, names) = backgrounds(&config, &args.backgrounds)?;
+            simulate_dataset(
+                &config,
+                &backgrounds,
+                &names,
+                args.samples,
+                args.seed,
+                &args.out,
+                &progress,
+            )?
+        }
+        Scenes::OffBench => {
+            if !config.modality.is_xray() {
+                bail!("--scenes {OFF_BENCH_VIEWS} is for the X-ray modalities");
+            }
+            // Radiographs when given (every pair on one), else the phantom from each view.
+            let (radiographs, names) = if args.backgrounds.is_empty() {
+                (Vec::new(), vec!["phantom:off-bench".to_string()])
+            } else {
+                radiographs(&args.backgrounds)?
+            };
+            let off_bench = OffBench::new(config.clone(), radiographs, 1.0);
+            simulate_off_bench_dataset(
+                &off_bench,
+                &config,
+                &names,
+                args.samples,
+                args.seed,
+                &args.out,
+                &progress,
+            )?
+        }
+    };
     bar.finish_and_clear();
     let seconds = start.elapsed().as_secs_f64();
     eprintln!(

@@ -5,7 +5,8 @@
 //! - [`carm`]: two perspective views (a biplane C-arm, or the bench's two cameras);
 //! - [`render`]: the catheter's exact anti-aliased mask, X-ray attenuation and camera look;
 //! - [`phantom`] and [`synthetic_xray`]: chest radiograph backgrounds cut into shuffled patches;
-//! - [`scene`]: random scenes and complete stereo samples;
+//! - [`scene`]: random scenes and complete stereo samples; [`off_bench`]: pairs off the bench
+//!   (any catheter and pose, any C-arm angle the page offers, phantom or radiograph);
 //! - [`centreline`], [`reconstruction`] and [`rod_fit`]: the catheter in 3D from its two masks
 //!   (sub-pixel centrelines, epipolar matching and triangulation) and the tip force of the rod
 //!   that fits it (a physics-checked force, no training); [`physics_force`] runs the three on a
@@ -30,6 +31,7 @@ pub mod force_table;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod import;
 pub mod noise;
+pub mod off_bench;
 pub mod phantom;
 pub mod physics_force;
 pub mod raster;

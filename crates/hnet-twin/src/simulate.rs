@@ -13,6 +13,7 @@ use crate::dataset::{
     Dataset, DatasetError, DatasetHeader, DatasetWriter, ImageRef, ManifestRow, Split,
     assign_splits, sample_files,
 };
+use crate::off_bench::OffBench;
 use crate::physics_force::PhysicsSetup;
 use crate::rod::RodConfig;
 use crate::scene::{Backgrounds, SceneParams, StereoSample, TwinConfig, generate};
@@ -209,17 +210,59 @@ pub fn simulate_dataset(
     out: &Path,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<SimulationReport, SimulationError> {
-    let header = DatasetHeader::new(
-        ImageSize::square(config.image_size),
-        samples,
-        json!({
-            "generator": "hnet-twin",
-            "version": env!("CARGO_PKG_VERSION"),
-            "seed": seed,
-            "backgrounds": background_names,
-            "twin": config,
-        }),
-    );
+    let source = json!({
+        "generator": "hnet-twin",
+        "version": env!("CARGO_PKG_VERSION"),
+        "seed": seed,
+        "backgrounds": background_names,
+        "twin": config,
+    });
+    write_samples(config, source, samples, seed, out, progress, &|index| {
+        Ok((config.clone(), generate(config, backgrounds, seed, index)?))
+    })
+}
+
+/// Generates `samples` pairs off the bench ([`OffBench`]: varied catheters and poses, the
+/// page's C-arm angle ranges, phantom or radiographs) into `out`, each pair's record holding its
+/// own views. The header marks the dataset `"views": "off-bench"`: its `twin` settings give the
+/// look, not the views.
+pub fn simulate_off_bench_dataset(
+    off_bench: &OffBench,
+    base: &TwinConfig,
+    background_names: &[String],
+    samples: usize,
+    seed: u64,
+    out: &Path,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<SimulationReport, SimulationError> {
+    let source = json!({
+        "generator": "hnet-twin",
+        "version": env!("CARGO_PKG_VERSION"),
+        "seed": seed,
+        "backgrounds": background_names,
+        "views": OFF_BENCH_VIEWS,
+        "twin": base,
+    });
+    write_samples(base, source, samples, seed, out, progress, &|index| {
+        Ok(off_bench.generate(seed, index)?)
+    })
+}
+
+/// The header's `views` value of an off-bench dataset.
+pub const OFF_BENCH_VIEWS: &str = "off-bench";
+
+/// Writes the samples `make` generates (with the twin settings each was made with), in parallel,
+/// crash-safely, skipping those already complete.
+fn write_samples(
+    config: &TwinConfig,
+    source: serde_json::Value,
+    samples: usize,
+    seed: u64,
+    out: &Path,
+    progress: &(dyn Fn(usize) + Sync),
+    make: &(dyn Fn(u64) -> Result<(TwinConfig, StereoSample), SimulationError> + Sync),
+) -> Result<SimulationReport, SimulationError> {
+    let header = DatasetHeader::new(ImageSize::square(config.image_size), samples, source);
     let writer = DatasetWriter::create_or_resume(out, &header)?;
     let splits = assign_splits(samples, seed);
     let pending: Vec<u64> = (0..samples as u64)
@@ -229,8 +272,8 @@ pub fn simulate_dataset(
     let done = AtomicUsize::new(resumed);
     progress(resumed);
     pending.par_iter().try_for_each(|&index| {
-        let sample = generate(config, backgrounds, seed, index)?;
-        let files = simulated_sample_files(config, &sample, splits[index as usize]);
+        let (twin, sample) = make(index)?;
+        let files = simulated_sample_files(&twin, &sample, splits[index as usize]);
         writer.write_sample(&sample_id(index), &files)?;
         progress(done.fetch_add(1, Ordering::Relaxed) + 1);
         Ok::<(), SimulationError>(())

@@ -7,8 +7,13 @@ use std::path::{Path, PathBuf};
 use hnet_twin::carm::triangulate;
 use hnet_twin::dataset::{Dataset, LoadedPair, Split};
 use hnet_twin::import::{ImportOptions, MaskThreshold, import_recordings};
+use hnet_twin::off_bench::OffBench;
+use hnet_twin::raster::GreyImage;
 use hnet_twin::scene::{Backgrounds, Modality, TwinConfig};
-use hnet_twin::simulate::{read_sample_record, simulate_dataset};
+use hnet_twin::simulate::{
+    OFF_BENCH_VIEWS, read_sample_record, simulate_dataset, simulate_off_bench_dataset,
+};
+use hnet_twin::synthetic_xray::BackgroundSource;
 
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("hnet-twin-{name}-{}", std::process::id()));
@@ -152,6 +157,30 @@ fn a_simulated_dataset_reads_back_with_splits_masks_and_geometry() {
     let (pa, pb) = (camera(0), camera(1));
     let back = triangulate(&pa, project(&pa), &pb, project(&pb));
     assert!((back - tip).max_abs() < 1e-6);
+    fs::remove_dir_all(out).ok();
+}
+
+#[test]
+fn an_off_bench_dataset_records_each_pairs_own_views() {
+    let config = TwinConfig::new(Modality::Xray2, 32);
+    // On a flat radiograph: the phantom takes seconds per view to render in a debug build.
+    let flat = BackgroundSource::chest_radiograph("flat", GreyImage::filled(64, 64, 0.5));
+    let off_bench = OffBench::new(config.clone(), vec![flat], 1.0);
+    let out = scratch("off-bench");
+    let names = ["phantom:off-bench".to_string()];
+    simulate_off_bench_dataset(&off_bench, &config, &names, 4, 9, &out, &|_| {}).unwrap();
+    let dataset = Dataset::open(&out).unwrap();
+    assert_eq!(dataset.header.source["views"], OFF_BENCH_VIEWS);
+    let views: Vec<_> = dataset
+        .rows
+        .iter()
+        .map(|row| read_sample_record(&dataset, &row.id).unwrap().views[1].carm)
+        .collect();
+    assert!(views.iter().all(|v| *v != config.views.b), "{views:?}");
+    for (row, carm) in dataset.rows.iter().zip(&views) {
+        let index: u64 = row.id.parse().unwrap();
+        assert_eq!(off_bench.draw(9, index).0.views.b, *carm);
+    }
     fs::remove_dir_all(out).ok();
 }
 

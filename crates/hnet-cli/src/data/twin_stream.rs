@@ -13,25 +13,24 @@
 //! their masks but not their force: the loss learns segmentation from them and force from the
 //! bench pairs only.
 
-use std::collections::HashMap;
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
 
 use anyhow::{Context, bail};
 use burn::data::dataloader::{DataLoader, DataLoaderIterator};
 use burn::data::dataset::{Dataset as BurnDataset, DatasetError};
 use burn::tensor::Device;
-use hnet_twin::carm::{Biplane, CArm, SECONDARY_DEG, VIEW_A_PRIMARY_DEG, VIEW_B_PRIMARY_DEG};
 use hnet_twin::dataset::{Dataset, LoadedPair};
-use hnet_twin::scene::{Backgrounds, SceneSampling, TwinConfig, generate, sample_rng};
-use hnet_twin::synthetic_xray::BackgroundSource;
+use hnet_twin::off_bench::OffBench;
+use hnet_twin::scene::{Backgrounds, TwinConfig, generate, sample_rng};
+use hnet_twin::simulate::OFF_BENCH_VIEWS;
 use hnet_units::ImageSize;
 use rand::RngExt;
 use serde::{Deserialize, Serialize};
 
 use super::StereoItem;
-use crate::simulate::{background_files, load_radiograph};
+use crate::simulate::radiographs;
 
 /// Settings of a training stream (`stream` in a training config).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -82,26 +81,15 @@ impl TwinStreamConfig {
     }
 }
 
-/// Salts that keep the stream's three random choices (bench pair, off-bench pair, which of the
-/// two) independent of each other.
-const OFF_BENCH_SALT: u64 = 0x6F66_665F_6265_6E63;
+/// Keeps the choice between a bench and an off-bench pair independent of both pairs' draws.
 const MIX_SALT: u64 = 0x6D69_785F_7061_6972;
-
-/// Step of the grid of C-arm angles at which the thorax phantom is rendered for off-bench
-/// views, degrees: a view takes the phantom of the nearest grid angles (the background only has
-/// to look like a thorax seen from about there).
-const PHANTOM_GRID_DEG: f64 = 20.0;
-
-/// Side of a rendered phantom radiograph, pixels (as [`Backgrounds::phantom`]).
-const PHANTOM_SIZE_PX: usize = 512;
 
 /// The twin's training pairs for the epoch in progress (a Burn dataset).
 pub struct TwinStream {
     config: TwinStreamConfig,
     twin: TwinConfig,
     bench_backgrounds: Backgrounds,
-    radiographs: Vec<BackgroundSource>,
-    phantoms: Mutex<HashMap<(i32, i32), BackgroundSource>>,
+    off_bench: Option<OffBench>,
     size: ImageSize,
     epochs_started: Arc<AtomicUsize>,
 }
@@ -139,6 +127,13 @@ impl TwinStream {
                     header_file.display()
                 )
             })?;
+        if source.get("views").and_then(|v| v.as_str()) == Some(OFF_BENCH_VIEWS) {
+            bail!(
+                "stream: '{}' holds off-bench pairs, whose force is not a label; give a bench \
+                 dataset to --data (off-bench pairs go in stream.off_bench)",
+                header_file.display()
+            );
+        }
         if source.get("seed").and_then(|s| s.as_u64()) == Some(config.seed) {
             bail!(
                 "stream.seed {} is the seed of '{}': its val and test pairs would be trained on; \
@@ -163,20 +158,23 @@ impl TwinStream {
                 header_file.display()
             );
         }
-        let radiographs = match &config.off_bench {
-            Some(off) if !off.radiographs.is_empty() => background_files(&off.radiographs)?
-                .iter()
-                .map(|p| load_radiograph(p))
-                .collect::<anyhow::Result<Vec<_>>>()
-                .context("stream.off_bench.radiographs")?,
-            _ => Vec::new(),
+        let off_bench = match &config.off_bench {
+            Some(off) => {
+                let (radiographs, _) =
+                    radiographs(&off.radiographs).context("stream.off_bench.radiographs")?;
+                Some(OffBench::new(
+                    twin.clone(),
+                    radiographs,
+                    off.radiograph_fraction,
+                ))
+            }
+            None => None,
         };
         Ok(Self {
             config: config.clone(),
             bench_backgrounds: Backgrounds::phantom(&twin.views),
             twin,
-            radiographs,
-            phantoms: Mutex::new(HashMap::new()),
+            off_bench,
             size,
             epochs_started: Arc::new(AtomicUsize::new(epochs_done)),
         })
@@ -198,7 +196,7 @@ impl TwinStream {
             Some(off) => format!(
                 ", {:.0} % off the bench ({} radiographs)",
                 off.fraction * 100.0,
-                self.radiographs.len()
+                self.off_bench.as_ref().map_or(0, OffBench::radiographs)
             ),
             None => String::new(),
         };
@@ -213,13 +211,11 @@ impl TwinStream {
         let off_bench = self.config.off_bench.as_ref().is_some_and(|off| {
             sample_rng(self.config.seed ^ MIX_SALT, index).random::<f64>() < off.fraction
         });
-        let (sample, rendered) = if off_bench {
-            self.off_bench_sample(index)?
-        } else {
-            let sample = generate(&self.twin, &self.bench_backgrounds, self.config.seed, index)?;
-            (sample, self.twin.image_size)
+        let sample = match self.off_bench.as_ref().filter(|_| off_bench) {
+            Some(off) => off.generate(self.config.seed, index)?.1,
+            None => generate(&self.twin, &self.bench_backgrounds, self.config.seed, index)?,
         };
-        let pair = LoadedPair::from_sample(&sample, rendered, self.size);
+        let pair = LoadedPair::from_sample(&sample, self.twin.image_size, self.size);
         let force = sample.params.tip_force_n;
         Ok(StereoItem::new(
             pair,
@@ -227,61 +223,6 @@ impl TwinStream {
             !off_bench,
             format!("stream-{}-{index}", self.config.seed),
         ))
-    }
-
-    /// An off-bench sample: varied scene, random C-arm angles, phantom or radiograph.
-    fn off_bench_sample(
-        &self,
-        index: u64,
-    ) -> anyhow::Result<(hnet_twin::scene::StereoSample, usize)> {
-        let off = self
-            .config
-            .off_bench
-            .as_ref()
-            .expect("only called with off-bench settings");
-        let seed = self.config.seed ^ OFF_BENCH_SALT;
-        let mut rng = sample_rng(seed, index);
-        let mut draw = |[lo, hi]: [f64; 2]| lo + (hi - lo) * rng.random::<f64>();
-        let angles = [
-            [draw(VIEW_A_PRIMARY_DEG), draw(SECONDARY_DEG)],
-            [draw(VIEW_B_PRIMARY_DEG), draw(SECONDARY_DEG)],
-        ];
-        let size = self.twin.image_size;
-        let views = Biplane {
-            a: CArm::cardiac(angles[0][0], angles[0][1], size),
-            b: CArm::cardiac(angles[1][0], angles[1][1], size),
-        };
-        let on_radiograph =
-            !self.radiographs.is_empty() && rng.random::<f64>() < off.radiograph_fraction;
-        let backgrounds = if on_radiograph {
-            Backgrounds::files(self.radiographs.clone())
-        } else {
-            Backgrounds {
-                per_view: [self.phantom_near(&views.a), self.phantom_near(&views.b)],
-            }
-        };
-        let twin = TwinConfig {
-            scene: SceneSampling::varied(),
-            views,
-            ..self.twin.clone()
-        };
-        Ok((generate(&twin, &backgrounds, seed, index)?, size))
-    }
-
-    /// The phantom rendered at the grid angles nearest to `view`'s (rendered once, kept).
-    fn phantom_near(&self, view: &CArm) -> Vec<BackgroundSource> {
-        let snap = |deg: f64| (deg / PHANTOM_GRID_DEG).round() as i32;
-        let key = (snap(view.primary_deg), snap(view.secondary_deg));
-        let mut cache = self.phantoms.lock().unwrap_or_else(|e| e.into_inner());
-        let source = cache.entry(key).or_insert_with(|| {
-            let at = CArm::cardiac(
-                f64::from(key.0) * PHANTOM_GRID_DEG,
-                f64::from(key.1) * PHANTOM_GRID_DEG,
-                view.image_size.width,
-            );
-            BackgroundSource::phantom(&at, PHANTOM_SIZE_PX)
-        });
-        vec![source.clone()]
     }
 }
 
