@@ -10,6 +10,10 @@
 //! are chosen on the val split; R² per axis is reported on the test split, by the same Table I
 //! code as `hnet eval`.
 //!
+//! `hnet study features` fits the same regressor to a trained H-Net's pooled features (its force
+//! head's input) and puts it beside the head's own estimates on the test split: if the
+//! regressor does much better, the head (its training) limits the force; if not, the features do.
+//!
 //! The regressor is solved with nalgebra's Cholesky factorisation (a maintained linear-algebra
 //! crate; the Gram matrix of `n` training pairs is `n x n`, so `--max-train` bounds the time:
 //! about O(n³) per setting tried).
@@ -17,6 +21,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
+use hnet_model::architectures::StereoModel;
 use hnet_model::metrics::{ForceAccumulator, ForceMetrics};
 use hnet_twin::dataset::{Dataset, Split};
 use hnet_twin::reconstruction::project;
@@ -25,6 +30,8 @@ use hnet_twin::vec3::Vec3;
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 use serde::Serialize;
+
+use crate::data::{StereoBatcher, StereoSplit};
 
 /// Studies of what a dataset allows.
 #[derive(clap::Args, Debug)]
@@ -38,6 +45,27 @@ enum Study {
     /// The force a non-deep regressor recovers from each pair's exact geometry: the 3D
     /// centreline, its exact 2D projections, and those rounded to whole pixels at given sizes.
     Ceiling(CeilingArgs),
+    /// The force the same regressor recovers from a trained H-Net's pooled features (its force
+    /// head's input), beside what the head itself makes of them: whether the features or the
+    /// head limit the network's force.
+    Features(FeaturesArgs),
+}
+
+/// `hnet study features`.
+#[derive(clap::Args, Debug)]
+pub struct FeaturesArgs {
+    /// H-Net weights (`model.bpk`).
+    #[arg(long)]
+    weights: PathBuf,
+    /// A dataset with train, val and test splits.
+    #[arg(long)]
+    data: PathBuf,
+    /// Training pairs used at most (the time grows with the cube of this).
+    #[arg(long, default_value_t = 1500)]
+    max_train: usize,
+    /// Validation and test pairs used at most, each.
+    #[arg(long, default_value_t = 600)]
+    max_eval: usize,
 }
 
 /// `hnet study ceiling`.
@@ -290,11 +318,27 @@ fn study_input(
     points: usize,
     [train, val, test]: [&[(SampleRecord, [f64; 3])]; 3],
 ) -> anyhow::Result<CeilingRow> {
-    let train = Samples::new(train, input, points);
-    let (val, test) = (
-        Samples::new(val, input, points),
-        Samples::new(test, input, points),
-    );
+    let [train, val, test] = [train, val, test].map(|split| Samples::new(split, input, points));
+    let fit = fit_and_test(&train, &val, &test).with_context(|| input.describe())?;
+    Ok(CeilingRow {
+        input,
+        train_pairs: train.forces.len(),
+        gamma_factor: fit.gamma_factor,
+        ridge: fit.ridge,
+        test: fit.test,
+    })
+}
+
+/// A kernel ridge fit chosen on the val split and its Table I on the test split.
+struct Fit {
+    gamma_factor: f64,
+    ridge: f64,
+    test: ForceMetrics,
+}
+
+/// Fits the regressor on `train` with each kernel width and ridge, keeps the best on `val`,
+/// and measures it on `test`.
+fn fit_and_test(train: &Samples, val: &Samples, test: &Samples) -> anyhow::Result<Fit> {
     let feature_scale: Vec<(f64, f64)> = (0..train.features.ncols())
         .map(|j| mean_and_std(train.features.column(j).iter().copied()))
         .collect();
@@ -305,14 +349,9 @@ fn study_input(
         let gamma = gamma_factor * unit;
         let gram = rbf_kernel(&x, &x, gamma);
         for ridge in [1e-4, 1e-3, 1e-2] {
-            let Some(model) = KernelRidge::fit(
-                &train,
-                x.clone(),
-                feature_scale.clone(),
-                &gram,
-                gamma,
-                ridge,
-            ) else {
+            let Some(model) =
+                KernelRidge::fit(train, x.clone(), feature_scale.clone(), &gram, gamma, ridge)
+            else {
                 continue;
             };
             let score = mean_r2(&force_metrics(&model.predict(&val.features), &val.forces));
@@ -322,14 +361,9 @@ fn study_input(
         }
     }
     let Some((_, gamma_factor, ridge, model)) = best else {
-        bail!(
-            "{}: no kernel setting gave a solvable system",
-            input.describe()
-        );
+        bail!("no kernel setting gave a solvable system");
     };
-    Ok(CeilingRow {
-        input,
-        train_pairs: train.forces.len(),
+    Ok(Fit {
         gamma_factor,
         ridge,
         test: force_metrics(&model.predict(&test.features), &test.forces),
@@ -356,7 +390,10 @@ fn load_split(
 
 /// Runs `hnet study`.
 pub fn run(args: &StudyArgs) -> anyhow::Result<()> {
-    let Study::Ceiling(args) = &args.study;
+    let args = match &args.study {
+        Study::Ceiling(args) => args,
+        Study::Features(args) => return study_features(args),
+    };
     if args.points < 2 {
         bail!("--points must be at least 2");
     }
@@ -408,6 +445,107 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<()> {
             r2(2),
             mean_r2(&row.test),
             row.test.overall.rmse
+        );
+    }
+    Ok(())
+}
+
+/// The pooled features (rows) and the network's own force estimates (N) of `split`'s pairs.
+fn pooled_features(
+    net: &hnet_model::HNet,
+    dataset: &Dataset,
+    split: Split,
+    size: hnet_units::ImageSize,
+    limit: usize,
+) -> anyhow::Result<(Samples, Vec<[f64; 3]>)> {
+    use burn::data::dataloader::batcher::Batcher;
+    use hnet_model::inference::host_values;
+
+    let pairs = StereoSplit::load(dataset, split, size, Some(limit))?;
+    if pairs.items.is_empty() {
+        bail!(
+            "{} has no pairs in its {} split",
+            dataset.root.display(),
+            split.name()
+        );
+    }
+    let device = burn::tensor::Device::flex();
+    let batcher = StereoBatcher { size };
+    let (mut rows, mut forces, mut estimates) = (Vec::new(), Vec::new(), Vec::new());
+    for chunk in pairs.items.chunks(16) {
+        let batch = batcher.batch(chunk.to_vec(), &device);
+        let (output, features) = net.forward_with_features(batch.view_a, batch.view_b);
+        let width = features.dims()[1];
+        let values = host_values(features)?;
+        rows.extend(
+            values
+                .chunks_exact(width)
+                .map(|r| r.iter().map(|&v| f64::from(v)).collect::<Vec<_>>()),
+        );
+        let estimated = host_values(output.force)?;
+        estimates.extend(
+            estimated
+                .chunks_exact(3)
+                .map(|f| [0, 1, 2].map(|i| f64::from(f[i]))),
+        );
+        forces.extend(chunk.iter().map(|item| item.force_n.map(f64::from)));
+    }
+    let columns = rows.first().map_or(0, Vec::len);
+    let samples = Samples {
+        features: DMatrix::from_fn(rows.len(), columns, |i, j| rows[i][j]),
+        forces,
+    };
+    Ok((samples, estimates))
+}
+
+/// `hnet study features`: the force in a trained H-Net's pooled features.
+fn study_features(args: &FeaturesArgs) -> anyhow::Result<()> {
+    let device = burn::tensor::Device::flex();
+    let model = crate::evaluation::load_weights(&args.weights, None, &device)?;
+    let StereoModel::Hnet(net) = &model.net else {
+        bail!(
+            "weights file '{}' holds a `{}` network: only H-Net has pooled features",
+            args.weights.display(),
+            model.spec.name()
+        );
+    };
+    let dataset = Dataset::open(&args.data)?;
+    let features = |split, limit| {
+        pooled_features(net, &dataset, split, model.image_size, limit)
+            .with_context(|| format!("the {} split of {}", split.name(), args.data.display()))
+    };
+    let (train, _) = features(Split::Train, args.max_train)?;
+    let (val, _) = features(Split::Val, args.max_eval)?;
+    let (test, head) = features(Split::Test, args.max_eval)?;
+    let fit = fit_and_test(&train, &val, &test)?;
+    let own = force_metrics(&head, &test.forces);
+    println!(
+        "Force in the pooled features of {} on {} ({} train, {} val, {} test pairs; {} features; kernel ridge, RBF)\n",
+        args.weights.display(),
+        args.data.display(),
+        train.forces.len(),
+        val.forces.len(),
+        test.forces.len(),
+        train.features.ncols()
+    );
+    println!("| from | R² Fx | R² Fy | R² Fz | R² mean | RMSE (N) |");
+    println!("| --- | --- | --- | --- | --- | --- |");
+    for (name, metrics) in [
+        ("the network's force head", &own),
+        ("kernel ridge on its pooled features", &fit.test),
+    ] {
+        let r2 = |i: usize| {
+            metrics.axes[i]
+                .r2
+                .map_or("n/a".into(), |v| format!("{v:.3}"))
+        };
+        println!(
+            "| {name} | {} | {} | {} | {:.3} | {:.4} |",
+            r2(0),
+            r2(1),
+            r2(2),
+            mean_r2(metrics),
+            metrics.overall.rmse
         );
     }
     Ok(())

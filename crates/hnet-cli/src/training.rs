@@ -330,7 +330,13 @@ fn export_best(
         .filter(|(_, loss)| loss.is_finite())
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .or_else(|| available.last().map(|e| (*e, f64::NAN)))
-        .context("no checkpoint was written")?;
+        .with_context(|| {
+            format!(
+                "no usable checkpoint in '{}': none was written, or every epoch's loss was not \
+                 finite",
+                run.root().display()
+            )
+        })?;
     let config = &request.config;
     let checkpoint = run.checkpoint_model_file(best.0);
     let record = burn::store::ModuleRecord::load(&checkpoint)

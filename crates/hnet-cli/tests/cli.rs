@@ -137,6 +137,21 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
     ]);
     let alone: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(alone["force"], eval["force"]);
+    // The force in its pooled features, beside its head's (the same test pairs).
+    let out = run(&[
+        "study",
+        "features",
+        "--weights",
+        weights.to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+    ]);
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(table.contains("40 test pairs; 48 features"), "{table}");
+    assert!(
+        table.contains("| kernel ridge on its pooled features |"),
+        "{table}"
+    );
     // Not weights, or weights of another size: named, and the run folder left as it was.
     let files_before = std::fs::read_dir(&runs).unwrap().count();
     for (args, message) in [
@@ -320,6 +335,62 @@ fn a_time_budget_ends_training_cleanly_with_the_best_checkpoint() {
     );
     assert!(bad.contains("is not a duration"), "{bad}");
     assert!(!dir.join("other").exists());
+    std::fs::remove_dir_all(dir).ok();
+}
+
+/// `tiny_config`'s settings for H-Net, edited by `edit`, written to `dir/NAME.json`.
+fn edited_config(dir: &Path, name: &str, edit: impl FnOnce(&mut serde_json::Value)) -> PathBuf {
+    let text = std::fs::read_to_string(tiny_config(dir, "hnet", 2)).unwrap();
+    let mut config: serde_json::Value = serde_json::from_str(&text).unwrap();
+    edit(&mut config);
+    let path = dir.join(format!("{name}.json"));
+    std::fs::write(&path, config.to_string()).unwrap();
+    path
+}
+
+#[test]
+fn a_stream_trains_on_fresh_twin_pairs_and_a_diverged_epoch_is_set_aside() {
+    let dir = scratch("stream");
+    let data = simulate(&dir, 40);
+    // A small radiograph for the off-bench pairs (the phantom is slow to render in a debug build).
+    let radiograph = dir.join("radiograph.png");
+    image::GrayImage::from_fn(64, 64, |x, y| image::Luma([(x * 2 + y) as u8]))
+        .save(&radiograph)
+        .unwrap();
+    let stream = |seed: u64| {
+        serde_json::json!({"pairs_per_epoch": 16, "seed": seed, "off_bench": {
+            "fraction": 0.5, "radiographs": [radiograph], "radiograph_fraction": 1.0}})
+    };
+    let config = edited_config(&dir, "stream", |c| c["stream"] = stream(99));
+    let runs = dir.join("run");
+    let out = succeeds(&mut train(&data, &runs, &config));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains(
+            "16 fresh twin pairs per epoch (stream seed 99, 50 % off the bench (1 radiographs))"
+        ),
+        "{stderr}"
+    );
+    let metrics = std::fs::read_to_string(runs.join("metrics.csv")).unwrap();
+    assert!(metrics.contains("\n2,train,"), "{metrics}");
+    assert!(runs.join("model.bpk").is_file());
+
+    // The dataset's own seed would train on its val and test pairs: refused, no run folder made.
+    let same_seed = edited_config(&dir, "same-seed", |c| c["stream"] = stream(5));
+    let err = fails(&mut train(&data, &dir.join("refused"), &same_seed));
+    assert!(err.contains("stream.seed 5"), "{err}");
+    assert!(!dir.join("refused").exists());
+
+    // Weights that blow up: the run stops after the epoch and sets its checkpoint aside, so
+    // that `--resume` cannot continue from it.
+    let diverging = edited_config(&dir, "diverging", |c| c["learning_rate"] = 1e30.into());
+    let runs = dir.join("diverged");
+    let err = fails(&mut train(&data, &runs, &diverging));
+    assert!(err.contains("loss is not finite"), "{err}");
+    assert!(err.contains("no usable checkpoint"), "{err}");
+    let checkpoints = runs.join("checkpoint");
+    assert!(checkpoints.join("model-1.bpk.non-finite").is_file());
+    assert!(!checkpoints.join("model-1.bpk").exists());
     std::fs::remove_dir_all(dir).ok();
 }
 

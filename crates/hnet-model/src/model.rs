@@ -391,6 +391,17 @@ impl HNet {
     /// Runs a batch of stereo pairs: `view_a` and `view_b` are `[B, C, H, W]` images with values
     /// in `[0, 1]`, where `H` and `W` are divisible by `2^depth`.
     pub fn forward(&self, view_a: Tensor<4>, view_b: Tensor<4>) -> HNetOutput {
+        self.forward_with_features(view_a, view_b).0
+    }
+
+    /// [`HNet::forward`], and the force head's input: the pooled features of both views
+    /// `[B, 2·(depth+1)·filters]` (view A's, then view B's), e.g. to measure how much of the
+    /// force they carry apart from what the head makes of them.
+    pub fn forward_with_features(
+        &self,
+        view_a: Tensor<4>,
+        view_b: Tensor<4>,
+    ) -> (HNetOutput, Tensor<2>) {
         let (a, b) = match &self.segmentation_b {
             None => {
                 let batch = view_a.dims()[0];
@@ -415,17 +426,18 @@ impl HNet {
             Some(branch_b) => (self.segmentation.forward(view_a), branch_b.forward(view_b)),
         };
         let features = Tensor::cat(alloc::vec![a.pooled, b.pooled], 1);
-        let mut force = self.force.forward(features);
+        let mut force = self.force.forward(features.clone());
         if let Some(scale) = self.force_scale {
             let device = force.device();
             let row = |v: [f64; 3]| Tensor::<2>::from_floats([v.map(|x| x as f32)], &device);
             force = force * row(scale.std_n) + row(scale.mean_n);
         }
-        HNetOutput {
+        let output = HNetOutput {
             mask_logits_a: a.mask_logits,
             mask_logits_b: b.mask_logits,
             force,
-        }
+        };
+        (output, features)
     }
 }
 
