@@ -210,13 +210,7 @@ pub fn simulate_dataset(
     out: &Path,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<SimulationReport, SimulationError> {
-    let source = json!({
-        "generator": "hnet-twin",
-        "version": env!("CARGO_PKG_VERSION"),
-        "seed": seed,
-        "backgrounds": background_names,
-        "twin": config,
-    });
+    let source = header_source(config, background_names, seed, None);
     write_samples(config, source, samples, seed, out, progress, &|index| {
         Ok((config.clone(), generate(config, backgrounds, seed, index)?))
     })
@@ -235,17 +229,31 @@ pub fn simulate_off_bench_dataset(
     out: &Path,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<SimulationReport, SimulationError> {
-    let source = json!({
+    let source = header_source(base, background_names, seed, Some(OFF_BENCH_VIEWS));
+    write_samples(base, source, samples, seed, out, progress, &|index| {
+        Ok(off_bench.generate(seed, index)?)
+    })
+}
+
+/// What a simulated dataset's header records of its making (`source` in `dataset.json`):
+/// generator, version, seed, backgrounds, twin settings, and `views` when they vary per pair.
+fn header_source(
+    twin: &TwinConfig,
+    background_names: &[String],
+    seed: u64,
+    views: Option<&str>,
+) -> serde_json::Value {
+    let mut source = json!({
         "generator": "hnet-twin",
         "version": env!("CARGO_PKG_VERSION"),
         "seed": seed,
         "backgrounds": background_names,
-        "views": OFF_BENCH_VIEWS,
-        "twin": base,
+        "twin": twin,
     });
-    write_samples(base, source, samples, seed, out, progress, &|index| {
-        Ok(off_bench.generate(seed, index)?)
-    })
+    if let Some(views) = views {
+        source["views"] = views.into();
+    }
+    source
 }
 
 /// The header's `views` value of an off-bench dataset.
