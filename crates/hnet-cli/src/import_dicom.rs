@@ -15,7 +15,7 @@ use hnet_twin::dataset::{
     sample_files,
 };
 use hnet_twin::force_table::{ForceRow, read_force_table};
-use hnet_twin::import::{MaskThreshold, recording_mask};
+use hnet_twin::import::recording_mask;
 use hnet_units::ImageSize;
 use serde_json::json;
 
@@ -124,10 +124,7 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<()> {
             "frames": frames,
             "paired_by_time": cine.pairing.timed,
             "views": [view_record(&a.geometry, size), view_record(&b.geometry, size)],
-            "threshold": match args.threshold {
-                MaskThreshold::Level(l) => json!(l),
-                MaskThreshold::Otsu => json!("otsu"),
-            },
+            "threshold": args.threshold.record(),
             "bright_catheter": args.bright_catheter,
             "seed": args.seed,
         }),

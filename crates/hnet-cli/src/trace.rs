@@ -7,6 +7,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
+use hnet_model::inference::force_magnitude;
 use hnet_twin::dataset::LoadedPair;
 
 use crate::backend::BackendChoice;
@@ -71,7 +72,7 @@ pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
                     model.spec.name()
                 );
             };
-            let magnitude = f.iter().map(|v| v * v).sum::<f32>().sqrt();
+            let magnitude = force_magnitude(f);
             let time = pair.time_s.map(|t| format!("{t:.4}")).unwrap_or_default();
             writeln!(
                 csv,

@@ -52,8 +52,13 @@ pub struct StereoPrediction {
 impl StereoPrediction {
     /// Magnitude of the tip force in newtons.
     pub fn force_magnitude(&self) -> f32 {
-        self.force.iter().map(|f| f * f).sum::<f32>().sqrt()
+        force_magnitude(self.force)
     }
+}
+
+/// Magnitude of a force `(Fx, Fy, Fz)` in newtons: the one formula of the CLI and the page.
+pub fn force_magnitude(force_n: [f32; 3]) -> f32 {
+    force_n.iter().map(|f| f * f).sum::<f32>().sqrt()
 }
 
 /// Appends an interleaved 8-bit RGB image as planar channels scaled to `[0, 1]` (the network's

@@ -27,6 +27,16 @@ pub enum MaskThreshold {
     Otsu,
 }
 
+impl MaskThreshold {
+    /// How a dataset header records it: the grey level, or `"otsu"`.
+    pub fn record(self) -> serde_json::Value {
+        match self {
+            MaskThreshold::Level(level) => serde_json::json!(level),
+            MaskThreshold::Otsu => serde_json::json!("otsu"),
+        }
+    }
+}
+
 /// What to import and how.
 #[derive(Debug, Clone)]
 pub struct ImportOptions {
@@ -267,10 +277,7 @@ pub fn import_recordings(
             "view_a": options.view_a,
             "view_b": options.view_b,
             "forces": options.forces,
-            "threshold": match options.threshold {
-                MaskThreshold::Level(l) => json!(l),
-                MaskThreshold::Otsu => json!("otsu"),
-            },
+            "threshold": options.threshold.record(),
             "bright_catheter": options.bright_catheter,
             "seed": options.seed,
         }),
