@@ -5,8 +5,8 @@
 
 use hnet_twin::scene::{Modality, SceneParams, SceneSampling};
 
-use crate::imaging::magnitude;
 use crate::workspace::{LabeledPair, PairSource};
+use hnet_units::force_magnitude as magnitude;
 
 /// Contact forces of ablation within this band (newtons) are considered effective and safe
 /// (the paper: ablation needs 0.1-0.3 N at the tip).

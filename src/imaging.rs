@@ -206,11 +206,6 @@ pub fn force_arrow(view: &CArm, start: [f64; 2], force_n: [f32; 3]) -> [[f64; 2]
     ]
 }
 
-/// Magnitude of a force in newtons.
-pub fn magnitude(force_n: [f32; 3]) -> f32 {
-    force_n.iter().map(|f| f * f).sum::<f32>().sqrt()
-}
-
 /// An RGB image with a coloured overlay: `coverage` (one value in `[0, 1]` per pixel) blended
 /// in `colour` at `opacity`. Overlays chain: the result is RGB again.
 pub fn overlay(

@@ -10,9 +10,9 @@ use crate::bundled::BUNDLED_FORCE_CAVEAT;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
 use crate::force_reading::{ABLATION_BAND_N, BandPosition, Disagreement, TrainingDomain, Verdict};
-use crate::imaging::magnitude;
 use crate::studio::{ModelState, Studio};
 use crate::workspace::{implausible_label, parse_force_labels, parse_newtons};
+use hnet_units::force_magnitude as magnitude;
 
 /// Full scale of the magnitude gauge, newtons.
 const GAUGE_MAX_N: f32 = 0.5;

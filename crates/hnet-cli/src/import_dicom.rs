@@ -19,7 +19,7 @@ use hnet_twin::import::recording_mask;
 use hnet_units::ImageSize;
 use serde_json::json;
 
-use crate::cine::BiplaneCine;
+use crate::cine::{grey_pair, open_cine};
 use crate::import::ImportArgs;
 use crate::progress;
 
@@ -85,7 +85,7 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<()> {
     let (Some(plane_a), Some(plane_b)) = (&args.dicom_a, &args.dicom_b) else {
         bail!("give --view-a and --view-b (image folders) or --dicom-a and --dicom-b (DICOM)");
     };
-    let cine = BiplaneCine::open(plane_a, plane_b)?;
+    let cine = open_cine(plane_a, plane_b)?;
     let frames = cine.pairing.pairs.len();
     let [a, b] = &cine.planes;
     let size = match args.size {
@@ -139,7 +139,7 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<()> {
             continue;
         }
         let pair = cine.pairing.pairs[*frame];
-        let [view_a, view_b] = cine.grey_pair(pair.frame).map(|image| {
+        let [view_a, view_b] = grey_pair(&cine, pair.frame).map(|image| {
             resized(image::DynamicImage::ImageLuma8(image), size)
                 .to_luma8()
                 .into_raw()

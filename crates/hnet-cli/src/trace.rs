@@ -1,23 +1,18 @@
 //! `hnet trace`: a trained model over every frame pair of a biplane DICOM cine, written as a
-//! force trace CSV (`frame,time_s,fx_n,fy_n,fz_n,magnitude_n`; frames from 1, time in seconds
-//! after plane A's first frame, empty when the headers give no frame time). The trace holds no
-//! header value besides the frame times, so no patient identifier.
+//! force trace CSV ([`hnet_dicom::trace_csv`], the page's format too). The trace holds no header
+//! value besides the frame times, so no patient identifier.
 
-use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use hnet_model::inference::force_magnitude;
+use hnet_dicom::{TracePoint, trace_csv};
 use hnet_twin::dataset::LoadedPair;
 
 use crate::backend::BackendChoice;
-use crate::cine::BiplaneCine;
+use crate::cine::{grey_pair, open_cine};
 use crate::data::StereoItem;
 use crate::evaluation::{load_weights, predict};
 use crate::progress;
-
-/// The trace's header line.
-pub const TRACE_COLUMNS: &str = "frame,time_s,fx_n,fy_n,fz_n,magnitude_n";
 
 #[derive(clap::Args, Debug)]
 pub struct TraceArgs {
@@ -45,15 +40,15 @@ pub struct TraceArgs {
 pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
     let device = args.backend.device()?;
     let model = load_weights(&args.weights, None, &device)?;
-    let cine = BiplaneCine::open(&args.dicom_a, &args.dicom_b)?;
+    let cine = open_cine(&args.dicom_a, &args.dicom_b)?;
     let pairs = &cine.pairing.pairs;
     let bar = progress::bar(pairs.len() as u64, "tracing");
-    let mut csv = format!("{TRACE_COLUMNS}\n");
+    let mut trace = Vec::with_capacity(pairs.len());
     for chunk in pairs.chunks(args.batch_size.max(1)) {
         let items: Vec<StereoItem> = chunk
             .iter()
             .map(|pair| {
-                let [a, b] = cine.grey_pair(pair.frame);
+                let [a, b] = grey_pair(&cine, pair.frame);
                 let empty = image::GrayImage::new(a.width(), a.height());
                 let images = [a, b, empty.clone(), empty].map(image::DynamicImage::ImageLuma8);
                 let loaded = LoadedPair::of_images(images, model.image_size);
@@ -72,22 +67,16 @@ pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
                     model.spec.name()
                 );
             };
-            let magnitude = force_magnitude(f);
-            let time = pair.time_s.map(|t| format!("{t:.4}")).unwrap_or_default();
-            writeln!(
-                csv,
-                "{},{time},{},{},{},{magnitude}",
-                pair.frame + 1,
-                f[0],
-                f[1],
-                f[2]
-            )
-            .expect("writing to a string");
+            trace.push(TracePoint {
+                frame: pair.frame,
+                time_s: pair.time_s,
+                force_n: f,
+            });
         }
         bar.inc(chunk.len() as u64);
     }
     bar.finish_and_clear();
-    hnet_twin::files::write_atomically(&args.out, csv.as_bytes())
+    hnet_twin::files::write_atomically(&args.out, trace_csv(&trace).as_bytes())
         .with_context(|| format!("cannot write {}", args.out.display()))?;
     eprintln!(
         "force trace of {} frame pairs written to {}",

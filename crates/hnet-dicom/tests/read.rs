@@ -5,9 +5,10 @@ use dicom_core::{DataElement, VR};
 use dicom_dictionary_std::tags;
 use hnet_dicom::writer::part10_bytes;
 use hnet_dicom::{
-    FRAME_TIME_MS, GeometryTag, ModalityLut, Monochrome, PairingWarning, PatientIdentity, Plane,
-    PlaneSeries, WindowLevel, XaCine, cine_views, deidentify, identifiers_present, pair_frames,
-    parse, read_cine_file, twin_cine, write_xa, xa_object,
+    BiplaneCine, FRAME_TIME_MS, GeometryTag, ModalityLut, Monochrome, PairingWarning,
+    PatientIdentity, Plane, PlaneSeries, WindowLevel, XaCine, cine_views, deidentify,
+    identifiers_present, pair_frames, parse, read_cine_file, twin_cine, twin_push_cine, write_xa,
+    xa_object,
 };
 use hnet_units::ImageSize;
 
@@ -59,6 +60,30 @@ fn a_twin_cine_reads_back_with_its_frames_geometry_and_timing() {
     assert!(pairing.timed && pairing.warnings.is_empty());
     assert_eq!(pairing.pairs.len(), FRAMES);
     assert!((pairing.pairs[1].time_s.unwrap() - 0.0667).abs() < 1e-9);
+}
+
+#[test]
+fn a_push_cine_ramps_the_force_up_and_back_on_one_scene_and_pairs_without_notes() {
+    let frames = 5;
+    let cine = twin_push_cine(SIZE, frames, 4).unwrap();
+    let magnitude = |f: [f64; 3]| f.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let forces: Vec<f64> = cine.forces_n.iter().map(|f| magnitude(*f)).collect();
+    assert!(forces[0] < 1e-9 && forces[frames - 1] < 1e-9, "{forces:?}");
+    assert!(forces[2] > forces[1] && forces[1] > 0.0, "{forces:?}");
+    let [a, b] = cine
+        .planes
+        .each_ref()
+        .map(|plane| series(plane.plane, "push.dcm", &write_xa(plane)));
+    let cine = BiplaneCine::pair(a, b).unwrap();
+    assert_eq!(cine.frame_count(), frames);
+    assert_eq!(cine.notes(), Vec::<String>::new());
+    let window = cine.series(Plane::A).initial_window(0);
+    let (first, middle) = (
+        cine.grey_frame(Plane::A, 0, window).unwrap(),
+        cine.grey_frame(Plane::A, 2, window).unwrap(),
+    );
+    assert_ne!(first, middle, "the catheter moves between frames");
+    assert_eq!(cine.grey_frame(Plane::B, frames, window), None);
 }
 
 /// A small cine of known values: 4x2 pixels, two frames.

@@ -56,10 +56,7 @@ impl StereoPrediction {
     }
 }
 
-/// Magnitude of a force `(Fx, Fy, Fz)` in newtons: the one formula of the CLI and the page.
-pub fn force_magnitude(force_n: [f32; 3]) -> f32 {
-    force_n.iter().map(|f| f * f).sum::<f32>().sqrt()
-}
+pub use hnet_units::force_magnitude;
 
 /// Appends an interleaved 8-bit RGB image as planar channels scaled to `[0, 1]` (the network's
 /// `[3, H, W]` input layout). The one conversion of images to network input, used by inference

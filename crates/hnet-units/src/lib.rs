@@ -1,5 +1,6 @@
-//! The sizes that H-Net Studio's network (`hnet-model`), digital twin (`hnet-twin`), command-line
-//! tool and page all speak of, defined once so that no caller has to remember an index order.
+//! The sizes and units that H-Net Studio's network (`hnet-model`), digital twin (`hnet-twin`),
+//! DICOM reader, command-line tool and page all speak of, defined once so that no caller has to
+//! remember an index order or rewrite a formula.
 //!
 //! [`ImageSize`] names its fields: `width` (pixels along `u`, a row's length) and `height`
 //! (pixels along `v`, the number of rows). Tensors are `[batch, channels, height, width]` and
@@ -10,12 +11,16 @@
 //! order) and the twin's `[width, height]`. [`ImageSize`]'s own `Deserialize` reads the object,
 //! and an array as `[height, width]`; fields that held `[width, height]` read old files with
 //! `#[serde(deserialize_with = "hnet_units::width_height_or_named")]`.
-#![no_std]
-
 use core::fmt;
 
 use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
 use serde::{Deserialize, Serialize};
+
+/// Magnitude of a tip force `(Fx, Fy, Fz)` in newtons: the one formula of the CLI, the DICOM
+/// force trace and the page.
+pub fn force_magnitude(force_n: [f32; 3]) -> f32 {
+    force_n.iter().map(|f| f * f).sum::<f32>().sqrt()
+}
 
 /// The size of an image, in pixels.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
