@@ -4,13 +4,21 @@
 
 use std::path::Path;
 
-use anyhow::{Context, bail};
+use anyhow::{Context, anyhow, bail};
 use hnet_model::HNetLossConfig;
 use hnet_model::architectures::ModelSpec;
+use hnet_model::weights::ConfigProblem;
 use hnet_units::ImageSize;
 use serde::{Deserialize, Serialize};
 
 use crate::data::twin_stream::TwinStreamConfig;
+
+/// The largest training image side, pixels (the page's upload limit): every pair is resized to
+/// the image size, so a larger one would only exhaust memory.
+pub const MAX_IMAGE_SIDE: usize = 8192;
+
+/// The most threads decoding or simulating batches.
+pub const MAX_WORKERS: usize = 256;
 
 /// How the learning rates change over a run.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
@@ -84,12 +92,57 @@ pub struct TrainingConfig {
 }
 
 impl TrainingConfig {
-    /// Checks that the settings describe a trainable run.
+    /// Checks that the settings describe a trainable run, before anything is loaded or built:
+    /// every layer count and size within bounds (so that nothing absurd is ever allocated),
+    /// the image size one the network can halve.
     pub fn check(&self) -> anyhow::Result<()> {
-        // The same bounds as a weights file's settings: nothing absurd is ever allocated.
-        self.model.check_layer_counts()?;
-        let multiple = self.model.size_multiple();
+        // The baselines: the same bounds as a weights file's settings.
+        self.model
+            .check_layer_counts()
+            .map_err(|problem| match problem {
+                ConfigProblem::OutOfRange(name, value, range) => anyhow!(
+                    "`model.{name}` = {value} is outside {range} for {}",
+                    self.model.name()
+                ),
+                other => anyhow!("model: {other}"),
+            })?;
+        if let ModelSpec::Hnet(c) = &self.model {
+            // The bounds the baselines have (its layers are built from these counts), then
+            // H-Net's own rules (an image size it can halve `depth` times).
+            let bounds = [
+                ("in_channels", c.in_channels, 3, 3, "3 (the views are RGB)"),
+                ("filters", c.filters, 1, 4096, "1..=4096"),
+                ("depth", c.depth, 1, 16, "1..=16"),
+                (
+                    "force_hidden[0]",
+                    c.force_hidden[0],
+                    1,
+                    1 << 16,
+                    "1..=65536",
+                ),
+                (
+                    "force_hidden[1]",
+                    c.force_hidden[1],
+                    1,
+                    1 << 16,
+                    "1..=65536",
+                ),
+            ];
+            for (name, value, low, high, range) in bounds {
+                if !(low..=high).contains(&value) {
+                    bail!("`model.{name}` = {value} is outside {range} for hnet");
+                }
+            }
+            c.validate().map_err(|e| anyhow!("model (hnet): {e}"))?;
+        }
         let ImageSize { width, height } = self.image_size;
+        if width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE {
+            bail!(
+                "`image_size` {} is larger than {MAX_IMAGE_SIDE}×{MAX_IMAGE_SIDE} pixels",
+                self.image_size
+            );
+        }
+        let multiple = self.model.size_multiple();
         if [width, height].iter().any(|s| *s == 0 || s % multiple != 0) {
             bail!(
                 "image size {} (width×height) must be a positive multiple of {multiple} for {}",
@@ -108,6 +161,12 @@ impl TrainingConfig {
         }
         if self.batch_size == 0 || self.epochs == 0 {
             bail!("batch_size and epochs must be at least 1");
+        }
+        if self.num_workers > MAX_WORKERS {
+            bail!(
+                "`num_workers` = {} is more than {MAX_WORKERS} threads",
+                self.num_workers
+            );
         }
         if let Some(stream) = &self.stream {
             stream.check()?;

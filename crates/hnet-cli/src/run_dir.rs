@@ -6,7 +6,7 @@
 //! RUN/run.json                          the dataset, the backend and the command (RunInfo)
 //! RUN/model.bpk                         the best epoch's network, a weights file
 //! RUN/metrics.csv                       per-epoch means of every logged metric
-//! RUN/checkpoint/{model,optim,scheduler}-<epoch>.bpk      burn-train's checkpoints
+//! RUN/checkpoint/{model,optim,scheduler}-<epoch>.bpk      checkpoints (training/checkpoints.rs)
 //! RUN/{train,valid}/epoch-<epoch>/<metric>.log            burn-train's metric logs
 //! RUN/eval-<split>.{json,md}, RUN/predictions-<split>.csv `hnet eval`
 //! RUN/report/                           `hnet report`'s figures
@@ -17,6 +17,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use hnet_twin::dataset::Split;
+use hnet_twin::files::write_atomically;
 use serde::{Deserialize, Serialize};
 
 use crate::config::TrainingConfig;
@@ -24,8 +25,9 @@ use crate::config::TrainingConfig;
 /// The metric every network logs: the total loss (eq. 7, or the terms a baseline has).
 pub const LOSS_METRIC: &str = "Loss";
 
-/// The parts of a burn-train checkpoint; an epoch is complete when all three are there.
-const CHECKPOINT_PARTS: [&str; 3] = ["model", "optim", "scheduler"];
+/// The parts of a burn-train checkpoint (network, optimiser, learning rate scheduler); an epoch
+/// is complete when all three are there.
+pub const CHECKPOINT_PARTS: [&str; 3] = ["model", "optim", "scheduler"];
 
 /// What is saved in the run folder besides burn-train's own files.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -87,13 +89,18 @@ impl RunDir {
     }
 
     /// Where burn-train keeps its checkpoints.
-    fn checkpoint_dir(&self) -> PathBuf {
+    pub fn checkpoint_dir(&self) -> PathBuf {
         self.root.join("checkpoint")
+    }
+
+    /// Part `part` (one of [`CHECKPOINT_PARTS`]) of epoch `epoch`'s checkpoint.
+    pub fn checkpoint_file(&self, part: &str, epoch: usize) -> PathBuf {
+        self.checkpoint_dir().join(format!("{part}-{epoch}.bpk"))
     }
 
     /// The network of epoch `epoch`'s checkpoint.
     pub fn checkpoint_model_file(&self, epoch: usize) -> PathBuf {
-        self.checkpoint_dir().join(format!("model-{epoch}.bpk"))
+        self.checkpoint_file("model", epoch)
     }
 
     /// `hnet eval`'s tables of `split`, as JSON and Markdown.
@@ -125,10 +132,10 @@ impl RunDir {
         TrainingConfig::load(&self.config_file())
     }
 
-    /// Saves the training settings.
+    /// Saves the training settings (atomically: a failed write leaves the old file).
     pub fn write_config(&self, config: &TrainingConfig) -> anyhow::Result<()> {
         let path = self.config_file();
-        std::fs::write(&path, serde_json::to_vec_pretty(config)?)
+        write_atomically(&path, &serde_json::to_vec_pretty(config)?)
             .with_context(|| format!("cannot write '{}'", path.display()))
     }
 
@@ -141,10 +148,11 @@ impl RunDir {
             .with_context(|| format!("'{}' is not a run record", path.display()))
     }
 
-    /// Saves the run's dataset, backend and command.
+    /// Saves the run's dataset, backend and command (atomically: `--resume` rewrites it, and a
+    /// failed write must leave the old record readable).
     pub fn write_info(&self, info: &RunInfo) -> anyhow::Result<()> {
         let path = self.info_file();
-        std::fs::write(&path, serde_json::to_vec_pretty(info)?)
+        write_atomically(&path, &serde_json::to_vec_pretty(info)?)
             .with_context(|| format!("cannot write '{}'", path.display()))
     }
 
@@ -179,7 +187,7 @@ impl RunDir {
     pub fn set_aside_checkpoint(&self, epoch: usize) -> anyhow::Result<()> {
         let dir = self.checkpoint_dir();
         for part in CHECKPOINT_PARTS {
-            let file = dir.join(format!("{part}-{epoch}.bpk"));
+            let file = self.checkpoint_file(part, epoch);
             if file.is_file() {
                 let aside = dir.join(format!("{part}-{epoch}.bpk.non-finite"));
                 std::fs::rename(&file, &aside)

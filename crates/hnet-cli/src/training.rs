@@ -2,10 +2,13 @@
 //!
 //! RMSprop at the paper's learning rate, per-epoch checkpoints, early stopping on the validation
 //! loss, the best checkpoint exported as the run's `model.bpk`. A run killed at any moment resumes
-//! from its last complete checkpoint with `--resume`. The settings are [`crate::config`]'s, the
+//! from its last complete checkpoint with `--resume`; a checkpoint or `model.bpk` that cannot be
+//! written (a full disk) stops the run naming the file, and leaves the last complete checkpoint
+//! for `--resume` ([`checkpoints`]). The settings are [`crate::config`]'s, the
 //! run folder's files [`crate::run_dir`]'s; here the loop, with the network and its loss in
 //! [`trainee`] and what is logged in [`metrics`].
 
+mod checkpoints;
 pub mod metrics;
 mod stopping;
 mod trainee;
@@ -31,6 +34,7 @@ use hnet_model::architectures::ModelSpec;
 use hnet_model::model::ForceScale;
 use hnet_twin::dataset::{Dataset, Split};
 
+use self::checkpoints::{RunCheckpointer, WriteFailure};
 use self::metrics::{Quantity, StepMetric};
 use self::stopping::{StoppingRule, TimeBudget, non_finite_epochs, parse_duration};
 use self::trainee::StereoTrainee;
@@ -187,10 +191,14 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
         .with_epsilon(config.rmsprop_epsilon)
         .init();
 
+    // Checkpoints written atomically, the last complete one never deleted, a failed write named.
+    let write_failure = WriteFailure::default();
+    let [model_parts, optim_parts, scheduler_parts] =
+        RunCheckpointer::for_run(&run, &write_failure);
     let mut training = SupervisedTraining::new(run.root(), loader_train, loader_valid)
         .metric_train_numeric(LossMetric::new())
         .metric_valid_numeric(LossMetric::new())
-        .with_default_checkpointers()
+        .with_custom_checkpointers(model_parts, optim_parts, scheduler_parts)
         .early_stopping(StoppingRule::new(
             MetricEarlyStoppingStrategy::new(
                 &LossMetric::new(),
@@ -223,6 +231,9 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
     let iterations_per_epoch = train_pairs.div_ceil(config.batch_size.max(1));
     let rates = learning_rates(config, iterations_per_epoch * config.epochs)?;
     let result = training.launch(Learner::new(trainee, optimizer, rates));
+    if let Some(failure) = write_failure.get() {
+        bail!("{failure}\n{}", resume_advice(&run, false));
+    }
     if let Some(error) = result.error {
         bail!("training failed: {error}");
     }
@@ -233,6 +244,27 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
     }
 
     export_best(request, &run, &device, started)
+}
+
+/// What to do after a checkpoint (or, when `exporting`, `model.bpk`) could not be
+/// written: `--resume` continues from the run's last complete checkpoint once the disk has room.
+fn resume_advice(run: &RunDir, exporting: bool) -> String {
+    let resume = format!("`hnet train --resume --out {}`", run.root().display());
+    let writable = "once the run folder can be written (free disk space?)";
+    match (run.checkpoint_epochs().last(), exporting) {
+        (Some(epoch), false) => format!(
+            "training stopped; epoch {epoch}'s checkpoint is complete: {writable}, {resume} \
+             continues from it"
+        ),
+        (Some(epoch), true) => format!(
+            "the checkpoints are kept (the last, epoch {epoch}'s, is complete): {writable}, \
+             {resume} writes model.bpk from them"
+        ),
+        (None, _) => format!(
+            "training stopped before any checkpoint was complete: {writable}, {resume} starts \
+             again from the first epoch"
+        ),
+    }
 }
 
 /// The learning rate of every parameter: `learning_rate`, and `force_head_learning_rate` for
@@ -362,9 +394,16 @@ fn export_best(
         .net
         .to_weights_bytes(&config.model, &provenance)
         .map_err(|e| anyhow::anyhow!("{e}"))?;
+    // Atomically (a temporary file beside it, renamed over it): a failed write leaves the
+    // previous model.bpk, and the checkpoints, as they were.
     let model_file = run.model_file();
-    hnet_twin::files::write_atomically(&model_file, &bytes)
-        .with_context(|| format!("cannot write '{}'", model_file.display()))?;
+    hnet_twin::files::write_atomically(&model_file, &bytes).map_err(|e| {
+        anyhow::anyhow!(
+            "cannot write '{}': {e}\n{}",
+            model_file.display(),
+            resume_advice(run, true)
+        )
+    })?;
     eprintln!(
         "best epoch {} (validation loss {:.4}); weights in {}",
         best.0,

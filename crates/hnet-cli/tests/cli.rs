@@ -394,6 +394,146 @@ fn a_stream_trains_on_fresh_twin_pairs_and_a_diverged_epoch_is_set_aside() {
     std::fs::remove_dir_all(dir).ok();
 }
 
+/// Runs `command`, which must fail with exit code 1 (an error, not a panic or an abort): what
+/// it says.
+fn fails_cleanly(command: &mut std::process::Command) -> String {
+    let output = command.output().expect("hnet runs");
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert_eq!(output.status.code(), Some(1), "{command:?}: {stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    stderr
+}
+
+#[test]
+fn a_training_config_claiming_a_huge_network_is_refused_naming_the_file() {
+    let dir = scratch("huge-config");
+    // Each would be built (or its images loaded) and abort on the allocation if it got that far.
+    let huge = 1usize << 40;
+    for (name, model, size, setting) in [
+        (
+            "unet-depth",
+            model_json("unet", huge, (32, 32)),
+            (32, 32),
+            "`model.depth` = 1099511627776 is outside 1..=16 for unet",
+        ),
+        (
+            "hnet-filters",
+            model_json("hnet", 2, (32, 32))
+                .replace("\"filters\": 8", &format!("\"filters\": {huge}")),
+            (32, 32),
+            "`model.filters` = 1099511627776 is outside 1..=4096 for hnet",
+        ),
+        (
+            "fcn-image",
+            model_json("fcn", 1, (32, 32)),
+            (1 << 20, 32),
+            "`image_size` 1048576×32 is larger than 8192×8192 pixels",
+        ),
+    ] {
+        let config = dir.join(format!("{name}.json"));
+        std::fs::write(&config, config_json(&model, size, 8, 1)).unwrap();
+        let err = fails_cleanly(
+            hnet()
+                .args(["train", "--config"])
+                .arg(&config)
+                .arg("--data")
+                .arg(dir.join("no-data"))
+                .arg("--out")
+                .arg(dir.join("run")),
+        );
+        assert!(
+            err.contains(&format!("training config '{}'", config.display()))
+                && err.contains(setting),
+            "{err}"
+        );
+        assert!(!dir.join("run").exists());
+    }
+    std::fs::remove_dir_all(dir).ok();
+}
+
+/// The files of a run's checkpoint folder, by name.
+fn checkpoint_files(runs: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
+    std::fs::read_dir(runs.join("checkpoint"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.is_file())
+        .map(|p| {
+            let name = p.file_name().unwrap().to_string_lossy().into_owned();
+            (name, std::fs::read(&p).unwrap())
+        })
+        .collect()
+}
+
+#[test]
+fn a_checkpoint_or_model_that_cannot_be_written_stops_the_run_and_resume_continues() {
+    let dir = scratch("write-faults");
+    let data = simulate(&dir, 60);
+    let config = tiny_config(&dir, "hnet", 3);
+    let runs = dir.join("run");
+    let resume = || {
+        let mut command = hnet();
+        command.args(["train", "--resume", "--out"]).arg(&runs);
+        command
+    };
+    // One epoch of three (the time budget stops it there).
+    succeeds(train(&data, &runs, &config).args(["--time-budget", "0s"]));
+    let epoch_1 = checkpoint_files(&runs);
+    assert_eq!(epoch_1.len(), 3, "{:?}", epoch_1.keys());
+    let model_1 = std::fs::read(runs.join("model.bpk")).unwrap();
+
+    // Epoch 2's network checkpoint cannot be written: a folder is in its place (a fault that
+    // root meets too, unlike permissions). The run stops, naming the file, with exit code 1.
+    let blocked = runs.join("checkpoint/model-2.bpk");
+    std::fs::create_dir_all(blocked.join("in-the-way")).unwrap();
+    let err = fails_cleanly(&mut resume());
+    assert!(
+        err.contains(&format!("cannot write checkpoint '{}'", blocked.display())),
+        "{err}"
+    );
+    assert!(
+        err.contains("epoch 1's checkpoint is complete") && err.contains("--resume"),
+        "{err}"
+    );
+    // Epoch 1's checkpoint is as it was, no temporary file is left, model.bpk is untouched.
+    let after = checkpoint_files(&runs);
+    for (name, bytes) in &epoch_1 {
+        assert_eq!(after.get(name), Some(bytes), "{name}");
+    }
+    assert!(
+        after.keys().all(|name| name.ends_with(".bpk")),
+        "{:?}",
+        after.keys()
+    );
+    assert_eq!(std::fs::read(runs.join("model.bpk")).unwrap(), model_1);
+
+    // Unblocked, `--resume` continues from epoch 1; now model.bpk cannot be written (a folder
+    // in its place): the three epochs' checkpoints are kept, the message names the file.
+    std::fs::remove_dir_all(&blocked).unwrap();
+    std::fs::remove_file(runs.join("model.bpk")).unwrap();
+    std::fs::create_dir_all(runs.join("model.bpk/in-the-way")).unwrap();
+    let err = fails_cleanly(&mut resume());
+    assert!(err.contains("resuming after epoch 1"), "{err}");
+    assert!(
+        err.contains(&format!(
+            "cannot write '{}'",
+            runs.join("model.bpk").display()
+        )),
+        "{err}"
+    );
+    assert!(err.contains("epoch 3's, is complete"), "{err}");
+    assert!(!runs.join("model.bpk.partial").exists());
+
+    // Unblocked again, `--resume` writes model.bpk from the checkpoints.
+    std::fs::remove_dir_all(runs.join("model.bpk")).unwrap();
+    let out = succeeds(&mut resume());
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(said.contains("resuming after epoch 3"), "{said}");
+    assert!(runs.join("model.bpk").is_file());
+    let metrics = std::fs::read_to_string(runs.join("metrics.csv")).unwrap();
+    assert!(metrics.contains("\n3,valid,"), "{metrics}");
+    std::fs::remove_dir_all(dir).ok();
+}
+
 // Property tests (issue #13, docs/reliability.md): `hnet train --config FILE` with arbitrary or
 // mutated settings ends with an error naming the file (or, for valid settings, goes on to the
 // data), never a panic. Through the binary: `TrainingConfig::load` has no library path.
