@@ -111,7 +111,7 @@ pub struct PairGeometry {
 /// The views of `pair`: the twin's own, or the page's default biplane for an uploaded pair.
 pub fn pair_views(pair: &LabeledPair) -> Biplane {
     match &pair.source {
-        PairSource::Twin { views, .. } => *views,
+        PairSource::Twin { views, .. } | PairSource::Dicom { views, .. } => *views,
         PairSource::Upload { .. } => default_views(),
     }
 }
@@ -123,7 +123,7 @@ pub fn default_views() -> Biplane {
 
 impl PairGeometry {
     /// The geometry of `pair`; `catheter` (the twin tab's sliders) sets the catheter of an
-    /// uploaded pair.
+    /// uploaded pair or a DICOM frame (whose views come from its headers).
     pub fn of(pair: &LabeledPair, catheter: &TwinControls) -> Result<Self, Catheter3dError> {
         let template = RodConfig::default();
         match &pair.source {
@@ -140,10 +140,10 @@ impl PairGeometry {
                     base_known: true,
                 })
             }
-            PairSource::Upload { .. } => {
+            PairSource::Upload { .. } | PairSource::Dicom { .. } => {
                 let (rod, base) = catheter.scene().rod(&template);
                 Ok(Self {
-                    views: default_views(),
+                    views: pair_views(pair),
                     rod,
                     base,
                     base_known: false,

@@ -90,6 +90,39 @@ fn describe(pair: &LabeledPair) -> (Vec<(String, String)>, serde_json::Value) {
                 "twin": settings,
             }),
         ),
+        PairSource::Dicom {
+            frame,
+            time_s,
+            views,
+            missing_geometry,
+        } => {
+            let view = |carm: &hnet_twin::carm::CArm, missing: &[String]| {
+                serde_json::json!({
+                    "carm": carm,
+                    "camera_matrix": carm.camera_matrix(),
+                    "missing_geometry": missing,
+                })
+            };
+            (
+                vec![
+                    ("source".into(), "dicom".into()),
+                    ("frame".into(), (frame + 1).to_string()),
+                    (
+                        "time_s".into(),
+                        time_s.map(|t| format!("{t:.4}")).unwrap_or_default(),
+                    ),
+                ],
+                serde_json::json!({
+                    "source": "dicom",
+                    "frame": frame + 1,
+                    "time_s": time_s,
+                    "views": {
+                        "a": view(&views.a, &missing_geometry[0]),
+                        "b": view(&views.b, &missing_geometry[1]),
+                    },
+                }),
+            )
+        }
     }
 }
 

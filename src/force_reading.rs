@@ -3,6 +3,7 @@
 //! weights were trained on; and whether H-Net's estimate and the physics estimate (the rod fitted
 //! to the catheter in 3D, [`crate::catheter_3d`]) disagree beyond what their errors explain.
 
+use hnet_twin::carm::Biplane;
 use hnet_twin::scene::{Modality, SceneParams, SceneSampling};
 
 use crate::workspace::{LabeledPair, PairSource};
@@ -76,18 +77,27 @@ impl TrainingDomain {
     }
 
     /// How a pair lies outside this domain, one phrase each (empty for twin pairs inside it).
-    /// Uploaded images are outside it by definition: the weights' error was measured on twin
-    /// images, and nothing says how far real ones differ.
+    /// Uploaded images and DICOM frames are outside it by definition: the weights' error was
+    /// measured on twin images, and nothing says how far real ones differ; a DICOM frame's
+    /// C-arm angles, known from its headers, are compared too.
     pub fn departures(&self, pair: &LabeledPair) -> Vec<String> {
-        let PairSource::Twin {
-            views, settings, ..
-        } = &pair.source
-        else {
-            return vec![format!(
+        let not_twin = || {
+            format!(
                 "images that are not the twin's (the error of these weights was measured on twin \
                  {} images)",
                 self.modality.name()
-            )];
+            )
+        };
+        let (views, settings) = match &pair.source {
+            PairSource::Twin {
+                views, settings, ..
+            } => (views, settings),
+            PairSource::Dicom { views, .. } => {
+                let mut departures = vec![not_twin()];
+                departures.extend(self.view_departures(views));
+                return departures;
+            }
+            PairSource::Upload { .. } => return vec![not_twin()],
         };
         let mut departures = Vec::new();
         let Some(modality) = settings["modality"].as_str().and_then(Modality::parse) else {
@@ -104,6 +114,23 @@ impl TrainingDomain {
             Ok(scene) => departures.extend(self.scenes.departures(&scene)),
             Err(_) => departures.push("the pair's twin settings cannot be read".into()),
         }
+        departures.extend(self.view_departures(views));
+        let source = settings["background"]["source"].as_str();
+        if self.phantom_backgrounds
+            && modality.is_xray()
+            && !source.is_some_and(|s| s.starts_with("phantom:"))
+        {
+            departures.push(format!(
+                "a background cut from {} (trained on the built-in phantom only)",
+                source.unwrap_or("an unknown radiograph")
+            ));
+        }
+        departures
+    }
+
+    /// The views whose C-arm angles differ from the trained ones by more than half a degree.
+    fn view_departures(&self, views: &Biplane) -> Vec<String> {
+        let mut departures = Vec::new();
         for (letter, (view, trained)) in ["A", "B"]
             .iter()
             .zip([views.a, views.b].iter().zip(self.views_deg))
@@ -115,16 +142,6 @@ impl TrainingDomain {
                     angles[0], angles[1], trained[0], trained[1]
                 ));
             }
-        }
-        let source = settings["background"]["source"].as_str();
-        if self.phantom_backgrounds
-            && modality.is_xray()
-            && !source.is_some_and(|s| s.starts_with("phantom:"))
-        {
-            departures.push(format!(
-                "a background cut from {} (trained on the built-in phantom only)",
-                source.unwrap_or("an unknown radiograph")
-            ));
         }
         departures
     }

@@ -30,6 +30,14 @@ pub enum Command {
     Eraser,
     /// The pan tool.
     Pan,
+    /// The window/level tool (drag on a DICOM frame).
+    WindowLevel,
+    /// Play or pause the cine.
+    PlayPause,
+    /// The cine's next frame.
+    NextFrame,
+    /// The cine's previous frame.
+    PreviousFrame,
     /// A smaller brush.
     SmallerBrush,
     /// A larger brush.
@@ -139,7 +147,7 @@ const GROW_SHRINK: &[(Chord, Command)] = &[
 ];
 
 /// Every shortcut, in the help panel's order.
-pub const KEYMAP: [Binding; 24] = [
+pub const KEYMAP: [Binding; 27] = [
     binding(
         Scope::Page,
         "R",
@@ -159,6 +167,27 @@ pub const KEYMAP: [Binding; 24] = [
         "H",
         "pan (or drag with the middle button)",
         &[(key("h"), Command::Pan)],
+    ),
+    binding(
+        Scope::Page,
+        "W",
+        "window/level: drag on a DICOM frame (right: wider window, down: darker)",
+        &[(key("w"), Command::WindowLevel)],
+    ),
+    binding(
+        Scope::Page,
+        "K",
+        "play or pause the DICOM cine",
+        &[(key("k"), Command::PlayPause)],
+    ),
+    binding(
+        Scope::Page,
+        ", / .",
+        "previous / next cine frame",
+        &[
+            (key(","), Command::PreviousFrame),
+            (key("."), Command::NextFrame),
+        ],
     ),
     binding(
         Scope::Page,
@@ -235,7 +264,8 @@ pub const KEYMAP: [Binding; 24] = [
     binding(
         Scope::Tabs,
         "← → ↑ ↓ Home End",
-        "move between the source tabs (Images, Digital twin, X-ray background); Enter opens one",
+        "move between the source tabs (Images, DICOM cine, Digital twin, X-ray background); Enter \
+         opens one",
         &[
             (key("ArrowLeft"), Command::Left),
             (key("ArrowUp"), Command::Left),

@@ -1,6 +1,7 @@
 //! H-Net Studio in the browser: load or simulate a stereo pair of catheter images, run H-Net on
 //! WebGPU or the CPU, correct the masks, label the tip force and export a dataset that `hnet
-//! train` reads. Everything runs in the page; no image leaves the machine.
+//! train` reads; or play a biplane DICOM cine and trace H-Net's force over its frames. Everything
+//! runs in the page; no image leaves the machine.
 //!
 //! The page's logic that needs no browser builds natively too (and is tested with `cargo test`):
 //!
@@ -9,6 +10,8 @@
 //! - [`twin_live`]: the digital twin's sliders and the synthetic X-ray background composer;
 //! - [`catheter_3d`]: the catheter in 3D from both masks and the physics-checked force of the
 //!   rod fitted to it, and what the 3D view draws; [`orbit_camera`]: the 3D view's camera;
+//! - [`cine`]: a biplane DICOM cine: frames as pairs with the headers' geometry, window/level,
+//!   the force trace;
 //! - [`export`]: the labeled pairs as a dataset zip;
 //! - [`force_reading`]: what a force estimate can be said to show against the ablation band;
 //! - [`keymap`]: every keyboard shortcut, for the handlers, the help list and the tooltips;
@@ -19,6 +22,7 @@
 //! (`storage`) and files (`browser`). `src/main.rs` mounts [`App`].
 
 pub mod catheter_3d;
+pub mod cine;
 pub mod error_text;
 pub mod export;
 pub mod force_reading;

@@ -1,6 +1,6 @@
 //! The page's state: signals gathered in [`Studio`], shared with the components through Leptos'
-//! context, and the actions that change them (run H-Net, keep the twin's pair, delete and
-//! restore pairs, undo). The labeling [`Workspace`] is saved to the browser's IndexedDB after
+//! context, and the actions that change them (run H-Net, keep the twin's pair or a cine frame,
+//! play a DICOM cine and trace its force, delete and restore pairs, undo). The labeling [`Workspace`] is saved to the browser's IndexedDB after
 //! every change (see [`Studio::persist`]), so that a reload loses nothing. The components only
 //! render this state and call these actions.
 
@@ -9,8 +9,10 @@ use std::rc::Rc;
 
 use leptos::prelude::*;
 
+use crate::browser::{download, now_ms};
 use crate::bundled::{self, FetchError};
 use crate::catheter_3d::{Catheter3d, PairGeometry, PairMasks, pair_views, reconstruct_pair};
+use crate::cine::CinePlayer;
 use crate::compute::{self, BackendChoice};
 use crate::engine::{Engine, EngineError, Prediction, WeightsOrigin};
 use crate::error_text::with_causes;
@@ -58,6 +60,8 @@ pub enum PointerTool {
     Eraser,
     /// Moves the zoomed view.
     Pan,
+    /// Changes the window/level of a DICOM frame's plane.
+    WindowLevel,
 }
 
 impl PointerTool {
@@ -66,7 +70,7 @@ impl PointerTool {
         match self {
             PointerTool::Brush => Some(Tool::Brush),
             PointerTool::Eraser => Some(Tool::Eraser),
-            PointerTool::Pan => None,
+            PointerTool::Pan | PointerTool::WindowLevel => None,
         }
     }
 }
@@ -139,6 +143,8 @@ pub struct CatheterReading {
 pub enum SourceTab {
     /// Two image files.
     Images,
+    /// A biplane DICOM cine.
+    Cine,
     /// The live twin's sliders.
     Twin,
     /// The synthetic X-ray background composer.
@@ -190,6 +196,18 @@ pub struct Studio {
     pub epipolar_pointer: RwSignal<Option<(View, [f64; 2])>>,
     /// The 3D view's camera (its target and framing follow the catheter).
     pub orbit: RwSignal<OrbitCamera>,
+    /// The DICOM cine, once loaded. Read it with `with`: it holds every frame.
+    pub cine: RwSignal<Option<CinePlayer>>,
+    /// Counts loaded cines, so that a trace of an earlier one stops.
+    pub cine_serial: RwSignal<u64>,
+    /// Whether the cine plays.
+    pub playing: RwSignal<bool>,
+    /// The cine's playback timer, while it plays.
+    playback: StoredValue<Option<IntervalHandle>>,
+    /// Frames traced and frames to trace, while H-Net runs over the cine.
+    pub trace_progress: RwSignal<Option<(usize, usize)>>,
+    /// The user asked to stop the trace.
+    pub trace_cancelled: RwSignal<bool>,
 }
 
 impl Default for Studio {
@@ -226,6 +244,12 @@ impl Studio {
             catheter: RwSignal::new(None),
             epipolar_pointer: RwSignal::new(None),
             orbit: RwSignal::new(OrbitCamera::default()),
+            cine: RwSignal::new(None),
+            cine_serial: RwSignal::new(0),
+            playing: RwSignal::new(false),
+            playback: StoredValue::new(None),
+            trace_progress: RwSignal::new(None),
+            trace_cancelled: RwSignal::new(false),
         }
     }
 
@@ -314,6 +338,14 @@ impl Studio {
     /// Whether the pair on screen is the unsaved twin draft.
     pub fn showing_draft(&self) -> bool {
         self.draft.with(Option::is_some)
+    }
+
+    /// Whether the pair on screen is an unsaved frame of the DICOM cine.
+    pub fn showing_cine_frame(&self) -> bool {
+        self.draft.with(|d| {
+            d.as_ref()
+                .is_some_and(|p| matches!(p.source, crate::workspace::PairSource::Dicom { .. }))
+        })
     }
 
     /// Saves pair `id` of the workspace to the browser's storage.
@@ -420,23 +452,241 @@ impl Studio {
         let id = format!("twin-{serial}");
         let result = self.background.with_untracked(|bg| controls.render(id, bg));
         match result {
-            Ok(pair) => {
-                // The previous draft's prediction is of no use any more.
-                if let Some(old) = self
-                    .draft
-                    .with_untracked(|d| d.as_ref().map(|p| p.id.clone()))
-                {
-                    self.predictions.update(|p| {
-                        p.remove(&old);
-                    });
-                }
-                self.draft.set(Some(pair));
-            }
+            Ok(pair) => self.replace_draft(Some(pair)),
             Err(e) => self.error(format!(
                 "the catheter does not settle under this load ({}); try a smaller force or a \
                  stiffer catheter",
                 with_causes(&e)
             )),
+        }
+    }
+
+    /// Shows `pair` as the unsaved draft (or none), forgetting the previous draft's prediction.
+    fn replace_draft(&self, pair: Option<LabeledPair>) {
+        if let Some(old) = self
+            .draft
+            .with_untracked(|d| d.as_ref().map(|p| p.id.clone()))
+        {
+            self.predictions.update(|p| {
+                p.remove(&old);
+            });
+        }
+        self.draft.set(pair);
+    }
+
+    /// Loads a cine in place of the previous one: playback and any trace stop, its first frame
+    /// is shown and H-Net runs on it.
+    pub fn load_cine(&self, player: CinePlayer) {
+        self.stop_playback();
+        self.trace_cancelled.set(true);
+        self.cine_serial.update(|s| *s += 1);
+        let frames = player.frame_count();
+        let notes = player.notes.clone();
+        self.cine.set(Some(player));
+        self.show_cine_frame();
+        self.run_model();
+        let mut text = format!("cine loaded: {frames} frame pairs");
+        if !notes.is_empty() {
+            text = format!("{text}. {}", notes.join("; "));
+        }
+        self.info(text);
+    }
+
+    /// Shows the cine's current frame as the draft (with a new id: its pixels follow the
+    /// window), without running H-Net.
+    pub fn show_cine_frame(&self) {
+        let serial = self.draft_serial.get_untracked() + 1;
+        self.draft_serial.set(serial);
+        let pair = self.cine.with_untracked(|cine| {
+            cine.as_ref()
+                .and_then(|c| c.pair(c.frame, format!("cine-{serial}")))
+        });
+        if pair.is_some() {
+            self.replace_draft(pair);
+        }
+    }
+
+    /// Whether a cine is loaded.
+    pub fn has_cine(&self) -> bool {
+        self.cine.with(Option::is_some)
+    }
+
+    /// Moves the cine `delta` frames (pausing it), shows that frame and runs H-Net on it.
+    pub fn step_cine(&self, delta: isize) {
+        if !self.cine.with_untracked(Option::is_some) {
+            return;
+        }
+        self.stop_playback();
+        self.cine
+            .update(|c| c.iter_mut().for_each(|c| c.step(delta)));
+        self.show_cine_frame();
+        self.run_model();
+    }
+
+    /// Shows cine frame `frame` (pausing the cine) and runs H-Net on it.
+    pub fn seek_cine(&self, frame: usize) {
+        if !self.cine.with_untracked(Option::is_some) {
+            return;
+        }
+        self.stop_playback();
+        self.cine
+            .update(|c| c.iter_mut().for_each(|c| c.seek(frame)));
+        self.show_cine_frame();
+        self.run_model();
+    }
+
+    /// Plays the cine at its frame rate, looping, or pauses it (and runs H-Net on the frame it
+    /// stops at). H-Net does not run on every frame while it plays: trace the force for that.
+    pub fn toggle_play(&self) {
+        if self.playback.with_value(Option::is_some) {
+            self.stop_playback();
+            self.run_model();
+            return;
+        }
+        let Some(interval_ms) = self
+            .cine
+            .with_untracked(|c| c.as_ref().map(CinePlayer::frame_interval_ms))
+        else {
+            return;
+        };
+        let studio = *self;
+        let handle = set_interval_with_handle(
+            move || {
+                studio.cine.update(|c| c.iter_mut().for_each(|c| c.step(1)));
+                studio.show_cine_frame();
+            },
+            std::time::Duration::from_micros((interval_ms * 1000.0) as u64),
+        );
+        match handle {
+            Ok(handle) => {
+                self.playback.set_value(Some(handle));
+                self.playing.set(true);
+            }
+            Err(e) => self.error(format!("the cine cannot play: {e:?}")),
+        }
+    }
+
+    /// Pauses the cine.
+    pub fn stop_playback(&self) {
+        if let Some(handle) = self.playback.try_update_value(Option::take).flatten() {
+            handle.clear();
+            self.playing.set(false);
+        }
+    }
+
+    /// Changes a plane's window as a drag on its view does (fractions of the view's side) and
+    /// shows the frame again; H-Net runs when the drag ends.
+    pub fn drag_window(&self, view: View, right: f64, down: f64) {
+        self.cine
+            .update(|c| c.iter_mut().for_each(|c| c.drag_window(view, right, down)));
+        self.show_cine_frame();
+    }
+
+    /// Both planes' windows back to the headers' and H-Net on the frame.
+    pub fn reset_windows(&self) {
+        self.cine
+            .update(|c| c.iter_mut().for_each(CinePlayer::reset_windows));
+        self.show_cine_frame();
+        self.run_model();
+    }
+
+    /// Runs H-Net over every frame of the cine, under the current windows, into its force
+    /// trace, one frame at a time: the page stays responsive (each inference yields to the
+    /// browser first), the progress shows in [`Studio::trace_progress`], and
+    /// [`Studio::cancel_trace`] stops it after the frame in progress (what was traced stays).
+    pub fn trace_cine(&self) {
+        let ModelState::Ready(engine) = self.model.get_untracked() else {
+            self.error("H-Net is not loaded yet: trace the force once it is");
+            return;
+        };
+        let Some(total) = self
+            .cine
+            .with_untracked(|c| c.as_ref().map(CinePlayer::frame_count))
+        else {
+            return;
+        };
+        if self.trace_progress.get_untracked().is_some() || self.busy.get_untracked().is_some() {
+            self.error("H-Net is busy: trace the force when it is done");
+            return;
+        }
+        self.stop_playback();
+        let serial = self.cine_serial.get_untracked();
+        self.cine
+            .update(|c| c.iter_mut().for_each(CinePlayer::clear_trace));
+        self.trace_cancelled.set(false);
+        self.trace_progress.set(Some((0, total)));
+        self.busy
+            .set(Some(format!("Tracing the tip force over {total} frames…")));
+        let studio = *self;
+        leptos::task::spawn_local(async move {
+            let start = now_ms();
+            let same_cine = || studio.cine_serial.get_untracked() == serial;
+            let mut done = 0;
+            let mut failure = None;
+            for frame in 0..total {
+                if studio.trace_cancelled.get_untracked() || !same_cine() {
+                    break;
+                }
+                let views = studio.cine.with_untracked(|c| {
+                    let c = c.as_ref()?;
+                    Some((c.rgb(View::A, frame)?, c.rgb(View::B, frame)?))
+                });
+                let Some((a, b)) = views else { break };
+                match engine.clone().infer(&a, &b).await {
+                    Ok(prediction) if same_cine() => studio.cine.update(|c| {
+                        c.iter_mut()
+                            .for_each(|c| c.record_force(frame, prediction.force_n))
+                    }),
+                    Ok(_) => break,
+                    Err(e) => {
+                        failure = Some(format!(
+                            "H-Net failed on frame {}: {}",
+                            frame + 1,
+                            with_causes(&e)
+                        ));
+                        break;
+                    }
+                }
+                done += 1;
+                studio.trace_progress.set(Some((done, total)));
+            }
+            studio.trace_progress.set(None);
+            studio.busy.set(None);
+            let seconds = (now_ms() - start) / 1000.0;
+            match failure {
+                Some(text) => studio.error(format!("{text}; {done} of {total} frames traced")),
+                None if !same_cine() => {}
+                None if done < total => studio.info(format!(
+                    "trace stopped: {done} of {total} frames traced in {seconds:.1} s"
+                )),
+                None => studio.info(format!(
+                    "tip force traced over {total} frames in {seconds:.1} s ({:.0} ms per frame)",
+                    seconds * 1000.0 / total.max(1) as f64
+                )),
+            }
+            if studio.rerun.get_untracked() {
+                studio.rerun.set(false);
+                studio.run_model();
+            }
+        });
+    }
+
+    /// Stops the trace after the frame in progress.
+    pub fn cancel_trace(&self) {
+        self.trace_cancelled.set(true);
+    }
+
+    /// Offers the cine's force trace as a CSV download (`hnet trace`'s format).
+    pub fn export_trace(&self) {
+        let Some(csv) = self
+            .cine
+            .with_untracked(|c| c.as_ref().map(CinePlayer::trace_csv))
+        else {
+            return;
+        };
+        match download(crate::cine::TRACE_FILE, csv.as_bytes(), "text/csv") {
+            Ok(()) => self.info(format!("force trace saved as {}", crate::cine::TRACE_FILE)),
+            Err(e) => self.error(with_causes(&e)),
         }
     }
 

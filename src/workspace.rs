@@ -32,6 +32,19 @@ pub enum PairSource {
         /// The twin's settings, as recorded with exported pairs.
         settings: serde_json::Value,
     },
+    /// A frame of a biplane DICOM cine. Nothing from the files' headers is kept but the
+    /// geometry and the frame's time: no file name, no patient or institution attribute.
+    Dicom {
+        /// The frame, 0-based, in both planes.
+        frame: usize,
+        /// Its time after plane A's first frame, seconds, when the headers give it.
+        time_s: Option<f64>,
+        /// Both planes' C-arms at [`WORK_SIZE`], from the headers (defaults where they lacked
+        /// an attribute).
+        views: Biplane,
+        /// The geometry attributes each plane's headers lacked (DICOM keywords), A then B.
+        missing_geometry: [Vec<String>; 2],
+    },
 }
 
 /// One stereo pair being labeled, at [`WORK_SIZE`].
@@ -126,7 +139,7 @@ impl LabeledPair {
     pub fn true_force(&self) -> Option<[f32; 3]> {
         match &self.source {
             PairSource::Twin { true_force_n, .. } => Some(*true_force_n),
-            PairSource::Upload { .. } => None,
+            PairSource::Upload { .. } | PairSource::Dicom { .. } => None,
         }
     }
 

@@ -386,3 +386,83 @@ test("a twin pair in 3D: the catheter, the physics force beside H-Net's, the epi
   assert.deepEqual(errors, []);
   await page.close();
 });
+
+test("a DICOM cine: sample, step, scrub, play, window/level, trace with cancel, CSV, keep a frame; bad files named, the cine kept", async () => {
+  const { page, errors } = await openPage(context, server.url);
+  await waitForModel(page);
+  await page.click("#tab-cine");
+  assert.match(await page.textContent("#dicom-privacy"), /nothing is uploaded.*no patient name, ID, birth date, accession/s);
+  await page.click("#cine-sample");
+  await page.waitForSelector("#cine-source", { timeout: 60_000 });
+  assert.match(await page.textContent("#cine-source"), /twin-cine-plane-a\.dcm · plane B: twin-cine-plane-b\.dcm · 24 frame pairs · 15\.0 frames\/s/);
+  assert.match(await page.textContent("#notice"), /cine loaded: 24 frame pairs/);
+  assert.equal(await page.getAttribute("#force-trace", "data-traced"), "0");
+
+  // Step, scrub and play.
+  await page.click("#cine-next");
+  assert.match(await page.textContent("#cine-frame"), /frame 2 of 24 · 0\.067 s/);
+  await page.$eval("#cine-scrub", (el) => {
+    el.value = "12";
+    el.dispatchEvent(new Event("input", { bubbles: true }));
+    el.dispatchEvent(new Event("change", { bubbles: true }));
+  });
+  assert.match(await page.textContent("#cine-frame"), /frame 13 of 24/);
+  await page.click("#cine-play");
+  await page.waitForFunction(() => !/frame 13 of/.test(document.querySelector("#cine-frame").textContent));
+  await page.click("#cine-play");
+  assert.equal(await page.textContent("#cine-play"), "Play");
+
+  // Window/level: a drag on view A changes plane A's window only.
+  const windows = await page.textContent("#cine-windows");
+  await page.click("#tool-window");
+  await paint(page, "a", [0.3, 0.5], [0.6, 0.7]);
+  const dragged = await page.textContent("#cine-windows");
+  assert.notEqual(dragged, windows);
+  assert.equal(dragged.split("·")[1], windows.split("·")[1]);
+
+  // Trace: cancel keeps what was traced, then a full trace and its CSV.
+  await page.click("#cine-trace");
+  await page.click("#cine-trace-cancel");
+  await page.waitForSelector("#cine-trace");
+  assert.match(await page.textContent("#notice"), /trace stopped: \d+ of 24 frames traced|traced over 24 frames/);
+  await page.click("#cine-window-reset");
+  await page.click("#cine-trace");
+  await page.waitForSelector("#trace-progress");
+  await page.waitForFunction(() => document.querySelector("#force-trace").dataset.traced === "24", null, { timeout: 180_000 });
+  assert.match(await page.textContent("#notice"), /tip force traced over 24 frames/);
+  assert.equal(await page.locator("#force-trace path[data-series]").count(), 4);
+  const [csv] = await Promise.all([page.waitForEvent("download"), page.click("#cine-export-trace")]);
+  assert.equal(csv.suggestedFilename(), "hnet-force-trace.csv");
+  await csv.saveAs(join(files, "trace.csv"));
+  const lines = (await readFile(join(files, "trace.csv"), "utf8")).trim().split("\n");
+  assert.equal(lines[0], "frame,time_s,fx_n,fy_n,fz_n,magnitude_n");
+  assert.equal(lines.length, 25);
+  assert.match(lines[2], /^2,0\.0667,-?[\d.e-]+,-?[\d.e-]+,-?[\d.e-]+,[\d.e-]+$/);
+
+  // A click on the plot moves the cine there; keep that frame as a labeled pair.
+  const plot = await page.locator("#force-trace").boundingBox();
+  await page.mouse.click(plot.x + plot.width * 0.99, plot.y + plot.height / 2);
+  assert.match(await page.textContent("#cine-frame"), /frame 24 of 24/);
+  await page.click("#cine-keep");
+  await page.waitForSelector('#pairs li[data-id="pair-0001"]');
+
+  // Bad files: named, and the loaded cine stays.
+  await page.setInputFiles("#dicom-plane-a", join(files, "notes.txt"));
+  await page.waitForFunction(() => /notes\.txt: not a DICOM file/.test(document.querySelector("#notice")?.textContent));
+  const [a, b] = await Promise.all([
+    page.waitForEvent("download"),
+    page.waitForEvent("download", { predicate: (d) => d.suggestedFilename().endsWith("b.dcm") }),
+    page.click("#cine-sample-download"),
+  ]);
+  assert.equal(a.suggestedFilename(), "twin-cine-plane-a.dcm");
+  await a.saveAs(join(files, "plane-a.dcm"));
+  const whole = await readFile(join(files, "plane-a.dcm"));
+  assert.equal(whole.subarray(128, 132).toString(), "DICM");
+  await writeFile(join(files, "cut.dcm"), whole.subarray(0, whole.length - 5000));
+  await page.setInputFiles("#dicom-plane-b", join(files, "cut.dcm"));
+  await page.waitForFunction(() => /cut\.dcm: the file is truncated/.test(document.querySelector("#notice")?.textContent));
+  assert.match(await page.textContent("#cine-source"), /24 frame pairs/);
+  assert.ok(b);
+  assert.deepEqual(errors, []);
+  await page.close();
+});

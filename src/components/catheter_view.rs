@@ -155,7 +155,7 @@ pub fn CatheterView() -> impl IntoView {
                 tip_mm,
                 ..
             } => Some((*tip_mm, *true_force_n)),
-            PairSource::Upload { .. } => None,
+            PairSource::Upload { .. } | PairSource::Dicom { .. } => None,
         })
     };
 

@@ -2,8 +2,10 @@
 //! through Leptos' context.
 
 pub mod catheter_view;
+pub mod cine_panel;
 pub mod composer;
 pub mod force_panel;
+pub mod force_trace;
 pub mod model_bar;
 pub mod pair_list;
 pub mod shortcuts;

@@ -1,11 +1,13 @@
-//! Where pairs come from: two image files (picked or dropped), or the live digital twin with its
-//! sliders; and the synthetic X-ray background composer.
+//! Where pairs come from: two image files (picked or dropped), a biplane DICOM cine
+//! ([`CinePanel`]), or the live digital twin with its sliders; and the synthetic X-ray background
+//! composer.
 
 use hnet_twin::carm::{SECONDARY_DEG, VIEW_A_PRIMARY_DEG, VIEW_B_PRIMARY_DEG};
 use hnet_twin::scene::Modality;
 use leptos::prelude::*;
 
 use crate::browser::{PickedFileError, files, read_file_with, take_picked_file, take_picked_files};
+use crate::components::cine_panel::CinePanel;
 use crate::components::composer::Composer;
 use crate::components::on_slider;
 use crate::error_text::with_causes;
@@ -16,8 +18,9 @@ use crate::twin_live::TwinControls;
 use crate::workspace::{LabeledPair, PairSource};
 
 /// The source tabs: which, the tab's element id, its label.
-const TABS: [(SourceTab, &str, &str); 3] = [
+const TABS: [(SourceTab, &str, &str); 4] = [
     (SourceTab::Images, "tab-images", "Images"),
+    (SourceTab::Cine, "tab-cine", "DICOM cine"),
     (SourceTab::Twin, "tab-twin", "Digital twin"),
     (SourceTab::Background, "tab-background", "X-ray background"),
 ];
@@ -32,14 +35,22 @@ pub fn Sources() -> impl IntoView {
     let tab = studio.tab;
     let select = move |which: SourceTab| {
         tab.set(which);
+        studio.stop_playback();
         if which == SourceTab::Background {
             // Show the catheter on the background being composed.
             let xray = studio.background.with_untracked(|bg| bg.style.modality());
             studio.twin.update(|t| t.modality = xray);
         }
-        if which != SourceTab::Images {
-            studio.render_twin();
-            studio.run_model();
+        match which {
+            SourceTab::Images => {}
+            SourceTab::Cine => {
+                studio.show_cine_frame();
+                studio.run_model();
+            }
+            SourceTab::Twin | SourceTab::Background => {
+                studio.render_twin();
+                studio.run_model();
+            }
         }
     };
     let on_key = move |ev: web_sys::KeyboardEvent| {
@@ -80,6 +91,7 @@ pub fn Sources() -> impl IntoView {
             aria-labelledby=move || TABS.iter().find(|t| t.0 == tab.get()).map_or("", |t| t.1)>
             {move || match tab.get() {
                 SourceTab::Images => view! { <UploadPair/> }.into_any(),
+                SourceTab::Cine => view! { <CinePanel/> }.into_any(),
                 SourceTab::Twin => view! { <TwinSliders/> }.into_any(),
                 SourceTab::Background => view! { <Composer/> }.into_any(),
             }}

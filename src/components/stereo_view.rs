@@ -70,6 +70,8 @@ pub fn StereoView() -> impl IntoView {
                 {tool_button(PointerTool::Brush, "tool-brush", "Brush", Command::Brush)}
                 {tool_button(PointerTool::Eraser, "tool-eraser", "Eraser", Command::Eraser)}
                 {tool_button(PointerTool::Pan, "tool-pan", "Pan", Command::Pan)}
+                {move || studio.showing_cine_frame().then(|| tool_button(
+                    PointerTool::WindowLevel, "tool-window-level", "Window/level", Command::WindowLevel))}
             </span>
             <label class="slider compact">"Size"
                 {slider("brush-size", ["1", "20", "0.5"], studio.brush_radius)}
@@ -95,7 +97,11 @@ pub fn StereoView() -> impl IntoView {
         </div>
         {move || studio.showing_draft().then(|| view! {
             <p class="draft-note">
-                "Live twin pair (not kept yet). "
+                {move || if studio.showing_cine_frame() {
+                    "DICOM cine frame (not kept yet). "
+                } else {
+                    "Live twin pair (not kept yet). "
+                }}
                 <button id="keep-draft" class="primary" on:click=move |_| studio.keep_draft()>"Keep this pair"</button>
             </p>
         })}
@@ -172,6 +178,8 @@ enum Gesture {
     Stroke([f64; 2]),
     /// Panning; the last canvas point.
     Pan([f64; 2]),
+    /// Changing the window/level of a DICOM frame; the last canvas point.
+    Window([f64; 2]),
 }
 
 /// One view's canvas.
@@ -249,13 +257,14 @@ fn ViewCanvas(view: View) -> impl IntoView {
                 side,
             );
             // Where the tip is and how the view sees the world: exact for twin pairs; for
-            // uploads, the tip found in the masks and the default biplane's geometry.
+            // uploads and DICOM frames, the tip found in the masks and the pair's geometry (the
+            // default biplane's, or the DICOM headers').
             let (tip, carm): (Option<[f64; 2]>, CArm) = match &pair.source {
                 PairSource::Twin { tip_mm, views, .. } => {
                     let carm = if view == View::A { views.a } else { views.b };
                     (Some(project(&carm, *tip_mm)), carm)
                 }
-                PairSource::Upload { .. } => {
+                PairSource::Upload { .. } | PairSource::Dicom { .. } => {
                     let default = pair_views(pair);
                     let carm = if view == View::A {
                         default.a
@@ -352,6 +361,13 @@ fn ViewCanvas(view: View) -> impl IntoView {
                 studio.show_label.set(true);
                 gesture.set_value(Some(Gesture::Stroke(at)));
             }
+            None if tool == PointerTool::WindowLevel && ev.button() == 0 => {
+                if studio.showing_cine_frame() {
+                    gesture.set_value(Some(Gesture::Window(p)));
+                } else {
+                    studio.info("window/level changes a DICOM cine's frames: load one in the DICOM cine tab");
+                }
+            }
             _ => gesture.set_value(Some(Gesture::Pan(p))),
         }
     };
@@ -379,12 +395,22 @@ fn ViewCanvas(view: View) -> impl IntoView {
                 });
                 gesture.set_value(Some(Gesture::Pan(p)));
             }
+            Some(Gesture::Window(last)) => {
+                studio.drag_window(
+                    view,
+                    (p[0] - last[0]) / CANVAS_SIDE,
+                    (p[1] - last[1]) / CANVAS_SIDE,
+                );
+                gesture.set_value(Some(Gesture::Window(p)));
+            }
             None => {}
         }
     };
     let on_up = move |_: web_sys::PointerEvent| {
-        if let Some(Gesture::Stroke(_)) = gesture.get_value() {
-            studio.edit(|ws| ws.end_stroke());
+        match gesture.get_value() {
+            Some(Gesture::Stroke(_)) => studio.edit(|ws| ws.end_stroke()),
+            Some(Gesture::Window(_)) => studio.run_model(),
+            _ => {}
         }
         gesture.set_value(None);
     };
@@ -489,6 +515,10 @@ fn ViewCanvas(view: View) -> impl IntoView {
                     PairSource::Twin { views, .. } => {
                         let c = if view == View::A { views.a } else { views.b };
                         format!(" · C-arm {:+.0}° / {:+.0}°", c.primary_deg, c.secondary_deg)
+                    }
+                    PairSource::Dicom { views, frame, .. } => {
+                        let c = if view == View::A { views.a } else { views.b };
+                        format!(" · frame {} · C-arm {:+.0}° / {:+.0}°", frame + 1, c.primary_deg, c.secondary_deg)
                     }
                 }))}
                 {move || {

@@ -103,7 +103,7 @@ pub fn twin_push_cine(size: usize, frames: usize, seed: u64) -> Result<TwinCine,
         } else {
             0.5
         };
-        let mut params = scene.clone();
+        let mut params = scene;
         params.tip_force_n = scene.tip_force_n * (std::f64::consts::PI * phase).sin();
         let (rod_config, base) = params.rod(&config.rod);
         let shape = rod::solve(&rod_config, &base, params.tip_force_n).map_err(unsolvable)?;
