@@ -67,6 +67,7 @@ pub fn parse(file: &str, bytes: &[u8]) -> Result<DicomObject, DicomError> {
             cause: None,
         });
     };
+    check_element_lengths(file, body)?;
     OpenFileOptions::new()
         .read_preamble(ReadPreamble::Never)
         .from_reader(body)
@@ -102,6 +103,152 @@ pub fn parse(file: &str, bytes: &[u8]) -> Result<DicomObject, DicomError> {
                 cause: Some(Box::new(error)),
             },
         })
+}
+
+/// The transfer syntaxes whose data sets are not explicit VR little endian.
+const IMPLICIT_VR_LITTLE_ENDIAN: &str = "1.2.840.10008.1.2";
+const EXPLICIT_VR_BIG_ENDIAN: &str = "1.2.840.10008.1.2.2";
+const DEFLATED: &str = "1.2.840.10008.1.2.1.99";
+
+/// Explicit VRs with a 2-byte length (PS3.5 7.1.2). Every other VR, an unknown one too (which
+/// dicom-rs reads as UN), has 2 reserved bytes and a 4-byte length.
+const SHORT_VRS: [&[u8; 2]; 21] = [
+    b"AE", b"AS", b"AT", b"CS", b"DA", b"DS", b"DT", b"FL", b"FD", b"IS", b"LO", b"LT", b"PN",
+    b"SH", b"SL", b"SS", b"ST", b"TM", b"UI", b"UL", b"US",
+];
+
+/// Walks the element headers of a Part 10 body (from `DICM`) and refuses any element or item
+/// whose defined length runs past the end of the bytes, before dicom-rs reads it: its parser
+/// reserves an element's claimed length up front, so a 2 KB file claiming 4 GiB of pixel data
+/// would otherwise ask for 4 GiB. Elements of undefined length are walked into (sequences,
+/// encapsulated pixel data); deflated data sets are left to dicom-rs. Headers cut short are left
+/// to dicom-rs too, which reports them as truncated.
+fn check_element_lengths(file: &str, body: &[u8]) -> Result<(), DicomError> {
+    let mut at = 4; // after `DICM`
+    let mut explicit = true;
+    let mut big_endian = false;
+    let mut in_meta = true;
+    while at + 8 <= body.len() {
+        let u16_at = |i: usize, big: bool| {
+            let b = [body[i], body[i + 1]];
+            if big {
+                u16::from_be_bytes(b)
+            } else {
+                u16::from_le_bytes(b)
+            }
+        };
+        let u32_at = |i: usize, big: bool| {
+            let b = [body[i], body[i + 1], body[i + 2], body[i + 3]];
+            if big {
+                u32::from_be_bytes(b)
+            } else {
+                u32::from_le_bytes(b)
+            }
+        };
+        // The file meta group is always explicit VR little endian.
+        let group_le = u16_at(at, false);
+        if in_meta && group_le != 0x0002 {
+            in_meta = false;
+        }
+        let big = big_endian && !in_meta;
+        let (group, element) = (u16_at(at, big), u16_at(at + 2, big));
+        let (length, header) = if group == 0xFFFE {
+            // Items and delimiters: no VR, a 4-byte length.
+            (u32_at(at + 4, big), 8)
+        } else if explicit || in_meta {
+            let vr = [body[at + 4], body[at + 5]];
+            if SHORT_VRS.contains(&&vr) {
+                (u32::from(u16_at(at + 6, big)), 8)
+            } else {
+                if at + 12 > body.len() {
+                    return Ok(());
+                }
+                (u32_at(at + 8, big), 12)
+            }
+        } else {
+            (u32_at(at + 4, big), 8)
+        };
+        at += header;
+        if length == u32::MAX || (group == 0xFFFE && element != 0xE000) {
+            // Undefined length (walk into it) or a delimiter.
+            continue;
+        }
+        let length = length as usize;
+        if length > body.len() - at {
+            return Err(DicomError::Truncated {
+                file: file.into(),
+                reason: format!(
+                    "element ({group:04X},{element:04X}) claims {length} bytes but {} remain",
+                    body.len() - at
+                ),
+                cause: None,
+            });
+        }
+        if in_meta && (group, element) == (0x0002, 0x0010) {
+            let uid = String::from_utf8_lossy(&body[at..at + length]);
+            match uid.trim_end_matches(['\0', ' ']) {
+                IMPLICIT_VR_LITTLE_ENDIAN => explicit = false,
+                EXPLICIT_VR_BIG_ENDIAN => big_endian = true,
+                DEFLATED => return Ok(()),
+                _ => {}
+            }
+        }
+        // An item of defined length is skipped whole; its elements are bounded by it.
+        at += length;
+    }
+    Ok(())
+}
+
+/// The width and height a JPEG stream's frame header (SOFn) gives, if it has one.
+fn jpeg_frame_size(stream: &[u8]) -> Option<(u16, u16)> {
+    if !stream.starts_with(&[0xFF, 0xD8]) {
+        return None;
+    }
+    let mut at = 2;
+    while at + 9 < stream.len() {
+        if stream[at] != 0xFF {
+            return None;
+        }
+        let marker = stream[at + 1];
+        let length = usize::from(u16::from_be_bytes([stream[at + 2], stream[at + 3]]));
+        if (0xC0..=0xCF).contains(&marker) && !matches!(marker, 0xC4 | 0xC8 | 0xCC) {
+            let height = u16::from_be_bytes([stream[at + 5], stream[at + 6]]);
+            let width = u16::from_be_bytes([stream[at + 7], stream[at + 8]]);
+            return Some((width, height));
+        }
+        at += 2 + length;
+    }
+    None
+}
+
+/// Refuses encapsulated JPEG frames whose own size differs from Rows x Columns before they are
+/// decoded: a larger frame overruns dicom-rs's frame buffer (a panic), and a frame claiming
+/// 65535 x 65535 pixels makes the decoder allocate them infallibly (an abort).
+fn check_jpeg_frames(object: &DicomObject, file: &str, size: ImageSize) -> Result<(), DicomError> {
+    let Some(fragments) = object
+        .element_opt(tags::PIXEL_DATA)
+        .ok()
+        .flatten()
+        .and_then(|e| e.value().fragments())
+    else {
+        return Ok(());
+    };
+    for fragment in fragments {
+        if let Some((width, height)) = jpeg_frame_size(fragment) {
+            if (usize::from(width), usize::from(height)) != (size.width, size.height) {
+                return Err(DicomError::Attribute {
+                    file: file.into(),
+                    attribute: "PixelData",
+                    problem: format!(
+                        "holds a JPEG frame of {width} x {height} pixels; Rows and Columns say \
+                         {size}"
+                    ),
+                    cause: None,
+                });
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Reads one file's frames, window, geometry and timing from its Part 10 bytes; `file` names it
@@ -179,6 +326,14 @@ fn read_frames(object: &DicomObject, file: &str) -> Result<Frames, DicomError> {
         count(tags::COLUMNS, "Columns")? as usize,
         count(tags::ROWS, "Rows")? as usize,
     );
+    if size.pixels() == 0 {
+        return Err(DicomError::Attribute {
+            file: file.into(),
+            attribute: if size.width == 0 { "Columns" } else { "Rows" },
+            problem: "is 0: an image has at least one pixel".into(),
+            cause: None,
+        });
+    }
     let frame_count = number(object, file, tags::NUMBER_OF_FRAMES, "NumberOfFrames")?
         .map_or(1, |n| n.max(1.0) as usize);
     let signed = number(
@@ -200,13 +355,19 @@ fn read_frames(object: &DicomObject, file: &str) -> Result<Frames, DicomError> {
             cause: None,
         });
     }
+    check_jpeg_frames(object, file, size)?;
     let decoded = object.decode_pixel_data().map_err(|e| DicomError::Decode {
         file: file.into(),
         cause: Box::new(e) as Cause,
     })?;
     let bytes_per_sample = if bits_allocated == 8 { 1 } else { 2 };
-    let needed = size.pixels() * frame_count * bytes_per_sample;
     let data = decoded.data();
+    // Checked: a NumberOfFrames of 1e30 must not wrap around to a small size.
+    let needed = size
+        .pixels()
+        .checked_mul(frame_count)
+        .and_then(|n| n.checked_mul(bytes_per_sample))
+        .unwrap_or(usize::MAX);
     if data.len() < needed {
         return Err(DicomError::Truncated {
             file: file.into(),

@@ -126,7 +126,7 @@ fn planes_with_different_frame_counts_are_not_paired() {
 // Property tests (issue #13, docs/reliability.md): arbitrary bytes, mutated XA files and headers
 // claiming any size are a cine that holds together or an error naming the file, never a panic;
 // a written cine reads back exactly. That reading never asks for memory out of proportion to the
-// file is checked too, by `#[ignore]`d tests: it fails today (bugs found, not fixed here).
+// file is checked too (the bugs these found are fixed in `file.rs`; docs/reliability.md).
 // ---------------------------------------------------------------------------------------------
 
 /// Records each thread's largest allocation request (see `properties::largest_allocation`).
@@ -218,8 +218,7 @@ mod properties {
         /// What CI checks.
         NoPanic,
         /// That, and no single allocation out of proportion to the file ([`allowance`]), and no
-        /// cine of zero pixels. Fails today (docs/reliability.md, "Bugs found, not fixed"): the
-        /// `#[ignore]`d tests below.
+        /// cine of zero pixels (docs/reliability.md, "Bugs found and fixed").
         Bounded,
     }
 
@@ -524,14 +523,12 @@ mod properties {
             }
         }
 
-        // Bugs found, not fixed here (crates/hnet-dicom/src belongs to other work; see
-        // docs/reliability.md for the inputs and the proposed fix). Each property below fails
-        // today; run them with `cargo test -p hnet-dicom --test bad_input -- --ignored`.
+        // The bugs these found (docs/reliability.md) are fixed in `file.rs`:
+        // `check_element_lengths`, `check_jpeg_frames` and the refusal of a zero Rows/Columns.
 
         /// dicom-rs's parser reserves and zero-fills an element's claimed length (up to 4 GiB)
         /// before reading it: a 2 KB file can ask for gigabytes.
         #[test]
-        #[ignore = "bug: dicom-parser allocates an element's claimed length up front"]
         fn any_bytes_ask_for_memory_in_proportion_to_the_file(
             prefix in 0usize..3,
             bytes in proptest::collection::vec(any::<u8>(), 0..2048),
@@ -540,13 +537,11 @@ mod properties {
         }
 
         #[test]
-        #[ignore = "bug: dicom-parser allocates an element's claimed length up front; zero Rows is read"]
         fn a_mutated_cine_asks_for_memory_in_proportion_to_the_file(file in 0usize..4, edits in edits()) {
             mutated(file, &edits, Expect::Bounded)?;
         }
 
         #[test]
-        #[ignore = "bug: dicom-parser allocates an element's claimed length up front"]
         fn a_pixel_data_length_claiming_any_size_is_refused_before_it_is_allocated(
             file in 0usize..4,
             length in any_length(),
@@ -557,7 +552,6 @@ mod properties {
         /// Aborts the test binary (jpeg-decoder allocates the frame its SOF claims, infallibly),
         /// or panics in dicom-rs's JPEG adapter when the frame is larger than Rows x Columns.
         #[test]
-        #[ignore = "bug: a JPEG frame's claimed size is allocated, or overruns the frame buffer"]
         fn a_jpeg_frame_claiming_any_size_is_refused_or_bounded(
             size in [any::<u16>(), any::<u16>()],
             edits in proptest::option::of(edits()),
@@ -621,18 +615,16 @@ mod properties {
         }
     }
 
-    // The smallest inputs of the bugs above, one test each (ignored: each fails today).
+    // The smallest inputs of the bugs above, one regression test each.
 
     /// dicom-parser reserves 4 GiB for a 2 KB file's Pixel Data claiming 4 GiB - 2 bytes.
     #[test]
-    #[ignore = "bug: dicom-parser allocates an element's claimed length up front"]
     fn a_pixel_data_length_of_4_gib_is_refused_before_it_is_allocated() {
         pixel_data_claiming(0, u32::MAX - 1, Expect::Bounded).unwrap();
     }
 
     /// Rows 0 (or Columns 0): read as a cine of zero frames of 0 pixels, not refused.
     #[test]
-    #[ignore = "bug: Rows or Columns 0 is read as a cine of no frames"]
     fn zero_rows_or_columns_are_refused() {
         for tag in [tags::ROWS, tags::COLUMNS] {
             let mut object = xa_object(&plain_cine(ImageSize::square(8), 8, 3));
@@ -645,7 +637,6 @@ mod properties {
     /// A JPEG frame larger than Rows x Columns: dicom-rs's JPEG adapter copies it past the end
     /// of its frame buffer.
     #[test]
-    #[ignore = "bug: a JPEG frame larger than Rows x Columns overruns the frame buffer"]
     fn a_jpeg_frame_larger_than_its_header_is_refused() {
         jpeg_claiming([64, 64], None, Expect::Bounded).unwrap();
     }
@@ -653,7 +644,6 @@ mod properties {
     /// A JPEG frame claiming 65535 x 65535 pixels: jpeg-decoder allocates them (4 GiB)
     /// infallibly, which aborts the process.
     #[test]
-    #[ignore = "bug: a JPEG frame's claimed size is allocated infallibly (aborts)"]
     fn a_jpeg_frame_claiming_65535_square_is_refused() {
         jpeg_claiming([u16::MAX, u16::MAX], None, Expect::Bounded).unwrap();
     }
