@@ -234,18 +234,17 @@ fn check_jpeg_frames(object: &DicomObject, file: &str, size: ImageSize) -> Resul
         return Ok(());
     };
     for fragment in fragments {
-        if let Some((width, height)) = jpeg_frame_size(fragment) {
-            if (usize::from(width), usize::from(height)) != (size.width, size.height) {
-                return Err(DicomError::Attribute {
-                    file: file.into(),
-                    attribute: "PixelData",
-                    problem: format!(
-                        "holds a JPEG frame of {width} x {height} pixels; Rows and Columns say \
-                         {size}"
-                    ),
-                    cause: None,
-                });
-            }
+        if let Some((width, height)) = jpeg_frame_size(fragment)
+            && (usize::from(width), usize::from(height)) != (size.width, size.height)
+        {
+            return Err(DicomError::Attribute {
+                file: file.into(),
+                attribute: "PixelData",
+                problem: format!(
+                    "holds a JPEG frame of {width} x {height} pixels; Rows and Columns say {size}"
+                ),
+                cause: None,
+            });
         }
     }
     Ok(())
