@@ -49,6 +49,8 @@ pub struct Engine {
     pub header: Option<WeightsHeader>,
     /// The weights file, to rebuild the engine on another backend.
     pub weights: Option<Rc<[u8]>>,
+    /// What the WebGPU result check found, on WebGPU ([`crate::webgpu_check`]).
+    pub check: Option<String>,
 }
 
 /// What H-Net says about one pair, at [`WORK_SIZE`].
@@ -143,6 +145,7 @@ impl Engine {
             origin: WeightsOrigin::Untrained,
             header: None,
             weights: None,
+            check: None,
         }
     }
 

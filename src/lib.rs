@@ -14,6 +14,7 @@
 //!   the force trace;
 //! - [`export`]: the labeled pairs as a dataset zip;
 //! - [`force_reading`]: what a force estimate can be said to show against the ablation band;
+//! - [`webgpu_check`]: WebGPU's result on a check pair against the CPU's, before it is trusted;
 //! - [`keymap`]: every keyboard shortcut, for the handlers, the help list and the tooltips;
 //! - [`error_text`]: an error and its causes as one message.
 //!
@@ -30,6 +31,7 @@ pub mod imaging;
 pub mod keymap;
 pub mod orbit_camera;
 pub mod twin_live;
+pub mod webgpu_check;
 pub mod workspace;
 
 #[cfg(target_arch = "wasm32")]

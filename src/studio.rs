@@ -13,12 +13,13 @@ use crate::browser::{download, now_ms};
 use crate::bundled::{self, FetchError};
 use crate::catheter_3d::{Catheter3d, PairGeometry, PairMasks, pair_views, reconstruct_pair};
 use crate::cine::CinePlayer;
-use crate::compute::{self, BackendChoice};
+use crate::compute::{self, Backend, BackendChoice};
 use crate::engine::{Engine, EngineError, Prediction, WeightsOrigin};
 use crate::error_text::with_causes;
 use crate::orbit_camera::OrbitCamera;
 use crate::storage;
 use crate::twin_live::{TwinControls, XrayBackground};
+use crate::webgpu_check;
 use crate::workspace::{LabeledPair, RemovedPair, Tool, View, Workspace};
 use hnet_twin::carm::Biplane;
 
@@ -801,9 +802,77 @@ async fn load_engine(
                 )
             }),
     };
-    Ok(match weights {
+    let engine = match weights {
         Some((bytes, name, origin)) => Engine::from_weights(bytes, &name, origin, device, backend)?,
         None => Engine::untrained(device, backend)?,
+    };
+    Ok(match engine.backend {
+        Backend::WebGpu => check_webgpu(engine).await?,
+        Backend::Cpu { .. } => engine,
+    })
+}
+
+/// Runs `engine` (on WebGPU) and the same weights on the CPU on the check pair
+/// ([`webgpu_check`]): within the tolerances the WebGPU engine is kept, with what was found;
+/// beyond them, or when WebGPU fails, the CPU engine is used and its reason says why.
+async fn check_webgpu(engine: Engine) -> Result<Engine, LoadError> {
+    let Some(bytes) = engine.weights.clone() else {
+        return Ok(Engine {
+            check: Some("not checked against the CPU (untrained weights)".into()),
+            ..engine
+        });
+    };
+    let scale = web_sys::window()
+        .and_then(|w| w.location().search().ok())
+        .map_or(1.0, |query| webgpu_check::tolerance_scale(&query));
+    let (name, origin) = (engine.weights_name.clone(), engine.origin.clone());
+    let cpu = |reason: String| {
+        Engine::from_weights(
+            bytes.clone(),
+            &name,
+            origin.clone(),
+            burn::tensor::Device::flex(),
+            Backend::Cpu { reason },
+        )
+    };
+    let pair = match webgpu_check::check_pair() {
+        Ok(pair) => pair,
+        Err(e) => {
+            return Ok(Engine {
+                check: Some(format!(
+                    "not checked against the CPU: the check pair could not be made ({})",
+                    with_causes(&e)
+                )),
+                ..engine
+            });
+        }
+    };
+    let reference = Rc::new(cpu(String::new())?);
+    let expected = reference.infer(&pair.view_a, &pair.view_b).await?;
+    let engine = Rc::new(engine);
+    let found = match engine.clone().infer(&pair.view_a, &pair.view_b).await {
+        Ok(found) => found,
+        Err(e) => {
+            return Ok(cpu(format!(
+                "WebGPU failed on a check pair ({}), so the CPU is used",
+                with_causes(&e)
+            ))?);
+        }
+    };
+    fn output(p: &Prediction) -> webgpu_check::Output<'_> {
+        webgpu_check::Output {
+            masks: [&p.mask_a[..], &p.mask_b[..]],
+            force_n: p.force_n,
+        }
+    }
+    let difference = webgpu_check::Difference::between(output(&expected), output(&found));
+    if !difference.within(scale) {
+        return Ok(cpu(difference.refusal(scale))?);
+    }
+    let engine = Rc::try_unwrap(engine).unwrap_or_else(|_| unreachable!("no inference holds it"));
+    Ok(Engine {
+        check: Some(difference.text()),
+        ..engine
     })
 }
 

@@ -466,3 +466,20 @@ test("a DICOM cine: sample, step, scrub, play, window/level, trace with cancel, 
   assert.deepEqual(errors, []);
   await page.close();
 });
+
+test("WebGPU is checked against the CPU on a check pair before it is trusted; a mismatch falls back to the CPU and says why", async () => {
+  for (const [query, expected] of [
+    ["", { backend: /^WebGPU$/, why: "#backend-check", text: /masks within [\d.e-]+, force within [\d.e-]+ N of the CPU on a check pair/ }],
+    ["?webgpu-tolerance-scale=-1", { backend: /^CPU/, why: "#backend-reason", text: /WebGPU's result on a check pair differs from the CPU's .*so the CPU is used/ }],
+  ]) {
+    const { page, errors } = await openPage(context, server.url + query);
+    await waitForModel(page);
+    await page.selectOption("#backend-choice", "webgpu");
+    await page.waitForSelector("#model-status [data-state=loading]", { state: "detached", timeout: 180_000 });
+    await waitForModel(page);
+    assert.match(await page.textContent("#backend"), expected.backend);
+    assert.match(await page.textContent(expected.why), expected.text);
+    assert.deepEqual(errors, []);
+    await page.close();
+  }
+});

@@ -80,6 +80,9 @@ pub fn ModelBar() -> impl IntoView {
                                 {engine.backend.reason().map(|why| view! {
                                     <dd id="backend-reason" class="why" title=why.to_string()>{format!("({why})")}</dd>
                                 })}
+                                {engine.check.clone().map(|check| view! {
+                                    <dd id="backend-check" class="why">{format!("({check})")}</dd>
+                                })}
                             </div>
                             <div><dt>"Parameters"</dt><dd id="params">{engine.params}</dd></div>
                             <div>
