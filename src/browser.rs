@@ -16,6 +16,8 @@ use wasm_bindgen_futures::JsFuture;
 pub struct JsError {
     /// What the browser said.
     pub message: String,
+    /// The error's name (`QuotaExceededError`, `AbortError`, ...), empty when it has none.
+    pub name: String,
 }
 
 impl JsError {
@@ -23,6 +25,7 @@ impl JsError {
     pub fn missing(what: &str) -> Self {
         Self {
             message: what.to_string(),
+            name: String::new(),
         }
     }
 }
@@ -31,11 +34,14 @@ impl From<JsValue> for JsError {
     /// An `Error` (a `DOMException` too) gives its message, a string itself; anything else is
     /// shown as the browser's console would.
     fn from(value: JsValue) -> Self {
-        let message = match value.dyn_ref::<js_sys::Error>() {
-            Some(error) => String::from(error.message()),
-            None => value.as_string().unwrap_or_else(|| format!("{value:?}")),
+        let (message, name) = match value.dyn_ref::<js_sys::Error>() {
+            Some(error) => (String::from(error.message()), String::from(error.name())),
+            None => (
+                value.as_string().unwrap_or_else(|| format!("{value:?}")),
+                String::new(),
+            ),
         };
-        Self { message }
+        Self { message, name }
     }
 }
 

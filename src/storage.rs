@@ -2,13 +2,15 @@
 //! sent anywhere.
 //!
 //! One record per pair in the object store `pairs`, keyed by the pair's id: its metadata as JSON
-//! and its images and masks as PNG bytes.
+//! and its images and masks as PNG bytes. A save or a deletion counts as done only once its
+//! transaction has committed: a write that the browser refuses (its storage full) or that a
+//! reload interrupts leaves the pair's previous record whole, and every other record untouched.
 
 use js_sys::{Array, Object, Promise, Reflect, Uint8Array};
 use wasm_bindgen::JsCast;
 use wasm_bindgen::prelude::*;
 use wasm_bindgen_futures::JsFuture;
-use web_sys::{IdbDatabase, IdbObjectStore, IdbRequest, IdbTransactionMode};
+use web_sys::{IdbDatabase, IdbObjectStore, IdbRequest, IdbTransaction, IdbTransactionMode};
 
 use hnet_twin::dataset::{ImageRef, Split, encode_png};
 
@@ -28,6 +30,13 @@ pub enum StorageError {
     /// The database could not be opened.
     #[error("browser storage (IndexedDB `hnet-studio`) cannot be opened")]
     Open(#[source] JsError),
+    /// The browser refused the write: the page's storage is full.
+    #[error(
+        "the browser's storage for this page is full: this change stays on the page until it is \
+         closed; export the labels (zip) and delete pairs, or free space in the browser's site \
+         settings. Pairs saved before are kept"
+    )]
+    Full(#[source] JsError),
     /// A request to the store of pairs was refused or failed.
     #[error("{action} the browser's store `pairs` failed")]
     Request {
@@ -51,9 +60,13 @@ pub enum StorageError {
 impl StorageError {
     /// The error of a failed request, for `map_err`.
     fn request(action: &'static str) -> impl Fn(JsValue) -> Self {
-        move |e| Self::Request {
-            action,
-            cause: e.into(),
+        move |e| {
+            let cause = JsError::from(e);
+            if cause.name == "QuotaExceededError" {
+                Self::Full(cause)
+            } else {
+                Self::Request { action, cause }
+            }
         }
     }
 }
@@ -111,6 +124,30 @@ async fn settled(request: &IdbRequest) -> Result<JsValue, JsValue> {
         request.set_onerror(Some(on_error.unchecked_ref()));
     });
     JsFuture::from(promise).await
+}
+
+/// Waits for a transaction to commit, or fails with why it was aborted (the transaction's own
+/// error, such as `QuotaExceededError`, which its requests may not report).
+async fn committed(transaction: &IdbTransaction) -> Result<(), JsValue> {
+    let promise = Promise::new(&mut |resolve, reject| {
+        let on_complete = Closure::once_into_js(move |_: web_sys::Event| {
+            let _ = resolve.call0(&JsValue::NULL);
+        });
+        let failed = transaction.clone();
+        let reject_with = move |_: web_sys::Event| {
+            let error = failed.error().map_or_else(
+                || JsValue::from_str("the transaction was aborted"),
+                JsValue::from,
+            );
+            let _ = reject.call1(&JsValue::NULL, &error);
+        };
+        let on_abort = Closure::once_into_js(reject_with.clone());
+        let on_error = Closure::once_into_js(reject_with);
+        transaction.set_oncomplete(Some(on_complete.unchecked_ref()));
+        transaction.set_onabort(Some(on_abort.unchecked_ref()));
+        transaction.set_onerror(Some(on_error.unchecked_ref()));
+    });
+    JsFuture::from(promise).await.map(drop)
 }
 
 async fn open() -> Result<IdbDatabase, StorageError> {
@@ -181,11 +218,14 @@ pub async fn save_pair(pair: &LabeledPair) -> Result<(), StorageError> {
     set("view_b", &png(&pair.view_b, 3)).map_err(&failed)?;
     set("mask_a", &png(&pair.mask_a, 1)).map_err(&failed)?;
     set("mask_b", &png(&pair.mask_b, 1)).map_err(&failed)?;
-    let request = store(&db, IdbTransactionMode::Readwrite)
+    let transaction = db
+        .transaction_with_str_and_mode(STORE, IdbTransactionMode::Readwrite)
+        .map_err(&failed)?;
+    transaction
+        .object_store(STORE)
         .and_then(|store| store.put_with_key(&record, &JsValue::from_str(&pair.id)))
         .map_err(&failed)?;
-    settled(&request).await.map_err(failed)?;
-    Ok(())
+    committed(&transaction).await.map_err(failed)
 }
 
 /// The store of pairs, in a transaction of `mode`.
@@ -198,11 +238,14 @@ fn store(db: &IdbDatabase, mode: IdbTransactionMode) -> Result<IdbObjectStore, J
 pub async fn delete_pair(id: &str) -> Result<(), StorageError> {
     let db = open().await?;
     let failed = StorageError::request("deleting from");
-    let request = store(&db, IdbTransactionMode::Readwrite)
+    let transaction = db
+        .transaction_with_str_and_mode(STORE, IdbTransactionMode::Readwrite)
+        .map_err(&failed)?;
+    transaction
+        .object_store(STORE)
         .and_then(|store| store.delete(&JsValue::from_str(id)))
         .map_err(&failed)?;
-    settled(&request).await.map_err(failed)?;
-    Ok(())
+    committed(&transaction).await.map_err(failed)
 }
 
 /// The image or mask `key` of the stored pair `id`, as it was saved.

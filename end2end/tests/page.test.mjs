@@ -443,8 +443,9 @@ test("a DICOM cine: sample, step, scrub, play, window/level, trace with cancel, 
   const plot = await page.locator("#force-trace").boundingBox();
   await page.mouse.click(plot.x + plot.width * 0.99, plot.y + plot.height / 2);
   assert.match(await page.textContent("#cine-frame"), /frame 24 of 24/);
+  const kept = await page.locator("#pairs li[data-id]").count();
   await page.click("#cine-keep");
-  await page.waitForSelector('#pairs li[data-id="pair-0001"]');
+  await page.waitForFunction((n) => document.querySelectorAll("#pairs li[data-id]").length === n + 1, kept);
 
   // Bad files: named, and the loaded cine stays.
   await page.setInputFiles("#dicom-plane-a", join(files, "notes.txt"));
@@ -482,4 +483,92 @@ test("WebGPU is checked against the CPU on a check pair before it is trusted; a 
     assert.deepEqual(errors, []);
     await page.close();
   }
+});
+
+test("storage faults: an older record loads, a damaged or newer one is named while the rest load, a full storage is named and loses nothing saved", async () => {
+  const { page, errors } = await openPage(context, server.url);
+  await waitForModel(page);
+  const stored = () =>
+    page.evaluate(async () => {
+      const db = await new Promise((ok, fail) => {
+        const r = indexedDB.open("hnet-studio", 1);
+        r.onsuccess = () => ok(r.result);
+        r.onerror = () => fail(r.error);
+      });
+      const keys = await new Promise((ok) => {
+        const r = db.transaction("pairs").objectStore("pairs").getAllKeys();
+        r.onsuccess = () => ok(r.result);
+      });
+      db.close();
+      return keys;
+    });
+  // The tests share one browser profile: pairs of earlier tests may be there.
+  const ids = () => page.locator("#pairs li[data-id]").evaluateAll((items) => items.map((li) => li.dataset.id));
+  await page.click("#tab-twin");
+  const before = await ids();
+  await page.click("#twin-keep");
+  await page.waitForFunction((n) => document.querySelectorAll("#pairs li[data-id]").length === n + 1, before.length);
+  const mine = (await ids()).find((id) => !before.includes(id));
+  for (let i = 0; i < 50 && !(await stored()).includes(mine); i++) await page.waitForTimeout(100);
+  // Records as an older page wrote them (no split), as a newer one might (an unknown source) and
+  // a damaged one (no images).
+  await page.evaluate(async (mine) => {
+    const db = await new Promise((ok) => {
+      const r = indexedDB.open("hnet-studio", 1);
+      r.onsuccess = () => ok(r.result);
+    });
+    const record = await new Promise((ok) => {
+      const r = db.transaction("pairs").objectStore("pairs").get(mine);
+      r.onsuccess = () => ok(r.result);
+    });
+    const meta = JSON.parse(record.metadata);
+    const put = (key, value) =>
+      new Promise((ok, fail) => {
+        const t = db.transaction("pairs", "readwrite");
+        t.objectStore("pairs").put(value, key);
+        t.oncomplete = ok;
+        t.onabort = () => fail(t.error);
+      });
+    const older = { ...meta, id: "zz-older" };
+    delete older.split;
+    await put("zz-older", { ...record, metadata: JSON.stringify(older) });
+    await put("zz-newer", { ...record, metadata: JSON.stringify({ ...meta, id: "zz-newer", source: { Hologram: {} } }) });
+    await put("zz-damaged", { metadata: JSON.stringify({ ...meta, id: "zz-damaged" }) });
+    db.close();
+  }, mine);
+  const expected = [...before, mine, "zz-older"].sort();
+  await page.reload();
+  await waitForModel(page);
+  await page.waitForSelector('#pairs li[data-id="zz-older"]');
+  assert.deepEqual(await ids(), expected);
+  await page.waitForFunction(() => /2 saved pair\(s\) could not be read/.test(document.querySelector("#notice")?.textContent));
+  const notice = await page.textContent("#notice");
+  assert.match(notice, /stored pair zz-damaged lacks `view_a`/);
+  assert.match(notice, /a stored pair's metadata cannot be read: unknown variant `Hologram`/);
+
+  // The browser's storage full: the new pair is named as not saved, with why; the saved ones stay.
+  const origin = new URL(server.url).origin;
+  const cdp = await context.newCDPSession(page);
+  await cdp.send("Storage.overrideQuotaForOrigin", { origin, quotaSize: 1 });
+  await page.click("#tab-twin");
+  await page.click("#twin-keep");
+  await page.waitForFunction(() => /not saved in the browser: the browser's storage for this page is full/.test(document.querySelector("#notice")?.textContent));
+  await cdp.send("Storage.overrideQuotaForOrigin", { origin });
+  await page.reload();
+  await waitForModel(page);
+  await page.waitForSelector('#pairs li[data-id="zz-older"]');
+  assert.deepEqual(await ids(), expected);
+  // Later tests share this profile: the records made here go.
+  await page.evaluate(async () => {
+    const db = await new Promise((ok) => {
+      const r = indexedDB.open("hnet-studio", 1);
+      r.onsuccess = () => ok(r.result);
+    });
+    const t = db.transaction("pairs", "readwrite");
+    for (const key of ["zz-older", "zz-newer", "zz-damaged"]) t.objectStore("pairs").delete(key);
+    await new Promise((ok) => (t.oncomplete = ok));
+    db.close();
+  });
+  assert.deepEqual(errors, []);
+  await page.close();
 });
