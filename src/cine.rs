@@ -324,7 +324,8 @@ fn view_slot(view: View) -> usize {
     }
 }
 
-#[cfg(test)]
+// Native only: the export test reads the zip with the `zip` crate, a native dev-dependency.
+#[cfg(all(test, not(target_arch = "wasm32")))]
 mod tests {
     use super::*;
     use hnet_dicom::{twin_cine, write_xa};
