@@ -84,12 +84,20 @@ pub struct TrainingConfig {
     pub max_valid_samples: Option<usize>,
     /// Threads decoding batches (or simulating them, with `stream`).
     pub num_workers: usize,
+    /// Most memory the training split may take decoded, MiB ([`DEFAULT_MAX_MEMORY_MIB`] when
+    /// absent): a larger split is read from disk batch by batch (PNGs decoded every epoch,
+    /// memory independent of the number of pairs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_memory_mib: Option<usize>,
     /// Train on pairs the twin simulates during training, fresh every epoch, instead of the
     /// dataset's train split (which then only gives the force statistics); validation stays
     /// the dataset's val split.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stream: Option<TwinStreamConfig>,
 }
+
+/// The training split's memory budget when a config sets none, MiB.
+pub const DEFAULT_MAX_MEMORY_MIB: usize = 2048;
 
 impl TrainingConfig {
     /// Checks that the settings describe a trainable run, before anything is loaded or built:

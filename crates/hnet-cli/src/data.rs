@@ -1,8 +1,10 @@
 //! Training pairs to batches of tensors: a dataset's split read from disk, or pairs the twin
 //! makes on the fly ([`twin_stream`]).
 //!
-//! A split is decoded, resized to the model's input size and kept in memory as bytes (about
-//! `2·(3+1)·H·W` bytes per pair), so that epochs after the first cost no PNG decoding.
+//! A split is decoded, resized to the model's input size and kept in memory as bytes
+//! ([`pair_bytes`] per pair), so that epochs after the first cost no PNG decoding; a training
+//! split too large for that is read from disk as the loader asks ([`DiskSplit`]), so that
+//! memory does not grow with the dataset.
 
 pub mod twin_stream;
 
@@ -51,6 +53,55 @@ impl StereoItem {
             force_known,
             id: id.into(),
         }
+    }
+}
+
+/// Bytes one pair takes in memory at `size`: both views (RGB) and both masks, a byte each.
+pub fn pair_bytes(size: ImageSize) -> usize {
+    2 * (3 + 1) * size.pixels()
+}
+
+/// The pairs of one split, read from disk pair by pair as the loader asks (decoded and resized
+/// every epoch): its memory is the manifest rows, whatever the number of pairs.
+#[derive(Debug, Clone)]
+pub struct DiskSplit {
+    dataset: Arc<Dataset>,
+    rows: Vec<ManifestRow>,
+    size: ImageSize,
+}
+
+impl DiskSplit {
+    /// `split` of `dataset` at `size`, at most `limit` pairs.
+    pub fn new(dataset: &Dataset, split: Split, size: ImageSize, limit: Option<usize>) -> Self {
+        Self {
+            rows: dataset
+                .split(split)
+                .take(limit.unwrap_or(usize::MAX))
+                .cloned()
+                .collect(),
+            dataset: Arc::new(dataset.clone()),
+            size,
+        }
+    }
+}
+
+impl BurnDataset<StereoItem> for DiskSplit {
+    fn get(&self, index: usize) -> Result<StereoItem, DatasetError> {
+        let row = self.rows.get(index).ok_or_else(|| {
+            DatasetError::new(std::io::Error::other(format!(
+                "pair {index} of {} requested",
+                self.rows.len()
+            )))
+        })?;
+        let pair = self
+            .dataset
+            .load_pair(row, Some(self.size))
+            .map_err(DatasetError::new)?;
+        Ok(StereoItem::new(pair, row.force_n, true, row.id.clone()))
+    }
+
+    fn len(&self) -> usize {
+        self.rows.len()
     }
 }
 

@@ -39,9 +39,9 @@ use self::metrics::{Quantity, StepMetric};
 use self::stopping::{StoppingRule, TimeBudget, non_finite_epochs, parse_duration};
 use self::trainee::StereoTrainee;
 use crate::backend::BackendChoice;
-use crate::config::{LearningRateSchedule, TrainingConfig, builtin_config};
+use crate::config::{DEFAULT_MAX_MEMORY_MIB, LearningRateSchedule, TrainingConfig, builtin_config};
 use crate::data::twin_stream::{EpochCounting, TwinStream};
-use crate::data::{StereoBatch, StereoBatcher, StereoSplit};
+use crate::data::{DiskSplit, StereoBatch, StereoBatcher, StereoSplit, pair_bytes};
 use crate::run_dir::{LOSS_METRIC, RunDir, RunInfo, log_name};
 
 /// What `hnet train` was asked to do.
@@ -162,14 +162,30 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
             (Arc::new(EpochCounting::new(loader, epochs_started)), pairs)
         }
         None => {
-            let train_split = load(Split::Train, config.max_train_samples)?;
-            let pairs = train_split.items.len();
-            eprintln!("loaded {pairs} training pairs at {}", config.image_size);
-            let loader = builder()
+            let limit = config.max_train_samples;
+            let pairs = dataset
+                .split(Split::Train)
+                .take(limit.unwrap_or(usize::MAX))
+                .count();
+            let budget_mib = config.max_memory_mib.unwrap_or(DEFAULT_MAX_MEMORY_MIB);
+            let decoded_mib = (pairs * pair_bytes(config.image_size)).div_ceil(1 << 20);
+            let builder = builder()
                 .shuffle(config.seed)
-                .set_device(device.clone().autodiff())
-                .build(train_split);
-            (loader, pairs)
+                .set_device(device.clone().autodiff());
+            if pairs > 0 && decoded_mib > budget_mib {
+                eprintln!(
+                    "reading {pairs} training pairs at {} from disk batch by batch ({decoded_mib} \
+                     MiB decoded would exceed max_memory_mib {budget_mib})",
+                    config.image_size
+                );
+                let split = DiskSplit::new(&dataset, Split::Train, config.image_size, limit);
+                (builder.build(split), pairs)
+            } else {
+                let train_split = load(Split::Train, limit)?;
+                let pairs = train_split.items.len();
+                eprintln!("loaded {pairs} training pairs at {}", config.image_size);
+                (builder.build(train_split), pairs)
+            }
         }
     };
     eprintln!(

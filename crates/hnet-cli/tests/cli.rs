@@ -324,6 +324,15 @@ fn a_time_budget_ends_training_cleanly_with_the_best_checkpoint() {
         "{metrics}"
     );
     assert!(runs.join("model.bpk").is_file());
+    // A training split larger than the memory budget is read from disk batch by batch.
+    let from_disk = edited_config(&dir, "from-disk", |c| c["max_memory_mib"] = 0.into());
+    let out = succeeds(train(&data, &dir.join("disk"), &from_disk).args(["--time-budget", "0s"]));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("from disk batch by batch") && stderr.contains("max_memory_mib 0"),
+        "{stderr}"
+    );
+    assert!(dir.join("disk/model.bpk").is_file());
     // A bad budget is refused before anything is written.
     let bad = fails(
         hnet()
