@@ -303,6 +303,8 @@ test("keyboard, screen readers and small screens", async () => {
   // The tabs: one tab stop, the arrow keys move the focus, Enter opens the focused tab.
   await page.focus("#tab-images");
   await page.keyboard.press("ArrowRight");
+  assert.equal(await page.evaluate(() => document.activeElement.id), "tab-cine");
+  await page.keyboard.press("ArrowRight");
   assert.equal(await page.evaluate(() => document.activeElement.id), "tab-twin");
   assert.equal(await page.getAttribute("#tab-twin", "aria-selected"), "false");
   await page.keyboard.press("Enter");
@@ -550,14 +552,29 @@ test("storage faults: an older record loads, a damaged or newer one is named whi
   const origin = new URL(server.url).origin;
   const cdp = await context.newCDPSession(page);
   await cdp.send("Storage.overrideQuotaForOrigin", { origin, quotaSize: 1 });
-  await page.click("#tab-twin");
-  await page.click("#twin-keep");
-  await page.waitForFunction(() => /not saved in the browser: the browser's storage for this page is full/.test(document.querySelector("#notice")?.textContent));
+  // Chromium may let a first write through before it has counted the origin's usage against the
+  // new quota: keep pairs until one is refused (at most three).
+  const full = /not saved in the browser: the browser's storage for this page is full/;
+  let refused = false;
+  for (let attempt = 0; attempt < 3 && !refused; attempt++) {
+    await page.click("#tab-images");
+    await page.click("#tab-twin");
+    await page.click("#twin-keep");
+    refused = await page
+      .waitForFunction((re) => new RegExp(re).test(document.querySelector("#notice")?.textContent), full.source, { timeout: 10_000 })
+      .then(() => true, () => false);
+  }
+  assert.ok(refused, `no write was refused; the notice: ${await page.textContent("#notice")}`);
+  const added = (await ids()).filter((id) => !expected.includes(id));
   await cdp.send("Storage.overrideQuotaForOrigin", { origin });
   await page.reload();
   await waitForModel(page);
   await page.waitForSelector('#pairs li[data-id="zz-older"]');
-  assert.deepEqual(await ids(), expected);
+  // The pairs saved before the storage filled are all there (those kept while it was full are
+  // not, save any that Chromium let through before it counted the quota).
+  const reloaded = await ids();
+  for (const id of expected) assert.ok(reloaded.includes(id), `${id} lost: ${reloaded}`);
+  assert.ok(reloaded.every((id) => expected.includes(id) || added.includes(id)), `${reloaded}`);
   // Later tests share this profile: the records made here go.
   await page.evaluate(async () => {
     const db = await new Promise((ok) => {
