@@ -182,14 +182,43 @@ impl RunDir {
         epochs
     }
 
+    /// The last epoch whose checkpoint reads back whole, for `--resume`. A later one that cannot
+    /// be read (cut short or garbled by a fault after it was written) is set aside, each part
+    /// renamed to `*.bpk.damaged`, with a warning naming the file, and the one before it is taken.
+    pub fn last_readable_checkpoint(&self) -> anyhow::Result<Option<usize>> {
+        for epoch in self.checkpoint_epochs().into_iter().rev() {
+            let unreadable = CHECKPOINT_PARTS.iter().find_map(|part| {
+                let file = self.checkpoint_file(part, epoch);
+                burn::store::ModuleRecord::load(&file)
+                    .err()
+                    .map(|e| (file, e))
+            });
+            let Some((file, error)) = unreadable else {
+                return Ok(Some(epoch));
+            };
+            eprintln!(
+                "warning: checkpoint '{}' cannot be read ({error}): epoch {epoch}'s checkpoint is \
+                 set aside as *.bpk.damaged and an earlier one is used",
+                file.display()
+            );
+            self.set_aside(epoch, "damaged")?;
+        }
+        Ok(None)
+    }
+
     /// Sets aside epoch `epoch`'s checkpoint (each part renamed to `*.bpk.non-finite`, kept for
     /// inspection), so that `--resume` continues from the last checkpoint before it.
     pub fn set_aside_checkpoint(&self, epoch: usize) -> anyhow::Result<()> {
+        self.set_aside(epoch, "non-finite")
+    }
+
+    /// Renames each part of epoch `epoch`'s checkpoint to `*.bpk.<why>`.
+    fn set_aside(&self, epoch: usize, why: &str) -> anyhow::Result<()> {
         let dir = self.checkpoint_dir();
         for part in CHECKPOINT_PARTS {
             let file = self.checkpoint_file(part, epoch);
             if file.is_file() {
-                let aside = dir.join(format!("{part}-{epoch}.bpk.non-finite"));
+                let aside = dir.join(format!("{part}-{epoch}.bpk.{why}"));
                 std::fs::rename(&file, &aside)
                     .with_context(|| format!("cannot set aside '{}'", file.display()))?;
             }

@@ -92,7 +92,7 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
                 run.root().display()
             );
         }
-        run.checkpoint_epochs().last().copied()
+        run.last_readable_checkpoint()?
     } else {
         if !run.is_empty()? {
             bail!(

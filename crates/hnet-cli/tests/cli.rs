@@ -540,6 +540,23 @@ fn a_checkpoint_or_model_that_cannot_be_written_stops_the_run_and_resume_continu
     assert!(runs.join("model.bpk").is_file());
     let metrics = std::fs::read_to_string(runs.join("metrics.csv")).unwrap();
     assert!(metrics.contains("\n3,valid,"), "{metrics}");
+
+    // A checkpoint damaged after it was written (cut short): `--resume` names it, sets it aside
+    // and continues from an earlier one, never a panic.
+    let optim_3 = runs.join("checkpoint/optim-3.bpk");
+    let bytes = std::fs::read(&optim_3).unwrap();
+    std::fs::write(&optim_3, &bytes[..bytes.len() / 2]).unwrap();
+    let out = succeeds(&mut resume());
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        said.contains(&format!(
+            "checkpoint '{}' cannot be read",
+            optim_3.display()
+        )),
+        "{said}"
+    );
+    assert!(runs.join("checkpoint/optim-3.bpk.damaged").is_file());
+    assert!(!said.contains("resuming after epoch 3"), "{said}");
     std::fs::remove_dir_all(dir).ok();
 }
 
