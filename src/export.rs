@@ -126,28 +126,63 @@ fn describe(pair: &LabeledPair) -> (Vec<(String, String)>, serde_json::Value) {
     }
 }
 
-/// Builds the dataset zip of every complete pair (masks labeled and a force label); the others
-/// are listed in [`Export::skipped`]. Pairs keep their ids and their splits ([`export_splits`]:
-/// a pair's split never changes once given).
-pub fn dataset_zip(pairs: &[LabeledPair]) -> Result<Export, ExportError> {
-    let mut skipped = Vec::new();
-    let splits = export_splits(pairs);
-    let complete: Vec<(&LabeledPair, Split)> = pairs
-        .iter()
-        .zip(splits)
-        .filter(|(p, _)| {
-            if let Some(why) = p.incomplete_because() {
-                skipped.push((p.id.clone(), why));
-            }
-            p.is_complete()
+/// A dataset zip built pair by pair, so that the page can let the browser breathe between pairs
+/// (an export of 1,000 pairs takes tens of seconds). The plan (which pairs, their splits) is
+/// made once from the pairs then; each pair is then added by id from whatever the page holds.
+pub struct ExportBuilder {
+    /// The complete pairs' ids and splits, in export order.
+    planned: Vec<(String, Split)>,
+    /// Pairs left out, with why.
+    skipped: Vec<(String, &'static str)>,
+    /// The pairs added so far and their splits.
+    added: Vec<(String, Split)>,
+    archive: DatasetArchive,
+}
+
+impl ExportBuilder {
+    /// Plans the export of every complete pair (masks labeled and a force label); the others
+    /// are listed in [`Export::skipped`]. Pairs keep their ids and their splits
+    /// ([`export_splits`]: a pair's split never changes once given).
+    pub fn new(pairs: &[LabeledPair]) -> Result<Self, ExportError> {
+        let mut skipped = Vec::new();
+        let planned: Vec<(String, Split)> = pairs
+            .iter()
+            .zip(export_splits(pairs))
+            .filter(|(p, _)| {
+                if let Some(why) = p.incomplete_because() {
+                    skipped.push((p.id.clone(), why));
+                }
+                p.is_complete()
+            })
+            .map(|(p, split)| (p.id.clone(), split.unwrap_or(Split::Train)))
+            .collect();
+        if planned.is_empty() {
+            return Err(ExportError::NothingComplete);
+        }
+        Ok(Self {
+            planned,
+            skipped,
+            added: Vec::new(),
+            archive: DatasetArchive::new(DATASET_NAME),
         })
-        .map(|(p, split)| (p, split.unwrap_or(Split::Train)))
-        .collect();
-    if complete.is_empty() {
-        return Err(ExportError::NothingComplete);
     }
-    let mut archive = DatasetArchive::new(DATASET_NAME);
-    for &(pair, split) in &complete {
+
+    /// The ids of the pairs to export, in order.
+    pub fn planned(&self) -> impl Iterator<Item = &str> {
+        self.planned.iter().map(|(id, _)| id.as_str())
+    }
+
+    /// Adds planned pair number `index` as `pair` holds it now; `None` (the pair was deleted
+    /// since) leaves it out, listed as skipped.
+    pub fn add(&mut self, index: usize, pair: Option<&LabeledPair>) -> Result<(), ExportError> {
+        let Some((id, split)) = self.planned.get(index).cloned() else {
+            return Ok(());
+        };
+        let Some(pair) = pair.filter(|p| p.id == id && p.is_complete()) else {
+            self.skipped
+                .push((id, "deleted or changed during the export"));
+            return Ok(());
+        };
         let (extra, record) = describe(pair);
         // The label's shortest decimal form (0.12, not 0.11999999731779099).
         let force = pair
@@ -155,12 +190,12 @@ pub fn dataset_zip(pairs: &[LabeledPair]) -> Result<Export, ExportError> {
             .unwrap_or_default()
             .map(|f| f.to_string().parse::<f64>().unwrap_or(f64::from(f)));
         let row = ManifestRow {
-            id: pair.id.clone(),
+            id: id.clone(),
             split,
             force_n: force,
             extra,
         };
-        archive.add_pair(
+        self.archive.add_pair(
             row,
             [
                 image(&pair.view_a, 3),
@@ -170,25 +205,44 @@ pub fn dataset_zip(pairs: &[LabeledPair]) -> Result<Export, ExportError> {
             ],
             &record,
         )?;
+        self.added.push((id, split));
+        Ok(())
     }
-    let header = DatasetHeader::new(
-        ImageSize::square(WORK_SIZE),
-        complete.len(),
-        serde_json::json!({
-            "generator": "hnet-studio",
-            "version": env!("CARGO_PKG_VERSION"),
-            "masks": "labeled in the browser app (0 background, 255 catheter)",
-        }),
-    );
-    Ok(Export {
-        zip: archive.finish(&header)?,
-        exported: complete.iter().map(|(p, _)| p.id.clone()).collect(),
-        skipped,
-        empty_splits: [Split::Train, Split::Val, Split::Test]
-            .into_iter()
-            .filter(|s| complete.iter().all(|(_, split)| split != s))
-            .collect(),
-    })
+
+    /// The zip of the pairs added.
+    pub fn finish(self) -> Result<Export, ExportError> {
+        if self.added.is_empty() {
+            return Err(ExportError::NothingComplete);
+        }
+        let header = DatasetHeader::new(
+            ImageSize::square(WORK_SIZE),
+            self.added.len(),
+            serde_json::json!({
+                "generator": "hnet-studio",
+                "version": env!("CARGO_PKG_VERSION"),
+                "masks": "labeled in the browser app (0 background, 255 catheter)",
+            }),
+        );
+        Ok(Export {
+            zip: self.archive.finish(&header)?,
+            empty_splits: [Split::Train, Split::Val, Split::Test]
+                .into_iter()
+                .filter(|s| self.added.iter().all(|(_, split)| split != s))
+                .collect(),
+            exported: self.added.into_iter().map(|(id, _)| id).collect(),
+            skipped: self.skipped,
+        })
+    }
+}
+
+/// Builds the dataset zip of every complete pair at once ([`ExportBuilder`], pair by pair).
+pub fn dataset_zip(pairs: &[LabeledPair]) -> Result<Export, ExportError> {
+    let mut builder = ExportBuilder::new(pairs)?;
+    let ids: Vec<String> = builder.planned().map(str::to_string).collect();
+    for (index, id) in ids.iter().enumerate() {
+        builder.add(index, pairs.iter().find(|p| &p.id == id))?;
+    }
+    builder.finish()
 }
 
 // Native tests (`cargo test`); the browser tests are in tests/web.rs.
@@ -246,6 +300,22 @@ mod tests {
             dataset_zip(&none).unwrap_err(),
             ExportError::NothingComplete
         ));
+
+        // Built pair by pair (as the page does), a pair deleted meanwhile is left out and named.
+        let mut builder = ExportBuilder::new(&ws.pairs).unwrap();
+        let planned: Vec<String> = builder.planned().map(str::to_string).collect();
+        assert_eq!(planned, vec!["pair-0001", "pair-0003"]);
+        builder.add(0, ws.pair("pair-0001")).unwrap();
+        builder.add(1, None).unwrap();
+        let export = builder.finish().unwrap();
+        assert_eq!(export.exported, vec!["pair-0001"]);
+        assert!(
+            export
+                .skipped
+                .contains(&("pair-0003".into(), "deleted or changed during the export")),
+            "{:?}",
+            export.skipped
+        );
     }
 
     #[test]

@@ -3,9 +3,9 @@
 
 use leptos::prelude::*;
 
-use crate::browser::download;
+use crate::browser::{download, yield_to_browser};
 use crate::error_text::with_causes;
-use crate::export::{DATASET_NAME, dataset_zip};
+use crate::export::{DATASET_NAME, ExportBuilder};
 use crate::studio::Studio;
 use crate::workspace::PairSource;
 
@@ -43,32 +43,69 @@ pub fn PairList() -> impl IntoView {
         for id in assigned {
             studio.persist(Some(id));
         }
-        let result = studio.workspace.with_untracked(|ws| dataset_zip(&ws.pairs));
-        match result {
-            Ok(export) => {
-                let name = format!("{DATASET_NAME}.zip");
-                match download(&name, &export.zip, "application/zip") {
-                    Ok(()) => {
-                        let mut text =
-                            format!("{name}: {} pair(s) exported", export.exported.len());
-                        if !export.skipped.is_empty() {
-                            let skipped: Vec<String> = export
-                                .skipped
-                                .iter()
-                                .map(|(id, why)| format!("{id} ({why})"))
-                                .collect();
-                            text.push_str(&format!("; left out: {}", skipped.join(", ")));
-                        }
-                        match export.split_warning() {
-                            Some(warning) => studio.error(format!("{text}. Warning: {warning}")),
-                            None => studio.info(text),
-                        }
-                    }
-                    Err(e) => studio.error(with_causes(&e)),
+        let planned = studio
+            .workspace
+            .with_untracked(|ws| ExportBuilder::new(&ws.pairs));
+        let mut builder = match planned {
+            Ok(builder) => builder,
+            Err(e) => {
+                studio.error(with_causes(&e));
+                return;
+            }
+        };
+        let ids: Vec<String> = builder.planned().map(str::to_string).collect();
+        leptos::task::spawn_local(async move {
+            // Pair by pair, letting the browser repaint and take input every few pairs.
+            for (index, id) in ids.iter().enumerate() {
+                if index % 8 == 0 {
+                    studio.busy.set(Some(format!(
+                        "Exporting pair {} of {}…",
+                        index + 1,
+                        ids.len()
+                    )));
+                    yield_to_browser().await;
+                }
+                let added = studio
+                    .workspace
+                    .with_untracked(|ws| builder.add(index, ws.pair(id)));
+                if let Err(e) = added {
+                    studio.busy.set(None);
+                    studio.error(with_causes(&e));
+                    return;
                 }
             }
-            Err(e) => studio.error(with_causes(&e)),
-        }
+            studio.busy.set(Some("Writing the zip…".into()));
+            yield_to_browser().await;
+            let result = builder.finish();
+            studio.busy.set(None);
+            match result {
+                Ok(export) => {
+                    let name = format!("{DATASET_NAME}.zip");
+                    match download(&name, &export.zip, "application/zip") {
+                        Ok(()) => {
+                            let mut text =
+                                format!("{name}: {} pair(s) exported", export.exported.len());
+                            if !export.skipped.is_empty() {
+                                let skipped: Vec<String> = export
+                                    .skipped
+                                    .iter()
+                                    .map(|(id, why)| format!("{id} ({why})"))
+                                    .collect();
+                                text.push_str(&format!("; left out: {}", skipped.join(", ")));
+                            }
+                            match export.split_warning() {
+                                Some(warning) => {
+                                    studio.error(format!("{text}. Warning: {warning}"))
+                                }
+                                None => studio.info(text),
+                            }
+                        }
+                        Err(e) => studio.error(with_causes(&e)),
+                    }
+                }
+                Err(e) => studio.error(with_causes(&e)),
+            }
+        });
     };
     // Deleting asks first; the notice then offers to undo it. The question is about the pair on
     // screen, so it is withdrawn when another pair is shown.
@@ -104,7 +141,8 @@ pub fn PairList() -> impl IntoView {
                 </For>
             </ol>
             <div class="actions">
-                <button id="export" class="primary" disabled=move || complete() == 0 on:click=export>
+                <button id="export" class="primary"
+                    disabled=move || complete() == 0 || studio.busy.get().is_some() on:click=export>
                     {move || format!("Export {} complete pair(s) (.zip)", complete())}
                 </button>
                 <button id="delete-pair" disabled=move || current_id.with(Option::is_none) || studio.showing_draft()
