@@ -514,24 +514,25 @@ impl Studio {
 
     /// Moves the cine `delta` frames (pausing it), shows that frame and runs H-Net on it.
     pub fn step_cine(&self, delta: isize) {
-        if !self.cine.with_untracked(Option::is_some) {
-            return;
-        }
-        self.stop_playback();
-        self.cine
-            .update(|c| c.iter_mut().for_each(|c| c.step(delta)));
-        self.show_cine_frame();
-        self.run_model();
+        self.move_cine(|c| c.step(delta));
     }
 
     /// Shows cine frame `frame` (pausing the cine) and runs H-Net on it.
     pub fn seek_cine(&self, frame: usize) {
+        self.move_cine(|c| c.seek(frame));
+    }
+
+    /// Pauses the cine, moves it with `to`, shows the frame and runs H-Net on it.
+    fn move_cine(&self, to: impl FnOnce(&mut CinePlayer)) {
         if !self.cine.with_untracked(Option::is_some) {
             return;
         }
         self.stop_playback();
-        self.cine
-            .update(|c| c.iter_mut().for_each(|c| c.seek(frame)));
+        self.cine.update(|c| {
+            if let Some(c) = c {
+                to(c);
+            }
+        });
         self.show_cine_frame();
         self.run_model();
     }
