@@ -7,7 +7,10 @@
 //!   image accumulated in place, the batch split across threads and the partial sums added.
 //!
 //! `W` is the OIHW weight seen as an `out_channels x taps` matrix. A pointwise convolution
-//! (1x1, stride 1, no padding) skips the lowering: the image is its own lowered matrix.
+//! (1x1, stride 1, no padding) skips the lowering: the image is its own lowered matrix. Every
+//! other stride-1 convolution (all of H-Net's but the upsampling) computes its forward pass and
+//! weight gradient with no lowered matrix at all, straight from the zero-padded image
+//! ([`crate::direct`]).
 //!
 //! The products are [`crate::products`]'. With the `rayon` feature, images run on rayon's
 //! workers, one image per task (a single image gives gemm all the threads).
@@ -16,6 +19,7 @@ use alloc::vec;
 use alloc::vec::Vec;
 use core::cell::Cell;
 
+use crate::direct::{self, PaddedLayout};
 use crate::geometry::ConvGeometry;
 use crate::lowering::{lower, raise_adding};
 use crate::products::{MatrixView, Threads, broadcast_product, gemm_product};
@@ -75,6 +79,17 @@ pub fn forward(g: &ConvGeometry, x: &[f32], weight: &[f32], bias: Option<&[f32]>
     assert_eq!(x.len(), g.batch * g.in_channels * plane, "input size");
     assert_eq!(weight.len(), g.out_channels * taps, "weight size");
     let mut y = vec![0.0; g.batch * g.out_channels * out_plane];
+    if let Some(layout) = PaddedLayout::of(g) {
+        let packed = direct::pack_weight(weight, g.out_channels, taps);
+        for_each_image(g.batch, &mut y, |n, y| {
+            let x = &x[n * g.in_channels * plane..][..g.in_channels * plane];
+            with_lowered_buffer(layout.len(g.in_channels), |padded| {
+                layout.pad(g, x, padded);
+                direct::forward_image(g, &layout, padded, &packed, bias, y);
+            });
+        });
+        return y;
+    }
     // Output rows lowered (and multiplied) at a time: about BAND_PIXELS pixels, so that the band's
     // lowered matrix stays in cache instead of being written whole and read back.
     let band_rows = (BAND_PIXELS / g.width.output).clamp(1, g.height.output);
@@ -155,11 +170,19 @@ pub fn weight_gradient(g: &ConvGeometry, x: &[f32], dy: &[f32]) -> Vec<f32> {
     let groups = parallel_groups(g.batch);
     let per_group = g.batch.div_ceil(groups);
     let mut partials = vec![0.0; groups * weight_len];
+    let layout = PaddedLayout::of(g);
     for_each_image(groups, &mut partials, |group, dw| {
         let images = group * per_group..((group + 1) * per_group).min(g.batch);
         for (i, n) in images.enumerate() {
             let x = &x[n * g.in_channels * plane..][..g.in_channels * plane];
             let dy = &dy[n * g.out_channels * out_plane..][..g.out_channels * out_plane];
+            if let Some(layout) = &layout {
+                with_lowered_buffer(layout.len(g.in_channels), |padded| {
+                    layout.pad(g, x, padded);
+                    direct::add_weight_gradient(g, layout, padded, dy, dw);
+                });
+                continue;
+            }
             let dy = MatrixView::row_major(dy, g.out_channels, out_plane);
             with_lowered_image(g, x, |lowered| {
                 let lowered_t = MatrixView::row_major(lowered, taps, out_plane).transposed();

@@ -6,6 +6,8 @@
 //! 2-D convolution and a transposed 2-D convolution are each lowered to one matrix product per
 //! image ([`lowering`]), computed by register-blocked products written for these shapes
 //! ([`products`]), with the weight gradient as one accumulating product per image ([`kernels`]).
+//! Stride-1 convolutions skip the lowering: their forward pass and weight gradient read the
+//! zero-padded image directly ([`direct`]).
 //!
 //! Model code calls [`conv2d_module`] / [`conv_transpose2d_module`] where it would call a
 //! burn-nn module's `forward` (or [`conv2d`] / [`conv_transpose2d`] where it would call Burn's
@@ -19,6 +21,7 @@ extern crate alloc;
 
 pub mod backend;
 pub mod conformance;
+pub mod direct;
 pub mod geometry;
 pub mod kernels;
 pub mod lowering;

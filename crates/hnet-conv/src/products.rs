@@ -18,7 +18,7 @@
 /// # Safety
 /// Implementations use target-specific instructions: call them only where the target has them
 /// (the `*_avx2` entry points are only called after run-time detection).
-trait Lanes: Copy {
+pub(crate) trait Lanes: Copy {
     /// `f32` values per vector.
     const WIDTH: usize;
     fn zero() -> Self;
@@ -65,7 +65,7 @@ impl Lanes for f32 {
 }
 
 #[cfg(target_arch = "x86_64")]
-mod avx2 {
+pub(crate) mod avx2 {
     use core::arch::x86_64::*;
 
     /// Eight lanes of AVX, with FMA.
@@ -100,7 +100,7 @@ mod avx2 {
 }
 
 #[cfg(target_arch = "wasm32")]
-mod simd128 {
+pub(crate) mod simd128 {
     use core::arch::wasm32::*;
 
     /// Four lanes of WebAssembly SIMD128 (no FMA: a multiply and an add).
@@ -136,7 +136,7 @@ mod simd128 {
 
 /// True when this x86-64 CPU has AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
-fn has_avx2() -> bool {
+pub(crate) fn has_avx2() -> bool {
     std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
 }
 

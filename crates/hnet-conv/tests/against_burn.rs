@@ -65,6 +65,27 @@ fn wide_images_lowered_in_bands_match_burn() {
     }
 }
 
+/// Stride-1 convolutions go to the direct kernels (`hnet_conv::direct`): rows that are not a
+/// whole number of vectors (the weight gradient's zero-extended tail), more output channels than
+/// one register tile, dilation, and padding on one side only.
+#[test]
+fn direct_stride_1_convolutions_match_burn() {
+    for (size, dilation, padding, out_channels) in [
+        ([5, 13], [1, 1], [(1, 1), (1, 1)], 7),
+        ([9, 20], [2, 1], [(2, 0), (0, 3)], 13),
+        ([3, 3], [1, 2], [(0, 0), (2, 2)], 1),
+    ] {
+        check(&ConvCase {
+            size,
+            dilation,
+            padding,
+            out_channels,
+            ..ConvCase::h_net_layer(false, 13)
+        })
+        .unwrap();
+    }
+}
+
 #[test]
 fn flex_and_autodiff_flex_reach_the_project_kernels() {
     use burn::tensor::DType;

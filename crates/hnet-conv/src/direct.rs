@@ -1,0 +1,385 @@
+//! Stride-1 convolutions computed straight from the zero-padded image (a *direct*, or
+//! implicit-GEMM, convolution): no lowered matrix is written and read back.
+//!
+//! Each image is first copied into a buffer that makes its zero padding explicit
+//! ([`PaddedLayout`]): `in_channels` planes of `rows x row` pixels, where `row`, the padded row
+//! length, is `output width + (kernel width - 1) · dilation`. With a stride of one, the pixel
+//! that tap `(i, j)` reads for output pixel `(oh, ow)` lies at offset
+//! `oh · row + ow + tap_offset(i, j)` of its channel's plane, with
+//! `tap_offset(i, j) = i · dilation_h · row + j · dilation_w`: consecutive output pixels of a row
+//! read consecutive addresses. So
+//!
+//! - the forward pass computes its outputs over the flat position `p = oh · row + ow`, loading
+//!   vectors of consecutive positions straight from the padded planes; the `row - output width`
+//!   positions per row past the output's right edge are computed and dropped (2 of 66 on a
+//!   64-pixel row with a 3x3 kernel);
+//! - the weight gradient sums `dy[o](oh, ow) · padded[c](oh · row + ow + tap_offset)` over the
+//!   output pixels, row by row (it must not see the dropped positions).
+//!
+//! Both keep a tile of accumulators in registers over the whole reduction: 6 output channels by
+//! 2 vectors of positions (forward), 3 output channels by 3 taps (weight gradient).
+
+use alloc::vec;
+use alloc::vec::Vec;
+
+use crate::geometry::ConvGeometry;
+use crate::products::Lanes;
+
+/// Output channels per register tile of the weight gradient: 3 channels by 3 taps keep nine
+/// accumulators, three loaded input vectors and one output-gradient vector in registers (4 x 3
+/// would need all sixteen on x86-64, and the compiler then spills).
+const R: usize = 3;
+
+/// Output channels per register tile of the forward pass: 6 channels by 2 vectors keep twelve
+/// accumulators (enough to hide the FMA latency) and leave registers for the loads (on x86-64,
+/// 4 x 3 would need all sixteen, and the compiler then spills).
+const FORWARD_ROWS: usize = 6;
+
+/// Positions the buffer holds past the last plane, so that the forward pass's last strip may
+/// read whole vectors (at least the widest strip, `V · WIDTH`).
+const SLACK: usize = 64;
+
+/// Output pixels per band of the weight gradient: its `dy` rows (4 channels) stay in L1 while
+/// every input channel and tap passes over them.
+const BAND_PIXELS: usize = 512;
+
+/// Where a stride-1 convolution's zero-padded image lies in its buffer.
+#[derive(Debug, Clone)]
+pub struct PaddedLayout {
+    /// Padded row length, pixels.
+    row: usize,
+    /// Rows of a padded plane.
+    rows: usize,
+    /// Offset of each kernel tap (row-major over the kernel) from its output position.
+    tap_offsets: Vec<usize>,
+    /// Flat positions the forward pass computes: `(output height - 1) · row + output width`.
+    positions: usize,
+}
+
+impl PaddedLayout {
+    /// The layout of `g`, or `None` when the direct kernels do not serve it: a stride other than
+    /// one, or a pointwise convolution (which needs no padding and no taps).
+    pub fn of(g: &ConvGeometry) -> Option<Self> {
+        if g.height.stride != 1 || g.width.stride != 1 || g.is_pointwise() {
+            return None;
+        }
+        let (h, w) = (&g.height, &g.width);
+        let row = w.output + (w.kernel - 1) * w.dilation;
+        let rows = h.output + (h.kernel - 1) * h.dilation;
+        let tap_offsets = (0..h.kernel)
+            .flat_map(|i| (0..w.kernel).map(move |j| i * h.dilation * row + j * w.dilation))
+            .collect();
+        Some(Self {
+            row,
+            rows,
+            tap_offsets,
+            positions: (h.output - 1) * row + w.output,
+        })
+    }
+
+    /// Pixels of one padded plane.
+    fn plane(&self) -> usize {
+        self.rows * self.row
+    }
+
+    /// Length of the buffer for one image of `channels` channels.
+    pub fn len(&self, channels: usize) -> usize {
+        channels * self.plane() + SLACK
+    }
+
+    /// Writes image `image` (`in_channels` planes of the input) into `buffer`
+    /// ([`Self::len`] long) with its padding made explicit. Every element is written.
+    pub fn pad(&self, g: &ConvGeometry, image: &[f32], buffer: &mut [f32]) {
+        let (in_h, in_w) = (g.height.input, g.width.input);
+        debug_assert_eq!(image.len(), g.in_channels * in_h * in_w);
+        debug_assert_eq!(buffer.len(), self.len(g.in_channels));
+        buffer.fill(0.0);
+        // Input pixels the convolution reads: those inside the padded plane.
+        let columns = in_w.min(self.row.saturating_sub(g.width.padding));
+        let image_rows = in_h.min(self.rows.saturating_sub(g.height.padding));
+        for (channel, plane) in image
+            .chunks_exact(in_h * in_w)
+            .zip(buffer.chunks_exact_mut(self.plane()))
+        {
+            for (y, source) in channel.chunks_exact(in_w).take(image_rows).enumerate() {
+                let start = (y + g.height.padding) * self.row + g.width.padding;
+                plane[start..start + columns].copy_from_slice(&source[..columns]);
+            }
+        }
+    }
+}
+
+/// The OIHW weight (`out_channels x taps` row-major) packed for the forward micro-kernel: per
+/// block of [`FORWARD_ROWS`] output channels, that many consecutive values per tap (channels past
+/// the last are 0).
+pub fn pack_weight(weight: &[f32], out_channels: usize, taps: usize) -> Vec<f32> {
+    let blocks = out_channels.div_ceil(FORWARD_ROWS);
+    let mut packed = vec![0.0f32; blocks * taps * FORWARD_ROWS];
+    for (block, panel) in packed.chunks_exact_mut(taps * FORWARD_ROWS).enumerate() {
+        for (kk, step) in panel.chunks_exact_mut(FORWARD_ROWS).enumerate() {
+            for (r, value) in step.iter_mut().enumerate() {
+                let o = block * FORWARD_ROWS + r;
+                if o < out_channels {
+                    *value = weight[o * taps + kk];
+                }
+            }
+        }
+    }
+    packed
+}
+
+/// One image's forward convolution `y = W · x (+ b)`, NCHW, from its padded buffer `padded`
+/// ([`PaddedLayout::pad`]) and the weight packed by [`pack_weight`]. Every element of `y`
+/// (`out_channels x output plane`) is written.
+pub fn forward_image(
+    g: &ConvGeometry,
+    layout: &PaddedLayout,
+    padded: &[f32],
+    packed_weight: &[f32],
+    bias: Option<&[f32]>,
+    y: &mut [f32],
+) {
+    assert!(
+        padded.len() >= layout.len(g.in_channels)
+            && packed_weight.len()
+                == g.out_channels.div_ceil(FORWARD_ROWS) * g.taps() * FORWARD_ROWS
+            && y.len() == g.out_channels * g.output_plane()
+            && bias.is_none_or(|b| b.len() == g.out_channels),
+        "direct forward: buffer sizes"
+    );
+    #[cfg(target_arch = "x86_64")]
+    if crate::products::has_avx2() {
+        // SAFETY: this CPU has AVX2 and FMA (checked just above).
+        unsafe { forward_avx2(g, layout, padded, packed_weight, bias, y) };
+        return;
+    }
+    #[cfg(target_arch = "wasm32")]
+    return forward_body::<crate::products::simd128::Simd128, 2>(
+        g,
+        layout,
+        padded,
+        packed_weight,
+        bias,
+        y,
+    );
+    #[allow(unreachable_code)]
+    forward_body::<f32, 8>(g, layout, padded, packed_weight, bias, y)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn forward_avx2(
+    g: &ConvGeometry,
+    layout: &PaddedLayout,
+    padded: &[f32],
+    packed_weight: &[f32],
+    bias: Option<&[f32]>,
+    y: &mut [f32],
+) {
+    // 6 channels x 2 vectors of 8: twelve accumulators, two loaded vectors and a broadcast.
+    forward_body::<crate::products::avx2::Avx2, 2>(g, layout, padded, packed_weight, bias, y)
+}
+
+/// The body of [`forward_image`]: strips of `V · WIDTH` flat positions, each multiplied by every
+/// block of [`FORWARD_ROWS`] output channels while it is in cache.
+#[inline(always)]
+fn forward_body<L: Lanes, const V: usize>(
+    g: &ConvGeometry,
+    layout: &PaddedLayout,
+    padded: &[f32],
+    packed_weight: &[f32],
+    bias: Option<&[f32]>,
+    y: &mut [f32],
+) {
+    let strip = V * L::WIDTH;
+    debug_assert!(strip <= SLACK);
+    let (plane, row) = (layout.plane(), layout.row);
+    let (out_w, out_plane) = (g.width.output, g.output_plane());
+    let taps = g.taps();
+    let mut tile = [[0.0f32; SLACK]; FORWARD_ROWS];
+    // Offset of every (input channel, tap), in the order of the packed weight's steps.
+    let offsets: Vec<usize> = (0..g.in_channels)
+        .flat_map(|channel| layout.tap_offsets.iter().map(move |t| channel * plane + t))
+        .collect();
+    // (tile offset, output offset, length) of each run of a strip's positions that are output
+    // pixels.
+    let mut runs: Vec<(usize, usize, usize)> = Vec::new();
+    for p0 in (0..layout.positions).step_by(strip) {
+        let end = (p0 + strip).min(layout.positions);
+        runs.clear();
+        let mut p = p0;
+        while p < end {
+            let (oh, ow) = (p / row, p % row);
+            if ow < out_w {
+                let len = (out_w - ow).min(end - p);
+                runs.push((p - p0, oh * out_w + ow, len));
+                p += len;
+            } else {
+                p += row - ow;
+            }
+        }
+        for (block, panel) in packed_weight.chunks_exact(taps * FORWARD_ROWS).enumerate() {
+            let channels = FORWARD_ROWS.min(g.out_channels - block * FORWARD_ROWS);
+            let mut acc = [[L::zero(); V]; FORWARD_ROWS];
+            // One loop over every (input channel, tap): a single level of loop-carried
+            // accumulators, which the register allocator keeps in registers.
+            for (&offset, a) in offsets.iter().zip(panel.chunks_exact(FORWARD_ROWS)) {
+                // SAFETY: positions `p0 .. p0 + strip` plus an offset stay below
+                // `(channel + 1) · plane + SLACK` (`positions + max tap offset = plane`, and
+                // `strip <= SLACK`), inside `padded` (checked in `forward_image`).
+                unsafe {
+                    let pb = padded.as_ptr().add(p0 + offset);
+                    let bv: [L; V] = core::array::from_fn(|v| L::load(pb.add(v * L::WIDTH)));
+                    for r in 0..FORWARD_ROWS {
+                        let a = L::splat(a[r]);
+                        for v in 0..V {
+                            acc[r][v] = acc[r][v].multiply_add(a, bv[v]);
+                        }
+                    }
+                }
+            }
+            for (r, (acc, tile)) in acc.iter().zip(&mut tile).enumerate().take(channels) {
+                for (v, value) in acc.iter().enumerate() {
+                    // SAFETY: `tile` holds SLACK >= V · WIDTH values.
+                    unsafe { value.store(tile.as_mut_ptr().add(v * L::WIDTH)) };
+                }
+                let out = &mut y[(block * FORWARD_ROWS + r) * out_plane..][..out_plane];
+                let b = bias.map_or(0.0, |bias| bias[block * FORWARD_ROWS + r]);
+                for &(t, o, len) in &runs {
+                    for (out, value) in out[o..o + len].iter_mut().zip(&tile[t..t + len]) {
+                        *out = value + b;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Adds one image's weight gradient `Σ dy[o](oh, ow) · x[c](oh + i, ow + j)` to `dw`
+/// (OIHW, `out_channels x taps`), from its padded buffer `padded` ([`PaddedLayout::pad`]) and
+/// its output gradient `dy` (`out_channels x output plane`).
+pub fn add_weight_gradient(
+    g: &ConvGeometry,
+    layout: &PaddedLayout,
+    padded: &[f32],
+    dy: &[f32],
+    dw: &mut [f32],
+) {
+    assert!(
+        padded.len() >= layout.len(g.in_channels)
+            && dy.len() == g.out_channels * g.output_plane()
+            && dw.len() == g.out_channels * g.taps(),
+        "direct weight gradient: buffer sizes"
+    );
+    #[cfg(target_arch = "x86_64")]
+    if crate::products::has_avx2() {
+        // SAFETY: this CPU has AVX2 and FMA (checked just above).
+        unsafe { weight_gradient_avx2(g, layout, padded, dy, dw) };
+        return;
+    }
+    #[cfg(target_arch = "wasm32")]
+    return weight_gradient_body::<crate::products::simd128::Simd128>(g, layout, padded, dy, dw);
+    #[allow(unreachable_code)]
+    weight_gradient_body::<f32>(g, layout, padded, dy, dw)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn weight_gradient_avx2(
+    g: &ConvGeometry,
+    layout: &PaddedLayout,
+    padded: &[f32],
+    dy: &[f32],
+    dw: &mut [f32],
+) {
+    weight_gradient_body::<crate::products::avx2::Avx2>(g, layout, padded, dy, dw)
+}
+
+/// The body of [`add_weight_gradient`]: per band of output rows, block of [`R`] output channels,
+/// input channel and group of `J` taps, `R x J` vector accumulators run along the band's rows.
+#[inline(always)]
+fn weight_gradient_body<L: Lanes>(
+    g: &ConvGeometry,
+    layout: &PaddedLayout,
+    padded: &[f32],
+    dy: &[f32],
+    dw: &mut [f32],
+) {
+    const J: usize = 3;
+    let (plane, row) = (layout.plane(), layout.row);
+    let (out_h, out_w, out_plane) = (g.height.output, g.width.output, g.output_plane());
+    let taps_per_channel = layout.tap_offsets.len();
+    let taps = g.taps();
+    let whole = out_w - out_w % L::WIDTH;
+    let band_rows = (BAND_PIXELS / out_w).clamp(1, out_h);
+    for first in (0..out_h).step_by(band_rows) {
+        let rows = first..(first + band_rows).min(out_h);
+        for block in 0..g.out_channels.div_ceil(R) {
+            let channels = R.min(g.out_channels - block * R);
+            // Absent channels of the last block repeat its last one; their sums are dropped.
+            let dy_planes: [usize; R] =
+                core::array::from_fn(|r| (block * R + r.min(channels - 1)) * out_plane);
+            for channel in 0..g.in_channels {
+                for t0 in (0..taps_per_channel).step_by(J) {
+                    let group = J.min(taps_per_channel - t0);
+                    let offsets: [usize; J] = core::array::from_fn(|jj| {
+                        channel * plane + layout.tap_offsets[t0 + jj.min(group - 1)]
+                    });
+                    let mut acc = [[L::zero(); J]; R];
+                    for oh in rows.clone() {
+                        let (dy_row, x_row) = (oh * out_w, oh * row);
+                        for ow in (0..whole).step_by(L::WIDTH) {
+                            // SAFETY: `x_row + offset + ow + WIDTH <= (channel + 1) · plane`
+                            // (the last output pixel's last tap is its plane's last pixel) and
+                            // `dy_plane + dy_row + ow + WIDTH <= dy.len()`, both checked in
+                            // `add_weight_gradient`.
+                            unsafe {
+                                let xv: [L; J] = core::array::from_fn(|jj| {
+                                    L::load(padded.as_ptr().add(offsets[jj] + x_row + ow))
+                                });
+                                for (acc, &dy_plane) in acc.iter_mut().zip(&dy_planes) {
+                                    let d = L::load(dy.as_ptr().add(dy_plane + dy_row + ow));
+                                    for (acc, x) in acc.iter_mut().zip(xv) {
+                                        *acc = acc.multiply_add(d, x);
+                                    }
+                                }
+                            }
+                        }
+                        if whole < out_w {
+                            // The row's last pixels, zero-extended to one vector each (both
+                            // operands, so that nothing outside the row enters the sum).
+                            let tail = out_w - whole;
+                            let mut xs = [[0.0f32; SLACK]; J];
+                            for (xs, &offset) in xs.iter_mut().zip(&offsets) {
+                                let from = offset + x_row + whole;
+                                xs[..tail].copy_from_slice(&padded[from..from + tail]);
+                            }
+                            for (acc, &dy_plane) in acc.iter_mut().zip(&dy_planes) {
+                                let mut ds = [0.0f32; SLACK];
+                                let from = dy_plane + dy_row + whole;
+                                ds[..tail].copy_from_slice(&dy[from..from + tail]);
+                                // SAFETY: `ds` and `xs` hold SLACK >= WIDTH values each.
+                                unsafe {
+                                    let d = L::load(ds.as_ptr());
+                                    for (acc, xs) in acc.iter_mut().zip(&xs) {
+                                        *acc = acc.multiply_add(d, L::load(xs.as_ptr()));
+                                    }
+                                }
+                            }
+                        }
+                    }
+                    let mut lanes = [0.0f32; SLACK];
+                    for r in 0..channels {
+                        let dw_row = &mut dw[(block * R + r) * taps + channel * taps_per_channel..];
+                        for jj in 0..group {
+                            // SAFETY: `lanes` holds SLACK >= WIDTH values.
+                            unsafe { acc[r][jj].store(lanes.as_mut_ptr()) };
+                            let sum: f32 = lanes[..L::WIDTH].iter().sum();
+                            dw_row[t0 + jj] += sum;
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
