@@ -93,17 +93,29 @@ impl PaddedLayout {
         let (in_h, in_w) = (g.height.input, g.width.input);
         debug_assert_eq!(image.len(), g.in_channels * in_h * in_w);
         debug_assert_eq!(buffer.len(), self.len(g.in_channels));
-        buffer.fill(0.0);
         // Input pixels the convolution reads: those inside the padded plane.
         let columns = in_w.min(self.row.saturating_sub(g.width.padding));
         let image_rows = in_h.min(self.rows.saturating_sub(g.height.padding));
+        let (planes, slack) = buffer.split_at_mut(g.in_channels * self.plane());
+        slack.fill(0.0);
         for (channel, plane) in image
             .chunks_exact(in_h * in_w)
-            .zip(buffer.chunks_exact_mut(self.plane()))
+            .zip(planes.chunks_exact_mut(self.plane()))
         {
-            for (y, source) in channel.chunks_exact(in_w).take(image_rows).enumerate() {
-                let start = (y + g.height.padding) * self.row + g.width.padding;
-                plane[start..start + columns].copy_from_slice(&source[..columns]);
+            // Only the padding is zeroed: the image's pixels are written once.
+            let (top, rest) = plane.split_at_mut(g.height.padding.min(self.rows) * self.row);
+            top.fill(0.0);
+            let (middle, bottom) = rest.split_at_mut(image_rows * self.row);
+            bottom.fill(0.0);
+            for (line, source) in middle
+                .chunks_exact_mut(self.row)
+                .zip(channel.chunks_exact(in_w))
+            {
+                let (left, rest) = line.split_at_mut(g.width.padding.min(self.row));
+                left.fill(0.0);
+                let (pixels, right) = rest.split_at_mut(columns);
+                pixels.copy_from_slice(&source[..columns]);
+                right.fill(0.0);
             }
         }
     }

@@ -218,6 +218,51 @@ impl ConvGeometry {
         ]
     }
 
+    /// For a stride-1 convolution, the convolution whose forward pass is this one's input
+    /// gradient: from the output space back onto the input space, with the kernel turned by 180
+    /// degrees and its two channel axes swapped ([`Self::flipped_weight`]), padded by
+    /// `(kernel - 1) · dilation - padding` before. `None` for other strides, or when this
+    /// convolution pads by more than its kernel reaches (the adjoint would need negative
+    /// padding).
+    pub fn input_gradient_as_convolution(&self) -> Option<Self> {
+        let axis = |a: &Axis| {
+            let reach = (a.kernel - 1) * a.dilation;
+            (a.stride == 1 && a.padding <= reach).then_some(Axis {
+                input: a.output,
+                output: a.input,
+                kernel: a.kernel,
+                stride: 1,
+                padding: reach - a.padding,
+                dilation: a.dilation,
+            })
+        };
+        Some(Self {
+            batch: self.batch,
+            in_channels: self.out_channels,
+            out_channels: self.in_channels,
+            height: axis(&self.height)?,
+            width: axis(&self.width)?,
+        })
+    }
+
+    /// This convolution's OIHW weight turned by 180 degrees with its channel axes swapped: the
+    /// weight of [`Self::input_gradient_as_convolution`].
+    pub fn flipped_weight(&self, weight: &[f32]) -> alloc::vec::Vec<f32> {
+        let (kh, kw) = (self.height.kernel, self.width.kernel);
+        let taps = kh * kw;
+        debug_assert_eq!(weight.len(), self.out_channels * self.in_channels * taps);
+        let mut flipped = alloc::vec![0.0; weight.len()];
+        for (o, filters) in weight.chunks_exact(self.in_channels * taps).enumerate() {
+            for (c, kernel) in filters.chunks_exact(taps).enumerate() {
+                let target = &mut flipped[(c * self.out_channels + o) * taps..][..taps];
+                for (t, value) in kernel.iter().enumerate() {
+                    target[taps - 1 - t] = *value;
+                }
+            }
+        }
+        flipped
+    }
+
     /// Shape of the weight, OIHW.
     pub fn weight_shape(&self) -> [usize; 4] {
         [

@@ -78,18 +78,11 @@ pub fn forward(g: &ConvGeometry, x: &[f32], weight: &[f32], bias: Option<&[f32]>
     let (taps, plane, out_plane) = (g.taps(), g.input_plane(), g.output_plane());
     assert_eq!(x.len(), g.batch * g.in_channels * plane, "input size");
     assert_eq!(weight.len(), g.out_channels * taps, "weight size");
-    let mut y = vec![0.0; g.batch * g.out_channels * out_plane];
     if let Some(layout) = PaddedLayout::of(g) {
         let packed = direct::pack_weight(weight, g.out_channels, taps);
-        for_each_image(g.batch, &mut y, |n, y| {
-            let x = &x[n * g.in_channels * plane..][..g.in_channels * plane];
-            with_lowered_buffer(layout.len(g.in_channels), |padded| {
-                layout.pad(g, x, padded);
-                direct::forward_image(g, &layout, padded, &packed, bias, y);
-            });
-        });
-        return y;
+        return forward_direct(g, &layout, x, &packed, bias);
     }
+    let mut y = vec![0.0; g.batch * g.out_channels * out_plane];
     // Output rows lowered (and multiplied) at a time: about BAND_PIXELS pixels, so that the band's
     // lowered matrix stays in cache instead of being written whole and read back.
     let band_rows = (BAND_PIXELS / g.width.output).clamp(1, g.height.output);
@@ -129,6 +122,26 @@ pub fn forward(g: &ConvGeometry, x: &[f32], weight: &[f32], bias: Option<&[f32]>
 /// Output pixels per band of the forward pass (at least one output row).
 const BAND_PIXELS: usize = 256;
 
+/// The forward convolution by the direct kernels, with the weight already packed.
+fn forward_direct(
+    g: &ConvGeometry,
+    layout: &PaddedLayout,
+    x: &[f32],
+    packed_weight: &[f32],
+    bias: Option<&[f32]>,
+) -> Vec<f32> {
+    let plane = g.input_plane();
+    let mut y = vec![0.0; g.batch * g.out_channels * g.output_plane()];
+    for_each_image(g.batch, &mut y, |n, y| {
+        let x = &x[n * g.in_channels * plane..][..g.in_channels * plane];
+        with_lowered_buffer(layout.len(g.in_channels), |padded| {
+            layout.pad(g, x, padded);
+            direct::forward_image(g, layout, padded, packed_weight, bias, y);
+        });
+    });
+    y
+}
+
 /// The gradient of the forward convolution's input: `dx[n] = raise(Wᵀ · dy[n])`, NCHW,
 /// `[batch, in_channels, input]`.
 pub fn input_gradient(g: &ConvGeometry, weight: &[f32], dy: &[f32]) -> Vec<f32> {
@@ -139,6 +152,13 @@ pub fn input_gradient(g: &ConvGeometry, weight: &[f32], dy: &[f32]) -> Vec<f32> 
         "output gradient size"
     );
     assert_eq!(weight.len(), g.out_channels * taps, "weight size");
+    if let Some(adjoint) = g.input_gradient_as_convolution()
+        && let Some(layout) = PaddedLayout::of(&adjoint)
+    {
+        let flipped = g.flipped_weight(weight);
+        let packed = direct::pack_weight(&flipped, adjoint.out_channels, adjoint.taps());
+        return forward_direct(&adjoint, &layout, dy, &packed, None);
+    }
     let weight_t = MatrixView::row_major(weight, g.out_channels, taps).transposed();
     let mut dx = vec![0.0; g.batch * g.in_channels * plane];
     for_each_image(g.batch, &mut dx, |n, dx| {
