@@ -52,6 +52,8 @@ pub struct PaddedLayout {
     rows: usize,
     /// Offset of each kernel tap (row-major over the kernel) from its output position.
     tap_offsets: Vec<usize>,
+    /// Taps per kernel row.
+    columns: usize,
     /// Flat positions the forward pass computes: `(output height - 1) · row + output width`.
     positions: usize,
 }
@@ -73,6 +75,7 @@ impl PaddedLayout {
             row,
             rows,
             tap_offsets,
+            columns: w.kernel,
             positions: (h.output - 1) * row + w.output,
         })
     }
@@ -230,6 +233,7 @@ fn forward_body<L: Lanes, const V: usize>(
                 p += row - ow;
             }
         }
+        prefetch_next_strip(layout, g.in_channels, p0 + strip, padded);
         for (block, panel) in packed_weight.chunks_exact(taps * FORWARD_ROWS).enumerate() {
             let channels = FORWARD_ROWS.min(g.out_channels - block * FORWARD_ROWS);
             let mut acc = [[L::zero(); V]; FORWARD_ROWS];
@@ -250,6 +254,24 @@ fn forward_body<L: Lanes, const V: usize>(
                     }
                 }
             }
+            if let [(0, o, len)] = runs[..]
+                && len == strip
+            {
+                // The strip lies inside one output row: stored straight from the registers.
+                for (r, acc) in acc.iter().enumerate().take(channels) {
+                    let b = L::splat(bias.map_or(0.0, |bias| bias[block * FORWARD_ROWS + r]));
+                    let out = &mut y[(block * FORWARD_ROWS + r) * out_plane + o..][..strip];
+                    for (v, value) in acc.iter().enumerate() {
+                        // SAFETY: `out` holds `strip = V · WIDTH` values.
+                        unsafe {
+                            value
+                                .multiply_add(b, L::splat(1.0))
+                                .store(out.as_mut_ptr().add(v * L::WIDTH))
+                        };
+                    }
+                }
+                continue;
+            }
             for (r, (acc, tile)) in acc.iter().zip(&mut tile).enumerate().take(channels) {
                 for (v, value) in acc.iter().enumerate() {
                     // SAFETY: `tile` holds SLACK >= V · WIDTH values.
@@ -265,6 +287,31 @@ fn forward_body<L: Lanes, const V: usize>(
             }
         }
     }
+}
+
+/// Asks the CPU to fetch the cache lines the strip at `p0` reads, while the current strip is
+/// multiplied: each of its (channel, kernel row) streams starts a line apart from the last
+/// strip's, more streams than the hardware prefetcher follows when there are many channels.
+#[inline(always)]
+fn prefetch_next_strip(layout: &PaddedLayout, channels: usize, p0: usize, padded: &[f32]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use core::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        if p0 >= layout.positions {
+            return;
+        }
+        let kernel_rows = layout.tap_offsets.len() / layout.columns;
+        for channel in 0..channels {
+            for i in 0..kernel_rows {
+                let at = channel * layout.plane() + layout.tap_offsets[i * layout.columns] + p0;
+                // SAFETY: a prefetch reads nothing and cannot fault; the address is inside
+                // `padded` (a strip's first position plus a tap offset).
+                unsafe { _mm_prefetch::<_MM_HINT_T0>(padded.as_ptr().add(at).cast()) };
+            }
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (layout, channels, p0, padded);
 }
 
 /// Adds one image's weight gradient `Σ dy[o](oh, ow) · x[c](oh + i, ow + j)` to `dw`
