@@ -190,7 +190,9 @@ pub fn weight_gradient(g: &ConvGeometry, x: &[f32], dy: &[f32]) -> Vec<f32> {
     let groups = parallel_groups(g.batch);
     let per_group = g.batch.div_ceil(groups);
     let mut partials = vec![0.0; groups * weight_len];
-    let layout = PaddedLayout::of(g);
+    // Direct for rows of at least two vectors; narrower rows (H-Net's 4 x 4 bottleneck) would
+    // spend their time on the zero-extended row tails, and their lowered matrices are small.
+    let layout = PaddedLayout::of(g).filter(|_| g.width.output >= DIRECT_GRADIENT_MIN_WIDTH);
     for_each_image(groups, &mut partials, |group, dw| {
         let images = group * per_group..((group + 1) * per_group).min(g.batch);
         for (i, n) in images.enumerate() {
@@ -219,6 +221,9 @@ pub fn weight_gradient(g: &ConvGeometry, x: &[f32], dy: &[f32]) -> Vec<f32> {
     partials.truncate(weight_len);
     partials
 }
+
+/// Narrowest output row, pixels, whose weight gradient the direct kernel computes.
+const DIRECT_GRADIENT_MIN_WIDTH: usize = 16;
 
 /// The gradient of a bias over NCHW values `dy` with `plane` pixels per channel: each channel's
 /// sum over the batch and its pixels.
