@@ -52,8 +52,6 @@ pub struct PaddedLayout {
     rows: usize,
     /// Offset of each kernel tap (row-major over the kernel) from its output position.
     tap_offsets: Vec<usize>,
-    /// Taps per kernel row.
-    columns: usize,
     /// Flat positions the forward pass computes: `(output height - 1) · row + output width`.
     positions: usize,
 }
@@ -75,7 +73,6 @@ impl PaddedLayout {
             row,
             rows,
             tap_offsets,
-            columns: w.kernel,
             positions: (h.output - 1) * row + w.output,
         })
     }
@@ -233,7 +230,7 @@ fn forward_body<L: Lanes, const V: usize>(
                 p += row - ow;
             }
         }
-        prefetch_next_strip(layout, g.in_channels, p0 + strip, padded);
+        prefetch_next_strip(layout, g, p0 + strip, padded);
         for (block, panel) in packed_weight.chunks_exact(taps * FORWARD_ROWS).enumerate() {
             let channels = FORWARD_ROWS.min(g.out_channels - block * FORWARD_ROWS);
             let mut acc = [[L::zero(); V]; FORWARD_ROWS];
@@ -293,17 +290,16 @@ fn forward_body<L: Lanes, const V: usize>(
 /// multiplied: each of its (channel, kernel row) streams starts a line apart from the last
 /// strip's, more streams than the hardware prefetcher follows when there are many channels.
 #[inline(always)]
-fn prefetch_next_strip(layout: &PaddedLayout, channels: usize, p0: usize, padded: &[f32]) {
+fn prefetch_next_strip(layout: &PaddedLayout, g: &ConvGeometry, p0: usize, padded: &[f32]) {
     #[cfg(target_arch = "x86_64")]
     {
         use core::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
         if p0 >= layout.positions {
             return;
         }
-        let kernel_rows = layout.tap_offsets.len() / layout.columns;
-        for channel in 0..channels {
-            for i in 0..kernel_rows {
-                let at = channel * layout.plane() + layout.tap_offsets[i * layout.columns] + p0;
+        for channel in 0..g.in_channels {
+            for i in 0..g.height.kernel {
+                let at = channel * layout.plane() + layout.tap_offsets[i * g.width.kernel] + p0;
                 // SAFETY: a prefetch reads nothing and cannot fault; the address is inside
                 // `padded` (a strip's first position plus a tap offset).
                 unsafe { _mm_prefetch::<_MM_HINT_T0>(padded.as_ptr().add(at).cast()) };
@@ -311,7 +307,7 @@ fn prefetch_next_strip(layout: &PaddedLayout, channels: usize, p0: usize, padded
         }
     }
     #[cfg(not(target_arch = "x86_64"))]
-    let _ = (layout, channels, p0, padded);
+    let _ = (layout, g, p0, padded);
 }
 
 /// Adds one image's weight gradient `Σ dy[o](oh, ow) · x[c](oh + i, ow + j)` to `dw`
