@@ -196,11 +196,9 @@ struct Metadata {
     split: Option<Split>,
 }
 
-/// Saves (or replaces) a pair.
-pub async fn save_pair(pair: &LabeledPair) -> Result<(), StorageError> {
-    let db = open().await?;
-    let record = Object::new();
-    let metadata = serde_json::to_string(&Metadata {
+/// The metadata record of `pair`, as JSON.
+fn metadata_json(pair: &LabeledPair) -> Result<String, StorageError> {
+    serde_json::to_string(&Metadata {
         id: pair.id.clone(),
         source: pair.source.clone(),
         masks_labeled: pair.masks_labeled,
@@ -210,7 +208,14 @@ pub async fn save_pair(pair: &LabeledPair) -> Result<(), StorageError> {
     .map_err(|cause| StorageError::Metadata {
         id: pair.id.clone(),
         cause,
-    })?;
+    })
+}
+
+/// Saves (or replaces) a pair.
+pub async fn save_pair(pair: &LabeledPair) -> Result<(), StorageError> {
+    let db = open().await?;
+    let record = Object::new();
+    let metadata = metadata_json(pair)?;
     let failed = StorageError::request("saving in");
     let set = |key: &str, value: &JsValue| Reflect::set(&record, &key.into(), value);
     set("metadata", &JsValue::from_str(&metadata)).map_err(&failed)?;
@@ -226,6 +231,88 @@ pub async fn save_pair(pair: &LabeledPair) -> Result<(), StorageError> {
         .and_then(|store| store.put_with_key(&record, &JsValue::from_str(&pair.id)))
         .map_err(&failed)?;
     committed(&transaction).await.map_err(failed)
+}
+
+/// A pair's metadata as it is stored, for [`save_metadata`]: small, so that many can be
+/// gathered without copying the pairs' images.
+pub struct PairMetadata {
+    id: String,
+    json: String,
+}
+
+impl PairMetadata {
+    /// The metadata of `pair`.
+    pub fn of(pair: &LabeledPair) -> Result<Self, StorageError> {
+        Ok(Self {
+            id: pair.id.clone(),
+            json: metadata_json(pair)?,
+        })
+    }
+}
+
+/// Pairs whose metadata one transaction of [`save_metadata`] puts back: each record read and
+/// written is structured-cloned on the page's thread (126 KiB of PNGs for a 224 px pair), so a
+/// transaction of all of 1,000 pairs stopped the page for 5 s; batches of this many let it answer
+/// in between.
+const METADATA_BATCH: usize = 25;
+
+/// Saves what changed in pairs whose images and masks did not (a split, a force label): each
+/// stored record is read and put back with the pair's new metadata, without encoding any image
+/// again, in transactions of [`METADATA_BATCH`] pairs. Returns the ids of pairs that have no
+/// stored record (a save that failed earlier): those need [`save_pair`]. On an error, the
+/// batches before it are saved and the failing one is not.
+pub async fn save_metadata(metadata: Vec<PairMetadata>) -> Result<Vec<String>, StorageError> {
+    let mut unsaved = Vec::new();
+    if metadata.is_empty() {
+        return Ok(unsaved);
+    }
+    let db = open().await?;
+    for batch in metadata.chunks(METADATA_BATCH) {
+        unsaved.extend(save_metadata_batch(&db, batch).await?);
+    }
+    Ok(unsaved)
+}
+
+/// One transaction of [`save_metadata`]; nothing of it is saved unless it commits.
+async fn save_metadata_batch(
+    db: &IdbDatabase,
+    batch: &[PairMetadata],
+) -> Result<Vec<String>, StorageError> {
+    let failed = StorageError::request("saving in");
+    let transaction = db
+        .transaction_with_str_and_mode(STORE, IdbTransactionMode::Readwrite)
+        .map_err(&failed)?;
+    let store = transaction.object_store(STORE).map_err(&failed)?;
+    let unsaved = std::rc::Rc::new(std::cell::RefCell::new(Vec::new()));
+    for PairMetadata { id, json } in batch {
+        let request = store.get(&JsValue::from_str(id)).map_err(&failed)?;
+        let (read, store, transaction, unsaved) = (
+            request.clone(),
+            store.clone(),
+            transaction.clone(),
+            unsaved.clone(),
+        );
+        let (id, json) = (id.clone(), json.clone());
+        // The record is put back from the read's own success event, while the transaction is
+        // still active (awaiting the read would let it commit in between).
+        let on_read = Closure::once_into_js(move |_: web_sys::Event| {
+            let record = read.result().unwrap_or(JsValue::UNDEFINED);
+            if !record.is_object() {
+                unsaved.borrow_mut().push(id);
+                return;
+            }
+            let key = JsValue::from_str(&id);
+            let written = Reflect::set(&record, &"metadata".into(), &JsValue::from_str(&json))
+                .and_then(|_| store.put_with_key(&record, &key));
+            if written.is_err() {
+                // Fails the whole transaction, which `committed` then reports.
+                let _ = transaction.abort();
+            }
+        });
+        request.set_onsuccess(Some(on_read.unchecked_ref()));
+    }
+    committed(&transaction).await.map_err(failed)?;
+    Ok(unsaved.take())
 }
 
 /// The store of pairs, in a transaction of `mode`.

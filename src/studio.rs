@@ -367,6 +367,36 @@ impl Studio {
         });
     }
 
+    /// Saves what changed in pairs whose images and masks did not (splits, force labels)
+    /// without encoding their images again; a pair the browser never stored is saved whole.
+    pub fn persist_metadata(&self, ids: &[String]) {
+        let metadata = self.workspace.with_untracked(|ws| {
+            ids.iter()
+                .filter_map(|id| ws.pair(id))
+                .map(storage::PairMetadata::of)
+                .collect::<Result<Vec<_>, _>>()
+        });
+        let studio = *self;
+        let count = ids.len();
+        leptos::task::spawn_local(async move {
+            let saved = match metadata {
+                Ok(metadata) => storage::save_metadata(metadata).await,
+                Err(e) => Err(e),
+            };
+            match saved {
+                Ok(unsaved) => {
+                    for id in unsaved {
+                        studio.persist(Some(id));
+                    }
+                }
+                Err(e) => studio.error(format!(
+                    "{count} pair(s): changes not saved in the browser: {}",
+                    with_causes(&e)
+                )),
+            }
+        });
+    }
+
     /// Adds a pair to the workspace, shows it, saves it and runs H-Net on it.
     pub fn add_pair(&self, pair: LabeledPair) {
         let id = pair.id.clone();

@@ -205,6 +205,35 @@ async fn pairs_survive_in_the_browser_storage() {
     assert!(pairs.iter().all(|p| p.id != pair.id));
 }
 
+/// A split or force label is saved by putting the stored record back with new metadata: the
+/// images read back unchanged, and a pair that was never stored is named for a whole save.
+#[wasm_bindgen_test]
+async fn metadata_changes_are_saved_without_the_images() {
+    let mut pair = TwinControls::default()
+        .render("test-storage-metadata".into(), &XrayBackground::phantom())
+        .unwrap();
+    storage::save_pair(&pair).await.unwrap();
+    pair.split = Some(hnet_twin::dataset::Split::Val);
+    pair.force_n = Some([0.1, -0.05, 0.2]);
+    let never_stored = TwinControls::default()
+        .render(
+            "test-storage-never-stored".into(),
+            &XrayBackground::phantom(),
+        )
+        .unwrap();
+    let metadata = [&pair, &never_stored]
+        .into_iter()
+        .map(|p| storage::PairMetadata::of(p).unwrap())
+        .collect();
+    let unsaved = storage::save_metadata(metadata).await.unwrap();
+    assert_eq!(unsaved, vec![never_stored.id.clone()]);
+    let (pairs, damaged) = storage::load_pairs().await.unwrap();
+    assert!(damaged.is_empty(), "{damaged:?}");
+    assert_eq!(pairs.iter().find(|p| p.id == pair.id), Some(&pair));
+    assert!(pairs.iter().all(|p| p.id != never_stored.id));
+    storage::delete_pair(&pair.id).await.unwrap();
+}
+
 /// Polls the document until `selector` matches (the page works asynchronously).
 async fn wait_for(selector: &str) -> web_sys::Element {
     let document = web_sys::window().unwrap().document().unwrap();

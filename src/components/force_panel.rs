@@ -100,9 +100,8 @@ pub fn ForcePanel() -> impl IntoView {
                     studio
                         .workspace
                         .update(|ws| result = ws.apply_force_labels(&labels));
-                    for (id, _) in &labels {
-                        studio.persist(Some(id.clone()));
-                    }
+                    let ids: Vec<String> = labels.iter().map(|(id, _)| id.clone()).collect();
+                    studio.persist_metadata(&ids);
                     let (applied, unknown) = result;
                     if unknown.is_empty() {
                         studio.info(format!("{}: {applied} force label(s) applied", file.name()));

@@ -40,9 +40,7 @@ pub fn PairList() -> impl IntoView {
         // Complete pairs without a split get theirs now and keep it from then on.
         let mut assigned = Vec::new();
         studio.workspace.update(|ws| assigned = ws.assign_splits());
-        for id in assigned {
-            studio.persist(Some(id));
-        }
+        studio.persist_metadata(&assigned);
         let planned = studio
             .workspace
             .with_untracked(|ws| ExportBuilder::new(&ws.pairs));
