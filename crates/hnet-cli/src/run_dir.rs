@@ -98,6 +98,43 @@ impl RunDir {
         self.checkpoint_dir().join(format!("{part}-{epoch}.bpk"))
     }
 
+    /// The checksum written beside a checkpoint part once it is complete
+    /// (`<part>-<epoch>.bpk.crc32`): see [`Self::write_checkpoint_checksum`].
+    pub fn checkpoint_checksum_file(&self, part: &str, epoch: usize) -> PathBuf {
+        let mut name = self.checkpoint_file(part, epoch).into_os_string();
+        name.push(".crc32");
+        name.into()
+    }
+
+    /// Writes the CRC-32 and length of a checkpoint part beside it (atomically), so that a
+    /// part garbled after it was written, even one that still reads as a checkpoint (burn-pack
+    /// files carry no checksum of their own), is noticed by `--resume`.
+    pub fn write_checkpoint_checksum(&self, part: &str, epoch: usize) -> std::io::Result<()> {
+        let bytes = std::fs::read(self.checkpoint_file(part, epoch))?;
+        write_atomically(
+            &self.checkpoint_checksum_file(part, epoch),
+            checksum_line(&bytes).as_bytes(),
+        )
+    }
+
+    /// Why a checkpoint part does not match the checksum written beside it, if it does not.
+    /// Parts without one (written before checksums were kept) are not checked.
+    fn checkpoint_checksum_mismatch(&self, part: &str, epoch: usize) -> Option<String> {
+        let recorded = std::fs::read_to_string(self.checkpoint_checksum_file(part, epoch)).ok()?;
+        let bytes = match std::fs::read(self.checkpoint_file(part, epoch)) {
+            Ok(bytes) => bytes,
+            Err(e) => return Some(e.to_string()),
+        };
+        let actual = checksum_line(&bytes);
+        (recorded != actual).then(|| {
+            format!(
+                "it does not match its checksum (recorded {}, now {})",
+                recorded.trim(),
+                actual.trim()
+            )
+        })
+    }
+
     /// The network of epoch `epoch`'s checkpoint.
     pub fn checkpoint_model_file(&self, epoch: usize) -> PathBuf {
         self.checkpoint_file("model", epoch)
@@ -189,8 +226,12 @@ impl RunDir {
         for epoch in self.checkpoint_epochs().into_iter().rev() {
             let unreadable = CHECKPOINT_PARTS.iter().find_map(|part| {
                 let file = self.checkpoint_file(part, epoch);
-                burn::store::ModuleRecord::load(&file)
-                    .err()
+                self.checkpoint_checksum_mismatch(part, epoch)
+                    .or_else(|| {
+                        burn::store::ModuleRecord::load(&file)
+                            .err()
+                            .map(|e| e.to_string())
+                    })
                     .map(|e| (file, e))
             });
             let Some((file, error)) = unreadable else {
@@ -221,6 +262,13 @@ impl RunDir {
                 let aside = dir.join(format!("{part}-{epoch}.bpk.{why}"));
                 std::fs::rename(&file, &aside)
                     .with_context(|| format!("cannot set aside '{}'", file.display()))?;
+            }
+            let checksum = self.checkpoint_checksum_file(part, epoch);
+            if checksum.is_file() {
+                let mut aside = checksum.clone().into_os_string();
+                aside.push(format!(".{why}"));
+                std::fs::rename(&checksum, &aside)
+                    .with_context(|| format!("cannot set aside '{}'", checksum.display()))?;
             }
         }
         Ok(())
@@ -300,6 +348,16 @@ fn weighted_mean(log: &str) -> Option<f64> {
         count += weight;
     }
     (count > 0.0).then(|| sum / count)
+}
+
+/// A checkpoint file's checksum record: its CRC-32 (`crc32fast`, SIMD-accelerated; enough to
+/// notice corruption, not meant against tampering) and its length in bytes.
+fn checksum_line(bytes: &[u8]) -> String {
+    format!(
+        "crc32 {:08x} bytes {}\n",
+        crc32fast::hash(bytes),
+        bytes.len()
+    )
 }
 
 #[cfg(test)]

@@ -487,7 +487,14 @@ fn a_checkpoint_or_model_that_cannot_be_written_stops_the_run_and_resume_continu
     // One epoch of three (the time budget stops it there).
     succeeds(train(&data, &runs, &config).args(["--time-budget", "0s"]));
     let epoch_1 = checkpoint_files(&runs);
-    assert_eq!(epoch_1.len(), 3, "{:?}", epoch_1.keys());
+    // Three parts, each with its checksum.
+    assert_eq!(epoch_1.len(), 6, "{:?}", epoch_1.keys());
+    assert_eq!(
+        epoch_1.keys().filter(|n| n.ends_with(".bpk.crc32")).count(),
+        3,
+        "{:?}",
+        epoch_1.keys()
+    );
     let model_1 = std::fs::read(runs.join("model.bpk")).unwrap();
 
     // Epoch 2's network checkpoint cannot be written: a folder is in its place (a fault that
@@ -509,7 +516,9 @@ fn a_checkpoint_or_model_that_cannot_be_written_stops_the_run_and_resume_continu
         assert_eq!(after.get(name), Some(bytes), "{name}");
     }
     assert!(
-        after.keys().all(|name| name.ends_with(".bpk")),
+        after
+            .keys()
+            .all(|name| name.ends_with(".bpk") || name.ends_with(".bpk.crc32")),
         "{:?}",
         after.keys()
     );
@@ -557,6 +566,42 @@ fn a_checkpoint_or_model_that_cannot_be_written_stops_the_run_and_resume_continu
     );
     assert!(runs.join("checkpoint/optim-3.bpk.damaged").is_file());
     assert!(!said.contains("resuming after epoch 3"), "{said}");
+
+    // A checkpoint garbled without being cut (one byte of its tensor data changed, so that it
+    // still loads) is caught by the checksum written beside it.
+    let last = std::fs::read_dir(runs.join("checkpoint"))
+        .unwrap()
+        .filter_map(|e| {
+            let name = e.unwrap().file_name().to_string_lossy().into_owned();
+            name.strip_prefix("model-")?
+                .strip_suffix(".bpk")?
+                .parse::<usize>()
+                .ok()
+        })
+        .max()
+        .expect("a checkpoint");
+    assert!(
+        runs.join(format!("checkpoint/model-{last}.bpk.crc32"))
+            .is_file()
+    );
+    let model_last = runs.join(format!("checkpoint/model-{last}.bpk"));
+    let mut bytes = std::fs::read(&model_last).unwrap();
+    let at = bytes.len() * 3 / 4;
+    bytes[at] ^= 0x10;
+    std::fs::write(&model_last, &bytes).unwrap();
+    let out = succeeds(&mut resume());
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        said.contains(&format!(
+            "checkpoint '{}' cannot be read (it does not match its checksum",
+            model_last.display()
+        )),
+        "{said}"
+    );
+    assert!(
+        runs.join(format!("checkpoint/model-{last}.bpk.damaged"))
+            .is_file()
+    );
     std::fs::remove_dir_all(dir).ok();
 }
 

@@ -8,6 +8,8 @@
 //! - an older epoch's part is deleted (burn-train's strategy keeps the last two epochs and the
 //!   best one) only once a later epoch's checkpoint is complete on disk, so a failed write of
 //!   epoch N, even one noticed late, never leaves the run without a complete checkpoint;
+//! - beside each part, once written, its CRC-32 and length (`*.bpk.crc32`), which `--resume`
+//!   checks: burn-pack files carry no checksum, and a part garbled later may still load;
 //! - the first write that fails is kept as a message naming the file ([`WriteFailure`]); the
 //!   learner stops, and `hnet train` reports it with the epoch `--resume` continues from.
 //!
@@ -91,7 +93,13 @@ impl<R: Checkpoint> Checkpointer<R> for RunCheckpointer {
         std::fs::create_dir_all(&dir).map_err(|e| self.failed("write", &file, e))?;
         record
             .save(file.clone())
-            .map_err(|e| self.failed("write", &file, cause(e)))
+            .map_err(|e| self.failed("write", &file, cause(e)))?;
+        self.run
+            .write_checkpoint_checksum(self.part, epoch)
+            .map_err(|e| {
+                let checksum = self.run.checkpoint_checksum_file(self.part, epoch);
+                self.failed("write", &checksum, e)
+            })
     }
 
     fn delete(&self, epoch: usize) -> Result<(), CheckpointerError> {
@@ -102,12 +110,17 @@ impl<R: Checkpoint> Checkpointer<R> for RunCheckpointer {
         if !self.run.checkpoint_epochs().iter().any(|&e| e > epoch) {
             return Ok(());
         }
-        let file = self.run.checkpoint_file(self.part, epoch);
-        match std::fs::remove_file(&file) {
-            Ok(()) => Ok(()),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-            Err(e) => Err(self.failed("delete", &file, e)),
+        for file in [
+            self.run.checkpoint_file(self.part, epoch),
+            self.run.checkpoint_checksum_file(self.part, epoch),
+        ] {
+            match std::fs::remove_file(&file) {
+                Ok(()) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => return Err(self.failed("delete", &file, e)),
+            }
         }
+        Ok(())
     }
 
     fn restore(&self, epoch: usize) -> Result<R, CheckpointerError> {
@@ -173,7 +186,12 @@ mod tests {
             .unwrap()
             .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
             .collect();
-        assert!(names.iter().all(|n| n.ends_with(".bpk")), "{names:?}");
+        assert!(
+            names
+                .iter()
+                .all(|n| n.ends_with(".bpk") || n.ends_with(".bpk.crc32")),
+            "{names:?}"
+        );
 
         // Once epoch 3 is complete, epoch 1 goes.
         for checkpointer in [&model, &optim, &scheduler] {
