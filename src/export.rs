@@ -371,7 +371,7 @@ mod tests {
 // Property tests (issue #13, docs/reliability.md): whatever pairs the page holds, the export is
 // a zip that hnet_twin's reader opens with the same ids, splits, forces, pixels and masks.
 #[cfg(all(test, not(target_arch = "wasm32")))]
-mod properties {
+pub(crate) mod properties {
     use super::*;
     use crate::imaging::properties::cases;
     use proptest::prelude::*;
@@ -398,7 +398,8 @@ mod properties {
         prop_oneof![-0.5f32..0.5, Just(0.0), Just(-0.0)]
     }
 
-    fn pair() -> impl Strategy<Value = LabeledPair> {
+    /// Any pair the page may hold (also the stored record's property tests).
+    pub(crate) fn pair() -> impl Strategy<Value = LabeledPair> {
         (
             any::<u64>(),
             ("\\PC{0,16}", "\\PC{0,16}"),

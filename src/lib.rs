@@ -30,6 +30,7 @@ pub mod force_reading;
 pub mod imaging;
 pub mod keymap;
 pub mod orbit_camera;
+pub mod stored_pair;
 pub mod twin_live;
 pub mod webgpu_check;
 pub mod workspace;

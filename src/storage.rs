@@ -12,11 +12,10 @@ use wasm_bindgen::prelude::*;
 use wasm_bindgen_futures::JsFuture;
 use web_sys::{IdbDatabase, IdbObjectStore, IdbRequest, IdbTransaction, IdbTransactionMode};
 
-use hnet_twin::dataset::{ImageRef, Split, encode_png};
-
 use crate::browser::JsError;
-use crate::imaging::WORK_SIZE;
-use crate::workspace::{LabeledPair, PairSource};
+pub use crate::stored_pair::DamagedRecord;
+use crate::stored_pair::{self, IMAGE_KEYS, METADATA_KEY};
+use crate::workspace::LabeledPair;
 
 const DATABASE: &str = "hnet-studio";
 const STORE: &str = "pairs";
@@ -69,36 +68,6 @@ impl StorageError {
             }
         }
     }
-}
-
-/// A saved record that cannot be read back as a pair: it is skipped (and left in storage).
-#[derive(Debug, thiserror::Error)]
-pub enum DamagedRecord {
-    /// It has no metadata.
-    #[error("a stored pair has no metadata")]
-    NoMetadata,
-    /// Its metadata is not what this page writes.
-    #[error("a stored pair's metadata cannot be read")]
-    Metadata(#[source] serde_json::Error),
-    /// An image or mask is missing.
-    #[error("stored pair {id} lacks `{key}`")]
-    Missing {
-        /// The pair.
-        id: String,
-        /// The image's key.
-        key: &'static str,
-    },
-    /// An image or mask is not a PNG.
-    #[error("stored pair {id}: `{key}` is damaged")]
-    Image {
-        /// The pair.
-        id: String,
-        /// The image's key.
-        key: &'static str,
-        /// The decoder's error.
-        #[source]
-        cause: image::ImageError,
-    },
 }
 
 /// Waits for an IndexedDB request to succeed or fail (with the request's `DOMException`).
@@ -175,37 +144,9 @@ async fn open() -> Result<IdbDatabase, StorageError> {
         .map_err(|_| StorageError::Open(JsError::missing("no database was opened")))
 }
 
-fn png(pixels: &[u8], channels: usize) -> Uint8Array {
-    let bytes = encode_png(ImageRef {
-        width: WORK_SIZE,
-        height: WORK_SIZE,
-        channels,
-        pixels,
-    });
-    Uint8Array::from(bytes.as_slice())
-}
-
-#[derive(serde::Serialize, serde::Deserialize)]
-struct Metadata {
-    id: String,
-    source: PairSource,
-    masks_labeled: bool,
-    force_n: Option<[f32; 3]>,
-    /// Absent in records saved before splits were kept (they get one at the next export).
-    #[serde(default)]
-    split: Option<Split>,
-}
-
 /// The metadata record of `pair`, as JSON.
 fn metadata_json(pair: &LabeledPair) -> Result<String, StorageError> {
-    serde_json::to_string(&Metadata {
-        id: pair.id.clone(),
-        source: pair.source.clone(),
-        masks_labeled: pair.masks_labeled,
-        force_n: pair.force_n,
-        split: pair.split,
-    })
-    .map_err(|cause| StorageError::Metadata {
+    stored_pair::metadata_json(pair).map_err(|cause| StorageError::Metadata {
         id: pair.id.clone(),
         cause,
     })
@@ -218,11 +159,10 @@ pub async fn save_pair(pair: &LabeledPair) -> Result<(), StorageError> {
     let metadata = metadata_json(pair)?;
     let failed = StorageError::request("saving in");
     let set = |key: &str, value: &JsValue| Reflect::set(&record, &key.into(), value);
-    set("metadata", &JsValue::from_str(&metadata)).map_err(&failed)?;
-    set("view_a", &png(&pair.view_a, 3)).map_err(&failed)?;
-    set("view_b", &png(&pair.view_b, 3)).map_err(&failed)?;
-    set("mask_a", &png(&pair.mask_a, 1)).map_err(&failed)?;
-    set("mask_b", &png(&pair.mask_b, 1)).map_err(&failed)?;
+    set(METADATA_KEY, &JsValue::from_str(&metadata)).map_err(&failed)?;
+    for ((key, _), png) in IMAGE_KEYS.iter().zip(stored_pair::image_pngs(pair)) {
+        set(key, &Uint8Array::from(png.as_slice())).map_err(&failed)?;
+    }
     let transaction = db
         .transaction_with_str_and_mode(STORE, IdbTransactionMode::Readwrite)
         .map_err(&failed)?;
@@ -302,7 +242,7 @@ async fn save_metadata_batch(
                 return;
             }
             let key = JsValue::from_str(&id);
-            let written = Reflect::set(&record, &"metadata".into(), &JsValue::from_str(&json))
+            let written = Reflect::set(&record, &METADATA_KEY.into(), &JsValue::from_str(&json))
                 .and_then(|_| store.put_with_key(&record, &key));
             if written.is_err() {
                 // Fails the whole transaction, which `committed` then reports.
@@ -335,57 +275,27 @@ pub async fn delete_pair(id: &str) -> Result<(), StorageError> {
     committed(&transaction).await.map_err(failed)
 }
 
-/// The image or mask `key` of the stored pair `id`, as it was saved.
-fn decode(
-    value: &JsValue,
-    id: &str,
-    key: &'static str,
-    channels: usize,
-) -> Result<Vec<u8>, DamagedRecord> {
-    let missing = || DamagedRecord::Missing {
-        id: id.to_string(),
-        key,
-    };
-    let bytes = Reflect::get(value, &key.into())
-        .map_err(|_| missing())?
-        .dyn_into::<Uint8Array>()
-        .map_err(|_| missing())?
-        .to_vec();
-    let image =
-        image::load_from_memory_with_format(&bytes, image::ImageFormat::Png).map_err(|cause| {
-            DamagedRecord::Image {
-                id: id.to_string(),
-                key,
-                cause,
-            }
-        })?;
-    Ok(if channels == 3 {
-        image.to_rgb8().into_raw()
-    } else {
-        image.to_luma8().into_raw()
-    })
-}
-
-/// A stored record as a pair.
+/// A stored record as a pair ([`stored_pair::read_record`] over the record's values).
 fn read_record(value: &JsValue) -> Result<LabeledPair, DamagedRecord> {
-    let metadata: Metadata = serde_json::from_str(
-        &Reflect::get(value, &"metadata".into())
-            .ok()
-            .and_then(|m| m.as_string())
-            .ok_or(DamagedRecord::NoMetadata)?,
-    )
-    .map_err(DamagedRecord::Metadata)?;
-    let id = &metadata.id;
-    Ok(LabeledPair {
-        view_a: decode(value, id, "view_a", 3)?,
-        view_b: decode(value, id, "view_b", 3)?,
-        mask_a: decode(value, id, "mask_a", 1)?,
-        mask_b: decode(value, id, "mask_b", 1)?,
-        id: metadata.id,
-        source: metadata.source,
-        masks_labeled: metadata.masks_labeled,
-        force_n: metadata.force_n,
-        split: metadata.split,
+    let metadata = Reflect::get(value, &METADATA_KEY.into())
+        .ok()
+        .and_then(|m| m.as_string());
+    let images: Vec<(&'static str, Vec<u8>)> = IMAGE_KEYS
+        .iter()
+        .filter_map(|&(key, _)| {
+            let bytes = Reflect::get(value, &key.into())
+                .ok()?
+                .dyn_into::<Uint8Array>()
+                .ok()?
+                .to_vec();
+            Some((key, bytes))
+        })
+        .collect();
+    stored_pair::read_record(metadata.as_deref(), |key| {
+        images
+            .iter()
+            .find(|(k, _)| *k == key)
+            .map(|(_, bytes)| bytes.as_slice())
     })
 }
 
