@@ -2,7 +2,7 @@
 //! them from disk): its frames, the header's window, its geometry and its timing. The reader
 //! keeps no patient identifier (see [`crate::deidentify`]).
 
-use dicom_dictionary_std::tags;
+use dicom_dictionary_std::{tags, uids};
 use dicom_encoding::transfer_syntax::TransferSyntaxIndex;
 use dicom_object::{OpenFileOptions, ReadError, file::ReadPreamble};
 use dicom_pixeldata::PixelDecoder;
@@ -152,11 +152,14 @@ fn check_element_lengths(file: &str, body: &[u8]) -> Result<(), DicomError> {
         }
         let big = big_endian && !in_meta;
         let (group, element) = (u16_at(at, big), u16_at(at + 2, big));
+        // The explicit VR, when the element has one.
+        let mut explicit_vr = None;
         let (length, header) = if group == 0xFFFE {
             // Items and delimiters: no VR, a 4-byte length.
             (u32_at(at + 4, big), 8)
         } else if explicit || in_meta {
             let vr = [body[at + 4], body[at + 5]];
+            explicit_vr = Some(vr);
             if SHORT_VRS.contains(&&vr) {
                 (u32::from(u16_at(at + 6, big)), 8)
             } else {
@@ -169,6 +172,25 @@ fn check_element_lengths(file: &str, body: &[u8]) -> Result<(), DicomError> {
             (u32_at(at + 4, big), 8)
         };
         at += header;
+        // Only a sequence (or UN holding one) and encapsulated Pixel Data may have an undefined
+        // length (PS3.5 7.1.2, A.4): dicom-rs reads any other such element in ways that may
+        // reserve gigabytes (an encapsulated cine whose Pixel Data tag became (7F00,0010) asked
+        // for 2.6 GB).
+        if length == u32::MAX
+            && let Some(vr) = explicit_vr
+            && !matches!(&vr, b"SQ" | b"UN")
+            && (group, element) != (0x7FE0, 0x0010)
+        {
+            return Err(DicomError::Truncated {
+                file: file.into(),
+                reason: format!(
+                    "element ({group:04X},{element:04X}) of VR {} has an undefined length, which \
+                     only sequences and encapsulated Pixel Data may have",
+                    String::from_utf8_lossy(&vr)
+                ),
+                cause: None,
+            });
+        }
         if length == u32::MAX || (group == 0xFFFE && element != 0xE000) {
             // Undefined length (walk into it) or a delimiter.
             continue;
@@ -245,6 +267,97 @@ fn check_jpeg_frames(object: &DicomObject, file: &str, size: ImageSize) -> Resul
                 ),
                 cause: None,
             });
+        }
+    }
+    Ok(())
+}
+
+/// Bytes one RLE Lossless segment decodes to, as dicom-rs's PackBits reader decodes it (a
+/// literal run cut short gives what is there), or `None` when it ends inside a replicate run
+/// (which that reader reports as an error).
+fn pack_bits_decoded_len(segment: &[u8]) -> Option<usize> {
+    let (mut decoded, mut i) = (0usize, 0usize);
+    while i < segment.len() {
+        let header = segment[i] as i8;
+        i += 1;
+        match header {
+            -127..=-1 => {
+                segment.get(i)?;
+                decoded += (1 - isize::from(header)) as usize;
+                i += 1;
+            }
+            0..=127 => {
+                let run = header as usize + 1;
+                decoded += run.min(segment.len() - i);
+                i += run;
+            }
+            -128 => {}
+        }
+    }
+    Some(decoded)
+}
+
+/// Refuses RLE Lossless frames that dicom-rs's RLE adapter would index out of bounds (a panic)
+/// before they are decoded: a fragment shorter than the 64-byte RLE header, a header claiming
+/// more than the standard's 15 segments (its offsets would be read past the fragment), fewer
+/// segments than the pixels need (one per byte of a sample), a segment outside the fragment, or
+/// one that decodes to fewer than Rows x Columns bytes.
+fn check_rle_frames(
+    object: &DicomObject,
+    file: &str,
+    size: ImageSize,
+    bytes_per_sample: usize,
+) -> Result<(), DicomError> {
+    if object.meta().transfer_syntax().trim_end_matches('\0') != uids::RLE_LOSSLESS {
+        return Ok(());
+    }
+    let Some(fragments) = object
+        .element_opt(tags::PIXEL_DATA)
+        .ok()
+        .flatten()
+        .and_then(|e| e.value().fragments())
+    else {
+        return Ok(());
+    };
+    let refuse = |problem: String| DicomError::Attribute {
+        file: file.into(),
+        attribute: "PixelData",
+        problem,
+        cause: None,
+    };
+    for (frame, fragment) in fragments.iter().enumerate() {
+        if fragment.len() < 64 {
+            return Err(refuse(format!(
+                "holds an RLE frame ({frame}) of {} bytes, shorter than its 64-byte header",
+                fragment.len()
+            )));
+        }
+        let word = |k: usize| u32::from_le_bytes(fragment[4 * k..4 * k + 4].try_into().unwrap());
+        let segments = word(0) as usize;
+        if !(bytes_per_sample..=15).contains(&segments) {
+            return Err(refuse(format!(
+                "holds an RLE frame ({frame}) of {segments} segments; {bytes_per_sample} to 15 \
+                 are possible"
+            )));
+        }
+        for k in 0..bytes_per_sample {
+            let start = word(1 + k) as usize;
+            let end = if k + 1 < segments {
+                word(2 + k) as usize
+            } else {
+                fragment.len()
+            };
+            let decoded = fragment
+                .get(start..end)
+                .and_then(pack_bits_decoded_len)
+                .unwrap_or(0);
+            if decoded < size.pixels() {
+                return Err(refuse(format!(
+                    "holds an RLE frame ({frame}) whose segment {k} decodes to {decoded} bytes; \
+                     Rows and Columns ({size}) need {}",
+                    size.pixels()
+                )));
+            }
         }
     }
     Ok(())
@@ -355,11 +468,12 @@ fn read_frames(object: &DicomObject, file: &str) -> Result<Frames, DicomError> {
         });
     }
     check_jpeg_frames(object, file, size)?;
+    let bytes_per_sample = if bits_allocated == 8 { 1 } else { 2 };
+    check_rle_frames(object, file, size, bytes_per_sample)?;
     let decoded = object.decode_pixel_data().map_err(|e| DicomError::Decode {
         file: file.into(),
         cause: Box::new(e) as Cause,
     })?;
-    let bytes_per_sample = if bits_allocated == 8 { 1 } else { 2 };
     let data = decoded.data();
     // Checked: a NumberOfFrames of 1e30 must not wrap around to a small size.
     let needed = size

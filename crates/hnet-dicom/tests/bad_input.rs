@@ -348,6 +348,89 @@ mod properties {
         .as_deref()
     }
 
+    /// PackBits as DICOM's RLE Lossless codes a byte segment (PS3.5 G.3.1): runs of 3 to 128
+    /// equal bytes as a replicate run (`1 - n` as a signed byte, then the byte), the rest as
+    /// literal runs of at most 128 bytes (`n - 1`, then the bytes). The segment is padded to an
+    /// even length.
+    fn pack_bits(bytes: &[u8]) -> Vec<u8> {
+        let mut out = Vec::new();
+        let mut literal: Vec<u8> = Vec::new();
+        let flush = |literal: &mut Vec<u8>, out: &mut Vec<u8>| {
+            for chunk in literal.chunks(128) {
+                out.push((chunk.len() - 1) as u8);
+                out.extend_from_slice(chunk);
+            }
+            literal.clear();
+        };
+        let mut i = 0;
+        while i < bytes.len() {
+            let run = bytes[i..]
+                .iter()
+                .take(128)
+                .take_while(|&&b| b == bytes[i])
+                .count();
+            if run >= 3 {
+                flush(&mut literal, &mut out);
+                out.push((1 - run as i16) as i8 as u8);
+                out.push(bytes[i]);
+                i += run;
+            } else {
+                literal.push(bytes[i]);
+                i += 1;
+            }
+        }
+        flush(&mut literal, &mut out);
+        if out.len() % 2 == 1 {
+            out.push(0x80); // a no-op run
+        }
+        out
+    }
+
+    /// One frame of 8-bit pixels as an RLE Lossless fragment: the 64-byte header (one segment
+    /// at offset 64, 14 unused offsets) and the segment.
+    fn rle_frame(pixels: &[u8]) -> Vec<u8> {
+        let mut fragment = vec![0u8; 64];
+        fragment[0..4].copy_from_slice(&1u32.to_le_bytes());
+        fragment[4..8].copy_from_slice(&64u32.to_le_bytes());
+        fragment.extend(pack_bits(pixels));
+        fragment
+    }
+
+    /// A 16 x 16, 8-bit cine of 2 frames as RLE Lossless (dicom-rs decodes RLE but has no
+    /// encoder, so the fragments are coded by [`rle_frame`]): each frame holds runs (a constant
+    /// half) and literals (the `plain_cine` pattern).
+    fn rle_file() -> &'static [u8] {
+        static FILE: OnceLock<Vec<u8>> = OnceLock::new();
+        FILE.get_or_init(|| {
+            let cine = plain_cine(ImageSize::square(16), 8, 2);
+            let mut object = xa_object(&cine);
+            object.update_meta(|meta| meta.transfer_syntax = uids::RLE_LOSSLESS.into());
+            let fragments: Vec<Vec<u8>> = rle_frames(&cine).iter().map(|f| rle_frame(f)).collect();
+            object.put(DataElement::new(
+                tags::PIXEL_DATA,
+                VR::OB,
+                PixelFragmentSequence::new(Vec::<u32>::new(), fragments),
+            ));
+            part10_bytes(&object)
+        })
+    }
+
+    /// The 8-bit pixels [`rle_file`] codes, frame by frame: the first half of each frame
+    /// constant, the second `plain_cine`'s pattern.
+    fn rle_frames(cine: &XaCine) -> Vec<Vec<u8>> {
+        cine.frames
+            .iter()
+            .map(|frame| {
+                let half = frame.len() / 2;
+                frame
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &v)| if i < half { 77 } else { v as u8 })
+                    .collect()
+            })
+            .collect()
+    }
+
     /// Random cines as `write_xa` takes them: any size up to 8 x 8, 1-4 frames, every pixel
     /// coding, geometry, timing, windows and rescale, or none of them.
     fn any_cine() -> impl Strategy<Value = XaCine> {
@@ -498,6 +581,13 @@ mod properties {
         #[test]
         fn a_mutated_cine_is_a_cine_or_an_error_naming_the_file(file in 0usize..4, edits in edits()) {
             mutated(file, &edits, Expect::NoPanic)?;
+        }
+
+        #[test]
+        fn a_mutated_rle_cine_is_a_cine_or_an_error_naming_the_file(edits in edits()) {
+            // Anywhere in the file: half the edits land in the RLE headers and segments.
+            let bytes = hnet_mutations::mutate(rle_file().to_vec(), &edits);
+            read_checked(&bytes, Expect::Bounded)?;
         }
 
         #[test]
@@ -655,6 +745,55 @@ mod properties {
         let cine = read_cine_file(NAME, bytes).unwrap();
         assert_eq!(cine.frames.count(), 2);
         assert_eq!(cine.frames.size, ImageSize::square(16));
+    }
+
+    /// The RLE property means something only if the file it mutates is a valid RLE cine: its
+    /// frames read back exactly (dicom-rs's RLE decoder).
+    #[test]
+    fn an_rle_cine_is_written_and_read() {
+        let cine = read_cine_file(NAME, rle_file()).unwrap();
+        let expected = rle_frames(&plain_cine(ImageSize::square(16), 8, 2));
+        assert_eq!(cine.frames.count(), 2);
+        let codes: Vec<u8> = cine.frames.codes.iter().map(|&c| c as u8).collect();
+        assert_eq!(codes, expected.concat());
+    }
+
+    /// Found by `a_mutated_rle_cine_is_a_cine_or_an_error_naming_the_file`: an RLE header
+    /// claiming 173 segments made dicom-rs's RLE adapter read its offsets past the fragment (a
+    /// panic), and a segment that decodes short made it index past the decoded bytes.
+    #[test]
+    fn rle_frames_that_would_overrun_the_decoder_are_refused() {
+        let valid = rle_file();
+        // Pixel Data's header (12 bytes), the empty offset table item (8), the first
+        // fragment's item header (8): then its RLE header, which starts with the segment count.
+        let header = pixel_data_offset(valid) + 28;
+        assert_eq!(valid[header..header + 8], [1, 0, 0, 0, 64, 0, 0, 0]);
+        let mut bytes = valid.to_vec();
+        bytes[header] = 173;
+        let error = read_checked(&bytes, Expect::Bounded).unwrap();
+        assert!(error.is_none());
+        let text = read_cine_file(NAME, &bytes).unwrap_err().to_string();
+        assert!(text.contains("RLE frame (0) of 173 segments"), "{text}");
+        // The first frame's segment cut to a replicate run of 100 bytes (of 256 needed).
+        let mut short = valid.to_vec();
+        short[header + 64] = (1 - 100i16) as i8 as u8;
+        let text = read_cine_file(NAME, &short).unwrap_err().to_string();
+        assert!(text.contains("decodes to"), "{text}");
+    }
+
+    /// Found by the same property: an encapsulated cine whose Pixel Data tag lost a byte
+    /// ((7FE0,0010) became (7F00,0010), an OB of undefined length) made dicom-rs ask for 2.6 GB.
+    #[test]
+    fn an_undefined_length_outside_sequences_and_pixel_data_is_refused() {
+        let mut bytes = rle_file().to_vec();
+        let tag = pixel_data_offset(&bytes);
+        bytes[tag] = 0;
+        assert!(read_checked(&bytes, Expect::Bounded).unwrap().is_none());
+        let text = read_cine_file(NAME, &bytes).unwrap_err().to_string();
+        assert!(
+            text.contains("element (7F00,0010) of VR OB has an undefined length"),
+            "{text}"
+        );
     }
 
     /// An encapsulated frame of no bytes (what the JPEG property's edits may leave): an error.
