@@ -9,6 +9,7 @@
 //! [`trainee`] and what is logged in [`metrics`].
 
 mod checkpoints;
+mod metric_log;
 pub mod metrics;
 mod stopping;
 mod trainee;
@@ -35,6 +36,7 @@ use hnet_model::model::ForceScale;
 use hnet_twin::dataset::{Dataset, Split};
 
 use self::checkpoints::{RunCheckpointer, WriteFailure};
+use self::metric_log::RunMetricLogger;
 use self::metrics::{Quantity, StepMetric};
 use self::stopping::{StoppingRule, TimeBudget, non_finite_epochs, parse_duration};
 use self::trainee::StereoTrainee;
@@ -215,6 +217,8 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
         .metric_train_numeric(LossMetric::new())
         .metric_valid_numeric(LossMetric::new())
         .with_custom_checkpointers(model_parts, optim_parts, scheduler_parts)
+        // burn-train's own file logger panics on a failed write; this one names the file.
+        .with_metric_logger(RunMetricLogger::new(run.root(), &write_failure))
         .early_stopping(StoppingRule::new(
             MetricEarlyStoppingStrategy::new(
                 &LossMetric::new(),
@@ -228,6 +232,7 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
             request
                 .time_budget
                 .map(|limit| TimeBudget::new(limit, session_started, Instant::now())),
+            &write_failure,
         ))
         .num_epochs(config.epochs)
         .renderer(Box::new(crate::progress_renderer::TrainingDisplay::new()));

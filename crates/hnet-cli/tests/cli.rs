@@ -605,6 +605,42 @@ fn a_checkpoint_or_model_that_cannot_be_written_stops_the_run_and_resume_continu
     std::fs::remove_dir_all(dir).ok();
 }
 
+/// A metric log that cannot be written (a full disk, a file in the way) stops the run after that
+/// epoch with a message naming the file, where burn-train's own logger panicked; `--resume`
+/// then continues from the last complete checkpoint.
+#[test]
+fn a_metric_log_that_cannot_be_written_stops_the_run_and_resume_continues() {
+    let dir = scratch("metric-log-fault");
+    let data = simulate(&dir, 40);
+    let config = tiny_config(&dir, "hnet", 2);
+    let runs = dir.join("run");
+    let resume = || {
+        let mut command = hnet();
+        command.args(["train", "--resume", "--out"]).arg(&runs);
+        command
+    };
+    // One epoch of two (the time budget stops it there); then a folder where epoch 2's
+    // training loss log goes.
+    succeeds(train(&data, &runs, &config).args(["--time-budget", "0s"]));
+    let blocked = runs.join("train/epoch-2/Loss.log");
+    std::fs::create_dir_all(blocked.join("in-the-way")).unwrap();
+    let err = fails_cleanly(&mut resume());
+    assert!(
+        err.contains(&format!("cannot write metric log '{}'", blocked.display())),
+        "{err}"
+    );
+    assert!(err.contains("--resume"), "{err}");
+    assert!(runs.join("train/epoch-1/Loss.log").is_file());
+    // Epoch 2's checkpoint was written (its weights are whole; its logs stop at the failure):
+    // unblocked, `--resume` finds the run complete and writes model.bpk.
+    std::fs::remove_dir_all(&blocked).unwrap();
+    let out = succeeds(&mut resume());
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(said.contains("resuming after epoch 2"), "{said}");
+    assert!(runs.join("model.bpk").is_file());
+    std::fs::remove_dir_all(dir).ok();
+}
+
 // Property tests (issue #13, docs/reliability.md): `hnet train --config FILE` with arbitrary or
 // mutated settings ends with an error naming the file (or, for valid settings, goes on to the
 // data), never a panic. Through the binary: `TrainingConfig::load` has no library path.

@@ -24,8 +24,9 @@ use burn::train::checkpoint::{Checkpoint, Checkpointer, CheckpointerError};
 
 use crate::run_dir::{CHECKPOINT_PARTS, RunDir};
 
-/// The first checkpoint write that failed, as a message naming the file; shared by the three
-/// parts' checkpointers (each on its own thread) and the training loop.
+/// The first write to the run folder that failed (a checkpoint or a metric log), as a message
+/// naming the file; shared by the three parts' checkpointers (each on its own thread), the
+/// metric logger, the stopping rule and the training loop.
 #[derive(Debug, Clone, Default)]
 pub struct WriteFailure(Arc<Mutex<Option<String>>>);
 
@@ -39,10 +40,15 @@ impl WriteFailure {
     }
 
     /// Keeps `message` unless an earlier failure is kept already (later ones are most likely
-    /// its consequences), and gives it back as burn-train's error.
-    fn record(&self, message: String) -> CheckpointerError {
+    /// its consequences).
+    pub fn note(&self, message: String) {
         let mut slot = self.0.lock().unwrap_or_else(PoisonError::into_inner);
-        slot.get_or_insert_with(|| message.clone());
+        slot.get_or_insert(message);
+    }
+
+    /// [`Self::note`], giving the message back as burn-train's error.
+    fn record(&self, message: String) -> CheckpointerError {
+        self.note(message.clone());
         CheckpointerError::IOError(std::io::Error::other(message))
     }
 }

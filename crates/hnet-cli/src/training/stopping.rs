@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 use burn::train::EarlyStoppingStrategy;
 use burn::train::metric::store::{Aggregate, EventStoreClient, Split};
 
+use super::checkpoints::WriteFailure;
 use crate::run_dir::{EpochRow, LOSS_METRIC};
 
 /// The epochs of `rows` whose mean loss (training or validation) is not finite.
@@ -66,17 +67,27 @@ impl TimeBudget {
 pub struct StoppingRule<P> {
     patience: P,
     budget: Option<TimeBudget>,
+    write_failure: WriteFailure,
 }
 
 impl<P> StoppingRule<P> {
-    /// Stops by `patience`, or when the next epoch would overrun `budget`.
-    pub fn new(patience: P, budget: Option<TimeBudget>) -> Self {
-        Self { patience, budget }
+    /// Stops by `patience`, when the next epoch would overrun `budget`, or after an epoch in
+    /// which a write to the run folder failed (`write_failure`).
+    pub fn new(patience: P, budget: Option<TimeBudget>, write_failure: &WriteFailure) -> Self {
+        Self {
+            patience,
+            budget,
+            write_failure: write_failure.clone(),
+        }
     }
 }
 
 impl<P: EarlyStoppingStrategy> EarlyStoppingStrategy for StoppingRule<P> {
     fn should_stop(&mut self, epoch: usize, store: &EventStoreClient) -> bool {
+        if self.write_failure.get().is_some() {
+            // `hnet train` says which write and where `--resume` continues.
+            return true;
+        }
         for split in [Split::Train, Split::Valid] {
             let loss = store.find_metric(LOSS_METRIC, epoch, Aggregate::Mean, &split);
             if loss.is_some_and(|l| !l.is_finite()) {
