@@ -118,10 +118,8 @@ fn decode(
         key,
         cause,
     };
-    let mut reader = image::ImageReader::with_format(
-        std::io::Cursor::new(bytes),
-        image::ImageFormat::Png,
-    );
+    let mut reader =
+        image::ImageReader::with_format(std::io::Cursor::new(bytes), image::ImageFormat::Png);
     let mut limits = image::Limits::default();
     limits.max_alloc = Some(MAX_DECODE_BYTES);
     reader.limits(limits);
@@ -232,7 +230,10 @@ mod properties {
     #[test]
     fn images_of_another_size_or_claiming_huge_sizes_are_refused() {
         let pair = crate::twin_live::TwinControls::default()
-            .render("stored-1".into(), &crate::twin_live::XrayBackground::phantom())
+            .render(
+                "stored-1".into(),
+                &crate::twin_live::XrayBackground::phantom(),
+            )
             .unwrap();
         let mut images = image_pngs(&pair);
         images[2] = encode_png(ImageRef {
@@ -244,7 +245,9 @@ mod properties {
         let metadata = metadata_json(&pair).unwrap();
         let error = read(&metadata, &images).unwrap_err();
         assert!(
-            error.to_string().ends_with("`mask_a` is 10 x 12 pixels, not 224 x 224"),
+            error
+                .to_string()
+                .ends_with("`mask_a` is 10 x 12 pixels, not 224 x 224"),
             "{error}"
         );
         // IHDR width and height (bytes 16..24) claim 60000 x 60000 (the chunk's CRC is
