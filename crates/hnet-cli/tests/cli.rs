@@ -460,6 +460,13 @@ fn a_training_config_claiming_a_huge_network_is_refused_naming_the_file() {
     std::fs::remove_dir_all(dir).ok();
 }
 
+/// `hnet train --resume --out RUNS`.
+fn resume_training(runs: &Path) -> std::process::Command {
+    let mut command = hnet();
+    command.args(["train", "--resume", "--out"]).arg(runs);
+    command
+}
+
 /// The files of a run's checkpoint folder, by name.
 fn checkpoint_files(runs: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
     std::fs::read_dir(runs.join("checkpoint"))
@@ -479,11 +486,7 @@ fn a_checkpoint_or_model_that_cannot_be_written_stops_the_run_and_resume_continu
     let data = simulate(&dir, 60);
     let config = tiny_config(&dir, "hnet", 3);
     let runs = dir.join("run");
-    let resume = || {
-        let mut command = hnet();
-        command.args(["train", "--resume", "--out"]).arg(&runs);
-        command
-    };
+    let resume = || resume_training(&runs);
     // One epoch of three (the time budget stops it there).
     succeeds(train(&data, &runs, &config).args(["--time-budget", "0s"]));
     let epoch_1 = checkpoint_files(&runs);
@@ -614,11 +617,7 @@ fn a_metric_log_that_cannot_be_written_stops_the_run_and_resume_continues() {
     let data = simulate(&dir, 40);
     let config = tiny_config(&dir, "hnet", 2);
     let runs = dir.join("run");
-    let resume = || {
-        let mut command = hnet();
-        command.args(["train", "--resume", "--out"]).arg(&runs);
-        command
-    };
+    let resume = || resume_training(&runs);
     // One epoch of two (the time budget stops it there); then a folder where epoch 2's
     // training loss log goes.
     succeeds(train(&data, &runs, &config).args(["--time-budget", "0s"]));

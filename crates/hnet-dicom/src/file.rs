@@ -243,16 +243,21 @@ fn jpeg_frame_size(stream: &[u8]) -> Option<(u16, u16)> {
     None
 }
 
-/// Refuses encapsulated JPEG frames whose own size differs from Rows x Columns before they are
-/// decoded: a larger frame overruns dicom-rs's frame buffer (a panic), and a frame claiming
-/// 65535 x 65535 pixels makes the decoder allocate them infallibly (an abort).
-fn check_jpeg_frames(object: &DicomObject, file: &str, size: ImageSize) -> Result<(), DicomError> {
-    let Some(fragments) = object
+/// The fragments of encapsulated Pixel Data (one per frame for the syntaxes read here), or
+/// `None` for native pixel data.
+fn pixel_fragments(object: &DicomObject) -> Option<&[Vec<u8>]> {
+    object
         .element_opt(tags::PIXEL_DATA)
         .ok()
         .flatten()
         .and_then(|e| e.value().fragments())
-    else {
+}
+
+/// Refuses encapsulated JPEG frames whose own size differs from Rows x Columns before they are
+/// decoded: a larger frame overruns dicom-rs's frame buffer (a panic), and a frame claiming
+/// 65535 x 65535 pixels makes the decoder allocate them infallibly (an abort).
+fn check_jpeg_frames(object: &DicomObject, file: &str, size: ImageSize) -> Result<(), DicomError> {
+    let Some(fragments) = pixel_fragments(object) else {
         return Ok(());
     };
     for fragment in fragments {
@@ -311,12 +316,7 @@ fn check_rle_frames(
     if object.meta().transfer_syntax().trim_end_matches('\0') != uids::RLE_LOSSLESS {
         return Ok(());
     }
-    let Some(fragments) = object
-        .element_opt(tags::PIXEL_DATA)
-        .ok()
-        .flatten()
-        .and_then(|e| e.value().fragments())
-    else {
+    let Some(fragments) = pixel_fragments(object) else {
         return Ok(());
     };
     let refuse = |problem: String| DicomError::Attribute {
