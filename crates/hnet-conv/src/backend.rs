@@ -3,7 +3,7 @@
 //! backward pass of its own. Other backends never reach it: [`crate::conv2d`] and
 //! [`crate::conv_transpose2d`] send them to Burn's own operations.
 
-use burn::backend::ops::ModuleOps;
+use burn::backend::ops::{ActivationOps, ModuleOps};
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{Backend, ExtensionType, Flex, backend_extension};
 use burn::tensor::DType;
@@ -27,12 +27,15 @@ pub enum ConvBias<B: Backend> {
 /// `conv_transpose2d` (same arguments, same shapes) to float rounding.
 #[backend_extension(Flex, Autodiff: cfg(feature = "autodiff"))]
 pub trait ProjectConvBackend: Backend {
-    /// `conv2d(x, weight, bias, options)`: x `[n, c, h, w]`, weight `[o, c, kh, kw]`.
+    /// `conv2d(x, weight, bias, options)`: x `[n, c, h, w]`, weight `[o, c, kh, kw]`; then
+    /// `relu` of it when `relu` (fused into the kernels' store, and its backward into the
+    /// convolution's).
     fn project_conv2d(
         x: FloatTensor<Self>,
         weight: FloatTensor<Self>,
         #[extension_type] bias: ConvBias<Self>,
         options: ConvOptions<2>,
+        relu: bool,
     ) -> FloatTensor<Self>;
 
     /// `conv_transpose2d(x, weight, bias, options)`: x `[n, c, h, w]`, weight `[c, o, kh, kw]`.
@@ -98,21 +101,24 @@ fn bias_matches(g: &ConvGeometry, direction: Direction, bias: Option<&FlexTensor
     bias.is_none_or(|b| b.layout().shape()[0] == channels)
 }
 
-/// The forward pass on flex, for a geometry the kernels cover.
+/// The forward pass on flex, for a geometry the kernels cover; a convolution's followed by a
+/// ReLU when `relu`.
 fn forward(
     g: &ConvGeometry,
     direction: Direction,
     x: &FlexTensor,
     weight: &FlexTensor,
     bias: Option<&FlexTensor>,
+    relu: bool,
 ) -> FlexTensor {
     with_values(x, |x| {
         with_values(weight, |w| {
             let run = |bias: Option<&[f32]>| match direction {
                 Direction::Convolution => {
-                    flex_tensor(kernels::forward(g, x, w, bias), g.output_shape())
+                    flex_tensor(kernels::forward(g, x, w, bias, relu), g.output_shape())
                 }
                 Direction::Transposed => {
+                    debug_assert!(!relu, "no fused ReLU for transposed convolutions");
                     let mut y = kernels::input_gradient(g, w, x);
                     if let Some(bias) = bias {
                         kernels::add_per_channel(&mut y, bias, g.input_plane());
@@ -173,9 +179,9 @@ fn gradients(
                 },
                 // y = raise(Wᵀ x), the adjoint's input gradient: dx = conv(dy), dW = x lower(dy)ᵀ.
                 Direction::Transposed => Gradients {
-                    x: wanted
-                        .x
-                        .then(|| flex_tensor(kernels::forward(g, dy, w, None), g.output_shape())),
+                    x: wanted.x.then(|| {
+                        flex_tensor(kernels::forward(g, dy, w, None, false), g.output_shape())
+                    }),
                     weight: wanted.weight.then(|| {
                         flex_tensor(kernels::weight_gradient(g, dy, x_values), weight_shape)
                     }),
@@ -221,11 +227,19 @@ impl ProjectConvBackend for Flex {
         weight: FlexTensor,
         bias: ConvBias<Self>,
         options: ConvOptions<2>,
+        relu: bool,
     ) -> FlexTensor {
         let bias = bias.into_option();
         match conv2d_geometry(&x, &weight, bias.as_ref(), &options) {
-            Some(g) => forward(&g, Direction::Convolution, &x, &weight, bias.as_ref()),
-            None => <Flex as ModuleOps<Flex>>::conv2d(x, weight, bias, options),
+            Some(g) => forward(&g, Direction::Convolution, &x, &weight, bias.as_ref(), relu),
+            None => {
+                let y = <Flex as ModuleOps<Flex>>::conv2d(x, weight, bias, options);
+                if relu {
+                    <Flex as ActivationOps<Flex>>::relu(y)
+                } else {
+                    y
+                }
+            }
         }
     }
 
@@ -237,7 +251,7 @@ impl ProjectConvBackend for Flex {
     ) -> FlexTensor {
         let bias = bias.into_option();
         match conv_transpose2d_geometry(&x, &weight, bias.as_ref(), &options) {
-            Some(g) => forward(&g, Direction::Transposed, &x, &weight, bias.as_ref()),
+            Some(g) => forward(&g, Direction::Transposed, &x, &weight, bias.as_ref(), false),
             None => <Flex as ModuleOps<Flex>>::conv_transpose2d(x, weight, bias, options),
         }
     }
@@ -251,14 +265,15 @@ mod autodiff {
     use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
     use burn::backend::autodiff::grads::Gradients as GradientStore;
     use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
-    use burn::backend::ops::ModuleOps;
+    use burn::backend::ops::{ActivationOps, ModuleOps};
     use burn::backend::tensor::FloatTensor;
+    use burn::tensor::TensorData;
     use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
     use burn_flex::FlexTensor;
 
     use super::{
         ConvBias, Direction, ProjectConvBackend, Wanted, conv_transpose2d_geometry,
-        conv2d_geometry, forward, gradients,
+        conv2d_geometry, forward, gradients, with_values,
     };
     use crate::geometry::ConvGeometry;
 
@@ -272,6 +287,9 @@ mod autodiff {
         direction: Direction,
         x: FlexTensor,
         weight: FlexTensor,
+        /// The result, when a ReLU was fused into the convolution: its backward passes the
+        /// output gradient only where the result is positive.
+        relu_output: Option<FlexTensor>,
     }
 
     impl<const N: usize> Backward<Flex, N> for ConvBackward {
@@ -284,6 +302,10 @@ mod autodiff {
             _checkpointer: &mut Checkpointer,
         ) {
             let dy = grads.consume::<Flex>(&ops.node);
+            let dy = match &ops.state.relu_output {
+                Some(y) => relu_backward(&dy, y),
+                None => dy,
+            };
             let parent = |i: usize| ops.parents.get(i).cloned().flatten();
             let (x_node, weight_node, bias_node) = (parent(0), parent(1), parent(2));
             let s = ops.state;
@@ -305,14 +327,30 @@ mod autodiff {
         }
     }
 
-    /// Records a covered convolution on the autodiff graph (when any operand is tracked) and
-    /// computes its forward pass.
+    /// `dy` where `y > 0`, else 0: a ReLU's backward, from its output `y`.
+    fn relu_backward(dy: &FlexTensor, y: &FlexTensor) -> FlexTensor {
+        let shape = dy.layout().shape().clone();
+        with_values(dy, |dy| {
+            with_values(y, |y| {
+                let masked: Vec<f32> = dy
+                    .iter()
+                    .zip(y)
+                    .map(|(&d, &y)| if y > 0.0 { d } else { 0.0 })
+                    .collect();
+                FlexTensor::from_data(TensorData::new(masked, shape))
+            })
+        })
+    }
+
+    /// Records a covered convolution (with its fused ReLU when `relu`) on the autodiff graph
+    /// (when any operand is tracked) and computes its forward pass.
     fn tracked<C: CheckpointStrategy>(
         geometry: ConvGeometry,
         direction: Direction,
         x: FloatTensor<Autodiff<Flex, C>>,
         weight: FloatTensor<Autodiff<Flex, C>>,
         bias: Option<FloatTensor<Autodiff<Flex, C>>>,
+        relu: bool,
     ) -> FloatTensor<Autodiff<Flex, C>> {
         let run = |bias: Option<&FlexTensor>| {
             forward(
@@ -321,13 +359,15 @@ mod autodiff {
                 x.primitive(),
                 weight.primitive(),
                 bias,
+                relu,
             )
         };
-        let state = || ConvState {
+        let state = |y: &FlexTensor| ConvState {
             geometry,
             direction,
             x: x.primitive().clone(),
             weight: weight.primitive().clone(),
+            relu_output: relu.then(|| y.clone()),
         };
         match &bias {
             Some(b) => match ConvBackward
@@ -335,7 +375,10 @@ mod autodiff {
                 .compute_bound()
                 .stateful()
             {
-                OpsKind::Tracked(prep) => prep.finish(state(), run(Some(b.primitive()))),
+                OpsKind::Tracked(prep) => {
+                    let y = run(Some(b.primitive()));
+                    prep.finish(state(&y), y)
+                }
                 OpsKind::UnTracked(prep) => prep.finish(run(Some(b.primitive()))),
             },
             None => match ConvBackward
@@ -343,7 +386,10 @@ mod autodiff {
                 .compute_bound()
                 .stateful()
             {
-                OpsKind::Tracked(prep) => prep.finish(state(), run(None)),
+                OpsKind::Tracked(prep) => {
+                    let y = run(None);
+                    prep.finish(state(&y), y)
+                }
                 OpsKind::UnTracked(prep) => prep.finish(run(None)),
             },
         }
@@ -355,6 +401,7 @@ mod autodiff {
             weight: FloatTensor<Self>,
             bias: ConvBias<Self>,
             options: ConvOptions<2>,
+            relu: bool,
         ) -> FloatTensor<Self> {
             let bias = bias.into_option();
             let geometry = conv2d_geometry(
@@ -364,8 +411,15 @@ mod autodiff {
                 &options,
             );
             match geometry {
-                Some(g) => tracked::<C>(g, Direction::Convolution, x, weight, bias),
-                None => <Self as ModuleOps<Self>>::conv2d(x, weight, bias, options),
+                Some(g) => tracked::<C>(g, Direction::Convolution, x, weight, bias, relu),
+                None => {
+                    let y = <Self as ModuleOps<Self>>::conv2d(x, weight, bias, options);
+                    if relu {
+                        <Self as ActivationOps<Self>>::relu(y)
+                    } else {
+                        y
+                    }
+                }
             }
         }
 
@@ -383,7 +437,7 @@ mod autodiff {
                 &options,
             );
             match geometry {
-                Some(g) => tracked::<C>(g, Direction::Transposed, x, weight, bias),
+                Some(g) => tracked::<C>(g, Direction::Transposed, x, weight, bias, false),
                 None => <Self as ModuleOps<Self>>::conv_transpose2d(x, weight, bias, options),
             }
         }

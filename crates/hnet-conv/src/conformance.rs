@@ -8,7 +8,7 @@
 //! kernel, stride larger than the kernel). Operand values are in [-1, 1].
 
 use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
-use burn::tensor::{Device, Tensor, TensorData, module};
+use burn::tensor::{Device, Tensor, TensorData, activation, module};
 
 /// Largest difference from Burn allowed, relative to the largest magnitude of Burn's result
 /// (plus one): `max |ours - burn| <= TOLERANCE * (1 + max |burn|)`. The sums of a case have at most
@@ -41,6 +41,9 @@ pub struct ConvCase {
     pub padding_out: [usize; 2],
     /// Whether the convolution has a bias.
     pub bias: bool,
+    /// Whether a ReLU follows (fused into the project's kernels by [`crate::conv2d_relu`];
+    /// convolutions only).
+    pub relu: bool,
     /// Seed of the operand values.
     pub seed: u64,
 }
@@ -80,6 +83,7 @@ impl ConvCase {
             (d.between(0, 3), d.between(0, 3)),
             (d.between(0, 3), d.between(0, 3)),
         ];
+        let relu = !transposed && d.one_in(2);
         let mut padding_out = [0, 0];
         if transposed {
             for axis in 0..2 {
@@ -101,6 +105,7 @@ impl ConvCase {
             dilation,
             padding_out,
             bias: !d.one_in(4),
+            relu,
             seed,
         }
     }
@@ -120,6 +125,8 @@ impl ConvCase {
             dilation: [1, 1],
             padding_out: if transposed { [1, 1] } else { [0, 0] },
             bias: true,
+            // H-Net's convolutions are each followed by a ReLU.
+            relu: !transposed,
             seed,
         }
     }
@@ -178,8 +185,9 @@ impl ConvCase {
         )
     }
 
-    /// The convolution computed by Burn's own operation (`project: false`) or by
-    /// [`crate::conv2d`] / [`crate::conv_transpose2d`] (`project: true`).
+    /// The convolution (with its ReLU when `relu`) computed by Burn's own operations
+    /// (`project: false`) or by [`crate::conv2d`], [`crate::conv2d_relu`] or
+    /// [`crate::conv_transpose2d`] (`project: true`).
     pub fn compute(
         &self,
         project: bool,
@@ -202,9 +210,11 @@ impl ConvCase {
         } else {
             let options =
                 ConvOptions::new_with_padding(self.stride, self.padding, self.dilation, 1);
-            match project {
-                true => crate::conv2d(x, weight, bias, options),
-                false => module::conv2d(x, weight, bias, options),
+            match (project, self.relu) {
+                (true, false) => crate::conv2d(x, weight, bias, options),
+                (true, true) => crate::conv2d_relu(x, weight, bias, options),
+                (false, false) => module::conv2d(x, weight, bias, options),
+                (false, true) => activation::relu(module::conv2d(x, weight, bias, options)),
             }
         }
     }

@@ -140,15 +140,16 @@ pub fn pack_weight(weight: &[f32], out_channels: usize, taps: usize) -> Vec<f32>
     packed
 }
 
-/// One image's forward convolution `y = W · x (+ b)`, NCHW, from its padded buffer `padded`
-/// ([`PaddedLayout::pad`]) and the weight packed by [`pack_weight`]. Every element of `y`
-/// (`out_channels x output plane`) is written.
+/// One image's forward convolution `y = W · x (+ b)`, NCHW, followed by a ReLU when `relu`, from
+/// its padded buffer `padded` ([`PaddedLayout::pad`]) and the weight packed by [`pack_weight`].
+/// Every element of `y` (`out_channels x output plane`) is written.
 pub fn forward_image(
     g: &ConvGeometry,
     layout: &PaddedLayout,
     padded: &[f32],
     packed_weight: &[f32],
     bias: Option<&[f32]>,
+    relu: bool,
     y: &mut [f32],
 ) {
     assert!(
@@ -162,7 +163,7 @@ pub fn forward_image(
     #[cfg(target_arch = "x86_64")]
     if crate::products::has_avx2() {
         // SAFETY: this CPU has AVX2 and FMA (checked just above).
-        unsafe { forward_avx2(g, layout, padded, packed_weight, bias, y) };
+        unsafe { forward_avx2(g, layout, padded, packed_weight, bias, relu, y) };
         return;
     }
     #[cfg(target_arch = "wasm32")]
@@ -172,10 +173,11 @@ pub fn forward_image(
         padded,
         packed_weight,
         bias,
+        relu,
         y,
     );
     #[allow(unreachable_code)]
-    forward_body::<f32, 8>(g, layout, padded, packed_weight, bias, y)
+    forward_body::<f32, 8>(g, layout, padded, packed_weight, bias, relu, y)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -186,10 +188,11 @@ fn forward_avx2(
     padded: &[f32],
     packed_weight: &[f32],
     bias: Option<&[f32]>,
+    relu: bool,
     y: &mut [f32],
 ) {
     // 6 channels x 2 vectors of 8: twelve accumulators, two loaded vectors and a broadcast.
-    forward_body::<crate::products::avx2::Avx2, 2>(g, layout, padded, packed_weight, bias, y)
+    forward_body::<crate::products::avx2::Avx2, 2>(g, layout, padded, packed_weight, bias, relu, y)
 }
 
 /// The body of [`forward_image`]: strips of `V · WIDTH` flat positions, each multiplied by every
@@ -201,6 +204,7 @@ fn forward_body<L: Lanes, const V: usize>(
     padded: &[f32],
     packed_weight: &[f32],
     bias: Option<&[f32]>,
+    relu: bool,
     y: &mut [f32],
 ) {
     let strip = V * L::WIDTH;
@@ -259,12 +263,10 @@ fn forward_body<L: Lanes, const V: usize>(
                     let b = L::splat(bias.map_or(0.0, |bias| bias[block * FORWARD_ROWS + r]));
                     let out = &mut y[(block * FORWARD_ROWS + r) * out_plane + o..][..strip];
                     for (v, value) in acc.iter().enumerate() {
+                        let value = value.multiply_add(b, L::splat(1.0));
+                        let value = if relu { value.relu() } else { value };
                         // SAFETY: `out` holds `strip = V · WIDTH` values.
-                        unsafe {
-                            value
-                                .multiply_add(b, L::splat(1.0))
-                                .store(out.as_mut_ptr().add(v * L::WIDTH))
-                        };
+                        unsafe { value.store(out.as_mut_ptr().add(v * L::WIDTH)) };
                     }
                 }
                 continue;
@@ -278,7 +280,11 @@ fn forward_body<L: Lanes, const V: usize>(
                 let b = bias.map_or(0.0, |bias| bias[block * FORWARD_ROWS + r]);
                 for &(t, o, len) in &runs {
                     for (out, value) in out[o..o + len].iter_mut().zip(&tile[t..t + len]) {
-                        *out = value + b;
+                        *out = if relu {
+                            (value + b).max(0.0)
+                        } else {
+                            value + b
+                        };
                     }
                 }
             }

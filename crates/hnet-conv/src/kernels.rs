@@ -73,14 +73,26 @@ fn for_each_image(batch: usize, out: &mut [f32], work: impl Fn(usize, &mut [f32]
     }
 }
 
-/// The forward convolution: `y[n] = W · lower(x[n]) + b`, NCHW, `[batch, out_channels, output]`.
-pub fn forward(g: &ConvGeometry, x: &[f32], weight: &[f32], bias: Option<&[f32]>) -> Vec<f32> {
+/// The forward convolution: `y[n] = W · lower(x[n]) + b`, NCHW, `[batch, out_channels, output]`,
+/// then a ReLU when `relu` (fused into the direct kernels' store).
+pub fn forward(
+    g: &ConvGeometry,
+    x: &[f32],
+    weight: &[f32],
+    bias: Option<&[f32]>,
+    relu: bool,
+) -> Vec<f32> {
     let (taps, plane, out_plane) = (g.taps(), g.input_plane(), g.output_plane());
     assert_eq!(x.len(), g.batch * g.in_channels * plane, "input size");
     assert_eq!(weight.len(), g.out_channels * taps, "weight size");
     if let Some(layout) = PaddedLayout::of(g) {
         let packed = direct::pack_weight(weight, g.out_channels, taps);
-        return forward_direct(g, &layout, x, &packed, bias);
+        return forward_direct(g, &layout, x, &packed, bias, relu);
+    }
+    if relu {
+        let mut y = forward(g, x, weight, bias, false);
+        y.iter_mut().for_each(|v| *v = v.max(0.0));
+        return y;
     }
     let mut y = vec![0.0; g.batch * g.out_channels * out_plane];
     // Output rows lowered (and multiplied) at a time: about BAND_PIXELS pixels, so that the band's
@@ -129,6 +141,7 @@ fn forward_direct(
     x: &[f32],
     packed_weight: &[f32],
     bias: Option<&[f32]>,
+    relu: bool,
 ) -> Vec<f32> {
     let plane = g.input_plane();
     let mut y = vec![0.0; g.batch * g.out_channels * g.output_plane()];
@@ -136,7 +149,7 @@ fn forward_direct(
         let x = &x[n * g.in_channels * plane..][..g.in_channels * plane];
         with_lowered_buffer(layout.len(g.in_channels), |padded| {
             layout.pad(g, x, padded);
-            direct::forward_image(g, layout, padded, packed_weight, bias, y);
+            direct::forward_image(g, layout, padded, packed_weight, bias, relu, y);
         });
     });
     y
@@ -157,7 +170,7 @@ pub fn input_gradient(g: &ConvGeometry, weight: &[f32], dy: &[f32]) -> Vec<f32> 
     {
         let flipped = g.flipped_weight(weight);
         let packed = direct::pack_weight(&flipped, adjoint.out_channels, adjoint.taps());
-        return forward_direct(&adjoint, &layout, dy, &packed, None);
+        return forward_direct(&adjoint, &layout, dy, &packed, None, false);
     }
     let weight_t = MatrixView::row_major(weight, g.out_channels, taps).transposed();
     let mut dx = vec![0.0; g.batch * g.in_channels * plane];

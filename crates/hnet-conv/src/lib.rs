@@ -33,7 +33,7 @@ use burn::backend::Dispatch;
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2d, ConvTranspose2d};
 use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
-use burn::tensor::{DType, Device, Tensor, module};
+use burn::tensor::{DType, Device, Tensor, activation, module};
 
 use backend::{ConvBias, ProjectConvBackend};
 
@@ -84,6 +84,27 @@ pub fn conv2d(
         weight.into_dispatch(),
         bias_of(bias),
         options,
+        false,
+    ))
+}
+
+/// `relu(module::conv2d(x, weight, bias, options))`; on flex the ReLU is fused into the project's
+/// kernels (one pass over the result less, forward and backward).
+pub fn conv2d_relu(
+    x: Tensor<4>,
+    weight: Tensor<4>,
+    bias: Option<Tensor<1>>,
+    options: ConvOptions<2>,
+) -> Tensor<4> {
+    if !runs_on_project_kernels(&x.device(), x.dtype()) {
+        return activation::relu(module::conv2d(x, weight, bias, options));
+    }
+    Tensor::from_dispatch(<Dispatch as ProjectConvBackend>::project_conv2d(
+        x.into_dispatch(),
+        weight.into_dispatch(),
+        bias_of(bias),
+        options,
+        true,
     ))
 }
 
@@ -117,6 +138,19 @@ fn same_padding(kernel: usize, stride: usize, input: usize) -> (usize, usize) {
 
 /// `conv.forward(x)` for a burn-nn `Conv2d`, computed by the project's kernels on flex.
 pub fn conv2d_module(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
+    let (weight, bias, options) = module_operands(conv, &x);
+    conv2d(x, weight, bias, options)
+}
+
+/// `relu(conv.forward(x))` for a burn-nn `Conv2d`, the ReLU fused into the project's kernels on
+/// flex ([`conv2d_relu`]).
+pub fn conv2d_relu_module(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
+    let (weight, bias, options) = module_operands(conv, &x);
+    conv2d_relu(x, weight, bias, options)
+}
+
+/// A burn-nn `Conv2d`'s weight, bias and options for input `x`.
+fn module_operands(conv: &Conv2d, x: &Tensor<4>) -> (Tensor<4>, Option<Tensor<1>>, ConvOptions<2>) {
     let [_, _, height, width] = x.dims();
     let padding = match conv.padding {
         PaddingConfig2d::Valid => [(0, 0), (0, 0)],
@@ -127,8 +161,7 @@ pub fn conv2d_module(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
         PaddingConfig2d::Explicit(top, left, bottom, right) => [(top, bottom), (left, right)],
     };
     let options = ConvOptions::new_with_padding(conv.stride, padding, conv.dilation, conv.groups);
-    conv2d(
-        x,
+    (
         conv.weight.val(),
         conv.bias.as_ref().map(|b| b.val()),
         options,

@@ -35,6 +35,8 @@ pub(crate) trait Lanes: Copy {
     unsafe fn store(self, to: *mut f32);
     /// `self + a * b`.
     fn multiply_add(self, a: Self, b: Self) -> Self;
+    /// The larger of each lane and zero (ReLU).
+    fn relu(self) -> Self;
 }
 
 /// One value: the portable fallback (compilers vectorise some of it).
@@ -61,6 +63,10 @@ impl Lanes for f32 {
     #[inline(always)]
     fn multiply_add(self, a: Self, b: Self) -> Self {
         self + a * b
+    }
+    #[inline(always)]
+    fn relu(self) -> Self {
+        self.max(0.0)
     }
 }
 
@@ -96,6 +102,10 @@ pub(crate) mod avx2 {
         fn multiply_add(self, a: Self, b: Self) -> Self {
             Self(unsafe { _mm256_fmadd_ps(a.0, b.0, self.0) })
         }
+        #[inline(always)]
+        fn relu(self) -> Self {
+            Self(unsafe { _mm256_max_ps(self.0, _mm256_setzero_ps()) })
+        }
     }
 }
 
@@ -130,6 +140,10 @@ pub(crate) mod simd128 {
         #[inline(always)]
         fn multiply_add(self, a: Self, b: Self) -> Self {
             Self(f32x4_add(self.0, f32x4_mul(a.0, b.0)))
+        }
+        #[inline(always)]
+        fn relu(self) -> Self {
+            Self(f32x4_max(self.0, f32x4_splat(0.0)))
         }
     }
 }

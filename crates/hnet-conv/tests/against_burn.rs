@@ -133,8 +133,19 @@ fn module_helpers_give_the_modules_forward() {
             burn::tensor::Distribution::Default,
             &device,
         );
-        let error = relative_error(hnet_conv::conv2d_module(&conv, x.clone()), conv.forward(x));
+        let error = relative_error(
+            hnet_conv::conv2d_module(&conv, x.clone()),
+            conv.forward(x.clone()),
+        );
         assert!(error <= TOLERANCE, "{size:?} {kernel} {stride}: {error:e}");
+        let error = relative_error(
+            hnet_conv::conv2d_relu_module(&conv, x.clone()),
+            burn::tensor::activation::relu(conv.forward(x)),
+        );
+        assert!(
+            error <= TOLERANCE,
+            "relu {size:?} {kernel} {stride}: {error:e}"
+        );
     }
     let up = ConvTranspose2dConfig::new([4, 3], [3, 3])
         .with_stride([2, 2])

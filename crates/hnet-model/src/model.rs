@@ -30,7 +30,7 @@ use burn::tensor::activation::{relu, sigmoid};
 use burn::tensor::module::max_pool2d;
 use burn::tensor::ops::MaxPoolOptions;
 use burn::tensor::{Device, Tensor};
-use hnet_conv::{conv_transpose2d_module, conv2d_module};
+use hnet_conv::{conv_transpose2d_module, conv2d_module, conv2d_relu_module};
 
 /// Settings of the network. The defaults are the paper's.
 #[derive(Config, Debug, PartialEq)]
@@ -201,10 +201,8 @@ impl DoubleConv {
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        relu(conv2d_module(
-            &self.second,
-            relu(conv2d_module(&self.first, x)),
-        ))
+        // Each convolution's ReLU fused into it on the CPU (`hnet_conv::conv2d_relu_module`).
+        conv2d_relu_module(&self.second, conv2d_relu_module(&self.first, x))
     }
 }
 
