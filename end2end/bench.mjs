@@ -6,6 +6,8 @@
 // to the twin tab's first estimate.
 // Usage, after `trunk build`: node end2end/bench.mjs [runs]   (docs/benchmarks.md)
 // HNET_DIST=<folder> times another build (e.g. scripts/bundle-size.sh's release page).
+// HNET_WEIGHTS=<model.bpk> loads those weights through the model bar first (e.g. a 128 px model
+// from `hnet train`), so that the page's time for another network size is measured.
 import { statSync, readdirSync } from "node:fs";
 import { join } from "node:path";
 import { DIST, serveDist, launchBrowser, openPage, waitForModel } from "./harness.mjs";
@@ -30,6 +32,14 @@ try {
       })
       .catch(() => {});
     await waitForModel(page);
+    if (process.env.HNET_WEIGHTS) {
+      const name = process.env.HNET_WEIGHTS.split("/").pop();
+      await page.setInputFiles("#weights-file", process.env.HNET_WEIGHTS);
+      await page.waitForFunction((n) => document.querySelector("#weights")?.textContent.includes(n), name, {
+        timeout: 60_000,
+      });
+      await waitForModel(page);
+    }
     const backend = await page.textContent("#backend");
     await page.click("#tab-twin");
     await page.waitForSelector("#force-verdict", { timeout: 120_000 });
