@@ -17,7 +17,7 @@ use burn::tensor::activation::relu;
 use burn::tensor::module::{interpolate, max_pool2d};
 use burn::tensor::ops::{InterpolateMode, InterpolateOptions, MaxPoolOptions};
 use burn::tensor::{Device, Tensor};
-use hnet_conv::{conv_transpose2d_module, conv2d_module};
+use hnet_conv::{conv_transpose2d_module, conv2d_module, conv2d_relu_module};
 
 fn conv3x3(cin: usize, cout: usize, device: &Device) -> Conv2d {
     Conv2dConfig::new([cin, cout], [3, 3])
@@ -55,10 +55,7 @@ impl ConvBlock {
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        relu(conv2d_module(
-            &self.second,
-            relu(conv2d_module(&self.first, x)),
-        ))
+        conv2d_relu_module(&self.second, conv2d_relu_module(&self.first, x))
     }
 }
 
@@ -262,15 +259,12 @@ impl HrNet {
     /// Mask logits `[N, 1, H, W]` of images `[N, 3, H, W]` (H, W divisible by 16).
     pub fn forward(&self, images: Tensor<4>) -> Tensor<4> {
         let [_, _, h, w] = images.dims();
-        let x = relu(conv2d_module(
-            &self.stem2,
-            relu(conv2d_module(&self.stem1, images)),
-        ));
+        let x = conv2d_relu_module(&self.stem2, conv2d_relu_module(&self.stem1, images));
         // Build the three branches, run their blocks, then exchange information.
         let mut branches = alloc::vec![x];
         for t in &self.transitions {
             let from = branches.last().expect("a branch").clone();
-            branches.push(relu(conv2d_module(t, from)));
+            branches.push(conv2d_relu_module(t, from));
         }
         let branches: Vec<Tensor<4>> = branches
             .into_iter()
@@ -308,7 +302,7 @@ impl HrNet {
         // HRNetV2 head: everything at the highest resolution, concatenated.
         let top = sizes[0];
         let joined = Tensor::cat(fused.into_iter().map(|f| resize(f, top)).collect(), 1);
-        let logits = conv2d_module(&self.classifier, relu(conv2d_module(&self.head, joined)));
+        let logits = conv2d_module(&self.classifier, conv2d_relu_module(&self.head, joined));
         resize(logits, [h, w])
     }
 }
