@@ -76,16 +76,7 @@ pub fn conv2d(
     bias: Option<Tensor<1>>,
     options: ConvOptions<2>,
 ) -> Tensor<4> {
-    if !runs_on_project_kernels(&x.device(), x.dtype()) {
-        return module::conv2d(x, weight, bias, options);
-    }
-    Tensor::from_dispatch(<Dispatch as ProjectConvBackend>::project_conv2d(
-        x.into_dispatch(),
-        weight.into_dispatch(),
-        bias_of(bias),
-        options,
-        false,
-    ))
+    conv2d_then(x, weight, bias, options, false)
 }
 
 /// `relu(module::conv2d(x, weight, bias, options))`; on flex the ReLU is fused into the project's
@@ -96,15 +87,27 @@ pub fn conv2d_relu(
     bias: Option<Tensor<1>>,
     options: ConvOptions<2>,
 ) -> Tensor<4> {
+    conv2d_then(x, weight, bias, options, true)
+}
+
+/// [`conv2d`], then a ReLU when `relu`.
+fn conv2d_then(
+    x: Tensor<4>,
+    weight: Tensor<4>,
+    bias: Option<Tensor<1>>,
+    options: ConvOptions<2>,
+    relu: bool,
+) -> Tensor<4> {
     if !runs_on_project_kernels(&x.device(), x.dtype()) {
-        return activation::relu(module::conv2d(x, weight, bias, options));
+        let y = module::conv2d(x, weight, bias, options);
+        return if relu { activation::relu(y) } else { y };
     }
     Tensor::from_dispatch(<Dispatch as ProjectConvBackend>::project_conv2d(
         x.into_dispatch(),
         weight.into_dispatch(),
         bias_of(bias),
         options,
-        true,
+        relu,
     ))
 }
 
