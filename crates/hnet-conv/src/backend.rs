@@ -327,7 +327,8 @@ mod autodiff {
         }
     }
 
-    /// `dy` where `y > 0`, else 0: a ReLU's backward, from its output `y`.
+    /// `dy` where `y > 0` (or is NaN), else 0: a ReLU's backward, from its output `y`, as Burn's
+    /// flex computes it.
     fn relu_backward(dy: &FlexTensor, y: &FlexTensor) -> FlexTensor {
         let shape = dy.layout().shape().clone();
         with_values(dy, |dy| {
@@ -335,7 +336,7 @@ mod autodiff {
                 let masked: Vec<f32> = dy
                     .iter()
                     .zip(y)
-                    .map(|(&d, &y)| if y > 0.0 { d } else { 0.0 })
+                    .map(|(&d, &y)| if y.is_nan() || y > 0.0 { d } else { 0.0 })
                     .collect();
                 FlexTensor::from_data(TensorData::new(masked, shape))
             })

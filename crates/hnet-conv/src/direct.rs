@@ -280,11 +280,8 @@ fn forward_body<L: Lanes, const V: usize>(
                 let b = bias.map_or(0.0, |bias| bias[block * FORWARD_ROWS + r]);
                 for &(t, o, len) in &runs {
                     for (out, value) in out[o..o + len].iter_mut().zip(&tile[t..t + len]) {
-                        *out = if relu {
-                            (value + b).max(0.0)
-                        } else {
-                            value + b
-                        };
+                        let value = value + b;
+                        *out = if relu { Lanes::relu(value) } else { value };
                     }
                 }
             }

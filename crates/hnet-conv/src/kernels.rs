@@ -10,7 +10,7 @@
 //! (1x1, stride 1, no padding) skips the lowering: the image is its own lowered matrix. Every
 //! other stride-1 convolution (all of H-Net's but the upsampling) computes its forward pass and
 //! weight gradient with no lowered matrix at all, straight from the zero-padded image
-//! ([`crate::direct`]).
+//! ([`crate::direct`]), and its input gradient as the direct forward pass of the turned kernel.
 //!
 //! The products are [`crate::products`]'. With the `rayon` feature, images run on rayon's
 //! workers, one image per task (a single image gives gemm all the threads).
@@ -22,7 +22,7 @@ use core::cell::Cell;
 use crate::direct::{self, PaddedLayout};
 use crate::geometry::ConvGeometry;
 use crate::lowering::{lower, raise_adding};
-use crate::products::{MatrixView, Threads, broadcast_product, gemm_product};
+use crate::products::{Lanes, MatrixView, Threads, broadcast_product, gemm_product};
 
 std::thread_local! {
     /// Each thread's buffer for a lowered image, kept between calls so that the pages it
@@ -91,7 +91,7 @@ pub fn forward(
     }
     if relu {
         let mut y = forward(g, x, weight, bias, false);
-        y.iter_mut().for_each(|v| *v = v.max(0.0));
+        y.iter_mut().for_each(|v| *v = Lanes::relu(*v));
         return y;
     }
     let mut y = vec![0.0; g.batch * g.out_channels * out_plane];

@@ -35,7 +35,8 @@ pub(crate) trait Lanes: Copy {
     unsafe fn store(self, to: *mut f32);
     /// `self + a * b`.
     fn multiply_add(self, a: Self, b: Self) -> Self;
-    /// The larger of each lane and zero (ReLU).
+    /// The larger of each lane and zero (ReLU); NaN stays NaN, as in Burn's and PyTorch's ReLU
+    /// (a diverged network must not look finite).
     fn relu(self) -> Self;
 }
 
@@ -66,7 +67,11 @@ impl Lanes for f32 {
     }
     #[inline(always)]
     fn relu(self) -> Self {
-        self.max(0.0)
+        if self.is_nan() || self > 0.0 {
+            self
+        } else {
+            0.0
+        }
     }
 }
 
@@ -104,7 +109,8 @@ pub(crate) mod avx2 {
         }
         #[inline(always)]
         fn relu(self) -> Self {
-            Self(unsafe { _mm256_max_ps(self.0, _mm256_setzero_ps()) })
+            // maxps returns its second operand when either is NaN: NaN propagates.
+            Self(unsafe { _mm256_max_ps(_mm256_setzero_ps(), self.0) })
         }
     }
 }
@@ -143,6 +149,7 @@ pub(crate) mod simd128 {
         }
         #[inline(always)]
         fn relu(self) -> Self {
+            // f32x4.max returns NaN when either lane is NaN.
             Self(f32x4_max(self.0, f32x4_splat(0.0)))
         }
     }

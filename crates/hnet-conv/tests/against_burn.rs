@@ -86,6 +86,44 @@ fn direct_stride_1_convolutions_match_burn() {
     }
 }
 
+/// A NaN stays NaN through the fused ReLU, where Burn's ReLU keeps it (a diverged network must
+/// not look finite): on the direct path (stride 1) and the lowered one (stride 2).
+#[test]
+fn the_fused_relu_keeps_nan_as_burn_does() {
+    let device = Device::flex();
+    // 40 pixels wide: the direct path stores whole strips from its vector registers there.
+    let shape = [2, 3, 9, 40];
+    for stride in [1, 2] {
+        let mut values = vec![0.5f32; shape.iter().product()];
+        values[4 * 40 + 20] = f32::NAN;
+        let x = Tensor::<4>::from_data(burn::tensor::TensorData::new(values, shape), &device);
+        let weight = Tensor::<4>::ones([4, 3, 3, 3], &device);
+        let options = ConvOptions::new([stride, stride], [1, 1], [1, 1], 1);
+        let nan_mask = |y: Tensor<4>| -> Vec<bool> {
+            let values = y
+                .into_data()
+                .convert::<f32>()
+                .try_into_vec::<f32>()
+                .unwrap();
+            values.iter().map(|v| v.is_nan()).collect()
+        };
+        let ours = nan_mask(hnet_conv::conv2d_relu(
+            x.clone(),
+            weight.clone(),
+            None,
+            options.clone(),
+        ));
+        let burn = nan_mask(burn::tensor::activation::relu(module::conv2d(
+            x, weight, None, options,
+        )));
+        assert!(
+            ours.iter().any(|&n| n),
+            "stride {stride}: no NaN came through"
+        );
+        assert_eq!(ours, burn, "stride {stride}");
+    }
+}
+
 #[test]
 fn flex_and_autodiff_flex_reach_the_project_kernels() {
     use burn::tensor::DType;
