@@ -13,6 +13,7 @@ use burn_flex::FlexTensor;
 
 use crate::geometry::ConvGeometry;
 use crate::kernels;
+use crate::pooling::{self, PoolShape};
 
 /// A convolution's bias, when it has one.
 #[derive(ExtensionType)]
@@ -45,6 +46,26 @@ pub trait ProjectConvBackend: Backend {
         #[extension_type] bias: ConvBias<Self>,
         options: ConvTransposeOptions<2>,
     ) -> FloatTensor<Self>;
+
+    /// `max_pool2d(x, [2, 2])` (stride 2, no padding): x `[n, c, h, w]`.
+    fn project_max_pool2x2(x: FloatTensor<Self>) -> FloatTensor<Self>;
+}
+
+/// Burn's own 2 x 2 max pooling (stride 2, no padding), for what the kernel does not cover.
+fn burn_max_pool2x2<B: Backend>(x: FloatTensor<B>) -> FloatTensor<B> {
+    B::max_pool2d(x, [2, 2], [2, 2], [0, 0], [1, 1], false)
+}
+
+/// The pooling's shape when the kernel covers `x` (f32, four dimensions).
+fn pool_shape(x: &FlexTensor) -> Option<PoolShape> {
+    (x.dtype() == DType::F32 && x.layout().shape().num_dims() == 4).then(|| PoolShape::of(dims4(x)))
+}
+
+/// The kernel's 2 x 2 max pooling of a covered flex tensor.
+fn max_pool(shape: &PoolShape, x: &FlexTensor) -> FlexTensor {
+    with_values(x, |x| {
+        flex_tensor(pooling::max_pool2x2(shape, x), shape.output_dims())
+    })
 }
 
 impl<B: Backend> ConvBias<B> {
@@ -255,6 +276,13 @@ impl ProjectConvBackend for Flex {
             None => <Flex as ModuleOps<Flex>>::conv_transpose2d(x, weight, bias, options),
         }
     }
+
+    fn project_max_pool2x2(x: FlexTensor) -> FlexTensor {
+        match pool_shape(&x) {
+            Some(shape) => max_pool(&shape, &x),
+            None => burn_max_pool2x2::<Flex>(x),
+        }
+    }
 }
 
 #[cfg(feature = "autodiff")]
@@ -272,10 +300,38 @@ mod autodiff {
     use burn_flex::FlexTensor;
 
     use super::{
-        ConvBias, Direction, ProjectConvBackend, Wanted, conv_transpose2d_geometry,
-        conv2d_geometry, forward, gradients, with_values,
+        ConvBias, Direction, ProjectConvBackend, Wanted, burn_max_pool2x2,
+        conv_transpose2d_geometry, conv2d_geometry, flex_tensor, forward, gradients, max_pool,
+        pool_shape, with_values,
     };
     use crate::geometry::ConvGeometry;
+    use crate::pooling::{self, PoolShape};
+
+    /// The backward step of a covered max pooling: its input, kept from the forward pass, where
+    /// each window's winner is found again.
+    #[derive(Debug)]
+    struct MaxPoolBackward;
+
+    impl Backward<Flex, 1> for MaxPoolBackward {
+        type State = (PoolShape, FlexTensor);
+
+        fn backward(
+            self,
+            ops: Ops<Self::State, 1>,
+            grads: &mut GradientStore,
+            _checkpointer: &mut Checkpointer,
+        ) {
+            let dy = grads.consume::<Flex>(&ops.node);
+            let (shape, x) = &ops.state;
+            if let [Some(node)] = &ops.parents {
+                let dx = with_values(x, |x| {
+                    with_values(&dy, |dy| pooling::max_pool2x2_backward(shape, x, dy))
+                });
+                let dims = [shape.batch, shape.channels, shape.height, shape.width];
+                grads.register::<Flex>(node.id, flex_tensor(dx, dims));
+            }
+        }
+    }
 
     /// The backward step of a covered convolution: its inputs, kept from the forward pass.
     #[derive(Debug)]
@@ -440,6 +496,23 @@ mod autodiff {
             match geometry {
                 Some(g) => tracked::<C>(g, Direction::Transposed, x, weight, bias, false),
                 None => <Self as ModuleOps<Self>>::conv_transpose2d(x, weight, bias, options),
+            }
+        }
+
+        fn project_max_pool2x2(x: FloatTensor<Self>) -> FloatTensor<Self> {
+            let Some(shape) = pool_shape(x.primitive()) else {
+                return burn_max_pool2x2::<Self>(x);
+            };
+            match MaxPoolBackward
+                .prepare::<C>([x.node()])
+                .compute_bound()
+                .stateful()
+            {
+                OpsKind::Tracked(prep) => {
+                    let y = max_pool(&shape, x.primitive());
+                    prep.finish((shape, x.primitive().clone()), y)
+                }
+                OpsKind::UnTracked(prep) => prep.finish(max_pool(&shape, x.primitive())),
             }
         }
     }

@@ -76,6 +76,69 @@ impl Axis {
     }
 }
 
+/// One class of input positions of a strided axis, `first + stride · m` for `m < count`, and the
+/// stride-1 convolution over the output positions that gives the input gradient there: the
+/// taps of the original kernel that reach these positions, in the order of their output
+/// offset (a polyphase, or sub-pixel, decomposition of the transposed convolution).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct AxisPhase {
+    /// The class's first input position (below the stride).
+    pub first: usize,
+    /// Positions in the class.
+    pub count: usize,
+    /// The stride-1 axis from the output positions onto the class, `None` when no tap reaches
+    /// the class (its gradient is zero); its outputs past `count` are not used.
+    pub axis: Option<Axis>,
+    /// For each tap of `axis`, the original kernel's tap.
+    pub taps: alloc::vec::Vec<usize>,
+}
+
+impl Axis {
+    /// The input positions' classes (one per residue modulo the stride) of an axis with dilation
+    /// 1, each with its stride-1 gradient axis; `None` for a dilated axis, or when a class's
+    /// taps would need negative padding.
+    ///
+    /// Input position `i = first + stride · m` receives `dy[o] · w[k]` wherever
+    /// `o · stride + k - padding = i`, that is for the taps `k ≡ first + padding (mod stride)`,
+    /// at output `o = m + d(k)` with `d(k) = (first + padding - k) / stride`: consecutive offsets,
+    /// so a stride-1 convolution of `dy` with those taps (largest `k` first) padded by `-min d`.
+    pub fn gradient_phases(&self) -> Option<alloc::vec::Vec<AxisPhase>> {
+        if self.dilation != 1 {
+            return None;
+        }
+        let (stride, padding) = (self.stride as i64, self.padding as i64);
+        (0..self.stride.min(self.input))
+            .map(|first| {
+                let count = (self.input - first).div_ceil(self.stride);
+                let reach = first as i64 + padding;
+                let taps: alloc::vec::Vec<usize> = (0..self.kernel)
+                    .rev()
+                    .filter(|&k| (reach - k as i64).rem_euclid(stride) == 0)
+                    .collect();
+                let Some(&last) = taps.first() else {
+                    return Some(AxisPhase {
+                        first,
+                        count,
+                        axis: None,
+                        taps,
+                    });
+                };
+                let lowest_offset = (reach - last as i64) / stride;
+                let before = usize::try_from(-lowest_offset).ok()?;
+                let after = (count + taps.len()).saturating_sub(1 + self.output + before);
+                let axis = Self::of_convolution(self.output, taps.len(), 1, (before, after), 1)?;
+                debug_assert!(axis.output >= count);
+                Some(AxisPhase {
+                    first,
+                    count,
+                    axis: Some(axis),
+                    taps,
+                })
+            })
+            .collect()
+    }
+}
+
 /// A 2-D convolution over a batch, with one group (every output channel sees every input channel).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ConvGeometry {
@@ -319,5 +382,29 @@ mod tests {
         assert_eq!(g.input_shape(), [4, 16, 16, 16]);
         assert_eq!(g.output_shape(), [4, 32, 8, 8]);
         assert_eq!(g.weight_shape(), [32, 16, 3, 3]);
+        // Its forward pass by classes: even positions take the middle tap, odd ones the two
+        // outer taps (the later one first), padded by one after.
+        let phases = g
+            .height
+            .gradient_phases()
+            .expect("dilation 1, no negative padding");
+        let summary: Vec<_> = phases
+            .iter()
+            .map(|p| {
+                (
+                    p.first,
+                    p.count,
+                    p.taps.clone(),
+                    p.axis.map(|a| (a.padding, a.output)),
+                )
+            })
+            .collect();
+        assert_eq!(
+            summary,
+            [
+                (0, 8, vec![1], Some((0, 8))),
+                (1, 8, vec![2, 0], Some((0, 8)))
+            ]
+        );
     }
 }

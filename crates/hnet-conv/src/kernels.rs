@@ -20,7 +20,7 @@ use alloc::vec::Vec;
 use core::cell::Cell;
 
 use crate::direct::{self, PaddedLayout};
-use crate::geometry::ConvGeometry;
+use crate::geometry::{AxisPhase, ConvGeometry};
 use crate::lowering::{lower, raise_adding};
 use crate::products::{Lanes, MatrixView, Threads, broadcast_product, gemm_product};
 
@@ -55,7 +55,11 @@ fn with_lowered_image<R>(g: &ConvGeometry, x: &[f32], work: impl FnOnce(&[f32]) 
 
 /// Calls `work(n, chunk)` for every image `n` and its chunk of `out` (`out.len() / batch`
 /// elements each): in parallel over images with `rayon`.
-fn for_each_image(batch: usize, out: &mut [f32], work: impl Fn(usize, &mut [f32]) + Send + Sync) {
+pub(crate) fn for_each_image(
+    batch: usize,
+    out: &mut [f32],
+    work: impl Fn(usize, &mut [f32]) + Send + Sync,
+) {
     if batch == 0 || out.is_empty() {
         return;
     }
@@ -172,6 +176,11 @@ pub fn input_gradient(g: &ConvGeometry, weight: &[f32], dy: &[f32]) -> Vec<f32> 
         let packed = direct::pack_weight(&flipped, adjoint.out_channels, adjoint.taps());
         return forward_direct(&adjoint, &layout, dy, &packed, None, false);
     }
+    if g.height.stride * g.width.stride > 1
+        && let (Some(rows), Some(columns)) = (g.height.gradient_phases(), g.width.gradient_phases())
+    {
+        return input_gradient_by_phases(g, &rows, &columns, weight, dy);
+    }
     let weight_t = MatrixView::row_major(weight, g.out_channels, taps).transposed();
     let mut dx = vec![0.0; g.batch * g.in_channels * plane];
     for_each_image(g.batch, &mut dx, |n, dx| {
@@ -186,6 +195,64 @@ pub fn input_gradient(g: &ConvGeometry, weight: &[f32], dy: &[f32]) -> Vec<f32> 
             });
         }
     });
+    dx
+}
+
+/// The input gradient of a strided convolution (a transposed convolution's forward pass) class
+/// by class of input positions ([`crate::geometry::Axis::gradient_phases`]): each class of rows
+/// and class of columns is a stride-1 convolution of `dy` with the taps that reach it, computed
+/// by [`forward`] (the direct kernels) and written into its positions of `dx`. No lowered
+/// matrix, no col2im.
+fn input_gradient_by_phases(
+    g: &ConvGeometry,
+    rows: &[AxisPhase],
+    columns: &[AxisPhase],
+    weight: &[f32],
+    dy: &[f32],
+) -> Vec<f32> {
+    let (in_h, in_w) = (g.height.input, g.width.input);
+    let (kh, kw) = (g.height.kernel, g.width.kernel);
+    let mut dx = vec![0.0; g.batch * g.in_channels * in_h * in_w];
+    for row in rows {
+        for column in columns {
+            let (Some(height), Some(width)) = (row.axis, column.axis) else {
+                continue;
+            };
+            // dy's space onto this class of dx's: the taps that reach it, channels swapped.
+            let phase = ConvGeometry {
+                batch: g.batch,
+                in_channels: g.out_channels,
+                out_channels: g.in_channels,
+                height,
+                width,
+            };
+            let taps = row.taps.len() * column.taps.len();
+            let mut phase_weight = Vec::with_capacity(g.in_channels * g.out_channels * taps);
+            for c in 0..g.in_channels {
+                for o in 0..g.out_channels {
+                    let kernel = &weight[(o * g.in_channels + c) * kh * kw..][..kh * kw];
+                    for &i in &row.taps {
+                        phase_weight.extend(column.taps.iter().map(|&j| kernel[i * kw + j]));
+                    }
+                }
+            }
+            let values = forward(&phase, dy, &phase_weight, None, false);
+            let (phase_plane, phase_w) = (phase.output_plane(), width.output);
+            let (images, planes) = (
+                dx.chunks_exact_mut(in_h * in_w),
+                values.chunks_exact(phase_plane),
+            );
+            for (dx, values) in images.zip(planes) {
+                for m in 0..row.count {
+                    let target = &mut dx[(row.first + m * g.height.stride) * in_w..][..in_w];
+                    let source = &values[m * phase_w..][..column.count];
+                    for (j, &value) in source.iter().enumerate() {
+                        target[column.first + j * g.width.stride] = value;
+                    }
+                }
+            }
+        }
+    }
     dx
 }
 

@@ -7,7 +7,11 @@
 //! image ([`lowering`]), computed by register-blocked products written for these shapes
 //! ([`products`]), with the weight gradient as one accumulating product per image ([`kernels`]).
 //! Stride-1 convolutions skip the lowering: their forward pass and weight gradient read the
-//! zero-padded image directly ([`direct`]).
+//! zero-padded image directly ([`direct`]). A strided convolution's input gradient (a transposed
+//! convolution's forward pass, H-Net's upsampling) is split into one stride-1 convolution per
+//! class of output positions ([`geometry::Axis::gradient_phases`]), which the direct kernels
+//! compute. The 2 x 2 max pooling between the encoder's blocks has its own kernel too
+//! ([`pooling`], [`max_pool2x2`]): flex pools through a general 3-D max pooling with indices.
 //!
 //! Model code calls [`conv2d_module`] / [`conv_transpose2d_module`] where it would call a
 //! burn-nn module's `forward` (or [`conv2d`] / [`conv_transpose2d`] where it would call Burn's
@@ -25,6 +29,7 @@ pub mod direct;
 pub mod geometry;
 pub mod kernels;
 pub mod lowering;
+pub mod pooling;
 pub mod products;
 
 use core::sync::atomic::{AtomicBool, Ordering};
@@ -32,7 +37,7 @@ use core::sync::atomic::{AtomicBool, Ordering};
 use burn::backend::Dispatch;
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2d, ConvTranspose2d};
-use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
+use burn::tensor::ops::{ConvOptions, ConvTransposeOptions, MaxPoolOptions};
 use burn::tensor::{DType, Device, Tensor, activation, module};
 
 use backend::{ConvBias, ProjectConvBackend};
@@ -127,6 +132,17 @@ pub fn conv_transpose2d(
         weight.into_dispatch(),
         bias_of(bias),
         options,
+    ))
+}
+
+/// Burn's `module::max_pool2d(x, MaxPoolOptions::new([2, 2]))` (2 x 2 windows, stride 2, no
+/// padding), computed by the project's kernel on flex ([`pooling`]).
+pub fn max_pool2x2(x: Tensor<4>) -> Tensor<4> {
+    if !runs_on_project_kernels(&x.device(), x.dtype()) {
+        return module::max_pool2d(x, MaxPoolOptions::new([2, 2]));
+    }
+    Tensor::from_dispatch(<Dispatch as ProjectConvBackend>::project_max_pool2x2(
+        x.into_dispatch(),
     ))
 }
 

@@ -197,3 +197,84 @@ fn module_helpers_give_the_modules_forward() {
     );
     assert!(error <= TOLERANCE, "transposed: {error:e}");
 }
+
+/// Values as bits, so that NaN compares equal to NaN and -0 differs from 0.
+fn bits(t: Tensor<4>) -> Vec<u32> {
+    let values = t
+        .into_data()
+        .convert::<f32>()
+        .try_into_vec::<f32>()
+        .unwrap();
+    values.iter().map(|v| v.to_bits()).collect()
+}
+
+/// The project's 2 x 2 max pooling and its gradient against Burn's, bit for bit: odd sizes,
+/// ties (values drawn from a few levels, zeros as after a ReLU, -0 and 0), NaN.
+fn check_max_pool(dims: [usize; 4], seed: u64) -> Result<(), TestCaseError> {
+    use burn::tensor::TensorData;
+    use burn::tensor::ops::MaxPoolOptions;
+    let len: usize = dims.iter().product();
+    let mut state = seed | 1;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    let levels = [0.0, -0.0, 0.0, 1.5, -2.0, 0.25, f32::NAN, 3.0];
+    let x: Vec<f32> = (0..len)
+        .map(|_| match next() % 16 {
+            k @ 0..8 => levels[k as usize],
+            _ => (next() % 1000) as f32 / 100.0 - 5.0,
+        })
+        .collect();
+    let dy: Vec<f32> = (0..len / 4 + 1)
+        .map(|_| (next() % 97) as f32 - 48.0)
+        .collect();
+    for device in [Device::flex(), Device::flex().autodiff()] {
+        let input = || {
+            let x = Tensor::<4>::from_data(TensorData::new(x.clone(), dims), &device);
+            if device.is_autodiff() {
+                x.require_grad()
+            } else {
+                x
+            }
+        };
+        let ours = hnet_conv::max_pool2x2(input());
+        let burn = module::max_pool2d(input(), MaxPoolOptions::new([2, 2]));
+        prop_assert_eq!(ours.dims(), burn.dims());
+        prop_assert_eq!(bits(ours.clone()), bits(burn.clone()), "forward {:?}", dims);
+        if !device.is_autodiff() {
+            continue;
+        }
+        let out_dims = ours.dims();
+        let weights = Tensor::<4>::from_data(
+            TensorData::new(dy[..out_dims.iter().product()].to_vec(), out_dims),
+            &device,
+        );
+        let gradient = |x: Tensor<4>, y: Tensor<4>| {
+            let grads = (y * weights.clone()).sum().backward();
+            x.grad(&grads).unwrap()
+        };
+        let (x_ours, x_burn) = (input(), input());
+        let ours = gradient(x_ours.clone(), hnet_conv::max_pool2x2(x_ours));
+        let burn = gradient(
+            x_burn.clone(),
+            module::max_pool2d(x_burn, MaxPoolOptions::new([2, 2])),
+        );
+        prop_assert_eq!(bits(ours), bits(burn), "gradient {:?}", dims);
+    }
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(hnet_mutations::cases(32))]
+
+    #[test]
+    fn max_pooling_matches_burn_bit_for_bit(
+        dims in (1usize..4, 1usize..5, 0usize..12, 0usize..12),
+        seed in any::<u64>(),
+    ) {
+        check_max_pool([dims.0, dims.1, dims.2, dims.3], seed)?;
+    }
+}

@@ -14,19 +14,15 @@ use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::{BatchNorm, BatchNormConfig, Linear, LinearConfig, PaddingConfig2d};
 use burn::tensor::activation::relu;
-use burn::tensor::module::{interpolate, max_pool2d};
-use burn::tensor::ops::{InterpolateMode, InterpolateOptions, MaxPoolOptions};
+use burn::tensor::module::interpolate;
+use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
 use burn::tensor::{Device, Tensor};
-use hnet_conv::{conv_transpose2d_module, conv2d_module, conv2d_relu_module};
+use hnet_conv::{conv_transpose2d_module, conv2d_module, conv2d_relu_module, max_pool2x2};
 
 fn conv3x3(cin: usize, cout: usize, device: &Device) -> Conv2d {
     Conv2dConfig::new([cin, cout], [3, 3])
         .with_padding(PaddingConfig2d::Same)
         .init(device)
-}
-
-fn pool2(x: Tensor<4>) -> Tensor<4> {
-    max_pool2d(x, MaxPoolOptions::new([2, 2]))
 }
 
 /// Bilinear resize of `[N, C, H, W]` to `size` (`[height, width]`).
@@ -114,7 +110,7 @@ impl UNet {
         for block in &self.down {
             x = block.forward(x);
             skips.push(x.clone());
-            x = pool2(x);
+            x = max_pool2x2(x);
         }
         x = self.bottom.forward(x);
         for ((up, merge), skip) in self.up.iter().zip(&self.merge).zip(skips.into_iter().rev()) {
@@ -166,7 +162,7 @@ impl Fcn {
         let mut x = images;
         let mut pooled = Vec::with_capacity(5);
         for block in &self.blocks {
-            x = pool2(block.forward(x));
+            x = max_pool2x2(block.forward(x));
             pooled.push(x.clone());
         }
         let s32 = conv2d_module(&self.score_32, pooled[4].clone());
@@ -354,7 +350,7 @@ impl YNet {
         for (i, block) in encoder.iter().enumerate() {
             x = block.forward(x);
             if i + 1 < encoder.len() {
-                x = pool2(x);
+                x = max_pool2x2(x);
             }
         }
         x.mean_dims(&[2, 3]).flatten(1, 3)

@@ -27,10 +27,8 @@ use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::{Linear, LinearConfig, PaddingConfig2d};
 use burn::tensor::activation::{relu, sigmoid};
-use burn::tensor::module::max_pool2d;
-use burn::tensor::ops::MaxPoolOptions;
 use burn::tensor::{Device, Tensor};
-use hnet_conv::{conv_transpose2d_module, conv2d_module, conv2d_relu_module};
+use hnet_conv::{conv_transpose2d_module, conv2d_module, conv2d_relu_module, max_pool2x2};
 
 /// Settings of the network. The defaults are the paper's.
 #[derive(Config, Debug, PartialEq)]
@@ -286,7 +284,7 @@ impl SegmentationBranch {
         for block in &self.encoder {
             x = block.forward(x);
             skips.push(x.clone());
-            x = max_pool2d(x, MaxPoolOptions::new([2, 2]));
+            x = max_pool2x2(x);
         }
         x = self.bottleneck.forward(x);
         let mut pooled = Vec::with_capacity(self.decoder.len() + 1);
