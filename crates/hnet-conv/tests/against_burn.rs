@@ -67,9 +67,17 @@ fn wide_images_lowered_in_bands_match_burn() {
 
 /// Stride-1 convolutions go to the direct kernels (`hnet_conv::direct`): rows that are not a
 /// whole number of vectors (the weight gradient's zero-extended tail), more output channels than
-/// one register tile, dilation, and padding on one side only.
+/// one register tile, dilation, padding on one side only, and many input channels (the
+/// accumulators kept over 333 channel-taps).
 #[test]
 fn direct_stride_1_convolutions_match_burn() {
+    check(&ConvCase {
+        in_channels: 37,
+        out_channels: 13,
+        size: [5, 40],
+        ..ConvCase::h_net_layer(false, 17)
+    })
+    .unwrap();
     for (size, dilation, padding, out_channels) in [
         ([5, 13], [1, 1], [(1, 1), (1, 1)], 7),
         ([9, 20], [2, 1], [(2, 0), (0, 3)], 13),
