@@ -140,11 +140,7 @@ fn forward(
                 }
                 Direction::Transposed => {
                     debug_assert!(!relu, "no fused ReLU for transposed convolutions");
-                    let mut y = kernels::input_gradient(g, w, x);
-                    if let Some(bias) = bias {
-                        kernels::add_per_channel(&mut y, bias, g.input_plane());
-                    }
-                    flex_tensor(y, g.input_shape())
+                    flex_tensor(kernels::transposed_forward(g, w, x, bias), g.input_shape())
                 }
             };
             match bias {

@@ -21,6 +21,7 @@
 
 use alloc::vec;
 use alloc::vec::Vec;
+use core::mem::MaybeUninit;
 
 use crate::geometry::ConvGeometry;
 use crate::products::Lanes;
@@ -142,7 +143,7 @@ pub fn pack_weight(weight: &[f32], out_channels: usize, taps: usize) -> Vec<f32>
 
 /// One image's forward convolution `y = W · x (+ b)`, NCHW, followed by a ReLU when `relu`, from
 /// its padded buffer `padded` ([`PaddedLayout::pad`]) and the weight packed by [`pack_weight`].
-/// Every element of `y` (`out_channels x output plane`) is written.
+/// Every element of `y` (`out_channels x output plane`) is written (it need not be initialised).
 pub fn forward_image(
     g: &ConvGeometry,
     layout: &PaddedLayout,
@@ -150,7 +151,7 @@ pub fn forward_image(
     packed_weight: &[f32],
     bias: Option<&[f32]>,
     relu: bool,
-    y: &mut [f32],
+    y: &mut [MaybeUninit<f32>],
 ) {
     assert!(
         padded.len() >= layout.len(g.in_channels)
@@ -189,7 +190,7 @@ fn forward_avx2(
     packed_weight: &[f32],
     bias: Option<&[f32]>,
     relu: bool,
-    y: &mut [f32],
+    y: &mut [MaybeUninit<f32>],
 ) {
     // 6 channels x 2 vectors of 8: twelve accumulators, two loaded vectors and a broadcast.
     forward_body::<crate::products::avx2::Avx2, 2>(g, layout, padded, packed_weight, bias, relu, y)
@@ -205,7 +206,7 @@ fn forward_body<L: Lanes, const V: usize>(
     packed_weight: &[f32],
     bias: Option<&[f32]>,
     relu: bool,
-    y: &mut [f32],
+    y: &mut [MaybeUninit<f32>],
 ) {
     let strip = V * L::WIDTH;
     debug_assert!(strip <= SLACK);
@@ -266,7 +267,7 @@ fn forward_body<L: Lanes, const V: usize>(
                         let value = value.multiply_add(b, L::splat(1.0));
                         let value = if relu { value.relu() } else { value };
                         // SAFETY: `out` holds `strip = V · WIDTH` values.
-                        unsafe { value.store(out.as_mut_ptr().add(v * L::WIDTH)) };
+                        unsafe { value.store(out.as_mut_ptr().cast::<f32>().add(v * L::WIDTH)) };
                     }
                 }
                 continue;
@@ -281,7 +282,7 @@ fn forward_body<L: Lanes, const V: usize>(
                 for &(t, o, len) in &runs {
                     for (out, value) in out[o..o + len].iter_mut().zip(&tile[t..t + len]) {
                         let value = value + b;
-                        *out = if relu { Lanes::relu(value) } else { value };
+                        out.write(if relu { Lanes::relu(value) } else { value });
                     }
                 }
             }

@@ -18,6 +18,7 @@
 use alloc::vec;
 use alloc::vec::Vec;
 use core::cell::Cell;
+use core::mem::MaybeUninit;
 
 use crate::direct::{self, PaddedLayout};
 use crate::geometry::{AxisPhase, ConvGeometry};
@@ -35,7 +36,11 @@ std::thread_local! {
 /// same thread gets a buffer of its own instead of a borrow error.
 fn with_lowered_buffer<R>(len: usize, work: impl FnOnce(&mut [f32]) -> R) -> R {
     let mut buffer = LOWERED.with(Cell::take);
-    buffer.resize(len, 0.0);
+    // Grown, never shrunk: resizing down and up again between a small and a large layer would
+    // zero the difference every time.
+    if buffer.len() < len {
+        buffer.resize(len, 0.0);
+    }
     let result = work(&mut buffer[..len]);
     LOWERED.with(|cell| cell.set(buffer));
     result
@@ -55,10 +60,10 @@ fn with_lowered_image<R>(g: &ConvGeometry, x: &[f32], work: impl FnOnce(&[f32]) 
 
 /// Calls `work(n, chunk)` for every image `n` and its chunk of `out` (`out.len() / batch`
 /// elements each): in parallel over images with `rayon`.
-pub(crate) fn for_each_image(
+pub(crate) fn for_each_image<T: Send>(
     batch: usize,
-    out: &mut [f32],
-    work: impl Fn(usize, &mut [f32]) + Send + Sync,
+    out: &mut [T],
+    work: impl Fn(usize, &mut [T]) + Send + Sync,
 ) {
     if batch == 0 || out.is_empty() {
         return;
@@ -148,20 +153,46 @@ fn forward_direct(
     relu: bool,
 ) -> Vec<f32> {
     let plane = g.input_plane();
-    let mut y = vec![0.0; g.batch * g.out_channels * g.output_plane()];
-    for_each_image(g.batch, &mut y, |n, y| {
+    let len = g.batch * g.out_channels * g.output_plane();
+    // Not zeroed first: the kernel writes every value.
+    let mut y = Vec::with_capacity(len);
+    for_each_image(g.batch, &mut y.spare_capacity_mut()[..len], |n, y| {
         let x = &x[n * g.in_channels * plane..][..g.in_channels * plane];
         with_lowered_buffer(layout.len(g.in_channels), |padded| {
             layout.pad(g, x, padded);
             direct::forward_image(g, layout, padded, packed_weight, bias, relu, y);
         });
     });
+    // SAFETY: `forward_image` wrote all `len` values (its contract), image by image.
+    unsafe { y.set_len(len) };
     y
 }
 
 /// The gradient of the forward convolution's input: `dx[n] = raise(Wᵀ · dy[n])`, NCHW,
 /// `[batch, in_channels, input]`.
 pub fn input_gradient(g: &ConvGeometry, weight: &[f32], dy: &[f32]) -> Vec<f32> {
+    input_gradient_plus(g, weight, dy, None)
+}
+
+/// The forward pass of the transposed convolution whose adjoint is `g`: the input gradient of
+/// `g` for `x` in its output space, plus `bias[c]` on every pixel of channel `c` (added by the
+/// kernels' store where they can).
+pub fn transposed_forward(
+    g: &ConvGeometry,
+    weight: &[f32],
+    x: &[f32],
+    bias: Option<&[f32]>,
+) -> Vec<f32> {
+    input_gradient_plus(g, weight, x, bias)
+}
+
+/// [`input_gradient`] plus a per-channel bias.
+fn input_gradient_plus(
+    g: &ConvGeometry,
+    weight: &[f32],
+    dy: &[f32],
+    bias: Option<&[f32]>,
+) -> Vec<f32> {
     let (taps, plane, out_plane) = (g.taps(), g.input_plane(), g.output_plane());
     assert_eq!(
         dy.len(),
@@ -174,12 +205,12 @@ pub fn input_gradient(g: &ConvGeometry, weight: &[f32], dy: &[f32]) -> Vec<f32> 
     {
         let flipped = g.flipped_weight(weight);
         let packed = direct::pack_weight(&flipped, adjoint.out_channels, adjoint.taps());
-        return forward_direct(&adjoint, &layout, dy, &packed, None, false);
+        return forward_direct(&adjoint, &layout, dy, &packed, bias, false);
     }
     if g.height.stride * g.width.stride > 1
         && let (Some(rows), Some(columns)) = (g.height.gradient_phases(), g.width.gradient_phases())
     {
-        return input_gradient_by_phases(g, &rows, &columns, weight, dy);
+        return input_gradient_by_phases(g, &rows, &columns, weight, dy, bias);
     }
     let weight_t = MatrixView::row_major(weight, g.out_channels, taps).transposed();
     let mut dx = vec![0.0; g.batch * g.in_channels * plane];
@@ -195,6 +226,9 @@ pub fn input_gradient(g: &ConvGeometry, weight: &[f32], dy: &[f32]) -> Vec<f32> 
             });
         }
     });
+    if let Some(bias) = bias {
+        add_per_channel(&mut dx, bias, plane);
+    }
     dx
 }
 
@@ -209,10 +243,16 @@ fn input_gradient_by_phases(
     columns: &[AxisPhase],
     weight: &[f32],
     dy: &[f32],
+    bias: Option<&[f32]>,
 ) -> Vec<f32> {
     let (in_h, in_w) = (g.height.input, g.width.input);
+    // The bias goes into the classes' stores when they cover every position.
+    let covered = rows.iter().chain(columns).all(|class| class.axis.is_some());
+    let class_bias = bias.filter(|_| covered);
     let (kh, kw) = (g.height.kernel, g.width.kernel);
-    let mut dx = vec![0.0; g.batch * g.in_channels * in_h * in_w];
+    // Each class's values, `[batch, in_channels, its rows, its columns]` (the columns past the
+    // class's count dropped when written).
+    let mut classes = Vec::with_capacity(rows.len() * columns.len());
     for row in rows {
         for column in columns {
             let (Some(height), Some(width)) = (row.axis, column.axis) else {
@@ -236,22 +276,42 @@ fn input_gradient_by_phases(
                     }
                 }
             }
-            let values = forward(&phase, dy, &phase_weight, None, false);
-            let (phase_plane, phase_w) = (phase.output_plane(), width.output);
-            let (images, planes) = (
-                dx.chunks_exact_mut(in_h * in_w),
-                values.chunks_exact(phase_plane),
-            );
-            for (dx, values) in images.zip(planes) {
+            let values = forward(&phase, dy, &phase_weight, class_bias, false);
+            classes.push((row, column, phase.output_plane(), width.output, values));
+        }
+    }
+    let len = g.batch * g.in_channels * in_h * in_w;
+    let mut dx = Vec::with_capacity(len);
+    let slots = &mut dx.spare_capacity_mut()[..len];
+    // The classes cover every position of dx when each has a tap; else the rest is 0 (plus the
+    // bias).
+    if !covered {
+        slots.fill(MaybeUninit::new(0.0));
+    }
+    let write = |n: usize, dx: &mut [MaybeUninit<f32>]| {
+        for (row, column, phase_plane, phase_w, values) in &classes {
+            let planes = &values[n * g.in_channels * phase_plane..][..g.in_channels * phase_plane];
+            for (dx, values) in dx
+                .chunks_exact_mut(in_h * in_w)
+                .zip(planes.chunks_exact(*phase_plane))
+            {
                 for m in 0..row.count {
                     let target = &mut dx[(row.first + m * g.height.stride) * in_w..][..in_w];
                     let source = &values[m * phase_w..][..column.count];
                     for (j, &value) in source.iter().enumerate() {
-                        target[column.first + j * g.width.stride] = value;
+                        target[column.first + j * g.width.stride].write(value);
                     }
                 }
             }
         }
+    };
+    for_each_image(g.batch, slots, write);
+    // SAFETY: every value is written: the classes partition dx's positions
+    // (`Axis::gradient_phases`) and each wrote its positions of every image and channel, or
+    // they were all zeroed first.
+    unsafe { dx.set_len(len) };
+    if let Some(bias) = bias.filter(|_| !covered) {
+        add_per_channel(&mut dx, bias, in_h * in_w);
     }
     dx
 }
