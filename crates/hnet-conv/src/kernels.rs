@@ -374,7 +374,17 @@ pub fn channel_sums(dy: &[f32], channels: usize, plane: usize) -> Vec<f32> {
     }
     for image in dy.chunks_exact(channels * plane) {
         for (sum, row) in sums.iter_mut().zip(image.chunks_exact(plane)) {
-            *sum += row.iter().sum::<f32>();
+            // Eight running sums (one vector), so that the compiler may vectorise the loop (a
+            // single running sum must be added in order).
+            let mut lanes = [0.0f32; 8];
+            let chunks = row.chunks_exact(8);
+            let tail: f32 = chunks.remainder().iter().sum();
+            for chunk in chunks {
+                for (lane, value) in lanes.iter_mut().zip(chunk) {
+                    *lane += value;
+                }
+            }
+            *sum += lanes.iter().sum::<f32>() + tail;
         }
     }
     sums
