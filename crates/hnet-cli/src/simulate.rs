@@ -93,6 +93,22 @@ fn background_files(paths: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
                 bail!("background folder '{}' holds no images", path.display());
             }
             files.extend(found);
+        } else if !path.exists() {
+            // A config's relative path is read from where hnet runs, not from the config's
+            // folder: say so, since that is the usual cause.
+            let from = if path.is_relative() {
+                std::env::current_dir()
+                    .map(|cwd| {
+                        format!(
+                            " (a relative path is read from the working directory, {})",
+                            cwd.display()
+                        )
+                    })
+                    .unwrap_or_default()
+            } else {
+                String::new()
+            };
+            bail!("background '{}' does not exist{from}", path.display());
         } else {
             files.push(path.clone());
         }

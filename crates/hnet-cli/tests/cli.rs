@@ -301,6 +301,21 @@ fn bad_input_gets_a_clear_error_naming_the_file() {
         err.contains("forces.csv") && err.contains("line 2"),
         "{err}"
     );
+
+    // A background folder that is not there (a config's relative path read from elsewhere).
+    let err = fails(
+        hnet()
+            .current_dir(&dir)
+            .args(["simulate", "--samples", "1", "--size", "32", "--background"])
+            .arg("../no-such-radiographs")
+            .arg("--out")
+            .arg(dir.join("sim")),
+    );
+    assert!(
+        err.contains("'../no-such-radiographs' does not exist")
+            && err.contains("working directory"),
+        "{err}"
+    );
     std::fs::remove_dir_all(dir).ok();
 }
 
