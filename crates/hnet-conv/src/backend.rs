@@ -140,7 +140,7 @@ fn forward(
                 }
                 Direction::Transposed => {
                     debug_assert!(!relu, "no fused ReLU for transposed convolutions");
-                    flex_tensor(kernels::transposed_forward(g, w, x, bias), g.input_shape())
+                    flex_tensor(kernels::input_gradient(g, w, x, bias), g.input_shape())
                 }
             };
             match bias {
@@ -183,9 +183,9 @@ fn gradients(
             with_values(dy, |dy| match direction {
                 // y = conv(x): dx = raise(Wᵀ dy), dW = dy lower(x)ᵀ.
                 Direction::Convolution => Gradients {
-                    x: wanted
-                        .x
-                        .then(|| flex_tensor(kernels::input_gradient(g, w, dy), g.input_shape())),
+                    x: wanted.x.then(|| {
+                        flex_tensor(kernels::input_gradient(g, w, dy, None), g.input_shape())
+                    }),
                     weight: wanted.weight.then(|| {
                         flex_tensor(kernels::weight_gradient(g, x_values, dy), weight_shape)
                     }),
@@ -323,8 +323,7 @@ mod autodiff {
                 let dx = with_values(x, |x| {
                     with_values(&dy, |dy| pooling::max_pool2x2_backward(shape, x, dy))
                 });
-                let dims = [shape.batch, shape.channels, shape.height, shape.width];
-                grads.register::<Flex>(node.id, flex_tensor(dx, dims));
+                grads.register::<Flex>(node.id, flex_tensor(dx, shape.input_dims()));
             }
         }
     }

@@ -127,7 +127,6 @@ impl Axis {
                 let before = usize::try_from(-lowest_offset).ok()?;
                 let after = (count + taps.len()).saturating_sub(1 + self.output + before);
                 let axis = Self::of_convolution(self.output, taps.len(), 1, (before, after), 1)?;
-                debug_assert!(axis.output >= count);
                 Some(AxisPhase {
                     first,
                     count,
@@ -311,19 +310,33 @@ impl ConvGeometry {
     /// This convolution's OIHW weight turned by 180 degrees with its channel axes swapped: the
     /// weight of [`Self::input_gradient_as_convolution`].
     pub fn flipped_weight(&self, weight: &[f32]) -> alloc::vec::Vec<f32> {
+        let rows: alloc::vec::Vec<usize> = (0..self.height.kernel).rev().collect();
+        let columns: alloc::vec::Vec<usize> = (0..self.width.kernel).rev().collect();
+        self.gathered_weight(weight, &rows, &columns)
+    }
+
+    /// The weight of a convolution from this one's output space back onto its input space that
+    /// uses kernel rows `rows` and columns `columns` of this one's OIHW `weight`, in that order:
+    /// `[in_channels, out_channels, rows.len(), columns.len()]`.
+    pub fn gathered_weight(
+        &self,
+        weight: &[f32],
+        rows: &[usize],
+        columns: &[usize],
+    ) -> alloc::vec::Vec<f32> {
         let (kh, kw) = (self.height.kernel, self.width.kernel);
-        let taps = kh * kw;
-        debug_assert_eq!(weight.len(), self.out_channels * self.in_channels * taps);
-        let mut flipped = alloc::vec![0.0; weight.len()];
-        for (o, filters) in weight.chunks_exact(self.in_channels * taps).enumerate() {
-            for (c, kernel) in filters.chunks_exact(taps).enumerate() {
-                let target = &mut flipped[(c * self.out_channels + o) * taps..][..taps];
-                for (t, value) in kernel.iter().enumerate() {
-                    target[taps - 1 - t] = *value;
+        debug_assert_eq!(weight.len(), self.out_channels * self.in_channels * kh * kw);
+        let mut gathered =
+            alloc::vec::Vec::with_capacity(weight.len() / (kh * kw) * rows.len() * columns.len());
+        for c in 0..self.in_channels {
+            for o in 0..self.out_channels {
+                let kernel = &weight[(o * self.in_channels + c) * kh * kw..][..kh * kw];
+                for &i in rows {
+                    gathered.extend(columns.iter().map(|&j| kernel[i * kw + j]));
                 }
             }
         }
-        flipped
+        gathered
     }
 
     /// Shape of the weight, OIHW.

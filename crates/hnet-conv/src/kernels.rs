@@ -11,6 +11,9 @@
 //! other stride-1 convolution (all of H-Net's but the upsampling) computes its forward pass and
 //! weight gradient with no lowered matrix at all, straight from the zero-padded image
 //! ([`crate::direct`]), and its input gradient as the direct forward pass of the turned kernel.
+//! A strided convolution's input gradient (a transposed convolution's forward pass, H-Net's
+//! upsampling) is one direct stride-1 convolution per class of positions
+//! ([`crate::geometry::Axis::gradient_phases`]); raise (col2im) is left for dilated axes.
 //!
 //! The products are [`crate::products`]'. With the `rayon` feature, images run on rayon's
 //! workers, one image per task (a single image gives gemm all the threads).
@@ -168,26 +171,13 @@ fn forward_direct(
     y
 }
 
-/// The gradient of the forward convolution's input: `dx[n] = raise(Wᵀ · dy[n])`, NCHW,
-/// `[batch, in_channels, input]`.
-pub fn input_gradient(g: &ConvGeometry, weight: &[f32], dy: &[f32]) -> Vec<f32> {
-    input_gradient_plus(g, weight, dy, None)
-}
-
-/// The forward pass of the transposed convolution whose adjoint is `g`: the input gradient of
-/// `g` for `x` in its output space, plus `bias[c]` on every pixel of channel `c` (added by the
-/// kernels' store where they can).
-pub fn transposed_forward(
-    g: &ConvGeometry,
-    weight: &[f32],
-    x: &[f32],
-    bias: Option<&[f32]>,
-) -> Vec<f32> {
-    input_gradient_plus(g, weight, x, bias)
-}
-
-/// [`input_gradient`] plus a per-channel bias.
-fn input_gradient_plus(
+/// The gradient of the forward convolution's input, `dx[n] = raise(Wᵀ · dy[n])`, NCHW,
+/// `[batch, in_channels, input]`, plus `bias[c]` on every pixel of channel `c` when given: also
+/// the forward pass of the transposed convolution whose adjoint is `g` (with `dy` its input).
+/// Stride 1: the forward pass of the turned kernel; larger strides: one stride-1 convolution per
+/// class of positions ([`crate::geometry::Axis::gradient_phases`]); else (dilated axes, classes
+/// that would need negative padding) a product and col2im.
+pub fn input_gradient(
     g: &ConvGeometry,
     weight: &[f32],
     dy: &[f32],
@@ -233,10 +223,11 @@ fn input_gradient_plus(
 }
 
 /// The input gradient of a strided convolution (a transposed convolution's forward pass) class
-/// by class of input positions ([`crate::geometry::Axis::gradient_phases`]): each class of rows
-/// and class of columns is a stride-1 convolution of `dy` with the taps that reach it, computed
-/// by [`forward`] (the direct kernels) and written into its positions of `dx`. No lowered
-/// matrix, no col2im.
+/// by class of the input positions, its transposed convolution's output positions
+/// ([`crate::geometry::Axis::gradient_phases`]): each class of rows and class of columns is a
+/// stride-1 convolution of `dy` with the taps that reach it, computed by [`forward`] (the direct
+/// kernels, or the pointwise product for a class with one tap and no padding) and written into
+/// its positions of `dx`. No lowered matrix, no col2im.
 fn input_gradient_by_phases(
     g: &ConvGeometry,
     rows: &[AxisPhase],
@@ -266,16 +257,9 @@ fn input_gradient_by_phases(
                 height,
                 width,
             };
-            let taps = row.taps.len() * column.taps.len();
-            let mut phase_weight = Vec::with_capacity(g.in_channels * g.out_channels * taps);
-            for c in 0..g.in_channels {
-                for o in 0..g.out_channels {
-                    let kernel = &weight[(o * g.in_channels + c) * kh * kw..][..kh * kw];
-                    for &i in &row.taps {
-                        phase_weight.extend(column.taps.iter().map(|&j| kernel[i * kw + j]));
-                    }
-                }
-            }
+            let phase_weight = g.gathered_weight(weight, &row.taps, &column.taps);
+            // The scatter below reads `count` rows and columns of each class's planes.
+            assert!(height.output >= row.count && width.output >= column.count);
             let values = forward(&phase, dy, &phase_weight, class_bias, false);
             classes.push((row, column, phase.output_plane(), width.output, values));
         }

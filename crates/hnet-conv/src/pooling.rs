@@ -39,6 +39,11 @@ impl PoolShape {
         }
     }
 
+    /// The input's dimensions, NCHW.
+    pub fn input_dims(&self) -> [usize; 4] {
+        [self.batch, self.channels, self.height, self.width]
+    }
+
     /// The output's dimensions, NCHW: half the height and width, rounded down.
     pub fn output_dims(&self) -> [usize; 4] {
         [self.batch, self.channels, self.height / 2, self.width / 2]
@@ -78,28 +83,22 @@ fn winner(top: &[f32], bottom: &[f32], ow: usize) -> (f32, usize) {
     best
 }
 
-/// The pooled values of NCHW `x` ([`PoolShape::output_dims`]).
+/// The pooled values of NCHW `x` ([`PoolShape::output_dims`]), plane by plane in parallel.
 pub fn max_pool2x2(shape: &PoolShape, x: &[f32]) -> Vec<f32> {
     assert_eq!(
         x.len(),
         shape.batch * shape.channels * shape.input_plane(),
         "max pool: input size"
     );
-    let (out_w, out_h) = (shape.width / 2, shape.height / 2);
+    let out_w = shape.width / 2;
     let mut y = vec![0.0f32; shape.batch * shape.channels * shape.output_plane()];
-    let image_in = shape.channels * shape.input_plane();
-    crate::kernels::for_each_image(shape.batch, &mut y, |n, y| {
-        let x = &x[n * image_in..][..image_in];
-        for (plane_x, plane_y) in x
-            .chunks_exact(shape.input_plane())
-            .zip(y.chunks_exact_mut(shape.output_plane().max(1)))
-        {
-            for oh in 0..out_h {
-                let top = &plane_x[2 * oh * shape.width..][..shape.width];
-                let bottom = &plane_x[(2 * oh + 1) * shape.width..][..shape.width];
-                for (ow, out) in plane_y[oh * out_w..][..out_w].iter_mut().enumerate() {
-                    *out = winner(top, bottom, ow).0;
-                }
+    crate::kernels::for_each_image(shape.batch * shape.channels, &mut y, |plane, y| {
+        let x = &x[plane * shape.input_plane()..][..shape.input_plane()];
+        for (oh, y) in y.chunks_exact_mut(out_w).enumerate() {
+            let top = &x[2 * oh * shape.width..][..shape.width];
+            let bottom = &x[(2 * oh + 1) * shape.width..][..shape.width];
+            for (ow, out) in y.iter_mut().enumerate() {
+                *out = winner(top, bottom, ow).0;
             }
         }
     });
@@ -107,29 +106,34 @@ pub fn max_pool2x2(shape: &PoolShape, x: &[f32]) -> Vec<f32> {
 }
 
 /// The gradient of the input of [`max_pool2x2`]: each output pixel's gradient `dy` goes to its
-/// window's winner in `x`, every other input pixel gets 0.
+/// window's winner in `x` (added to 0, as Burn's flex adds it: a gradient of -0 arrives as 0),
+/// every other input pixel gets 0.
 pub fn max_pool2x2_backward(shape: &PoolShape, x: &[f32], dy: &[f32]) -> Vec<f32> {
-    let image_in = shape.channels * shape.input_plane();
-    let image_out = shape.channels * shape.output_plane();
-    assert_eq!(x.len(), shape.batch * image_in, "max pool: input size");
-    assert_eq!(dy.len(), shape.batch * image_out, "max pool: gradient size");
-    let (out_w, out_h) = (shape.width / 2, shape.height / 2);
+    assert_eq!(
+        x.len(),
+        shape.batch * shape.channels * shape.input_plane(),
+        "max pool: input size"
+    );
+    assert_eq!(
+        dy.len(),
+        shape.batch * shape.channels * shape.output_plane(),
+        "max pool: gradient size"
+    );
+    let (out_w, out_plane) = (shape.width / 2, shape.output_plane());
     let mut dx = vec![0.0f32; x.len()];
-    crate::kernels::for_each_image(shape.batch, &mut dx, |n, dx| {
-        let x = &x[n * image_in..][..image_in];
-        let dy = &dy[n * image_out..][..image_out];
-        for ((plane_x, plane_dx), plane_dy) in x
-            .chunks_exact(shape.input_plane())
-            .zip(dx.chunks_exact_mut(shape.input_plane()))
-            .zip(dy.chunks_exact(shape.output_plane().max(1)))
-        {
-            for oh in 0..out_h {
-                let top = &plane_x[2 * oh * shape.width..][..shape.width];
-                let bottom = &plane_x[(2 * oh + 1) * shape.width..][..shape.width];
-                for (ow, &d) in plane_dy[oh * out_w..][..out_w].iter().enumerate() {
-                    let k = winner(top, bottom, ow).1;
-                    plane_dx[(2 * oh + k / 2) * shape.width + 2 * ow + k % 2] = d;
-                }
+    let planes = shape.batch * shape.channels;
+    if out_plane == 0 {
+        return dx;
+    }
+    crate::kernels::for_each_image(planes, &mut dx, |plane, dx| {
+        let x = &x[plane * shape.input_plane()..][..shape.input_plane()];
+        let dy = &dy[plane * out_plane..][..out_plane];
+        for (oh, dy) in dy.chunks_exact(out_w).enumerate() {
+            let top = &x[2 * oh * shape.width..][..shape.width];
+            let bottom = &x[(2 * oh + 1) * shape.width..][..shape.width];
+            for (ow, &d) in dy.iter().enumerate() {
+                let k = winner(top, bottom, ow).1;
+                dx[(2 * oh + k / 2) * shape.width + 2 * ow + k % 2] = 0.0 + d;
             }
         }
     });
