@@ -240,7 +240,6 @@ fn input_gradient_by_phases(
     // The bias goes into the classes' stores when they cover every position.
     let covered = rows.iter().chain(columns).all(|class| class.axis.is_some());
     let class_bias = bias.filter(|_| covered);
-    let (kh, kw) = (g.height.kernel, g.width.kernel);
     // Each class's values, `[batch, in_channels, its rows, its columns]` (the columns past the
     // class's count dropped when written).
     let mut classes = Vec::with_capacity(rows.len() * columns.len());
