@@ -102,19 +102,13 @@ fn the_fused_relu_keeps_nan_as_burn_does() {
     // 40 pixels wide: the direct path stores whole strips from its vector registers there.
     let shape = [2, 3, 9, 40];
     for stride in [1, 2] {
-        let mut values = vec![0.5f32; shape.iter().product()];
-        values[4 * 40 + 20] = f32::NAN;
-        let x = Tensor::<4>::from_data(burn::tensor::TensorData::new(values, shape), &device);
+        let mut image = vec![0.5f32; shape.iter().product()];
+        image[4 * 40 + 20] = f32::NAN;
+        let x = Tensor::<4>::from_data(burn::tensor::TensorData::new(image, shape), &device);
         let weight = Tensor::<4>::ones([4, 3, 3, 3], &device);
         let options = ConvOptions::new([stride, stride], [1, 1], [1, 1], 1);
-        let nan_mask = |y: Tensor<4>| -> Vec<bool> {
-            let values = y
-                .into_data()
-                .convert::<f32>()
-                .try_into_vec::<f32>()
-                .unwrap();
-            values.iter().map(|v| v.is_nan()).collect()
-        };
+        let nan_mask =
+            |y: Tensor<4>| -> Vec<bool> { values(y).iter().map(|v| v.is_nan()).collect() };
         let ours = nan_mask(hnet_conv::conv2d_relu(
             x.clone(),
             weight.clone(),
@@ -206,14 +200,17 @@ fn module_helpers_give_the_modules_forward() {
     assert!(error <= TOLERANCE, "transposed: {error:e}");
 }
 
-/// Values as bits, so that NaN compares equal to NaN and -0 differs from 0.
-fn bits(t: Tensor<4>) -> Vec<u32> {
-    let values = t
-        .into_data()
+/// A tensor's values, row-major.
+fn values(t: Tensor<4>) -> Vec<f32> {
+    t.into_data()
         .convert::<f32>()
         .try_into_vec::<f32>()
-        .unwrap();
-    values.iter().map(|v| v.to_bits()).collect()
+        .unwrap()
+}
+
+/// Values as bits, so that NaN compares equal to NaN and -0 differs from 0.
+fn bits(t: Tensor<4>) -> Vec<u32> {
+    values(t).iter().map(|v| v.to_bits()).collect()
 }
 
 /// The project's 2 x 2 max pooling and its gradient against Burn's, bit for bit: odd sizes,
