@@ -19,7 +19,6 @@
 //! Both keep a tile of accumulators in registers over the whole reduction: 6 output channels by
 //! 2 vectors of positions (forward), 3 output channels by 3 taps (weight gradient).
 
-use alloc::vec;
 use alloc::vec::Vec;
 use core::mem::MaybeUninit;
 
@@ -31,10 +30,19 @@ use crate::products::Lanes;
 /// would need all sixteen on x86-64, and the compiler then spills).
 const R: usize = 3;
 
-/// Output channels per register tile of the forward pass: 6 channels by 2 vectors keep twelve
-/// accumulators (enough to hide the FMA latency) and leave registers for the loads (on x86-64,
-/// 4 x 3 would need all sixteen, and the compiler then spills).
+/// Most output channels per register tile of the forward pass: 6 channels by 2 vectors keep
+/// twelve accumulators (enough to hide the FMA latency) and leave registers for the loads (on
+/// x86-64, 4 x 3 would need all sixteen, and the compiler then spills).
 const FORWARD_ROWS: usize = 6;
+
+/// The forward pass's blocks of output channels, `(first channel, channels)`: as few as tiles of
+/// at most [`FORWARD_ROWS`] allow, and as even as possible, so that no tile computes channels
+/// that do not exist (32 channels: 6, 6, 5, 5, 5, 5, where six tiles of 6 would compute 36).
+pub fn forward_blocks(out_channels: usize) -> impl Iterator<Item = (usize, usize)> {
+    let blocks = out_channels.div_ceil(FORWARD_ROWS);
+    let (base, extra) = (out_channels / blocks.max(1), out_channels % blocks.max(1));
+    (0..blocks).map(move |b| (b * base + b.min(extra), base + usize::from(b < extra)))
+}
 
 /// Positions the buffer holds past the last plane, so that the forward pass's last strip may
 /// read whole vectors (at least the widest strip, `V · WIDTH`).
@@ -123,19 +131,13 @@ impl PaddedLayout {
 }
 
 /// The OIHW weight (`out_channels x taps` row-major) packed for the forward micro-kernel: per
-/// block of [`FORWARD_ROWS`] output channels, that many consecutive values per tap (channels past
-/// the last are 0).
+/// block of [`forward_blocks`], its channels' values for each tap in turn (`taps x channels`).
 pub fn pack_weight(weight: &[f32], out_channels: usize, taps: usize) -> Vec<f32> {
-    let blocks = out_channels.div_ceil(FORWARD_ROWS);
-    let mut packed = vec![0.0f32; blocks * taps * FORWARD_ROWS];
-    for (block, panel) in packed.chunks_exact_mut(taps * FORWARD_ROWS).enumerate() {
-        for (kk, step) in panel.chunks_exact_mut(FORWARD_ROWS).enumerate() {
-            for (r, value) in step.iter_mut().enumerate() {
-                let o = block * FORWARD_ROWS + r;
-                if o < out_channels {
-                    *value = weight[o * taps + kk];
-                }
-            }
+    debug_assert_eq!(weight.len(), out_channels * taps);
+    let mut packed = Vec::with_capacity(out_channels * taps);
+    for (first, channels) in forward_blocks(out_channels) {
+        for tap in 0..taps {
+            packed.extend((first..first + channels).map(|o| weight[o * taps + tap]));
         }
     }
     packed
@@ -155,8 +157,7 @@ pub fn forward_image(
 ) {
     assert!(
         padded.len() >= layout.len(g.in_channels)
-            && packed_weight.len()
-                == g.out_channels.div_ceil(FORWARD_ROWS) * g.taps() * FORWARD_ROWS
+            && packed_weight.len() == g.out_channels * g.taps()
             && y.len() == g.out_channels * g.output_plane()
             && bias.is_none_or(|b| b.len() == g.out_channels),
         "direct forward: buffer sizes"
@@ -236,54 +237,116 @@ fn forward_body<L: Lanes, const V: usize>(
             }
         }
         prefetch_next_strip(layout, g, p0 + strip, padded);
-        for (block, panel) in packed_weight.chunks_exact(taps * FORWARD_ROWS).enumerate() {
-            let channels = FORWARD_ROWS.min(g.out_channels - block * FORWARD_ROWS);
-            let mut acc = [[L::zero(); V]; FORWARD_ROWS];
-            // One loop over every (input channel, tap): a single level of loop-carried
-            // accumulators, which the register allocator keeps in registers.
-            for (&offset, a) in offsets.iter().zip(panel.chunks_exact(FORWARD_ROWS)) {
-                // SAFETY: positions `p0 .. p0 + strip` plus an offset stay below
-                // `(channel + 1) · plane + SLACK` (`positions + max tap offset = plane`, and
-                // `strip <= SLACK`), inside `padded` (checked in `forward_image`).
-                unsafe {
-                    let pb = padded.as_ptr().add(p0 + offset);
-                    let bv: [L; V] = core::array::from_fn(|v| L::load(pb.add(v * L::WIDTH)));
-                    for r in 0..FORWARD_ROWS {
-                        let a = L::splat(a[r]);
-                        for v in 0..V {
-                            acc[r][v] = acc[r][v].multiply_add(a, bv[v]);
-                        }
+        let at = Strip {
+            p0,
+            runs: &runs,
+            offsets: &offsets,
+            padded,
+            out_plane,
+        };
+        let mut rest = packed_weight;
+        for (first, channels) in forward_blocks(g.out_channels) {
+            let (panel, later) = rest.split_at(taps * channels);
+            rest = later;
+            let out = Outputs {
+                first,
+                bias,
+                relu,
+                y: &mut *y,
+                tile: &mut tile,
+            };
+            match channels {
+                6 => at.multiply::<L, V, 6>(panel, out),
+                5 => at.multiply::<L, V, 5>(panel, out),
+                4 => at.multiply::<L, V, 4>(panel, out),
+                3 => at.multiply::<L, V, 3>(panel, out),
+                2 => at.multiply::<L, V, 2>(panel, out),
+                _ => at.multiply::<L, V, 1>(panel, out),
+            }
+        }
+    }
+}
+
+/// One strip of the forward pass: `V · WIDTH` flat positions from `p0`, and where they go.
+struct Strip<'a> {
+    p0: usize,
+    /// (tile offset, output offset, length) of each run of the strip's positions that are output
+    /// pixels.
+    runs: &'a [(usize, usize, usize)],
+    /// Offset of every (input channel, tap), in the order of the packed weight's steps.
+    offsets: &'a [usize],
+    padded: &'a [f32],
+    out_plane: usize,
+}
+
+/// Where one block's results are stored: channels `first ..`, plus their bias, then a ReLU.
+struct Outputs<'a> {
+    first: usize,
+    bias: Option<&'a [f32]>,
+    relu: bool,
+    y: &'a mut [MaybeUninit<f32>],
+    /// Scratch for a strip that spans output rows.
+    tile: &'a mut [[f32; SLACK]; FORWARD_ROWS],
+}
+
+impl Strip<'_> {
+    /// The strip times `R` output channels' panel (`taps x R`, [`pack_weight`]), stored.
+    #[inline(always)]
+    fn multiply<L: Lanes, const V: usize, const R: usize>(&self, panel: &[f32], out: Outputs) {
+        let strip = V * L::WIDTH;
+        let mut acc = [[L::zero(); V]; R];
+        // One loop over every (input channel, tap): a single level of loop-carried accumulators,
+        // which the register allocator keeps in registers.
+        for (&offset, a) in self.offsets.iter().zip(panel.chunks_exact(R)) {
+            // SAFETY: positions `p0 .. p0 + strip` plus an offset stay below
+            // `(channel + 1) · plane + SLACK` (`positions + max tap offset = plane`, and
+            // `strip <= SLACK`), inside `padded` (checked in `forward_image`).
+            unsafe {
+                let pb = self.padded.as_ptr().add(self.p0 + offset);
+                let bv: [L; V] = core::array::from_fn(|v| L::load(pb.add(v * L::WIDTH)));
+                for r in 0..R {
+                    let a = L::splat(a[r]);
+                    for v in 0..V {
+                        acc[r][v] = acc[r][v].multiply_add(a, bv[v]);
                     }
                 }
             }
-            if let [(0, o, len)] = runs[..]
-                && len == strip
-            {
-                // The strip lies inside one output row: stored straight from the registers.
-                for (r, acc) in acc.iter().enumerate().take(channels) {
-                    let b = L::splat(bias.map_or(0.0, |bias| bias[block * FORWARD_ROWS + r]));
-                    let out = &mut y[(block * FORWARD_ROWS + r) * out_plane + o..][..strip];
-                    for (v, value) in acc.iter().enumerate() {
-                        let value = value.multiply_add(b, L::splat(1.0));
-                        let value = if relu { value.relu() } else { value };
-                        // SAFETY: `out` holds `strip = V · WIDTH` values.
-                        unsafe { value.store(out.as_mut_ptr().cast::<f32>().add(v * L::WIDTH)) };
-                    }
-                }
-                continue;
-            }
-            for (r, (acc, tile)) in acc.iter().zip(&mut tile).enumerate().take(channels) {
+        }
+        let Outputs {
+            first,
+            bias,
+            relu,
+            y,
+            tile,
+        } = out;
+        let out_plane = self.out_plane;
+        if let [(0, o, len)] = self.runs[..]
+            && len == strip
+        {
+            // The strip lies inside one output row: stored straight from the registers.
+            for (r, acc) in acc.iter().enumerate() {
+                let b = L::splat(bias.map_or(0.0, |bias| bias[first + r]));
+                let out = &mut y[(first + r) * out_plane + o..][..strip];
                 for (v, value) in acc.iter().enumerate() {
-                    // SAFETY: `tile` holds SLACK >= V · WIDTH values.
-                    unsafe { value.store(tile.as_mut_ptr().add(v * L::WIDTH)) };
+                    let value = value.multiply_add(b, L::splat(1.0));
+                    let value = if relu { value.relu() } else { value };
+                    // SAFETY: `out` holds `strip = V · WIDTH` values.
+                    unsafe { value.store(out.as_mut_ptr().cast::<f32>().add(v * L::WIDTH)) };
                 }
-                let out = &mut y[(block * FORWARD_ROWS + r) * out_plane..][..out_plane];
-                let b = bias.map_or(0.0, |bias| bias[block * FORWARD_ROWS + r]);
-                for &(t, o, len) in &runs {
-                    for (out, value) in out[o..o + len].iter_mut().zip(&tile[t..t + len]) {
-                        let value = value + b;
-                        out.write(if relu { Lanes::relu(value) } else { value });
-                    }
+            }
+            return;
+        }
+        for (r, (acc, tile)) in acc.iter().zip(tile.iter_mut()).enumerate() {
+            for (v, value) in acc.iter().enumerate() {
+                // SAFETY: `tile` holds SLACK >= V · WIDTH values.
+                unsafe { value.store(tile.as_mut_ptr().add(v * L::WIDTH)) };
+            }
+            let out = &mut y[(first + r) * out_plane..][..out_plane];
+            let b = bias.map_or(0.0, |bias| bias[first + r]);
+            for &(t, o, len) in self.runs {
+                for (out, value) in out[o..o + len].iter_mut().zip(&tile[t..t + len]) {
+                    let value = value + b;
+                    out.write(if relu { Lanes::relu(value) } else { value });
                 }
             }
         }
@@ -440,5 +503,38 @@ fn weight_gradient_body<L: Lanes>(
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{FORWARD_ROWS, forward_blocks};
+
+    #[test]
+    fn forward_blocks_cover_every_channel_once_in_even_tiles() {
+        for channels in 1..=70 {
+            let blocks: alloc::vec::Vec<_> = forward_blocks(channels).collect();
+            assert_eq!(blocks.len(), channels.div_ceil(FORWARD_ROWS), "{channels}");
+            let mut next = 0;
+            for &(first, rows) in &blocks {
+                assert_eq!(first, next, "{channels}: contiguous");
+                assert!(
+                    (1..=FORWARD_ROWS).contains(&rows),
+                    "{channels}: {rows} rows"
+                );
+                next += rows;
+            }
+            assert_eq!(next, channels);
+            let (least, most) = blocks
+                .iter()
+                .fold((usize::MAX, 0), |(l, m), &(_, r)| (l.min(r), m.max(r)));
+            assert!(most - least <= 1, "{channels}: uneven {blocks:?}");
+        }
+        assert_eq!(
+            forward_blocks(32)
+                .map(|(_, rows)| rows)
+                .collect::<alloc::vec::Vec<_>>(),
+            [6, 6, 5, 5, 5, 5]
+        );
     }
 }
