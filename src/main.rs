@@ -1,5 +1,18 @@
 #[cfg(target_arch = "wasm32")]
+unsafe extern "C" {
+    /// The linker's function that runs the module's static constructors (some of Burn's
+    /// dependencies register plugins through `inventory`).
+    fn __wasm_call_ctors();
+}
+
+#[cfg(target_arch = "wasm32")]
 fn main() {
+    // Run the constructors once, here. Without this call the linker treats the page as a
+    // command-style module and runs every constructor again at the start of every exported
+    // function (each allocation and closure call from JavaScript): 5-12 % of the page's busy
+    // time (docs/benchmarks.md, "In the browser"). The `inventory` crate documents this fix.
+    // SAFETY: called once, before anything else in the module, as the linker intends.
+    unsafe { __wasm_call_ctors() };
     console_error_panic_hook::set_once();
     leptos::mount::mount_to_body(hnet_studio::App);
 }
