@@ -8,6 +8,7 @@
 // HNET_DIST=<folder> times another build (e.g. scripts/bundle-size.sh's release page).
 // HNET_WEIGHTS=<model.bpk> loads those weights through the model bar first (e.g. a 128 px model
 // from `hnet train`), so that the page's time for another network size is measured.
+// HNET_BACKENDS=cpu times the CPU path only (the software WebGPU adapter takes seconds a run).
 import { statSync, readdirSync } from "node:fs";
 import { join } from "node:path";
 import { DIST, serveDist, launchBrowser, openPage, waitForModel } from "./harness.mjs";
@@ -17,7 +18,7 @@ const server = await serveDist();
 const context = await launchBrowser();
 const results = [];
 try {
-  for (const choice of ["cpu", "webgpu"]) {
+  for (const choice of (process.env.HNET_BACKENDS ?? "cpu,webgpu").split(",")) {
     const opened = performance.now();
     const { page } = await openPage(context, server.url);
     await waitForModel(page);

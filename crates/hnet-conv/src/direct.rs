@@ -30,10 +30,12 @@ use crate::products::Lanes;
 /// would need all sixteen on x86-64, and the compiler then spills).
 const R: usize = 3;
 
-/// Most output channels per register tile of the forward pass: 6 channels by 2 vectors keep
-/// twelve accumulators (enough to hide the FMA latency) and leave registers for the loads (on
-/// x86-64, 4 x 3 would need all sixteen, and the compiler then spills).
-const FORWARD_ROWS: usize = 6;
+/// Most output channels per register tile of the forward pass: natively, 6 channels by 2 vectors
+/// keep twelve accumulators (enough to hide the FMA latency) and leave registers for the loads (on
+/// x86-64, 4 x 3 would need all sixteen, and the compiler then spills). In WebAssembly, 5: the
+/// browser's compiler keeps one of the sixteen vector registers for itself, and 5 x 2 measured
+/// about 10 % faster in Chromium than 6 x 2 (4 x 2 the same as 5 x 2; docs/benchmarks.md).
+const FORWARD_ROWS: usize = if cfg!(target_arch = "wasm32") { 5 } else { 6 };
 
 /// The forward pass's blocks of output channels, `(first channel, channels)`: as few as tiles of
 /// at most [`FORWARD_ROWS`] allow, and as even as possible, so that no tile computes channels
