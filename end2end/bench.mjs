@@ -11,7 +11,7 @@
 // HNET_BACKENDS=cpu times the CPU path only (the software WebGPU adapter takes seconds a run).
 import { statSync, readdirSync } from "node:fs";
 import { join } from "node:path";
-import { DIST, serveDist, launchBrowser, openPage, waitForModel } from "./harness.mjs";
+import { DIST, serveDist, launchBrowser, openPage, waitForModel, loadWeightsFromEnv } from "./harness.mjs";
 
 const runs = Number(process.argv[2] ?? 10);
 const server = await serveDist();
@@ -33,14 +33,7 @@ try {
       })
       .catch(() => {});
     await waitForModel(page);
-    if (process.env.HNET_WEIGHTS) {
-      const name = process.env.HNET_WEIGHTS.split("/").pop();
-      await page.setInputFiles("#weights-file", process.env.HNET_WEIGHTS);
-      await page.waitForFunction((n) => document.querySelector("#weights")?.textContent.includes(n), name, {
-        timeout: 60_000,
-      });
-      await waitForModel(page);
-    }
+    await loadWeightsFromEnv(page);
     const backend = await page.textContent("#backend");
     await page.click("#tab-twin");
     await page.waitForSelector("#force-verdict", { timeout: 120_000 });

@@ -90,3 +90,18 @@ export async function waitForModel(page) {
   const failed = await page.$("#model-status [data-state=failed]");
   if (failed) throw new Error(`the model did not load: ${await failed.textContent()}`);
 }
+
+/**
+ * Loads the weights file `HNET_WEIGHTS` names (e.g. a model.bpk from `hnet train`) through the
+ * model bar and waits until it is ready; does nothing when the variable is unset.
+ */
+export async function loadWeightsFromEnv(page) {
+  const file = process.env.HNET_WEIGHTS;
+  if (!file) return;
+  const name = file.split("/").pop();
+  await page.setInputFiles("#weights-file", file);
+  await page.waitForFunction((n) => document.querySelector("#weights")?.textContent.includes(n), name, {
+    timeout: 60_000,
+  });
+  await waitForModel(page);
+}

@@ -3,7 +3,7 @@
 // functions by their Rust names, from the build's name section), largest first.
 // Usage, after `trunk build`: node end2end/profile.mjs [runs] [top]   (docs/benchmarks.md)
 // HNET_WEIGHTS=<model.bpk> profiles those weights instead of the bundled ones.
-import { serveDist, launchBrowser, openPage, waitForModel } from "./harness.mjs";
+import { serveDist, launchBrowser, openPage, waitForModel, loadWeightsFromEnv } from "./harness.mjs";
 
 const runs = Number(process.argv[2] ?? 10);
 const top = Number(process.argv[3] ?? 25);
@@ -17,14 +17,7 @@ try {
     timeout: 60_000,
   });
   await waitForModel(page);
-  if (process.env.HNET_WEIGHTS) {
-    const name = process.env.HNET_WEIGHTS.split("/").pop();
-    await page.setInputFiles("#weights-file", process.env.HNET_WEIGHTS);
-    await page.waitForFunction((n) => document.querySelector("#weights")?.textContent.includes(n), name, {
-      timeout: 60_000,
-    });
-    await waitForModel(page);
-  }
+  await loadWeightsFromEnv(page);
   await page.click("#tab-twin");
   await page.waitForSelector("#force-verdict", { timeout: 120_000 });
   const cdp = await context.newCDPSession(page);
