@@ -14,11 +14,25 @@ import { join } from "node:path";
 import { DIST, serveDist, launchBrowser, openPage, waitForModel, loadWeightsFromEnv } from "./harness.mjs";
 
 const runs = Number(process.argv[2] ?? 10);
+
+/** The backends to time, from HNET_BACKENDS (default: both). */
+function backends() {
+  const chosen = (process.env.HNET_BACKENDS || "cpu,webgpu")
+    .split(",")
+    .map((b) => b.trim().toLowerCase())
+    .filter(Boolean);
+  const unknown = chosen.filter((b) => b !== "cpu" && b !== "webgpu");
+  if (unknown.length || !chosen.length) {
+    console.error(`HNET_BACKENDS: expected cpu, webgpu or both, comma-separated; got "${process.env.HNET_BACKENDS}"`);
+    process.exit(2);
+  }
+  return chosen;
+}
 const server = await serveDist();
 const context = await launchBrowser();
 const results = [];
 try {
-  for (const choice of (process.env.HNET_BACKENDS ?? "cpu,webgpu").split(",")) {
+  for (const choice of backends()) {
     const opened = performance.now();
     const { page } = await openPage(context, server.url);
     await waitForModel(page);
@@ -54,7 +68,7 @@ try {
       runs,
       median_ms: times[Math.floor(times.length / 2)],
       min_ms: times[0],
-      // Only meaningful for the first choice (a fresh page: the CPU; the second reloads the model).
+      // Only meaningful for the first backend timed (a fresh page; the second reloads the model).
       model_ready_ms: Math.round(modelReadyMs),
       first_estimate_ms: Math.round(firstEstimateMs),
     });

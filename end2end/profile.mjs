@@ -1,6 +1,7 @@
 // Where the page's CPU inference spends its time: Chromium's sampling profiler (DevTools
 // protocol) over N runs of the model on a twin pair, self time summed by function (WebAssembly
-// functions by their Rust names, from the build's name section), largest first.
+// functions by their Rust names, from the build's name section), largest first. The busy time
+// counts everything but idle (the garbage collector and redraws included).
 // Usage, after `trunk build`: node end2end/profile.mjs [runs] [top]   (docs/benchmarks.md)
 // HNET_WEIGHTS=<model.bpk> profiles those weights instead of the bundled ones.
 import { serveDist, launchBrowser, openPage, waitForModel, loadWeightsFromEnv } from "./harness.mjs";
@@ -32,9 +33,9 @@ try {
     times.push(Number((await page.textContent("#inference-time")).match(/(\d+) ms/)[1]));
   }
   const { profile } = await cdp.send("Profiler.stop");
-  // Self time per node: the sampling intervals of the samples that landed on it.
+  // Self time per node: the interval after each sample that landed on it (as DevTools counts).
   const self = new Map();
-  profile.samples.forEach((id, i) => self.set(id, (self.get(id) ?? 0) + (profile.timeDeltas[i] ?? 0)));
+  profile.samples.forEach((id, i) => self.set(id, (self.get(id) ?? 0) + (profile.timeDeltas[i + 1] ?? 0)));
   const byFunction = new Map();
   let total = 0;
   for (const node of profile.nodes) {

@@ -11,7 +11,8 @@ fn main() {
     // command-style module and runs every constructor again at the start of every exported
     // function (each allocation and closure call from JavaScript): 5-12 % of the page's busy
     // time (docs/benchmarks.md, "In the browser"). The `inventory` crate documents this fix.
-    // SAFETY: called once, before anything else in the module, as the linker intends.
+    // SAFETY: called once (wasm-bindgen runs `main` once per instance), before any code that reads
+    // what the constructors register.
     unsafe { __wasm_call_ctors() };
     console_error_panic_hook::set_once();
     leptos::mount::mount_to_body(hnet_studio::App);

@@ -5,12 +5,13 @@
 //! pays page faults and cross-core TLB shootdowns; `hnet bench model` measured a training step
 //! about 30 % faster with the settings below (docs/benchmarks.md). glibc's mmap threshold cannot
 //! go above 32 MiB, and one 32-channel activation of a batch of 8 pairs at 128 x 128 is 33.5 MB
-//! (at 224 x 224, 103 MB), so mappings are turned off altogether: a 128 x 128 training step
-//! measured about 12 % faster again (docs/benchmarks.md).
+//! (at 224 x 224, 103 MB), so mappings are turned off: a 128 x 128 training step measured 23 %
+//! faster again (docs/benchmarks.md). Training allocates on the main thread, whose heap grows as
+//! needed; a block over 64 MiB allocated on another thread (larger than one of glibc's thread
+//! heaps) is still mapped, as glibc falls back to a mapping there whatever this setting says.
 
 /// Raises glibc's mmap threshold to its maximum (32 MiB), serves larger blocks from the heap
-/// too (no mappings: a thread's arena that cannot hold a block falls back to the main heap), and
-/// stops glibc trimming the heap.
+/// too (no mappings, but for the fallback above), and stops glibc trimming the heap.
 pub fn tune() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: mallopt only changes allocator parameters; it is called before any thread starts.

@@ -16,8 +16,9 @@
 //! - the weight gradient sums `dy[o](oh, ow) · padded[c](oh · row + ow + tap_offset)` over the
 //!   output pixels, row by row (it must not see the dropped positions).
 //!
-//! Both keep a tile of accumulators in registers over the whole reduction: 6 output channels by
-//! 2 vectors of positions (forward), 3 output channels by 3 taps (weight gradient).
+//! Both keep a tile of accumulators in registers over the whole reduction: up to
+//! [`FORWARD_ROWS`] output channels by 2 vectors of positions (forward, [`forward_blocks`]), 3
+//! output channels by 3 taps (weight gradient).
 
 use alloc::vec::Vec;
 use core::mem::MaybeUninit;
@@ -39,7 +40,8 @@ const FORWARD_ROWS: usize = if cfg!(target_arch = "wasm32") { 5 } else { 6 };
 
 /// The forward pass's blocks of output channels, `(first channel, channels)`: as few as tiles of
 /// at most [`FORWARD_ROWS`] allow, and as even as possible, so that no tile computes channels
-/// that do not exist (32 channels: 6, 6, 5, 5, 5, 5, where six tiles of 6 would compute 36).
+/// that do not exist (natively, 32 channels: 6, 6, 5, 5, 5, 5, where six tiles of 6 would compute
+/// 36).
 pub fn forward_blocks(out_channels: usize) -> impl Iterator<Item = (usize, usize)> {
     let blocks = out_channels.div_ceil(FORWARD_ROWS);
     let (base, extra) = (out_channels / blocks.max(1), out_channels % blocks.max(1));
@@ -195,12 +197,12 @@ fn forward_avx2(
     relu: bool,
     y: &mut [MaybeUninit<f32>],
 ) {
-    // 6 channels x 2 vectors of 8: twelve accumulators, two loaded vectors and a broadcast.
+    // Up to 6 channels x 2 vectors of 8: twelve accumulators, two loaded vectors and a broadcast.
     forward_body::<crate::products::avx2::Avx2, 2>(g, layout, padded, packed_weight, bias, relu, y)
 }
 
 /// The body of [`forward_image`]: strips of `V · WIDTH` flat positions, each multiplied by every
-/// block of [`FORWARD_ROWS`] output channels while it is in cache.
+/// block of output channels ([`forward_blocks`]) while it is in cache.
 #[inline(always)]
 fn forward_body<L: Lanes, const V: usize>(
     g: &ConvGeometry,
@@ -263,7 +265,8 @@ fn forward_body<L: Lanes, const V: usize>(
                 4 => at.multiply::<L, V, 4>(panel, out),
                 3 => at.multiply::<L, V, 3>(panel, out),
                 2 => at.multiply::<L, V, 2>(panel, out),
-                _ => at.multiply::<L, V, 1>(panel, out),
+                1 => at.multiply::<L, V, 1>(panel, out),
+                _ => unreachable!("blocks hold 1 to {FORWARD_ROWS} channels"),
             }
         }
     }
@@ -296,6 +299,14 @@ impl Strip<'_> {
     #[inline(always)]
     fn multiply<L: Lanes, const V: usize, const R: usize>(&self, panel: &[f32], out: Outputs) {
         let strip = V * L::WIDTH;
+        // Every channel of the block is stored (`tile` holds FORWARD_ROWS), so every value of
+        // `y` is written, as `forward_image` promises.
+        assert!(R <= FORWARD_ROWS && panel.len() == R * self.offsets.len());
+        debug_assert!(
+            self.offsets
+                .last()
+                .is_none_or(|&last| self.p0 + last + strip <= self.padded.len())
+        );
         let mut acc = [[L::zero(); V]; R];
         // One loop over every (input channel, tap): a single level of loop-carried accumulators,
         // which the register allocator keeps in registers.
