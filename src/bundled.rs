@@ -11,9 +11,9 @@ pub const BUNDLED_WEIGHTS: &str = "assets/hnet-cpu.bpk";
 /// What the bundled weights can and cannot be trusted with, shown beside their force estimate.
 /// Keep in step with the evaluation in `assets/MODEL.md`.
 pub const BUNDLED_FORCE_CAVEAT: &str = "The bundled weights were trained on the CPU at \
-    128 x 128 px on 44,000 twin pairs (assets/MODEL.md). On fresh twin pairs their masks are \
-    accurate (catheter IoU 0.92 on the bench, 0.86-0.91 on other catheters, poses, C-arm angles \
-    and chest radiographs) but their force only coarse (RMSE 0.071 N, R² 0.59), and learned on \
+    128 x 128 px on 58,000 twin pairs (assets/MODEL.md). On fresh twin pairs their masks are \
+    accurate (catheter IoU 0.92-0.93 on the bench, 0.86-0.91 on other catheters, poses, C-arm \
+    angles and chest radiographs) but their force only coarse (RMSE 0.068 N, R² 0.63), and learned on \
     the bench pose alone: read the arrows as a direction and a rough size, not a measurement.";
 
 /// A file of the page's own that could not be fetched.

@@ -236,7 +236,7 @@ test("the live twin bends the catheter with the sliders and composes X-ray backg
   assert.match(caption, /C-arm \+0° \/ \+0°/);
   // Inside the training data, the verdict says no more than the error allows.
   await page.waitForSelector("#force-verdict", { timeout: 120_000 });
-  assert.match(await page.textContent("#force-verdict"), /\|F\| = \d\.\d{3} ± 0\.123 N: /);
+  assert.match(await page.textContent("#force-verdict"), /\|F\| = \d\.\d{3} ± 0\.117 N: /);
   // Push the tip sideways with the keyboard on the Fx slider: the catheter's silhouette changes.
   const before = await page.evaluate(() => document.querySelector("#view-a").toDataURL());
   await page.focus("#twin-fx");
@@ -245,7 +245,7 @@ test("the live twin bends the catheter with the sliders and composes X-ray backg
   // The true force is shown beside H-Net's estimate, with the error, and the bundled weights'
   // caveat beside it.
   await page.waitForSelector("#force-table tr.error");
-  assert.match(await page.textContent("#force-caveat"), /R² 0\.59/);
+  assert.match(await page.textContent("#force-caveat"), /R² 0\.63/);
   // A force the model never saw (Fz > 0, |F| 0.69 N): no verdict, and the true band beside it.
   for (const axis of ["fx", "fy", "fz"]) {
     await page.focus(`#twin-${axis}`);
