@@ -379,16 +379,19 @@ mod autodiff {
     }
 
     /// `dy` where `y > 0` (or is NaN), else 0: a ReLU's backward, from its output `y`, as Burn's
-    /// flex computes it.
+    /// flex computes it (on every rayon worker with `rayon`).
     fn relu_backward(dy: &FlexTensor, y: &FlexTensor) -> FlexTensor {
         let shape = dy.layout().shape().clone();
+        let pass = |&d: &f32, &y: &f32| if y.is_nan() || y > 0.0 { d } else { 0.0 };
         with_values(dy, |dy| {
             with_values(y, |y| {
-                let masked: Vec<f32> = dy
-                    .iter()
-                    .zip(y)
-                    .map(|(&d, &y)| if y.is_nan() || y > 0.0 { d } else { 0.0 })
-                    .collect();
+                #[cfg(feature = "rayon")]
+                let masked: Vec<f32> = {
+                    use rayon::prelude::*;
+                    dy.par_iter().zip(y).map(|(d, y)| pass(d, y)).collect()
+                };
+                #[cfg(not(feature = "rayon"))]
+                let masked: Vec<f32> = dy.iter().zip(y).map(|(d, y)| pass(d, y)).collect();
                 FlexTensor::from_data(TensorData::new(masked, shape))
             })
         })
