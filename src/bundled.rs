@@ -13,8 +13,9 @@ pub const BUNDLED_WEIGHTS: &str = "assets/hnet-cpu.bpk";
 pub const BUNDLED_FORCE_CAVEAT: &str = "The bundled weights were trained on the CPU at \
     128 x 128 px on 58,000 twin pairs (assets/MODEL.md). On fresh twin pairs their masks are \
     accurate (catheter IoU 0.92-0.93 on the bench, 0.86-0.91 on other catheters, poses, C-arm \
-    angles and chest radiographs) but their force only coarse (RMSE 0.068 N, R² 0.63), and learned on \
-    the bench pose alone: read the arrows as a direction and a rough size, not a measurement.";
+    angles and chest radiographs) but their force only coarse (RMSE 0.068 N, R² 0.63), and \
+    learned on the bench pose alone: read the arrows as a direction and a rough size, not a \
+    measurement.";
 
 /// A file of the page's own that could not be fetched.
 #[derive(Debug, thiserror::Error)]

@@ -9,8 +9,9 @@ unsafe extern "C" {
 fn main() {
     // Run the constructors once, here. Without this call the linker treats the page as a
     // command-style module and runs every constructor again at the start of every exported
-    // function (each allocation and closure call from JavaScript): 5-12 % of the page's busy
-    // time (docs/benchmarks.md, "In the browser"). The `inventory` crate documents this fix.
+    // function (each allocation and closure call from JavaScript): about 12 % of the page's busy
+    // time in its profile (docs/benchmarks.md, "In the browser"). The `inventory` crate documents
+    // this fix.
     // SAFETY: called once (wasm-bindgen runs `main` once per instance), before any code that reads
     // what the constructors register.
     unsafe { __wasm_call_ctors() };

@@ -10,7 +10,8 @@
 //! zero-padded image directly ([`direct`]). A strided convolution's input gradient (a transposed
 //! convolution's forward pass, H-Net's upsampling) is split into one stride-1 convolution per
 //! class of the transposed convolution's output positions (even or odd row and column, for
-//! stride 2; [`geometry::Axis::gradient_phases`]), which the direct kernels compute. The 2 x 2 max pooling between the encoder's blocks has its own kernel too
+//! stride 2; [`geometry::Axis::gradient_phases`]), which the direct kernels compute. The 2 x 2
+//! max pooling between the encoder's blocks has its own kernel too
 //! ([`pooling`], [`max_pool2x2`]): flex pools through a general 3-D max pooling with indices.
 //!
 //! Model code calls [`conv2d_module`] / [`conv_transpose2d_module`] where it would call a
