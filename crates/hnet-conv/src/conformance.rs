@@ -131,6 +131,18 @@ impl ConvCase {
         }
     }
 
+    /// H-Net's 3x3 convolution on an image wide enough for Winograd's kernel
+    /// ([`crate::winograd`]), its last strip partial, with 5 and 7 channels (uneven register
+    /// tiles).
+    pub fn winograd_layer(seed: u64) -> Self {
+        Self {
+            in_channels: 5,
+            out_channels: 7,
+            size: [6, 2 * crate::winograd::STRIP_TILES + 6],
+            ..Self::h_net_layer(false, seed)
+        }
+    }
+
     /// True when Burn itself gives a result (an output of at least one pixel).
     pub fn is_valid(&self) -> bool {
         (0..2).all(|a| {

@@ -36,7 +36,7 @@ const R: usize = 3;
 /// x86-64, 4 x 3 would need all sixteen, and the compiler then spills). In WebAssembly, 5: the
 /// browser's compiler keeps one of the sixteen vector registers for itself, and 5 x 2 measured
 /// about 10 % faster in Chromium than 6 x 2 (4 x 2 the same as 5 x 2; docs/benchmarks.md).
-const FORWARD_ROWS: usize = if cfg!(target_arch = "wasm32") { 5 } else { 6 };
+pub(crate) const FORWARD_ROWS: usize = if cfg!(target_arch = "wasm32") { 5 } else { 6 };
 
 /// The forward pass's blocks of output channels, `(first channel, channels)`: as few as tiles of
 /// at most [`FORWARD_ROWS`] allow, and as even as possible, so that no tile computes channels
@@ -316,7 +316,7 @@ impl Strip<'_> {
             // `strip <= SLACK`), inside `padded` (checked in `forward_image`).
             unsafe {
                 let pb = self.padded.as_ptr().add(self.p0 + offset);
-                let bv: [L; V] = core::array::from_fn(|v| L::load(pb.add(v * L::WIDTH)));
+                let bv: [L; V] = L::load_vectors(pb);
                 for r in 0..R {
                     let a = L::splat(a[r]);
                     for v in 0..V {
@@ -469,9 +469,11 @@ fn weight_gradient_body<L: Lanes>(
                             // `dy_plane + dy_row + ow + WIDTH <= dy.len()`, both checked in
                             // `add_weight_gradient`.
                             unsafe {
-                                let xv: [L; J] = core::array::from_fn(|jj| {
-                                    L::load(padded.as_ptr().add(offsets[jj] + x_row + ow))
-                                });
+                                // A loop, not `array::from_fn` (see `Lanes::load_vectors`).
+                                let mut xv = [L::zero(); J];
+                                for (x, offset) in xv.iter_mut().zip(offsets) {
+                                    *x = L::load(padded.as_ptr().add(offset + x_row + ow));
+                                }
                                 for (acc, &dy_plane) in acc.iter_mut().zip(&dy_planes) {
                                     let d = L::load(dy.as_ptr().add(dy_plane + dy_row + ow));
                                     for (acc, x) in acc.iter_mut().zip(xv) {

@@ -27,6 +27,7 @@ use crate::direct::{self, PaddedLayout};
 use crate::geometry::{AxisPhase, ConvGeometry};
 use crate::lowering::{lower, raise_adding};
 use crate::products::{Lanes, MatrixView, Threads, broadcast_product, gemm_product};
+use crate::winograd::{self, WinogradLayout};
 
 std::thread_local! {
     /// Each thread's buffer for a lowered image, kept between calls so that the pages it
@@ -97,6 +98,9 @@ pub fn forward(
     let (taps, plane, out_plane) = (g.taps(), g.input_plane(), g.output_plane());
     assert_eq!(x.len(), g.batch * g.in_channels * plane, "input size");
     assert_eq!(weight.len(), g.out_channels * taps, "weight size");
+    if let Some(y) = forward_by_winograd(g, x, weight, bias, relu) {
+        return y;
+    }
     if let Some(layout) = PaddedLayout::of(g) {
         let packed = direct::pack_weight(weight, g.out_channels, taps);
         return forward_direct(g, &layout, x, &packed, bias, relu);
@@ -155,18 +159,51 @@ fn forward_direct(
     bias: Option<&[f32]>,
     relu: bool,
 ) -> Vec<f32> {
+    forward_padded(g, x, layout.len(g.in_channels), |x, padded, y| {
+        layout.pad(g, x, padded);
+        direct::forward_image(g, layout, padded, packed_weight, bias, relu, y);
+    })
+}
+
+/// The forward convolution by Winograd's F(2x2, 3x3) ([`winograd`]), when it serves `g` and is
+/// switched on ([`crate::use_winograd`]).
+fn forward_by_winograd(
+    g: &ConvGeometry,
+    x: &[f32],
+    weight: &[f32],
+    bias: Option<&[f32]>,
+    relu: bool,
+) -> Option<Vec<f32>> {
+    let layout = WinogradLayout::of(g).filter(|_| crate::winograd_enabled())?;
+    let transformed = winograd::transform_weight(weight, g.out_channels, g.in_channels);
+    Some(forward_padded(
+        g,
+        x,
+        layout.len(g.in_channels),
+        |x, padded, y| {
+            layout.pad(g, x, padded);
+            winograd::forward_image(g, &layout, padded, &transformed, bias, relu, y);
+        },
+    ))
+}
+
+/// Runs `image(x, padded, y)` for every image `x` of the batch, with this thread's buffer of
+/// `padded_len` values for its padded copy and its part `y` of the result, which `image` must
+/// write whole (it is not zeroed first).
+fn forward_padded(
+    g: &ConvGeometry,
+    x: &[f32],
+    padded_len: usize,
+    image: impl Fn(&[f32], &mut [f32], &mut [MaybeUninit<f32>]) + Send + Sync,
+) -> Vec<f32> {
     let plane = g.input_plane();
     let len = g.batch * g.out_channels * g.output_plane();
-    // Not zeroed first: the kernel writes every value.
     let mut y = Vec::with_capacity(len);
     for_each_image(g.batch, &mut y.spare_capacity_mut()[..len], |n, y| {
         let x = &x[n * g.in_channels * plane..][..g.in_channels * plane];
-        with_lowered_buffer(layout.len(g.in_channels), |padded| {
-            layout.pad(g, x, padded);
-            direct::forward_image(g, layout, padded, packed_weight, bias, relu, y);
-        });
+        with_lowered_buffer(padded_len, |padded| image(x, padded, y));
     });
-    // SAFETY: `forward_image` wrote all `len` values (its contract), image by image.
+    // SAFETY: `image` wrote all `len` values (its contract), image by image.
     unsafe { y.set_len(len) };
     y
 }
@@ -194,6 +231,9 @@ pub fn input_gradient(
         && let Some(layout) = PaddedLayout::of(&adjoint)
     {
         let flipped = g.flipped_weight(weight);
+        if let Some(dx) = forward_by_winograd(&adjoint, dy, &flipped, bias, false) {
+            return dx;
+        }
         let packed = direct::pack_weight(&flipped, adjoint.out_channels, adjoint.taps());
         return forward_direct(&adjoint, &layout, dy, &packed, bias, false);
     }

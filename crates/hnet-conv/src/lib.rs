@@ -32,6 +32,7 @@ pub mod kernels;
 pub mod lowering;
 pub mod pooling;
 pub mod products;
+pub mod winograd;
 
 use core::sync::atomic::{AtomicBool, Ordering};
 
@@ -45,6 +46,21 @@ use backend::{ConvBias, ProjectConvBackend};
 
 /// Off only for A/B measurements against Burn's own kernels ([`use_project_kernels`]).
 static PROJECT_KERNELS: AtomicBool = AtomicBool::new(true);
+
+/// Off only for A/B measurements of the Winograd kernel against the direct one ([`use_winograd`]).
+static WINOGRAD: AtomicBool = AtomicBool::new(true);
+
+/// Whether the project's kernels compute stride-1 3 x 3 convolutions by Winograd's F(2x2, 3x3)
+/// ([`winograd`], the default) or directly ([`direct`]), for the whole process: the switch behind
+/// `hnet bench --kernels direct`.
+pub fn use_winograd(enabled: bool) {
+    WINOGRAD.store(enabled, Ordering::Relaxed);
+}
+
+/// True unless [`use_winograd`] turned the Winograd kernel off.
+pub(crate) fn winograd_enabled() -> bool {
+    WINOGRAD.load(Ordering::Relaxed)
+}
 
 /// Whether flex convolutions use the project's kernels (the default) or Burn's own, for the whole
 /// process: the switch behind `hnet bench --kernels burn`.

@@ -28,6 +28,20 @@ pub(crate) trait Lanes: Copy {
     /// # Safety
     /// `from .. from + WIDTH` must be readable.
     unsafe fn load(from: *const f32) -> Self;
+    /// `N` consecutive vectors from `from` (`N · WIDTH` values). A loop, not `array::from_fn`:
+    /// inside its closure the compiler left the load intrinsic as a call (`perf`, AVX2).
+    ///
+    /// # Safety
+    /// `from .. from + N · WIDTH` must be readable.
+    #[inline(always)]
+    unsafe fn load_vectors<const N: usize>(from: *const f32) -> [Self; N] {
+        let mut vectors = [Self::zero(); N];
+        for (v, vector) in vectors.iter_mut().enumerate() {
+            // SAFETY: inside the `N · WIDTH` readable values (the caller's guarantee).
+            *vector = unsafe { Self::load(from.add(v * Self::WIDTH)) };
+        }
+        vectors
+    }
     /// Stores `WIDTH` values at `to`.
     ///
     /// # Safety
@@ -35,6 +49,12 @@ pub(crate) trait Lanes: Copy {
     unsafe fn store(self, to: *mut f32);
     /// `self + a * b`.
     fn multiply_add(self, a: Self, b: Self) -> Self;
+    /// `self + other`, lane by lane.
+    fn add(self, other: Self) -> Self;
+    /// `self - other`, lane by lane.
+    fn sub(self, other: Self) -> Self;
+    /// The lanes of `self` and `other` alternated, `(s0, o0, s1, o1, ...)`, as two vectors.
+    fn interleave(self, other: Self) -> (Self, Self);
     /// The larger of each lane and zero (ReLU); NaN stays NaN, as in Burn's and PyTorch's ReLU
     /// (a diverged network must not look finite).
     fn relu(self) -> Self;
@@ -64,6 +84,18 @@ impl Lanes for f32 {
     #[inline(always)]
     fn multiply_add(self, a: Self, b: Self) -> Self {
         self + a * b
+    }
+    #[inline(always)]
+    fn add(self, other: Self) -> Self {
+        self + other
+    }
+    #[inline(always)]
+    fn sub(self, other: Self) -> Self {
+        self - other
+    }
+    #[inline(always)]
+    fn interleave(self, other: Self) -> (Self, Self) {
+        (self, other)
     }
     #[inline(always)]
     fn relu(self) -> Self {
@@ -108,6 +140,26 @@ pub(crate) mod avx2 {
             Self(unsafe { _mm256_fmadd_ps(a.0, b.0, self.0) })
         }
         #[inline(always)]
+        fn add(self, other: Self) -> Self {
+            Self(unsafe { _mm256_add_ps(self.0, other.0) })
+        }
+        #[inline(always)]
+        fn sub(self, other: Self) -> Self {
+            Self(unsafe { _mm256_sub_ps(self.0, other.0) })
+        }
+        #[inline(always)]
+        fn interleave(self, other: Self) -> (Self, Self) {
+            // unpack interleaves within each 128-bit half; the permutes put the halves in order.
+            unsafe {
+                let low = _mm256_unpacklo_ps(self.0, other.0);
+                let high = _mm256_unpackhi_ps(self.0, other.0);
+                (
+                    Self(_mm256_permute2f128_ps::<0x20>(low, high)),
+                    Self(_mm256_permute2f128_ps::<0x31>(low, high)),
+                )
+            }
+        }
+        #[inline(always)]
         fn relu(self) -> Self {
             // maxps returns its second operand when either is NaN: NaN propagates.
             Self(unsafe { _mm256_max_ps(_mm256_setzero_ps(), self.0) })
@@ -146,6 +198,21 @@ pub(crate) mod simd128 {
         #[inline(always)]
         fn multiply_add(self, a: Self, b: Self) -> Self {
             Self(f32x4_add(self.0, f32x4_mul(a.0, b.0)))
+        }
+        #[inline(always)]
+        fn add(self, other: Self) -> Self {
+            Self(f32x4_add(self.0, other.0))
+        }
+        #[inline(always)]
+        fn sub(self, other: Self) -> Self {
+            Self(f32x4_sub(self.0, other.0))
+        }
+        #[inline(always)]
+        fn interleave(self, other: Self) -> (Self, Self) {
+            (
+                Self(i32x4_shuffle::<0, 4, 1, 5>(self.0, other.0)),
+                Self(i32x4_shuffle::<2, 6, 3, 7>(self.0, other.0)),
+            )
         }
         #[inline(always)]
         fn relu(self) -> Self {
@@ -279,7 +346,7 @@ fn broadcast_body<L: Lanes, const R: usize, const VECTORS: usize>(
                 // SAFETY: `panel_a` holds k steps of R values and `panel_b` k rows of `strip`
                 // values; each pass reads one step and one row and advances past them.
                 unsafe {
-                    let bv: [L; VECTORS] = core::array::from_fn(|v| L::load(pb.add(v * L::WIDTH)));
+                    let bv: [L; VECTORS] = L::load_vectors(pb);
                     for (i, acc) in acc.iter_mut().enumerate() {
                         let a = L::splat(*pa.add(i));
                         for (acc, b) in acc.iter_mut().zip(bv) {

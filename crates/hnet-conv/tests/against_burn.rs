@@ -94,13 +94,43 @@ fn direct_stride_1_convolutions_match_burn() {
     }
 }
 
+/// Stride-1 3x3 convolutions with even outputs at least one strip wide go to Winograd's
+/// F(2x2, 3x3) (`hnet_conv::winograd`), forward and input gradient: paddings 1 (the browser
+/// tests' case), 0 and 2, on one side only, a partial last strip, channel counts that leave
+/// uneven register tiles; and the same with the kernel switched off (the direct path). The switch
+/// is process-wide: tests running meanwhile may take either path, both of which must match Burn.
+#[test]
+fn winograd_convolutions_match_burn() {
+    let wide = 2 * hnet_conv::winograd::STRIP_TILES;
+    let cases = [
+        ([8, wide + 2], [(0, 0), (0, 0)], 3, 13),
+        ([4, wide], [(2, 2), (2, 2)], 8, 32),
+        ([8, wide + 2], [(2, 0), (0, 2)], 2, 6),
+    ];
+    let others = cases.map(|(size, padding, in_channels, out_channels)| ConvCase {
+        size,
+        padding,
+        in_channels,
+        out_channels,
+        ..ConvCase::h_net_layer(false, 23)
+    });
+    for case in [ConvCase::winograd_layer(23)].into_iter().chain(others) {
+        check(&case).unwrap();
+        hnet_conv::use_winograd(false);
+        let direct = check(&case);
+        hnet_conv::use_winograd(true);
+        direct.unwrap();
+    }
+}
+
 /// A NaN stays NaN through the fused ReLU, where Burn's ReLU keeps it (a diverged network must
 /// not look finite): on the direct path (stride 1) and the lowered one (stride 2).
 #[test]
 fn the_fused_relu_keeps_nan_as_burn_does() {
     let device = Device::flex();
-    // 40 pixels wide: the direct path stores whole strips from its vector registers there.
-    let shape = [2, 3, 9, 40];
+    // 40 pixels wide: the direct path stores whole strips from its vector registers there; 8
+    // rows, so that Winograd's kernel serves the stride-1 case.
+    let shape = [2, 3, 8, 40];
     for stride in [1, 2] {
         let mut image = vec![0.5f32; shape.iter().product()];
         image[4 * 40 + 20] = f32::NAN;

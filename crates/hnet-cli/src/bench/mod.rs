@@ -36,6 +36,9 @@ enum BenchCommand {
 pub enum Kernels {
     /// The project's (crates/hnet-conv), as every other command uses.
     Project,
+    /// The project's, with stride-1 3x3 convolutions computed directly instead of by
+    /// Winograd's F(2x2, 3x3).
+    Direct,
     /// Burn flex's own convolutions.
     Burn,
 }
@@ -43,7 +46,8 @@ pub enum Kernels {
 impl Kernels {
     /// Makes the whole process use these kernels.
     pub fn select(self) {
-        hnet_conv::use_project_kernels(self == Kernels::Project);
+        hnet_conv::use_project_kernels(self != Kernels::Burn);
+        hnet_conv::use_winograd(self == Kernels::Project);
     }
 }
 

@@ -1,0 +1,633 @@
+//! Winograd's minimal filtering F(2x2, 3x3) (Lavin and Gray, "Fast Algorithms for Convolutional
+//! Neural Networks", CVPR 2016) for the forward pass of stride-1, undilated 3x3 convolutions: all
+//! of H-Net's double convolutions, and their input gradients (the forward pass of the turned
+//! kernel).
+//!
+//! Each 2 x 2 block of output pixels (a *tile*) of output channel `o` is
+//! `Y = Aᵀ [Σ_c (G g_oc Gᵀ) ⊙ (Bᵀ d_c B)] A`, where `d_c` is the 4 x 4 patch of input channel `c`
+//! the tile reads and `g_oc` the 3 x 3 kernel. The sum over channels is, for each of the 16 points
+//! of the transformed domain, one matrix product `(out x in) · (in x tiles)`: 16 multiply-adds
+//! per tile and channel pair where the direct kernel ([`crate::direct`]) needs 36, 2.25x fewer.
+//! The transforms only add and subtract (and halve, for the weight), so the result is the direct
+//! convolution's up to f32 rounding, and each output depends on exactly the inputs of its 3 x 3
+//! window: a NaN reaches the same outputs as in the direct kernel.
+//!
+//! The work goes by strips of [`STRIP_TILES`] tiles along one row of tiles: the strip's input is
+//! transformed into `V[point][channel][tile]`, multiplied by each point's transformed weight
+//! with the direct kernel's register tile (output channels by two vectors of tiles), and
+//! transformed back into the output, with the bias and the ReLU, while it is in cache. The input
+//! is first copied into a zero-padded buffer whose rows are split into their even and odd
+//! columns ([`WinogradLayout::pad`]), so that the tiles of a strip, two columns apart, load as
+//! whole vectors.
+
+use alloc::vec;
+use alloc::vec::Vec;
+use core::mem::MaybeUninit;
+
+use crate::direct::{FORWARD_ROWS, forward_blocks};
+use crate::geometry::ConvGeometry;
+use crate::products::Lanes;
+
+/// Tiles per strip: two vectors of tiles (AVX2: 2 x 8; WebAssembly SIMD128: 2 x 4).
+pub const STRIP_TILES: usize = if cfg!(target_arch = "wasm32") { 8 } else { 16 };
+
+/// Points of the transformed domain per tile (4 x 4).
+const POINTS: usize = 16;
+
+/// Where a convolution's zero-padded input lies in its buffer, for the Winograd kernel.
+#[derive(Debug, Clone)]
+pub struct WinogradLayout {
+    /// Rows of tiles (output height / 2).
+    tiles_h: usize,
+    /// Tiles per row (output width / 2).
+    tiles_w: usize,
+    /// Strips per row of tiles; the last one may hold fewer than [`STRIP_TILES`] real tiles.
+    strips: usize,
+    /// Values per half row (the even padded columns, then as many odd ones): one more than the
+    /// strips' tiles, so that every strip loads whole vectors inside its row.
+    half: usize,
+    /// Padded rows per plane (output height + 2).
+    rows: usize,
+}
+
+impl WinogradLayout {
+    /// The layout of `g`, or `None` when the Winograd kernel does not serve it: anything but a
+    /// stride-1, undilated 3 x 3 kernel, an odd output height or width, or rows narrower than
+    /// one strip (H-Net's small bottleneck layers, where a strip would be mostly empty).
+    pub fn of(g: &ConvGeometry) -> Option<Self> {
+        let (h, w) = (&g.height, &g.width);
+        let served = |a: &crate::geometry::Axis| {
+            a.stride == 1 && a.kernel == 3 && a.dilation == 1 && a.output.is_multiple_of(2)
+        };
+        if !served(h) || !served(w) || w.output / 2 < STRIP_TILES || h.output == 0 {
+            return None;
+        }
+        let tiles_w = w.output / 2;
+        let strips = tiles_w.div_ceil(STRIP_TILES);
+        Some(Self {
+            tiles_h: h.output / 2,
+            tiles_w,
+            strips,
+            half: strips * STRIP_TILES + 1,
+            rows: h.output + 2,
+        })
+    }
+
+    /// Values per padded row (both halves).
+    fn row(&self) -> usize {
+        2 * self.half
+    }
+
+    /// Values per padded plane.
+    fn plane(&self) -> usize {
+        self.rows * self.row()
+    }
+
+    /// Length of the buffer for one image of `channels` channels.
+    pub fn len(&self, channels: usize) -> usize {
+        channels * self.plane()
+    }
+
+    /// Writes image `image` (`in_channels` planes of the input) into `buffer` ([`Self::len`]
+    /// long): padded row `r` of channel `c` holds the padded image's even columns `0, 2, 4, ...`
+    /// then its odd columns `1, 3, 5, ...`, zero outside the image. Every element is written.
+    pub fn pad(&self, g: &ConvGeometry, image: &[f32], buffer: &mut [f32]) {
+        let (in_h, in_w) = (g.height.input, g.width.input);
+        let (top, left) = (g.height.padding, g.width.padding);
+        debug_assert_eq!(image.len(), g.in_channels * in_h * in_w);
+        debug_assert_eq!(buffer.len(), self.len(g.in_channels));
+        // One padded row, contiguous: the image's pixels land in `left .. left + columns`, and
+        // the rest stays zero, as every image row writes the same range.
+        let mut line = vec![0.0f32; self.row()];
+        let left = left.min(line.len());
+        let columns = in_w.min(line.len() - left);
+        for (channel, plane) in image
+            .chunks_exact(in_h * in_w)
+            .zip(buffer.chunks_exact_mut(self.plane()))
+        {
+            for (r, split) in plane.chunks_exact_mut(self.row()).enumerate() {
+                let (even, odd) = split.split_at_mut(self.half);
+                let Some(i) = r.checked_sub(top).filter(|&i| i < in_h) else {
+                    even.fill(0.0);
+                    odd.fill(0.0);
+                    continue;
+                };
+                line[left..left + columns].copy_from_slice(&channel[i * in_w..][..columns]);
+                for (pair, (even, odd)) in line.chunks_exact(2).zip(even.iter_mut().zip(odd)) {
+                    *even = pair[0];
+                    *odd = pair[1];
+                }
+            }
+        }
+    }
+}
+
+/// The OIHW weight (`out_channels x in_channels x 3 x 3`) in the transformed domain,
+/// `U = G g Gᵀ` per channel pair, packed for the products: per point, per block of
+/// [`forward_blocks`], per input channel, the block's output channels.
+pub fn transform_weight(weight: &[f32], out_channels: usize, in_channels: usize) -> Vec<f32> {
+    assert_eq!(
+        weight.len(),
+        out_channels * in_channels * 9,
+        "3x3 weight size"
+    );
+    // G = [[1, 0, 0], [½, ½, ½], [½, -½, ½], [0, 0, 1]] applied to three values.
+    let g_times = |v: [f32; 3]| {
+        [
+            v[0],
+            0.5 * (v[0] + v[1] + v[2]),
+            0.5 * (v[0] - v[1] + v[2]),
+            v[2],
+        ]
+    };
+    // U per (output, input) channel pair, 16 points each.
+    let mut transformed = vec![0.0f32; out_channels * in_channels * POINTS];
+    for (kernel, u) in weight
+        .chunks_exact(9)
+        .zip(transformed.chunks_exact_mut(POINTS))
+    {
+        // G g: 4 x 3, column by column.
+        let columns: [[f32; 4]; 3] =
+            core::array::from_fn(|j| g_times([kernel[j], kernel[3 + j], kernel[6 + j]]));
+        for a in 0..4 {
+            let row = g_times([columns[0][a], columns[1][a], columns[2][a]]);
+            u[a * 4..][..4].copy_from_slice(&row);
+        }
+    }
+    let mut packed = Vec::with_capacity(transformed.len());
+    for point in 0..POINTS {
+        for (first, channels) in forward_blocks(out_channels) {
+            for c in 0..in_channels {
+                packed.extend(
+                    (first..first + channels)
+                        .map(|o| transformed[(o * in_channels + c) * POINTS + point]),
+                );
+            }
+        }
+    }
+    packed
+}
+
+/// One image's forward convolution `y = W ⋆ x (+ b)`, NCHW, followed by a ReLU when `relu`, from
+/// its padded buffer `padded` ([`WinogradLayout::pad`]) and the weight transformed by
+/// [`transform_weight`]. Every element of `y` (`out_channels x output plane`) is written.
+pub fn forward_image(
+    g: &ConvGeometry,
+    layout: &WinogradLayout,
+    padded: &[f32],
+    weight: &[f32],
+    bias: Option<&[f32]>,
+    relu: bool,
+    y: &mut [MaybeUninit<f32>],
+) {
+    assert!(
+        padded.len() == layout.len(g.in_channels)
+            && weight.len() == g.out_channels * g.in_channels * POINTS
+            && y.len() == g.out_channels * g.output_plane()
+            && bias.is_none_or(|b| b.len() == g.out_channels)
+            && layout.tiles_w * 2 == g.width.output
+            && layout.tiles_h * 2 == g.height.output,
+        "Winograd forward: buffer sizes"
+    );
+    let run = Run {
+        g,
+        layout,
+        padded,
+        weight,
+        bias,
+        relu,
+    };
+    #[cfg(target_arch = "x86_64")]
+    if crate::products::has_avx2() {
+        return run.strips::<avx2::Phases>(y);
+    }
+    #[cfg(target_arch = "wasm32")]
+    return run.strips::<Generic<crate::products::simd128::Simd128, 2>>(y);
+    #[allow(unreachable_code)]
+    run.strips::<Generic<f32, STRIP_TILES>>(y)
+}
+
+/// The three phases of a strip, for one instruction set.
+trait Phases {
+    fn transform_input(run: &Run, tile_row: usize, first_tile: usize, out: &mut [f32]);
+    fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]);
+    fn transform_output(
+        run: &Run,
+        tile_row: usize,
+        first_tile: usize,
+        products: &[f32],
+        y: &mut [MaybeUninit<f32>],
+    );
+}
+
+/// The phases over [`Lanes`] `L`, `V` vectors per strip, where `L`'s instructions are always
+/// available (SIMD128 in a module built with it, and the portable `f32`).
+struct Generic<L, const V: usize>(core::marker::PhantomData<L>);
+
+impl<L: Lanes, const V: usize> Phases for Generic<L, V> {
+    fn transform_input(run: &Run, tile_row: usize, first_tile: usize, out: &mut [f32]) {
+        run.transform_input::<L, V>(tile_row, first_tile, out);
+    }
+    fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]) {
+        run.multiply::<L, V>(transformed, products);
+    }
+    fn transform_output(
+        run: &Run,
+        tile_row: usize,
+        first_tile: usize,
+        products: &[f32],
+        y: &mut [MaybeUninit<f32>],
+    ) {
+        run.transform_output::<L, V>(tile_row, first_tile, products, y);
+    }
+}
+
+/// The phases with AVX2 and FMA, each compiled for them on its own: inlined into one function,
+/// the compiler left the vector intrinsics as calls (a third of the time in `perf`).
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use core::mem::MaybeUninit;
+
+    use super::Run;
+    use crate::products::avx2::Avx2;
+
+    /// Only used after `has_avx2()` returned true.
+    pub(super) struct Phases;
+
+    impl super::Phases for Phases {
+        fn transform_input(run: &Run, tile_row: usize, first_tile: usize, out: &mut [f32]) {
+            // SAFETY: chosen only on CPUs with AVX2 and FMA (`forward_image`).
+            unsafe { transform_input(run, tile_row, first_tile, out) }
+        }
+        fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]) {
+            // SAFETY: as above.
+            unsafe { multiply(run, transformed, products) }
+        }
+        fn transform_output(
+            run: &Run,
+            tile_row: usize,
+            first_tile: usize,
+            products: &[f32],
+            y: &mut [MaybeUninit<f32>],
+        ) {
+            // SAFETY: as above.
+            unsafe { transform_output(run, tile_row, first_tile, products, y) }
+        }
+    }
+
+    #[target_feature(enable = "avx2,fma")]
+    fn transform_input(run: &Run, tile_row: usize, first_tile: usize, out: &mut [f32]) {
+        run.transform_input::<Avx2, 2>(tile_row, first_tile, out);
+    }
+
+    #[target_feature(enable = "avx2,fma")]
+    fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]) {
+        run.multiply::<Avx2, 2>(transformed, products);
+    }
+
+    #[target_feature(enable = "avx2,fma")]
+    fn transform_output(
+        run: &Run,
+        tile_row: usize,
+        first_tile: usize,
+        products: &[f32],
+        y: &mut [MaybeUninit<f32>],
+    ) {
+        run.transform_output::<Avx2, 2>(tile_row, first_tile, products, y);
+    }
+}
+
+/// Values between consecutive points of the transformed input: one strip row more than the
+/// channels need, so that the 16 points of one channel (written together by the input transform)
+/// do not fall into the same cache set, as they would a power of two apart.
+fn point_stride(in_channels: usize) -> usize {
+    (in_channels + 1) * STRIP_TILES
+}
+
+/// One call of [`forward_image`].
+struct Run<'a> {
+    g: &'a ConvGeometry,
+    layout: &'a WinogradLayout,
+    padded: &'a [f32],
+    weight: &'a [f32],
+    bias: Option<&'a [f32]>,
+    relu: bool,
+}
+
+impl Run<'_> {
+    /// Every strip: input transform, products, output transform.
+    fn strips<P: Phases>(&self, y: &mut [MaybeUninit<f32>]) {
+        let (cin, cout) = (self.g.in_channels, self.g.out_channels);
+        let mut transformed = vec![0.0f32; POINTS * point_stride(cin)];
+        let mut products = vec![0.0f32; cout * POINTS * STRIP_TILES];
+        for tile_row in 0..self.layout.tiles_h {
+            for strip in 0..self.layout.strips {
+                let first_tile = strip * STRIP_TILES;
+                P::transform_input(self, tile_row, first_tile, &mut transformed);
+                P::multiply(self, &transformed, &mut products);
+                P::transform_output(self, tile_row, first_tile, &products, y);
+            }
+        }
+    }
+
+    /// `V[point][channel][tile] = (Bᵀ d B)[point]` for the strip's tiles, every input channel;
+    /// the points [`point_stride`] apart.
+    #[inline(always)]
+    fn transform_input<L: Lanes, const V: usize>(
+        &self,
+        tile_row: usize,
+        first_tile: usize,
+        out: &mut [f32],
+    ) {
+        assert_eq!(V * L::WIDTH, STRIP_TILES);
+        let layout = self.layout;
+        let (row, plane, half) = (layout.row(), layout.plane(), layout.half);
+        let cin = self.g.in_channels;
+        let stride = point_stride(cin);
+        debug_assert_eq!(out.len(), POINTS * stride);
+        for c in 0..cin {
+            let base = c * plane + 2 * tile_row * row + first_tile;
+            // Each strip reads values `first_tile ..= first_tile + STRIP_TILES` of both halves
+            // of four rows: inside the plane (`half = strips · STRIP_TILES + 1`).
+            let rows: [&[f32]; 4] =
+                core::array::from_fn(|r| &self.padded[base + r * row..][..half + STRIP_TILES + 1]);
+            for v in 0..V {
+                let at = v * L::WIDTH;
+                // Column combinations of each row: with e, o the even and odd columns,
+                // (d0 - d2, d1 + d2, d2 - d1, d1 - d3) = (e0 - e1, o0 + e1, e1 - o0, o0 - o1).
+                let mut w = [[L::zero(); 4]; 4];
+                for (w, line) in w.iter_mut().zip(&rows) {
+                    let line = line.as_ptr();
+                    // SAFETY: `at + WIDTH <= STRIP_TILES`, so every load lies in `line`
+                    // (`half + STRIP_TILES + 1` values).
+                    let (e0, e1, o0, o1) = unsafe {
+                        (
+                            L::load(line.add(at)),
+                            L::load(line.add(at + 1)),
+                            L::load(line.add(half + at)),
+                            L::load(line.add(half + at + 1)),
+                        )
+                    };
+                    *w = [e0.sub(e1), o0.add(e1), e1.sub(o0), o0.sub(o1)];
+                }
+                for k in 0..4 {
+                    let points = [
+                        w[0][k].sub(w[2][k]),
+                        w[1][k].add(w[2][k]),
+                        w[2][k].sub(w[1][k]),
+                        w[1][k].sub(w[3][k]),
+                    ];
+                    for (i, value) in points.into_iter().enumerate() {
+                        let to =
+                            &mut out[(i * 4 + k) * stride + c * STRIP_TILES + at..][..L::WIDTH];
+                        // SAFETY: `to` holds WIDTH values.
+                        unsafe { value.store(to.as_mut_ptr()) };
+                    }
+                }
+            }
+        }
+    }
+
+    /// `M[point] = U[point] · V[point]` for every point, stored as `M[out channel][point][tile]`
+    /// (so that the output transform reads one channel's points together).
+    #[inline(always)]
+    fn multiply<L: Lanes, const V: usize>(&self, transformed: &[f32], products: &mut [f32]) {
+        let (cin, cout) = (self.g.in_channels, self.g.out_channels);
+        for point in 0..POINTS {
+            let input = &transformed[point * point_stride(cin)..][..cin * STRIP_TILES];
+            let weight = &self.weight[point * cout * cin..][..cout * cin];
+            for (first, channels) in forward_blocks(cout) {
+                let panel = &weight[first * cin..][..channels * cin];
+                let out = &mut products[(first * POINTS + point) * STRIP_TILES..];
+                match channels {
+                    6 => block_product::<L, V, 6>(panel, input, out),
+                    5 => block_product::<L, V, 5>(panel, input, out),
+                    4 => block_product::<L, V, 4>(panel, input, out),
+                    3 => block_product::<L, V, 3>(panel, input, out),
+                    2 => block_product::<L, V, 2>(panel, input, out),
+                    1 => block_product::<L, V, 1>(panel, input, out),
+                    _ => unreachable!("blocks hold 1 to {FORWARD_ROWS} channels"),
+                }
+            }
+        }
+    }
+
+    /// `Y = Aᵀ M A (+ b)`, then the ReLU, for every output channel of the strip, stored in `y`.
+    #[inline(always)]
+    fn transform_output<L: Lanes, const V: usize>(
+        &self,
+        tile_row: usize,
+        first_tile: usize,
+        products: &[f32],
+        y: &mut [MaybeUninit<f32>],
+    ) {
+        let cout = self.g.out_channels;
+        let (out_w, out_plane) = (self.g.width.output, self.g.output_plane());
+        let tiles = STRIP_TILES.min(self.layout.tiles_w - first_tile);
+        // The strip's two output rows of one channel.
+        let mut lines = [[0.0f32; 2 * STRIP_TILES]; 2];
+        for o in 0..cout {
+            let b = L::splat(self.bias.map_or(0.0, |bias| bias[o]));
+            for v in 0..V {
+                let at = v * L::WIDTH;
+                // No closures here (`array::from_fn`): the vector operations inside them were
+                // left as calls.
+                let mut m = [L::zero(); POINTS];
+                for (point, m) in m.iter_mut().enumerate() {
+                    let from = &products[(o * POINTS + point) * STRIP_TILES + at..][..L::WIDTH];
+                    // SAFETY: `from` holds WIDTH values.
+                    *m = unsafe { L::load(from.as_ptr()) };
+                }
+                // Aᵀ = [[1, 1, 1, 0], [0, 1, -1, -1]], on the rows, then on the columns.
+                let (mut top, mut bottom) = ([L::zero(); 4], [L::zero(); 4]);
+                for k in 0..4 {
+                    top[k] = m[k].add(m[4 + k]).add(m[8 + k]);
+                    bottom[k] = m[4 + k].sub(m[8 + k]).sub(m[12 + k]);
+                }
+                let mut outputs = [
+                    top[0].add(top[1]).add(top[2]),
+                    top[1].sub(top[2]).sub(top[3]),
+                    bottom[0].add(bottom[1]).add(bottom[2]),
+                    bottom[1].sub(bottom[2]).sub(bottom[3]),
+                ];
+                for value in &mut outputs {
+                    *value = value.add(b);
+                    if self.relu {
+                        *value = value.relu();
+                    }
+                }
+                // Each output row of the strip: its tiles' left and right pixels alternated.
+                for (line, pair) in lines.iter_mut().zip(outputs.chunks_exact(2)) {
+                    let (first, second) = pair[0].interleave(pair[1]);
+                    // SAFETY: `line` holds 2 · STRIP_TILES values and `2 · at + 2 · WIDTH` is at
+                    // most that.
+                    unsafe {
+                        first.store(line.as_mut_ptr().add(2 * at));
+                        second.store(line.as_mut_ptr().add(2 * at + L::WIDTH));
+                    }
+                }
+            }
+            let plane = &mut y[o * out_plane..][..out_plane];
+            for (dr, line) in lines.iter().enumerate() {
+                let out = &mut plane[(2 * tile_row + dr) * out_w + 2 * first_tile..][..2 * tiles];
+                for (out, &value) in out.iter_mut().zip(line) {
+                    out.write(value);
+                }
+            }
+        }
+    }
+}
+
+/// `out (R x STRIP_TILES) = panel (in_channels steps of R) · input (in_channels x STRIP_TILES)`,
+/// with an `R` channels by `V` vectors tile of accumulators in registers; the rows of `out` are
+/// `POINTS · STRIP_TILES` apart.
+#[inline(always)]
+fn block_product<L: Lanes, const V: usize, const R: usize>(
+    panel: &[f32],
+    input: &[f32],
+    out: &mut [f32],
+) {
+    let steps = input.len() / STRIP_TILES;
+    let row = POINTS * STRIP_TILES;
+    assert!(panel.len() == steps * R && out.len() >= (R - 1) * row + STRIP_TILES);
+    let mut acc = [[L::zero(); V]; R];
+    for (weights, values) in panel.chunks_exact(R).zip(input.chunks_exact(STRIP_TILES)) {
+        // SAFETY: `values` holds STRIP_TILES = V · WIDTH values.
+        let bv: [L; V] = unsafe { L::load_vectors(values.as_ptr()) };
+        for r in 0..R {
+            let a = L::splat(weights[r]);
+            for v in 0..V {
+                acc[r][v] = acc[r][v].multiply_add(a, bv[v]);
+            }
+        }
+    }
+    for (r, acc) in acc.iter().enumerate() {
+        for (v, value) in acc.iter().enumerate() {
+            // SAFETY: row `r` of `out` holds STRIP_TILES values (asserted above).
+            unsafe { value.store(out.as_mut_ptr().add(r * row + v * L::WIDTH)) };
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::direct::{self, PaddedLayout};
+
+    /// Deterministic values in [-1, 1].
+    fn values(count: usize, salt: u32) -> Vec<f32> {
+        (0..count as u32)
+            .map(|i| {
+                let h = (i ^ salt).wrapping_mul(2_654_435_761).rotate_left(13);
+                (h % 2001) as f32 / 1000.0 - 1.0
+            })
+            .collect()
+    }
+
+    /// The direct kernel's result for the same convolution.
+    fn direct_forward(
+        g: &ConvGeometry,
+        x: &[f32],
+        w: &[f32],
+        bias: Option<&[f32]>,
+        relu: bool,
+    ) -> Vec<f32> {
+        let layout = PaddedLayout::of(g).unwrap();
+        let mut padded = vec![0.0; layout.len(g.in_channels)];
+        layout.pad(g, x, &mut padded);
+        let packed = direct::pack_weight(w, g.out_channels, g.taps());
+        let mut y = vec![MaybeUninit::uninit(); g.out_channels * g.output_plane()];
+        direct::forward_image(g, &layout, &padded, &packed, bias, relu, &mut y);
+        y.into_iter().map(|v| unsafe { v.assume_init() }).collect()
+    }
+
+    fn winograd_forward<L: Lanes, const V: usize>(
+        g: &ConvGeometry,
+        x: &[f32],
+        w: &[f32],
+        bias: Option<&[f32]>,
+        relu: bool,
+    ) -> Vec<f32> {
+        let layout = WinogradLayout::of(g).unwrap();
+        let mut padded = vec![f32::NAN; layout.len(g.in_channels)];
+        layout.pad(g, x, &mut padded);
+        let weight = transform_weight(w, g.out_channels, g.in_channels);
+        let mut y = vec![MaybeUninit::uninit(); g.out_channels * g.output_plane()];
+        let run = Run {
+            g,
+            layout: &layout,
+            padded: &padded,
+            weight: &weight,
+            bias,
+            relu,
+        };
+        run.strips::<Generic<L, V>>(&mut y);
+        y.into_iter().map(|v| unsafe { v.assume_init() }).collect()
+    }
+
+    /// Both the SIMD path this machine runs and the portable one agree with the direct kernel,
+    /// over paddings of 0, 1 and 2 (one side only too), a partial last strip and channel counts
+    /// that leave uneven register tiles.
+    #[test]
+    fn winograd_matches_the_direct_kernel() {
+        use burn::tensor::ops::ConvOptions;
+        for (size, padding, channels) in [
+            ([6, 34], [1, 1], (5, 7)),
+            ([10, 2 * STRIP_TILES + 2], [0, 0], (3, 13)),
+            ([4, 2 * STRIP_TILES + 20], [2, 2], (8, 32)),
+        ] {
+            let (cin, cout) = channels;
+            let options = ConvOptions::new([1, 1], padding, [1, 1], 1);
+            let g =
+                ConvGeometry::of_conv2d([1, cin, size[0], size[1]], [cout, cin, 3, 3], &options)
+                    .unwrap();
+            let x = values(cin * size[0] * size[1], 1);
+            let w = values(cout * cin * 9, 2);
+            let bias = values(cout, 3);
+            for relu in [false, true] {
+                let expected = direct_forward(&g, &x, &w, Some(&bias), relu);
+                let simd = {
+                    let layout = WinogradLayout::of(&g).unwrap();
+                    let mut padded = vec![0.0; layout.len(cin)];
+                    layout.pad(&g, &x, &mut padded);
+                    let weight = transform_weight(&w, cout, cin);
+                    let mut y = vec![MaybeUninit::uninit(); cout * g.output_plane()];
+                    forward_image(&g, &layout, &padded, &weight, Some(&bias), relu, &mut y);
+                    y.into_iter()
+                        .map(|v| unsafe { v.assume_init() })
+                        .collect::<Vec<_>>()
+                };
+                let portable = winograd_forward::<f32, STRIP_TILES>(&g, &x, &w, Some(&bias), relu);
+                for (ours, name) in [(&simd, "SIMD"), (&portable, "portable")] {
+                    let error = ours
+                        .iter()
+                        .zip(&expected)
+                        .map(|(a, b)| (a - b).abs())
+                        .fold(0.0f32, f32::max);
+                    assert!(error < 1e-4, "{name} {size:?} {padding:?}: {error:e}");
+                }
+            }
+        }
+    }
+
+    /// Shapes the kernel does not serve get no layout.
+    #[test]
+    fn only_stride_1_undilated_3x3_with_even_wide_outputs() {
+        use burn::tensor::ops::ConvOptions;
+        let wide = 2 * STRIP_TILES;
+        let layout = |size: [usize; 2], kernel: usize, stride: usize, dilation: usize| {
+            let options = ConvOptions::new([stride; 2], [kernel / 2; 2], [dilation; 2], 1);
+            let g =
+                ConvGeometry::of_conv2d([1, 2, size[0], size[1]], [2, 2, kernel, kernel], &options)
+                    .unwrap();
+            WinogradLayout::of(&g).is_some()
+        };
+        assert!(layout([8, wide], 3, 1, 1));
+        assert!(!layout([7, wide], 3, 1, 1), "odd height");
+        assert!(!layout([8, wide + 1], 3, 1, 1), "odd width");
+        assert!(!layout([8, wide - 2], 3, 1, 1), "narrower than a strip");
+        assert!(!layout([8, wide], 3, 2, 1), "stride 2");
+        assert!(!layout([8, wide], 5, 1, 1), "5x5");
+        assert!(!layout([8, wide], 3, 1, 2), "dilated");
+    }
+}
