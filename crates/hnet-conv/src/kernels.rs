@@ -10,7 +10,9 @@
 //! (1x1, stride 1, no padding) skips the lowering: the image is its own lowered matrix. Every
 //! other stride-1 convolution (all of H-Net's but the upsampling) computes its forward pass and
 //! weight gradient with no lowered matrix at all, straight from the zero-padded image
-//! ([`crate::direct`]), and its input gradient as the direct forward pass of the turned kernel.
+//! ([`crate::direct`]), and its input gradient as the forward pass of the turned kernel. Those
+//! forward passes go by Winograd's F(2x2, 3x3) ([`crate::winograd`]) where it serves the shape (3 x
+//! 3, undilated, an even output at least one strip wide) and by the direct kernel elsewhere.
 //! A strided convolution's input gradient (a transposed convolution's forward pass, H-Net's
 //! upsampling) is one direct stride-1 convolution per class of positions
 //! ([`crate::geometry::Axis::gradient_phases`]); raise (col2im) is left for dilated axes.
@@ -159,10 +161,13 @@ fn forward_direct(
     bias: Option<&[f32]>,
     relu: bool,
 ) -> Vec<f32> {
-    forward_padded(g, x, layout.len(g.in_channels), |x, padded, y| {
-        layout.pad(g, x, padded);
-        direct::forward_image(g, layout, padded, packed_weight, bias, relu, y);
-    })
+    // SAFETY: `direct::forward_image` writes every value of `y`.
+    unsafe {
+        forward_padded(g, x, layout.len(g.in_channels), |x, padded, y| {
+            layout.pad(g, x, padded);
+            direct::forward_image(g, layout, padded, packed_weight, bias, relu, y);
+        })
+    }
 }
 
 /// The forward convolution by Winograd's F(2x2, 3x3) ([`winograd`]), when it serves `g` and is
@@ -174,23 +179,27 @@ fn forward_by_winograd(
     bias: Option<&[f32]>,
     relu: bool,
 ) -> Option<Vec<f32>> {
-    let layout = WinogradLayout::of(g).filter(|_| crate::winograd_enabled())?;
+    if !crate::winograd_enabled() {
+        return None;
+    }
+    let layout = WinogradLayout::of(g)?;
     let transformed = winograd::transform_weight(weight, g.out_channels, g.in_channels);
-    Some(forward_padded(
-        g,
-        x,
-        layout.len(g.in_channels),
-        |x, padded, y| {
+    // SAFETY: `winograd::forward_image` writes every value of `y`.
+    Some(unsafe {
+        forward_padded(g, x, layout.len(g.in_channels), |x, padded, y| {
             layout.pad(g, x, padded);
             winograd::forward_image(g, &layout, padded, &transformed, bias, relu, y);
-        },
-    ))
+        })
+    })
 }
 
 /// Runs `image(x, padded, y)` for every image `x` of the batch, with this thread's buffer of
-/// `padded_len` values for its padded copy and its part `y` of the result, which `image` must
-/// write whole (it is not zeroed first).
-fn forward_padded(
+/// `padded_len` values for its padded copy and its part `y` of the result.
+///
+/// # Safety
+///
+/// `image` writes every value of its `y` (which is not initialised first).
+unsafe fn forward_padded(
     g: &ConvGeometry,
     x: &[f32],
     padded_len: usize,
@@ -203,7 +212,7 @@ fn forward_padded(
         let x = &x[n * g.in_channels * plane..][..g.in_channels * plane];
         with_lowered_buffer(padded_len, |padded| image(x, padded, y));
     });
-    // SAFETY: `image` wrote all `len` values (its contract), image by image.
+    // SAFETY: `image` wrote all `len` values, image by image (the caller's promise).
     unsafe { y.set_len(len) };
     y
 }
@@ -227,15 +236,15 @@ pub fn input_gradient(
         "output gradient size"
     );
     assert_eq!(weight.len(), g.out_channels * taps, "weight size");
-    if let Some(adjoint) = g.input_gradient_as_convolution()
-        && let Some(layout) = PaddedLayout::of(&adjoint)
-    {
+    if let Some(adjoint) = g.input_gradient_as_convolution() {
         let flipped = g.flipped_weight(weight);
         if let Some(dx) = forward_by_winograd(&adjoint, dy, &flipped, bias, false) {
             return dx;
         }
-        let packed = direct::pack_weight(&flipped, adjoint.out_channels, adjoint.taps());
-        return forward_direct(&adjoint, &layout, dy, &packed, bias, false);
+        if let Some(layout) = PaddedLayout::of(&adjoint) {
+            let packed = direct::pack_weight(&flipped, adjoint.out_channels, adjoint.taps());
+            return forward_direct(&adjoint, &layout, dy, &packed, bias, false);
+        }
     }
     if g.height.stride * g.width.stride > 1
         && let (Some(rows), Some(columns)) = (g.height.gradient_phases(), g.width.gradient_phases())

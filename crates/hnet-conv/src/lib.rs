@@ -50,9 +50,10 @@ static PROJECT_KERNELS: AtomicBool = AtomicBool::new(true);
 /// Off only for A/B measurements of the Winograd kernel against the direct one ([`use_winograd`]).
 static WINOGRAD: AtomicBool = AtomicBool::new(true);
 
-/// Whether the project's kernels compute stride-1 3 x 3 convolutions by Winograd's F(2x2, 3x3)
-/// ([`winograd`], the default) or directly ([`direct`]), for the whole process: the switch behind
-/// `hnet bench --kernels direct`.
+/// Whether the project's kernels compute the convolutions Winograd's F(2x2, 3x3) serves (stride-1,
+/// undilated 3 x 3 with an even output at least one strip wide, [`winograd::WinogradLayout::of`])
+/// by it ([`winograd`], the default) or directly ([`direct`]), for the whole process: the switch
+/// behind `hnet bench --kernels direct`.
 pub fn use_winograd(enabled: bool) {
     WINOGRAD.store(enabled, Ordering::Relaxed);
 }

@@ -1,16 +1,19 @@
 //! Winograd's minimal filtering F(2x2, 3x3) (Lavin and Gray, "Fast Algorithms for Convolutional
-//! Neural Networks", CVPR 2016) for the forward pass of stride-1, undilated 3x3 convolutions: all
-//! of H-Net's double convolutions, and their input gradients (the forward pass of the turned
-//! kernel).
+//! Neural Networks", CVPR 2016) for the forward pass of stride-1, undilated 3x3 convolutions with
+//! an even output at least one strip wide ([`WinogradLayout::of`]): H-Net's double convolutions
+//! but the narrow ones near the bottleneck, and their input gradients (the forward pass of the
+//! turned kernel).
 //!
 //! Each 2 x 2 block of output pixels (a *tile*) of output channel `o` is
 //! `Y = Aᵀ [Σ_c (G g_oc Gᵀ) ⊙ (Bᵀ d_c B)] A`, where `d_c` is the 4 x 4 patch of input channel `c`
 //! the tile reads and `g_oc` the 3 x 3 kernel. The sum over channels is, for each of the 16 points
 //! of the transformed domain, one matrix product `(out x in) · (in x tiles)`: 16 multiply-adds
 //! per tile and channel pair where the direct kernel ([`crate::direct`]) needs 36, 2.25x fewer.
-//! The transforms only add and subtract (and halve, for the weight), so the result is the direct
-//! convolution's up to f32 rounding, and each output depends on exactly the inputs of its 3 x 3
-//! window: a NaN reaches the same outputs as in the direct kernel.
+//! The transforms only add and subtract (and halve, for the weight), so for finite inputs well
+//! below `f32::MAX` the result is the direct convolution's up to f32 rounding, and each output
+//! depends on exactly the inputs of its 3 x 3 window: a NaN reaches the same outputs as in the
+//! direct kernel. An infinite input is another matter: the transforms take differences of
+//! neighbours, and `inf - inf` makes NaN where the direct kernel gives an infinity.
 //!
 //! The work goes by strips of [`STRIP_TILES`] tiles along one row of tiles: the strip's input is
 //! transformed into `V[point][channel][tile]`, multiplied by each point's transformed weight
@@ -199,19 +202,28 @@ pub fn forward_image(
     };
     #[cfg(target_arch = "x86_64")]
     if crate::products::has_avx2() {
-        return run.strips::<avx2::Phases>(y);
+        // SAFETY: this CPU has AVX2 and FMA.
+        return unsafe { run.strips::<avx2::Avx2Phases>(y) };
     }
     #[cfg(target_arch = "wasm32")]
-    return run.strips::<Generic<crate::products::simd128::Simd128, 2>>(y);
+    // SAFETY: wasm32 builds enable SIMD128 for the whole crate (.cargo/config.toml).
+    return unsafe { run.strips::<Generic<crate::products::simd128::Simd128, 2>>(y) };
     #[allow(unreachable_code)]
-    run.strips::<Generic<f32, STRIP_TILES>>(y)
+    // SAFETY: the portable lanes need no instruction set.
+    unsafe {
+        run.strips::<Generic<f32, STRIP_TILES>>(y)
+    }
 }
 
 /// The three phases of a strip, for one instruction set.
+///
+/// # Safety
+///
+/// Every method may only be called on a CPU that has the implementation's instruction set.
 trait Phases {
-    fn transform_input(run: &Run, tile_row: usize, first_tile: usize, out: &mut [f32]);
-    fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]);
-    fn transform_output(
+    unsafe fn transform_input(run: &Run, tile_row: usize, first_tile: usize, out: &mut [f32]);
+    unsafe fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]);
+    unsafe fn transform_output(
         run: &Run,
         tile_row: usize,
         first_tile: usize,
@@ -225,13 +237,13 @@ trait Phases {
 struct Generic<L, const V: usize>(core::marker::PhantomData<L>);
 
 impl<L: Lanes, const V: usize> Phases for Generic<L, V> {
-    fn transform_input(run: &Run, tile_row: usize, first_tile: usize, out: &mut [f32]) {
+    unsafe fn transform_input(run: &Run, tile_row: usize, first_tile: usize, out: &mut [f32]) {
         run.transform_input::<L, V>(tile_row, first_tile, out);
     }
-    fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]) {
+    unsafe fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]) {
         run.multiply::<L, V>(transformed, products);
     }
-    fn transform_output(
+    unsafe fn transform_output(
         run: &Run,
         tile_row: usize,
         first_tile: usize,
@@ -251,19 +263,19 @@ mod avx2 {
     use super::Run;
     use crate::products::avx2::Avx2;
 
-    /// Only used after `has_avx2()` returned true.
-    pub(super) struct Phases;
+    /// The phases for AVX2 and FMA (the trait's contract: only on CPUs that have them).
+    pub(super) struct Avx2Phases;
 
-    impl super::Phases for Phases {
-        fn transform_input(run: &Run, tile_row: usize, first_tile: usize, out: &mut [f32]) {
-            // SAFETY: chosen only on CPUs with AVX2 and FMA (`forward_image`).
+    impl super::Phases for Avx2Phases {
+        unsafe fn transform_input(run: &Run, tile_row: usize, first_tile: usize, out: &mut [f32]) {
+            // SAFETY: the caller checked for AVX2 and FMA (the trait's contract).
             unsafe { transform_input(run, tile_row, first_tile, out) }
         }
-        fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]) {
+        unsafe fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]) {
             // SAFETY: as above.
             unsafe { multiply(run, transformed, products) }
         }
-        fn transform_output(
+        unsafe fn transform_output(
             run: &Run,
             tile_row: usize,
             first_tile: usize,
@@ -316,16 +328,23 @@ struct Run<'a> {
 
 impl Run<'_> {
     /// Every strip: input transform, products, output transform.
-    fn strips<P: Phases>(&self, y: &mut [MaybeUninit<f32>]) {
+    ///
+    /// # Safety
+    ///
+    /// This CPU has `P`'s instruction set ([`Phases`]).
+    unsafe fn strips<P: Phases>(&self, y: &mut [MaybeUninit<f32>]) {
         let (cin, cout) = (self.g.in_channels, self.g.out_channels);
         let mut transformed = vec![0.0f32; POINTS * point_stride(cin)];
         let mut products = vec![0.0f32; cout * POINTS * STRIP_TILES];
         for tile_row in 0..self.layout.tiles_h {
             for strip in 0..self.layout.strips {
                 let first_tile = strip * STRIP_TILES;
-                P::transform_input(self, tile_row, first_tile, &mut transformed);
-                P::multiply(self, &transformed, &mut products);
-                P::transform_output(self, tile_row, first_tile, &products, y);
+                // SAFETY: the caller's promise ([`Self::strips`]).
+                unsafe {
+                    P::transform_input(self, tile_row, first_tile, &mut transformed);
+                    P::multiply(self, &transformed, &mut products);
+                    P::transform_output(self, tile_row, first_tile, &products, y);
+                }
             }
         }
     }
@@ -339,7 +358,7 @@ impl Run<'_> {
         first_tile: usize,
         out: &mut [f32],
     ) {
-        assert_eq!(V * L::WIDTH, STRIP_TILES);
+        const { assert!(V * L::WIDTH == STRIP_TILES, "a strip is V vectors") };
         let layout = self.layout;
         let (row, plane, half) = (layout.row(), layout.plane(), layout.half);
         let cin = self.g.in_channels;
@@ -392,6 +411,7 @@ impl Run<'_> {
     /// (so that the output transform reads one channel's points together).
     #[inline(always)]
     fn multiply<L: Lanes, const V: usize>(&self, transformed: &[f32], products: &mut [f32]) {
+        const { assert!(V * L::WIDTH == STRIP_TILES, "a strip is V vectors") };
         let (cin, cout) = (self.g.in_channels, self.g.out_channels);
         for point in 0..POINTS {
             let input = &transformed[point * point_stride(cin)..][..cin * STRIP_TILES];
@@ -421,6 +441,7 @@ impl Run<'_> {
         products: &[f32],
         y: &mut [MaybeUninit<f32>],
     ) {
+        const { assert!(V * L::WIDTH == STRIP_TILES, "a strip is V vectors") };
         let cout = self.g.out_channels;
         let (out_w, out_plane) = (self.g.width.output, self.g.output_plane());
         let tiles = STRIP_TILES.min(self.layout.tiles_w - first_tile);
@@ -487,6 +508,7 @@ fn block_product<L: Lanes, const V: usize, const R: usize>(
     input: &[f32],
     out: &mut [f32],
 ) {
+    const { assert!(V * L::WIDTH == STRIP_TILES, "a strip is V vectors") };
     let steps = input.len() / STRIP_TILES;
     let row = POINTS * STRIP_TILES;
     assert!(panel.len() == steps * R && out.len() >= (R - 1) * row + STRIP_TILES);
@@ -566,7 +588,8 @@ mod tests {
                 bias,
                 relu,
             };
-            run.strips::<Generic<f32, STRIP_TILES>>(&mut y);
+            // SAFETY: the portable lanes need no instruction set.
+            unsafe { run.strips::<Generic<f32, STRIP_TILES>>(&mut y) };
         } else {
             forward_image(g, &layout, &padded, &weight, bias, relu, &mut y);
         }
@@ -574,8 +597,8 @@ mod tests {
     }
 
     /// Both the SIMD path this machine runs and the portable one agree with the direct kernel,
-    /// over paddings of 0, 1 and 2 (one side only too), a partial last strip and channel counts
-    /// that leave uneven register tiles.
+    /// over paddings of 0, 1 and 2, a partial last strip and channel counts that leave uneven
+    /// register tiles (one-sided paddings: `tests/against_burn.rs`).
     #[test]
     fn winograd_matches_the_direct_kernel() {
         use burn::tensor::ops::ConvOptions;

@@ -94,13 +94,19 @@ fn direct_stride_1_convolutions_match_burn() {
     }
 }
 
+/// Held by the tests that need a known state of the process-wide Winograd switch: the one that
+/// turns it off, and the one that must run through the Winograd kernel.
+static WINOGRAD_SWITCH: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// Stride-1 3x3 convolutions with even outputs at least one strip wide go to Winograd's
 /// F(2x2, 3x3) (`hnet_conv::winograd`), forward and input gradient: paddings 1 (the browser
 /// tests' case), 0 and 2, on one side only, a partial last strip, channel counts that leave
 /// uneven register tiles; and the same with the kernel switched off (the direct path). The switch
-/// is process-wide: tests running meanwhile may take either path, both of which must match Burn.
+/// is process-wide: other tests running meanwhile may take either path, both of which must match
+/// Burn.
 #[test]
 fn winograd_convolutions_match_burn() {
+    let _switch = WINOGRAD_SWITCH.lock().unwrap_or_else(|e| e.into_inner());
     let wide = 2 * hnet_conv::winograd::STRIP_TILES;
     let cases = [
         ([8, wide + 2], [(0, 0), (0, 0)], 3, 13),
@@ -127,6 +133,8 @@ fn winograd_convolutions_match_burn() {
 /// not look finite): on the direct path (stride 1) and the lowered one (stride 2).
 #[test]
 fn the_fused_relu_keeps_nan_as_burn_does() {
+    // Not while the test above has the Winograd kernel switched off.
+    let _switch = WINOGRAD_SWITCH.lock().unwrap_or_else(|e| e.into_inner());
     let device = Device::flex();
     // 40 pixels wide: the direct path stores whole strips from its vector registers there; 8
     // rows, so that Winograd's kernel serves the stride-1 case.
