@@ -48,6 +48,42 @@ pub fn forward_blocks(out_channels: usize) -> impl Iterator<Item = (usize, usize
     (0..blocks).map(move |b| (b * base + b.min(extra), base + usize::from(b < extra)))
 }
 
+/// `$call` with the const `$rows` bound to `$channels`, a block's height from [`forward_blocks`]
+/// (1 to [`FORWARD_ROWS`]): each height is its own compiled register tile.
+macro_rules! with_block_rows {
+    ($channels:expr, $rows:ident => $call:expr) => {{
+        const { assert!(crate::direct::FORWARD_ROWS <= 6, "tiles of 1 to 6 channels") };
+        match $channels {
+            6 => {
+                const $rows: usize = 6;
+                $call
+            }
+            5 => {
+                const $rows: usize = 5;
+                $call
+            }
+            4 => {
+                const $rows: usize = 4;
+                $call
+            }
+            3 => {
+                const $rows: usize = 3;
+                $call
+            }
+            2 => {
+                const $rows: usize = 2;
+                $call
+            }
+            1 => {
+                const $rows: usize = 1;
+                $call
+            }
+            _ => unreachable!("blocks hold 1 to {} channels", crate::direct::FORWARD_ROWS),
+        }
+    }};
+}
+pub(crate) use with_block_rows;
+
 /// Positions the buffer holds past the last plane, so that the forward pass's last strip may
 /// read whole vectors (at least the widest strip, `V · WIDTH`).
 const SLACK: usize = 64;
@@ -259,15 +295,7 @@ fn forward_body<L: Lanes, const V: usize>(
                 y: &mut *y,
                 tile: &mut tile,
             };
-            match channels {
-                6 => at.multiply::<L, V, 6>(panel, out),
-                5 => at.multiply::<L, V, 5>(panel, out),
-                4 => at.multiply::<L, V, 4>(panel, out),
-                3 => at.multiply::<L, V, 3>(panel, out),
-                2 => at.multiply::<L, V, 2>(panel, out),
-                1 => at.multiply::<L, V, 1>(panel, out),
-                _ => unreachable!("blocks hold 1 to {FORWARD_ROWS} channels"),
-            }
+            with_block_rows!(channels, R => at.multiply::<L, V, R>(panel, out));
         }
     }
 }

@@ -27,7 +27,7 @@ use alloc::vec;
 use alloc::vec::Vec;
 use core::mem::MaybeUninit;
 
-use crate::direct::{FORWARD_ROWS, forward_blocks};
+use crate::direct::{forward_blocks, with_block_rows};
 use crate::geometry::ConvGeometry;
 use crate::products::Lanes;
 
@@ -419,15 +419,7 @@ impl Run<'_> {
             for (first, channels) in forward_blocks(cout) {
                 let panel = &weight[first * cin..][..channels * cin];
                 let out = &mut products[(first * POINTS + point) * STRIP_TILES..];
-                match channels {
-                    6 => block_product::<L, V, 6>(panel, input, out),
-                    5 => block_product::<L, V, 5>(panel, input, out),
-                    4 => block_product::<L, V, 4>(panel, input, out),
-                    3 => block_product::<L, V, 3>(panel, input, out),
-                    2 => block_product::<L, V, 2>(panel, input, out),
-                    1 => block_product::<L, V, 1>(panel, input, out),
-                    _ => unreachable!("blocks hold 1 to {FORWARD_ROWS} channels"),
-                }
+                with_block_rows!(channels, R => block_product::<L, V, R>(panel, input, out));
             }
         }
     }
