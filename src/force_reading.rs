@@ -224,14 +224,22 @@ impl Verdict {
 /// size, 224 px; the pairs' label masks).
 pub const PHYSICS_FORCE_ERROR_N: f32 = 0.013;
 
+/// The physics estimate's per-axis mean square errors (x, y, z), N², when the rod is fitted to
+/// the bundled weights' own masks rather than exact ones: 0.00061, 0.00070 and 0.00360 over 479
+/// fresh bench pairs (`hnet eval` on `data/xray2-bench-224-s33`, docs/results.md, "The catheter
+/// in 3D"). This is how the page reads a pair without label masks.
+pub const PHYSICS_FORCE_MSE_FROM_HNET_MASKS_N2: [f32; 3] = [0.00061, 0.00070, 0.00360];
+
 /// H-Net's and the physics estimate are said to disagree when their difference |ΔF| exceeds
-/// this, newtons. If both err as measured (H-Net: the bundled weights' per-axis mean square
-/// errors 0.00478, 0.00516 and 0.00375 N², [`TrainingDomain::bundled`]; the physics estimate:
-/// [`PHYSICS_FORCE_ERROR_N`]), independently and normally, |ΔF| stays below 0.19 N on 95 % of
-/// pairs (0.10 N median; by sampling two million draws). Beyond 0.20 N, one of the two is off by
-/// more than its usual error. H-Net's coarse force dominates it: with weights ten times as
-/// accurate the tolerance would shrink accordingly.
-pub const DISAGREEMENT_TOLERANCE_N: f32 = 0.20;
+/// this, newtons. If both err as measured, independently and normally (H-Net: the bundled
+/// weights' per-axis mean square errors 0.00478, 0.00516 and 0.00375 N²,
+/// [`TrainingDomain::bundled`]; the physics estimate fitted to H-Net's own masks:
+/// [`PHYSICS_FORCE_MSE_FROM_HNET_MASKS_N2`]), |ΔF| stays below 0.22 N on 95 % of pairs (0.12 N
+/// median; by sampling 400,000 draws). From exact masks ([`PHYSICS_FORCE_ERROR_N`]) it stays
+/// below 0.19 N on 95 % and below 0.22 N on 98 %. Beyond 0.22 N, one of the two is off by more
+/// than its usual error. H-Net's coarse force dominates it: with weights ten times as accurate
+/// the tolerance would shrink accordingly.
+pub const DISAGREEMENT_TOLERANCE_N: f32 = 0.22;
 
 /// How far H-Net's estimate and the physics estimate are apart.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -357,6 +365,47 @@ mod tests {
         );
     }
 
+    /// The tolerance is the 95th percentile of |ΔF| when both estimates err as documented
+    /// ([`DISAGREEMENT_TOLERANCE_N`]): independent normal errors per axis, integrated on a grid.
+    #[test]
+    fn the_tolerance_is_what_the_measured_errors_explain() {
+        // The bundled weights' per-axis mean square errors, N² (assets/MODEL.md).
+        let hnet = [0.00478f64, 0.00516, 0.00375];
+        let within = |tolerance: f64, physics: [f64; 3]| {
+            let sd: Vec<f64> = (0..3).map(|i| (hnet[i] + physics[i]).sqrt()).collect();
+            let steps = 90;
+            let grid = |sd: f64| -> Vec<(f64, f64)> {
+                let h = 10.0 * sd / steps as f64;
+                (0..steps)
+                    .map(|k| {
+                        let x = -5.0 * sd + (k as f64 + 0.5) * h;
+                        let density = (-0.5 * (x / sd).powi(2)).exp()
+                            / (sd * (2.0 * std::f64::consts::PI).sqrt());
+                        (x, density * h)
+                    })
+                    .collect()
+            };
+            let (gx, gy, gz) = (grid(sd[0]), grid(sd[1]), grid(sd[2]));
+            let mut p = 0.0;
+            for &(x, wx) in &gx {
+                for &(y, wy) in &gy {
+                    for &(z, wz) in &gz {
+                        if x * x + y * y + z * z <= tolerance * tolerance {
+                            p += wx * wy * wz;
+                        }
+                    }
+                }
+            }
+            p
+        };
+        let from_hnet_masks = PHYSICS_FORCE_MSE_FROM_HNET_MASKS_N2.map(f64::from);
+        let p = within(f64::from(DISAGREEMENT_TOLERANCE_N), from_hnet_masks);
+        assert!((0.94..=0.96).contains(&p), "{p}");
+        let exact = [f64::from(PHYSICS_FORCE_ERROR_N).powi(2) / 3.0; 3];
+        let p = within(f64::from(DISAGREEMENT_TOLERANCE_N), exact);
+        assert!((0.975..=0.99).contains(&p), "{p}");
+    }
+
     #[test]
     fn a_disagreement_beyond_the_tolerance_is_a_warning() {
         let agree = Disagreement::between([0.1, 0.0, -0.1], [0.2, 0.0, -0.1]);
@@ -364,7 +413,7 @@ mod tests {
         assert!(!agree.beyond_tolerance());
         assert_eq!(
             agree.text(),
-            "H-Net and the physics estimate agree within 0.20 N: |ΔF| = 0.100 N."
+            "H-Net and the physics estimate agree within 0.22 N: |ΔF| = 0.100 N."
         );
         let apart = Disagreement::between([0.1, 0.0, -0.1], [-0.1, 0.2, -0.1]);
         assert!(apart.beyond_tolerance());
