@@ -16,8 +16,8 @@ pub const BUNDLED_FORCE_CAVEAT: &str = "The bundled weights were trained on the 
     angles and chest radiographs) but their force only coarse (RMSE 0.068 N, R² 0.63), and \
     learned on the bench pose alone: read the arrows as a direction and a rough size, not a \
     measurement. The physics estimate, fitted to these masks, is closer across the catheter \
-    (R² 0.96 on x and y on the bench, 0.93-0.95 on radiographs) but no better along it (Fz: R² \
-    0.53).";
+    (R² 0.96 on x and y on the bench, 0.93-0.95 on radiographs) and as coarse along it (Fz: R² \
+    0.53 on the bench).";
 
 /// A file of the page's own that could not be fetched.
 #[derive(Debug, thiserror::Error)]

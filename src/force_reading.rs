@@ -369,8 +369,11 @@ mod tests {
     /// ([`DISAGREEMENT_TOLERANCE_N`]): independent normal errors per axis, integrated on a grid.
     #[test]
     fn the_tolerance_is_what_the_measured_errors_explain() {
-        // The bundled weights' per-axis mean square errors, N² (assets/MODEL.md).
+        // The bundled weights' per-axis mean square errors, N² (assets/MODEL.md), whose root
+        // sum is the domain's error.
         let hnet = [0.00478f64, 0.00516, 0.00375];
+        let error_n = hnet.iter().sum::<f64>().sqrt();
+        assert!((error_n - f64::from(TrainingDomain::bundled().force_error_n)).abs() < 5e-4);
         let within = |tolerance: f64, physics: [f64; 3]| {
             let sd: Vec<f64> = (0..3).map(|i| (hnet[i] + physics[i]).sqrt()).collect();
             let steps = 90;
