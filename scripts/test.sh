@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs every test: formatting, clippy (native and wasm32), the native tests, a type check of the
-# GPU (wgpu) build of `hnet`, the browser tests (wasm-bindgen-test in headless Chromium), the
-# trunk build of the page and the Playwright end-to-end tests.
+# GPU (wgpu) build of `hnet`, the browser tests (wasm-bindgen-test in headless Chromium: the
+# page's, and the WebGPU worker's in a dedicated worker), the trunk build of the page and the
+# Playwright end-to-end tests.
 #
 # Clippy runs inside the builds that the tests need: clippy-driver is cargo's workspace wrapper
 # (what `cargo clippy` itself does, for `cargo check`), so every workspace crate is compiled once,
@@ -36,12 +37,13 @@ cargo check -p hnet-cli --features wgpu --locked
     # Debian's rustc-web has no clippy; the native run above linted all but the page's
     # wasm-only components.
     step "wasm: browser tests (headless Chromium; no wasm32 clippy with Debian's rustc-web)"
-    cargo test -p hnet-studio --target wasm32-unknown-unknown --locked
+    cargo test -p hnet-studio -p hnet-gpu --target wasm32-unknown-unknown --locked
     step "wasm: trunk build"
     trunk build --locked
   else
     step "wasm: clippy, build and browser tests (headless Chromium)"
-    with_clippy cargo test -p hnet-studio --target wasm32-unknown-unknown --all-targets --locked
+    with_clippy cargo test -p hnet-studio -p hnet-gpu --target wasm32-unknown-unknown --all-targets \
+      --locked
     step "wasm: trunk build"
     with_clippy trunk build --locked
   fi

@@ -1,13 +1,11 @@
 //! Where H-Net runs in the browser: WebGPU when the browser offers a hardware adapter, the CPU
 //! (Burn's flex backend, compiled to WebAssembly with SIMD) otherwise or when the user asks for
-//! it. WebGPU on a software adapter only when the user asks for WebGPU.
+//! it. WebGPU on a software adapter only when the user asks for WebGPU. WebGPU runs in a worker
+//! whose module the page fetches only then ([`crate::gpu_worker`]).
 
-use burn::tensor::Device;
 use js_sys::{Function, Promise, Reflect};
 use wasm_bindgen::{JsCast, JsValue};
 use wasm_bindgen_futures::JsFuture;
-
-use crate::error_text::with_causes;
 
 /// What the user asked for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -43,7 +41,7 @@ impl BackendChoice {
 /// The backend the page settled on.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Backend {
-    /// WebGPU through wgpu.
+    /// WebGPU through wgpu, in the WebGPU worker.
     WebGpu,
     /// Burn's flex CPU backend (WebAssembly).
     Cpu {
@@ -128,17 +126,12 @@ async fn default_adapter(gpu: &JsValue) -> Option<Option<String>> {
     }))
 }
 
-thread_local! {
-    /// The WebGPU device, once set up: wgpu registers one runtime per device and page, so
-    /// switching back to WebGPU (after the CPU, or to load other weights) reuses it.
-    static WEBGPU: std::cell::RefCell<Option<Device>> = const { std::cell::RefCell::new(None) };
-}
-
-/// Picks the device for `choice`. `Auto` takes WebGPU only on a hardware adapter: a software
-/// adapter (Chromium's SwiftShader, Mesa's llvmpipe) runs H-Net many times slower than the
-/// CPU path (docs/benchmarks.md), so the CPU is used and the reason says so.
-pub async fn select_device(choice: BackendChoice) -> (Device, Backend) {
-    let cpu = |reason: String| (Device::flex(), Backend::Cpu { reason });
+/// The backend for `choice`, from the adapter the browser offers. `Auto` takes WebGPU only on a
+/// hardware adapter: a software adapter (Chromium's SwiftShader, Mesa's llvmpipe) runs H-Net
+/// many times slower than the CPU path (docs/benchmarks.md), so the CPU is used and the reason
+/// says so. WebGPU itself is set up by the caller, in the worker, and may still fail there.
+pub async fn choose_backend(choice: BackendChoice) -> Backend {
+    let cpu = |reason: String| Backend::Cpu { reason };
     if choice == BackendChoice::Cpu {
         return cpu("CPU chosen".into());
     }
@@ -146,29 +139,14 @@ pub async fn select_device(choice: BackendChoice) -> (Device, Backend) {
         return cpu("this browser has no WebGPU".into());
     };
     match default_adapter(&gpu).await {
-        None => {
-            return cpu(
-                "this browser's WebGPU offers no adapter (no supported GPU, or WebGPU is turned \
-                 off)"
-                    .into(),
-            );
-        }
-        Some(Some(software)) if choice == BackendChoice::Auto => {
-            return cpu(format!(
-                "WebGPU here is {software}, much slower than the CPU path; choose \
-                 \u{201c}WebGPU\u{201d} to use it anyway"
-            ));
-        }
-        Some(_) => {}
-    }
-    if let Some(device) = WEBGPU.with_borrow(|d| d.clone()) {
-        return (device, Backend::WebGpu);
-    }
-    match Device::wgpu_options().init_async().await {
-        Ok(device) => {
-            WEBGPU.set(Some(device.clone()));
-            (device, Backend::WebGpu)
-        }
-        Err(e) => cpu(format!("WebGPU could not be set up ({})", with_causes(&e))),
+        None => cpu(
+            "this browser's WebGPU offers no adapter (no supported GPU, or WebGPU is turned off)"
+                .into(),
+        ),
+        Some(Some(software)) if choice == BackendChoice::Auto => cpu(format!(
+            "WebGPU here is {software}, much slower than the CPU path; choose \u{201c}WebGPU\u{201d} \
+             to use it anyway"
+        )),
+        Some(_) => Backend::WebGpu,
     }
 }

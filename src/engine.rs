@@ -1,18 +1,20 @@
 //! The network in the page: H-Net with its weights on the chosen device, and inference on the
 //! stereo pair on screen.
 
+use std::collections::BTreeMap;
 use std::rc::Rc;
 
 use burn::module::Module;
 use burn::tensor::Device;
 use hnet_model::architectures::{ModelSpec, StereoModel};
-use hnet_model::inference::{PredictError, StereoPair};
+use hnet_model::inference::{PredictError, StereoPair, StereoPrediction};
 use hnet_model::weights::{WeightsError, WeightsHeader};
 use hnet_model::{HNet, HNetConfig, HNetConfigError};
 use hnet_units::ImageSize;
 
 use crate::browser::{now_ms, yield_to_browser};
 use crate::compute::Backend;
+use crate::gpu_worker::{GpuNetwork, GpuWorker, GpuWorkerError};
 use crate::imaging::{WORK_SIZE, rescale_mask, rescale_rgb};
 
 /// Input size of the untrained network the page falls back to when it ships no weights, pixels.
@@ -29,14 +31,19 @@ pub enum WeightsOrigin {
     Untrained,
 }
 
+/// Where a loaded H-Net runs.
+enum Runner {
+    /// On the page's thread, on Burn's flex CPU backend (WebAssembly).
+    Cpu(Box<HNet>),
+    /// In the WebGPU worker ([`crate::gpu_worker`]), which holds its own copy of the network.
+    WebGpu(GpuNetwork),
+}
+
 /// A loaded H-Net.
 pub struct Engine {
-    /// The device it runs on.
-    pub device: Device,
-    /// Which backend that is.
+    runner: Runner,
+    /// Which backend it runs on.
     pub backend: Backend,
-    /// The network.
-    pub model: HNet,
     /// Its input size, pixels.
     pub input: ImageSize,
     /// Parameter count.
@@ -47,7 +54,7 @@ pub struct Engine {
     pub origin: WeightsOrigin,
     /// The weights file's header (its provenance), when there is a file.
     pub header: Option<WeightsHeader>,
-    /// The weights file, to rebuild the engine on another backend.
+    /// The weights file, to rebuild the engine on another backend (none for untrained weights).
     pub weights: Option<Rc<[u8]>>,
     /// What the WebGPU result check found, on WebGPU ([`crate::webgpu_check`]).
     pub check: Option<String>,
@@ -93,25 +100,30 @@ pub enum EngineError {
     /// The untrained fallback network cannot be built.
     #[error("the untrained H-Net cannot be built")]
     Untrained(#[source] HNetConfigError),
+    /// The untrained network's weights cannot be written for the WebGPU worker.
+    #[error("the untrained H-Net cannot be handed to WebGPU")]
+    UntrainedWeights(#[source] WeightsError),
     /// The forward pass or the read-back failed.
     #[error(transparent)]
     Predict(#[from] PredictError),
+    /// The WebGPU worker failed.
+    #[error(transparent)]
+    WebGpu(#[from] GpuWorkerError),
     /// The network gave no prediction for the pair.
     #[error("H-Net returned no prediction")]
     NoPrediction,
 }
 
 impl Engine {
-    /// An engine from a weights file's bytes; the file must hold H-Net weights for square
-    /// images.
+    /// An engine on the CPU from a weights file's bytes; the file must hold H-Net weights for
+    /// square images. `reason` says why the CPU is used.
     pub fn from_weights(
         bytes: Rc<[u8]>,
         name: &str,
         origin: WeightsOrigin,
-        device: Device,
-        backend: Backend,
+        reason: String,
     ) -> Result<Self, EngineError> {
-        let (model, spec, header) = StereoModel::from_weights_bytes(&bytes, &device, name)?;
+        let (model, spec, header) = StereoModel::from_weights_bytes(&bytes, &Device::flex(), name)?;
         let (StereoModel::Hnet(model), ModelSpec::Hnet(config)) = (model, spec) else {
             return Err(EngineError::NotHnet {
                 file: name.to_string(),
@@ -129,17 +141,16 @@ impl Engine {
             origin,
             header: Some(header),
             weights: Some(bytes),
-            ..Self::without_file(model, config.image_size, device, backend)
+            ..Self::without_file(model, config.image_size, reason)
         })
     }
 
-    /// An engine for `model` that came from no file.
-    fn without_file(model: HNet, input: ImageSize, device: Device, backend: Backend) -> Self {
+    /// An engine on the CPU for `model` that came from no file.
+    fn without_file(model: HNet, input: ImageSize, reason: String) -> Self {
         Self {
             params: model.num_params(),
-            device,
-            backend,
-            model,
+            runner: Runner::Cpu(Box::new(model)),
+            backend: Backend::Cpu { reason },
             input,
             weights_name: "untrained".into(),
             origin: WeightsOrigin::Untrained,
@@ -149,25 +160,66 @@ impl Engine {
         }
     }
 
-    /// An untrained H-Net (paper architecture at [`FALLBACK_INPUT`] pixels).
-    pub fn untrained(device: Device, backend: Backend) -> Result<Self, EngineError> {
-        let config = HNetConfig::new().with_image_size(ImageSize::square(FALLBACK_INPUT));
-        let model = config.init(&device).map_err(EngineError::Untrained)?;
-        Ok(Self::without_file(
-            model,
-            config.image_size,
-            device,
-            backend,
-        ))
+    /// An untrained H-Net on the CPU (paper architecture at [`FALLBACK_INPUT`] pixels).
+    pub fn untrained(reason: String) -> Result<Self, EngineError> {
+        let config = Self::untrained_config();
+        let model = config
+            .init(&Device::flex())
+            .map_err(EngineError::Untrained)?;
+        Ok(Self::without_file(model, config.image_size, reason))
+    }
+
+    fn untrained_config() -> HNetConfig {
+        HNetConfig::new().with_image_size(ImageSize::square(FALLBACK_INPUT))
+    }
+
+    /// This engine on the CPU, `reason` saying why the CPU is used.
+    pub fn with_cpu_reason(self, reason: String) -> Self {
+        Self {
+            backend: Backend::Cpu { reason },
+            ..self
+        }
+    }
+
+    /// This engine with what the WebGPU result check found.
+    pub fn with_check(self, check: String) -> Self {
+        Self {
+            check: Some(check),
+            ..self
+        }
+    }
+
+    /// The same network on WebGPU, in `worker`, which loads these weights (an untrained
+    /// network's too, so that both backends hold the same numbers). The CPU engine is kept by
+    /// the caller, for the check and the fallback.
+    pub async fn on_webgpu(&self, worker: &Rc<GpuWorker>) -> Result<Self, EngineError> {
+        let Runner::Cpu(model) = &self.runner else {
+            unreachable!("an engine moves to WebGPU from the CPU")
+        };
+        let bytes: Rc<[u8]> = match &self.weights {
+            Some(bytes) => bytes.clone(),
+            None => model
+                .to_weights_bytes(&Self::untrained_config(), &BTreeMap::new())
+                .map_err(EngineError::UntrainedWeights)?
+                .into(),
+        };
+        let network = worker.load(&bytes, &self.weights_name).await?;
+        Ok(Self {
+            runner: Runner::WebGpu(network),
+            backend: Backend::WebGpu,
+            input: self.input,
+            params: self.params,
+            weights_name: self.weights_name.clone(),
+            origin: self.origin.clone(),
+            header: self.header.clone(),
+            weights: self.weights.clone(),
+            check: None,
+        })
     }
 
     /// Runs H-Net on two [`WORK_SIZE`] RGB images, resizing them to the network's input and
     /// its masks back. Yields to the browser first so that the busy state is painted.
-    pub async fn infer(
-        self: Rc<Self>,
-        view_a: &[u8],
-        view_b: &[u8],
-    ) -> Result<Prediction, EngineError> {
+    pub async fn infer(&self, view_a: &[u8], view_b: &[u8]) -> Result<Prediction, EngineError> {
         let side = self.input.width;
         let (a, b) = (
             rescale_rgb(view_a, WORK_SIZE, side),
@@ -175,19 +227,23 @@ impl Engine {
         );
         yield_to_browser().await;
         let start = now_ms();
-        let out = self
-            .model
-            .predict_async(
-                &[StereoPair {
-                    view_a: &a,
-                    view_b: &b,
-                }],
-                self.input,
-                &self.device,
-            )
-            .await?;
+        let p: StereoPrediction = match &self.runner {
+            Runner::Cpu(model) => model
+                .predict_async(
+                    &[StereoPair {
+                        view_a: &a,
+                        view_b: &b,
+                    }],
+                    self.input,
+                    &Device::flex(),
+                )
+                .await?
+                .into_iter()
+                .next()
+                .ok_or(EngineError::NoPrediction)?,
+            Runner::WebGpu(network) => network.infer(&a, &b, self.input).await?,
+        };
         let millis = now_ms() - start;
-        let p = out.into_iter().next().ok_or(EngineError::NoPrediction)?;
         Ok(Prediction {
             mask_a: rescale_mask(&p.mask_a, side, WORK_SIZE),
             mask_b: rescale_mask(&p.mask_b, side, WORK_SIZE),

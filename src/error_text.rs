@@ -1,23 +1,8 @@
 //! How the page words an error: the message, then each cause it carries, so that what the
-//! libraries kept (a decoder's or the device's own account) reaches the person reading it.
+//! libraries kept (a decoder's or the device's own account) reaches the person reading it. The
+//! wording is [`hnet_units::with_causes`], shared with the WebGPU worker (crates/hnet-gpu).
 
-use std::error::Error;
-
-/// `error`'s message followed by its causes, `: `-separated (as `hnet` prints them).
-pub fn with_causes(error: &dyn Error) -> String {
-    let mut text = error.to_string();
-    let mut cause = error.source();
-    while let Some(e) = cause {
-        let message = e.to_string();
-        // A wrapper that repeats its cause's words adds nothing.
-        if !text.ends_with(&message) {
-            text.push_str(": ");
-            text.push_str(&message);
-        }
-        cause = e.source();
-    }
-    text
-}
+pub use hnet_units::with_causes;
 
 #[cfg(test)]
 mod tests {

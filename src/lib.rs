@@ -19,7 +19,8 @@
 //! - [`error_text`]: an error and its causes as one message.
 //!
 //! The rest exists only on wasm32: the page's state (`studio`), its components (`app`,
-//! `components`), the network on the chosen device (`engine`, `compute`), the browser's storage
+//! `components`), the network on the chosen backend (`engine`, `compute`, and
+//! `gpu_worker`, the page's side of the WebGPU worker in crates/hnet-gpu), the browser's storage
 //! (`storage`) and files (`browser`). `src/main.rs` mounts [`App`].
 
 pub mod catheter_3d;
@@ -47,6 +48,8 @@ pub mod components;
 pub mod compute;
 #[cfg(target_arch = "wasm32")]
 pub mod engine;
+#[cfg(target_arch = "wasm32")]
+pub mod gpu_worker;
 #[cfg(target_arch = "wasm32")]
 pub mod storage;
 #[cfg(target_arch = "wasm32")]

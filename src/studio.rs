@@ -16,6 +16,7 @@ use crate::cine::CinePlayer;
 use crate::compute::{self, Backend, BackendChoice};
 use crate::engine::{Engine, EngineError, Prediction, WeightsOrigin};
 use crate::error_text::with_causes;
+use crate::gpu_worker::GpuWorker;
 use crate::orbit_camera::OrbitCamera;
 use crate::storage;
 use crate::twin_live::{TwinControls, XrayBackground};
@@ -450,7 +451,10 @@ impl Studio {
                 Ok(prediction) => studio.predictions.update(|p| {
                     p.insert(id, prediction);
                 }),
-                Err(e) => studio.error(format!("H-Net failed on {id}: {}", with_causes(&e))),
+                Err(e) => {
+                    studio.error(format!("H-Net failed on {id}: {}", with_causes(&e)));
+                    studio.leave_webgpu_after(&engine, &e);
+                }
             }
             studio.busy.set(None);
             if studio.rerun.get_untracked() {
@@ -463,6 +467,29 @@ impl Studio {
                 }
             }
         });
+    }
+
+    /// After `engine` failed on WebGPU with `error`, the same weights on the CPU, which says why
+    /// (the worker is stopped: every later call would fail too). Any other failure changes
+    /// nothing.
+    fn leave_webgpu_after(&self, engine: &Engine, error: &EngineError) {
+        if !matches!(error, EngineError::WebGpu(_)) || engine.backend != Backend::WebGpu {
+            return;
+        }
+        let reason = format!("WebGPU failed ({}), so the CPU is used", with_causes(error));
+        let cpu = match &engine.weights {
+            Some(bytes) => Engine::from_weights(
+                bytes.clone(),
+                &engine.weights_name,
+                engine.origin.clone(),
+                reason,
+            ),
+            None => Engine::untrained(reason),
+        };
+        match cpu {
+            Ok(cpu) => self.model.set(ModelState::Ready(Rc::new(cpu))),
+            Err(e) => self.model.set(ModelState::Failed(with_causes(&e))),
+        }
     }
 
     /// Id of the pair on screen, without tracking.
@@ -664,7 +691,7 @@ impl Studio {
                     Some((c.rgb(View::A, frame)?, c.rgb(View::B, frame)?))
                 });
                 let Some((a, b)) = views else { break };
-                match engine.clone().infer(&a, &b).await {
+                match engine.infer(&a, &b).await {
                     Ok(prediction) if same_cine() => studio.cine.update(|c| {
                         c.iter_mut()
                             .for_each(|c| c.record_force(frame, prediction.force_n))
@@ -676,6 +703,7 @@ impl Studio {
                             frame + 1,
                             with_causes(&e)
                         ));
+                        studio.leave_webgpu_after(&engine, &e);
                         break;
                     }
                 }
@@ -815,12 +843,13 @@ enum LoadError {
 }
 
 /// The engine of `weights` (else the bundled weights, else an untrained H-Net) on the backend
-/// the user chose.
+/// the user chose. The weights are always read on the CPU first: that engine names a bad file,
+/// checks WebGPU's result, and is used whenever WebGPU cannot be.
 async fn load_engine(
     studio: Studio,
     weights: Option<(Rc<[u8]>, String, WeightsOrigin)>,
 ) -> Result<Engine, LoadError> {
-    let (device, backend) = compute::select_device(studio.backend_choice.get_untracked()).await;
+    let backend = compute::choose_backend(studio.backend_choice.get_untracked()).await;
     let weights = match weights {
         Some(w) => Some(w),
         None => bundled::fetch_bytes(bundled::BUNDLED_WEIGHTS)
@@ -833,61 +862,64 @@ async fn load_engine(
                 )
             }),
     };
-    let engine = match weights {
-        Some((bytes, name, origin)) => Engine::from_weights(bytes, &name, origin, device, backend)?,
-        None => Engine::untrained(device, backend)?,
+    let reason = backend.reason().unwrap_or_default().to_string();
+    let cpu = match weights {
+        Some((bytes, name, origin)) => Engine::from_weights(bytes, &name, origin, reason)?,
+        None => Engine::untrained(reason)?,
     };
-    Ok(match engine.backend {
-        Backend::WebGpu => check_webgpu(engine).await?,
-        Backend::Cpu { .. } => engine,
+    Ok(match backend {
+        Backend::WebGpu => onto_webgpu(cpu).await,
+        Backend::Cpu { .. } => cpu,
     })
 }
 
-/// Runs `engine` (on WebGPU) and the same weights on the CPU on the check pair
-/// ([`webgpu_check`]): within the tolerances the WebGPU engine is kept, with what was found;
-/// beyond them, or when WebGPU fails, the CPU engine is used and its reason says why.
-async fn check_webgpu(engine: Engine) -> Result<Engine, LoadError> {
-    let Some(bytes) = engine.weights.clone() else {
-        return Ok(Engine {
-            check: Some("not checked against the CPU (untrained weights)".into()),
-            ..engine
-        });
+/// `cpu`'s network on WebGPU, once its result on the check pair ([`webgpu_check`]) is within
+/// the tolerances of the CPU's; with what the check found. When the worker cannot be started,
+/// fails, or differs beyond them, `cpu` itself, whose reason says why.
+async fn onto_webgpu(cpu: Engine) -> Engine {
+    let worker = match GpuWorker::shared().await {
+        Ok(worker) => worker,
+        Err(e) => {
+            return cpu.with_cpu_reason(format!(
+                "WebGPU could not be set up ({}), so the CPU is used",
+                with_causes(&e)
+            ));
+        }
     };
-    let scale = web_sys::window()
-        .and_then(|w| w.location().search().ok())
-        .map_or(1.0, |query| webgpu_check::tolerance_scale(&query));
-    let (name, origin) = (engine.weights_name.clone(), engine.origin.clone());
-    let cpu = |reason: String| {
-        Engine::from_weights(
-            bytes.clone(),
-            &name,
-            origin.clone(),
-            burn::tensor::Device::flex(),
-            Backend::Cpu { reason },
-        )
+    let gpu = match cpu.on_webgpu(&worker).await {
+        Ok(gpu) => gpu,
+        Err(e) => {
+            return cpu.with_cpu_reason(format!(
+                "WebGPU could not load the network ({}), so the CPU is used",
+                with_causes(&e)
+            ));
+        }
     };
     let pair = match webgpu_check::check_pair() {
         Ok(pair) => pair,
         Err(e) => {
-            return Ok(Engine {
-                check: Some(format!(
-                    "not checked against the CPU: the check pair could not be made ({})",
-                    with_causes(&e)
-                )),
-                ..engine
-            });
+            return gpu.with_check(format!(
+                "not checked against the CPU: the check pair could not be made ({})",
+                with_causes(&e)
+            ));
         }
     };
-    let reference = Rc::new(cpu(String::new())?);
-    let expected = reference.infer(&pair.view_a, &pair.view_b).await?;
-    let engine = Rc::new(engine);
-    let found = match engine.clone().infer(&pair.view_a, &pair.view_b).await {
+    let expected = match cpu.infer(&pair.view_a, &pair.view_b).await {
+        Ok(expected) => expected,
+        Err(e) => {
+            return cpu.with_cpu_reason(format!(
+                "the CPU failed on the check pair ({}), so WebGPU's result cannot be checked",
+                with_causes(&e)
+            ));
+        }
+    };
+    let found = match gpu.infer(&pair.view_a, &pair.view_b).await {
         Ok(found) => found,
         Err(e) => {
-            return Ok(cpu(format!(
+            return cpu.with_cpu_reason(format!(
                 "WebGPU failed on a check pair ({}), so the CPU is used",
                 with_causes(&e)
-            ))?);
+            ));
         }
     };
     fn output(p: &Prediction) -> webgpu_check::Output<'_> {
@@ -896,15 +928,14 @@ async fn check_webgpu(engine: Engine) -> Result<Engine, LoadError> {
             force_n: p.force_n,
         }
     }
+    let scale = web_sys::window()
+        .and_then(|w| w.location().search().ok())
+        .map_or(1.0, |query| webgpu_check::tolerance_scale(&query));
     let difference = webgpu_check::Difference::between(output(&expected), output(&found));
     if !difference.within(scale) {
-        return Ok(cpu(difference.refusal(scale))?);
+        return cpu.with_cpu_reason(difference.refusal(scale));
     }
-    let engine = Rc::try_unwrap(engine).unwrap_or_else(|_| unreachable!("no inference holds it"));
-    Ok(Engine {
-        check: Some(difference.text()),
-        ..engine
-    })
+    gpu.with_check(difference.text())
 }
 
 /// Loads the model (bundled weights, or `weights`) on the chosen backend. On failure the model

@@ -49,9 +49,16 @@ test("the page loads H-Net, says where it runs, and asks for nothing outside", a
   const origin = new URL(server.url).origin;
   const foreign = requests.filter((u) => !u.startsWith(origin) && !u.startsWith("data:") && !u.startsWith("blob:"));
   assert.deepEqual(foreign, []);
+  // "Fastest available" passes over headless Chromium's software adapter, and the page then never
+  // fetches the WebGPU module (the WebGPU test below sees it fetched when it is used).
+  assert.match(await page.textContent("#backend"), /CPU/);
+  assert.deepEqual(requests.filter(isWebGpuModule), []);
   assert.deepEqual(errors, []);
   await page.close();
 });
+
+/** Whether a request is for the WebGPU worker's script or module (crates/hnet-gpu). */
+const isWebGpuModule = (url) => /gpu-worker\.js|hnet-gpu(_bg\.wasm|\.js)/.test(url);
 
 test("load a pair, run H-Net, paint, undo, reload with labels kept, export the dataset", async () => {
   const { page, errors } = await openPage(context, server.url);
@@ -470,19 +477,32 @@ test("a DICOM cine: sample, step, scrub, play, window/level, trace with cancel, 
   await page.close();
 });
 
-test("WebGPU is checked against the CPU on a check pair before it is trusted; a mismatch falls back to the CPU and says why", async () => {
+test("WebGPU runs in its worker, checked against the CPU on a check pair before it is trusted; a mismatch or a module that cannot be fetched falls back to the CPU and says why", async () => {
   for (const [query, expected] of [
     ["", { backend: /^WebGPU$/, why: "#backend-check", text: /masks within [\d.e-]+, force within [\d.e-]+ N of the CPU on a check pair/ }],
     ["?webgpu-tolerance-scale=-1", { backend: /^CPU/, why: "#backend-reason", text: /WebGPU's result on a check pair differs from the CPU's .*so the CPU is used/ }],
+    ["?no-gpu-module", { backend: /^CPU/, why: "#backend-reason", text: /WebGPU could not be set up \(the WebGPU worker's `start` failed: .+\), so the CPU is used/, blocked: true }],
   ]) {
-    const { page, errors } = await openPage(context, server.url + query);
+    const block = (route) => route.abort();
+    if (expected.blocked) await context.route("**/hnet-gpu_bg.wasm", block);
+    const { page, requests, errors } = await openPage(context, server.url + query);
     await waitForModel(page);
     await page.selectOption("#backend-choice", "webgpu");
     await page.waitForSelector("#model-status [data-state=loading]", { state: "detached", timeout: 180_000 });
     await waitForModel(page);
     assert.match(await page.textContent("#backend"), expected.backend);
     assert.match(await page.textContent(expected.why), expected.text);
-    assert.deepEqual(errors, []);
+    assert.ok(requests.some(isWebGpuModule), "the WebGPU module was fetched");
+    // The page runs on: a pair's inference on the backend it settled on.
+    await page.click("#tab-twin");
+    await page.waitForFunction(() => /\d+ ms on /.test(document.querySelector("#inference-time")?.textContent));
+    if (expected.blocked) {
+      await context.unroute("**/hnet-gpu_bg.wasm", block);
+      // The failed fetch is the browser's console error, nothing else.
+      assert.ok(errors.every((e) => /hnet-gpu_bg\.wasm|Failed to load resource|net::ERR_FAILED/.test(e)), errors.join("\n"));
+    } else {
+      assert.deepEqual(errors, []);
+    }
     await page.close();
   }
 });

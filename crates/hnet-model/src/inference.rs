@@ -54,6 +54,34 @@ impl StereoPrediction {
     pub fn force_magnitude(&self) -> f32 {
         force_magnitude(self.force)
     }
+
+    /// The prediction as one buffer: view A's mask, view B's mask (row-major, `size.pixels()`
+    /// values each), then `(Fx, Fy, Fz)` in newtons. How the page's WebGPU worker hands a
+    /// prediction to the page (crates/hnet-gpu).
+    pub fn to_packed(&self) -> Vec<f32> {
+        let mut values = Vec::with_capacity(self.mask_a.len() + self.mask_b.len() + 3);
+        values.extend_from_slice(&self.mask_a);
+        values.extend_from_slice(&self.mask_b);
+        values.extend_from_slice(&self.force);
+        values
+    }
+
+    /// The prediction in a [`StereoPrediction::to_packed`] buffer for images of `size`; `None`
+    /// when the buffer's length is not that of such a prediction.
+    pub fn from_packed(values: &[f32], size: ImageSize) -> Option<Self> {
+        let pixels = size.pixels();
+        if values.len() != 2 * pixels + 3 {
+            return None;
+        }
+        let (mask_a, rest) = values.split_at(pixels);
+        let (mask_b, force) = rest.split_at(pixels);
+        Some(Self {
+            size,
+            mask_a: mask_a.to_vec(),
+            mask_b: mask_b.to_vec(),
+            force: [force[0], force[1], force[2]],
+        })
+    }
 }
 
 pub use hnet_units::force_magnitude;

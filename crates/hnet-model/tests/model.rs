@@ -4,7 +4,7 @@ use burn::module::{Module, ModuleVisitor, Param};
 use burn::optim::{GradientsParams, RmsPropConfig};
 use burn::tensor::Gradients;
 use burn::tensor::{Device, Distribution, Tensor, Tolerance};
-use hnet_model::inference::{StereoPair, host_values, stereo_batch};
+use hnet_model::inference::{StereoPair, StereoPrediction, host_values, stereo_batch};
 use hnet_model::model::ForceScale;
 use hnet_model::{HNet, HNetConfig, HNetLossConfig};
 use hnet_units::ImageSize;
@@ -82,6 +82,17 @@ fn predict_gives_each_pair_its_masks_and_force() {
         assert!(close(&p.mask_a, &mask_a[pixels.clone()]), "pair {i}");
         assert!(close(&p.mask_b, &mask_b[pixels]), "pair {i}");
         assert!(close(&p.force, &force[3 * i..3 * i + 3]), "pair {i}");
+        // The packed form (the WebGPU worker's) gives the prediction back, and only for its size.
+        let packed = p.to_packed();
+        assert_eq!(
+            StereoPrediction::from_packed(&packed, size).as_ref(),
+            Some(p)
+        );
+        assert_eq!(StereoPrediction::from_packed(&packed[1..], size), None);
+        assert_eq!(
+            StereoPrediction::from_packed(&packed, ImageSize::square(16)),
+            None
+        );
     }
     // An image of another size is refused by name.
     let short = [StereoPair {

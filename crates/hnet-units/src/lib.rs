@@ -1,6 +1,7 @@
 //! The sizes and units that H-Net Studio's network (`hnet-model`), digital twin (`hnet-twin`),
 //! DICOM reader, command-line tool and page all speak of, defined once so that no caller has to
-//! remember an index order or rewrite a formula.
+//! remember an index order or rewrite a formula; and [`with_causes`], how an error is worded
+//! with its causes.
 //!
 //! [`ImageSize`] names its fields: `width` (pixels along `u`, a row's length) and `height`
 //! (pixels along `v`, the number of rows). Tensors are `[batch, channels, height, width]` and
@@ -15,6 +16,24 @@ use core::fmt;
 
 use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
 use serde::{Deserialize, Serialize};
+
+/// `error`'s message followed by each of its causes, `: `-separated (as `hnet` prints them), so
+/// that what a library kept (a decoder's or a device's own account) reaches the reader: the one
+/// wording of the page, its WebGPU worker and their tests.
+pub fn with_causes(error: &dyn core::error::Error) -> String {
+    let mut text = error.to_string();
+    let mut cause = error.source();
+    while let Some(e) = cause {
+        let message = e.to_string();
+        // A wrapper that repeats its cause's words adds nothing.
+        if !text.ends_with(&message) {
+            text.push_str(": ");
+            text.push_str(&message);
+        }
+        cause = e.source();
+    }
+    text
+}
 
 /// Magnitude of a tip force `(Fx, Fy, Fz)` in newtons: the one formula of the CLI, the DICOM
 /// force trace and the page.
@@ -151,6 +170,29 @@ mod tests {
     use std::string::ToString;
 
     use super::*;
+
+    #[test]
+    fn causes_follow_the_message_and_a_repeated_cause_is_said_once() {
+        #[derive(Debug)]
+        struct Error(&'static str, Option<&'static Error>);
+        impl fmt::Display for Error {
+            fn fmt(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str(self.0)
+            }
+        }
+        impl core::error::Error for Error {
+            fn source(&self) -> Option<&(dyn core::error::Error + 'static)> {
+                self.1.map(|e| e as _)
+            }
+        }
+        static ROOT: Error = Error("unexpected end of file", None);
+        static SAME: Error = Error("scan.png: unexpected end of file", Some(&ROOT));
+        assert_eq!(
+            with_causes(&Error("scan.png: cannot be decoded", Some(&ROOT))),
+            "scan.png: cannot be decoded: unexpected end of file"
+        );
+        assert_eq!(with_causes(&SAME), "scan.png: unexpected end of file");
+    }
 
     #[test]
     fn named_fields_round_trip_and_old_arrays_keep_their_meaning() {
