@@ -31,19 +31,23 @@ with_clippy cargo test --workspace --all-targets --locked
 step "native: type-check hnet with the wgpu backend"
 cargo check -p hnet-cli --features wgpu --locked
 
+# The page and its WebGPU worker (crates/hnet-gpu) are tested one package at a time: each test
+# build then has the features of its trunk build below and shares its compiled dependencies
+# (tested together, cargo would unify their features and build Burn's stack a third time).
 (
   . scripts/wasm-env.sh
   if [ -n "${RUSTC_BOOTSTRAP:-}" ]; then
     # Debian's rustc-web has no clippy; the native run above linted all but the page's
     # wasm-only components.
     step "wasm: browser tests (headless Chromium; no wasm32 clippy with Debian's rustc-web)"
-    cargo test -p hnet-studio -p hnet-gpu --target wasm32-unknown-unknown --locked
+    cargo test -p hnet-studio --target wasm32-unknown-unknown --locked
+    cargo test -p hnet-gpu --target wasm32-unknown-unknown --locked
     step "wasm: trunk build"
     trunk build --locked
   else
     step "wasm: clippy, build and browser tests (headless Chromium)"
-    with_clippy cargo test -p hnet-studio -p hnet-gpu --target wasm32-unknown-unknown --all-targets \
-      --locked
+    with_clippy cargo test -p hnet-studio --target wasm32-unknown-unknown --all-targets --locked
+    with_clippy cargo test -p hnet-gpu --target wasm32-unknown-unknown --all-targets --locked
     step "wasm: trunk build"
     with_clippy trunk build --locked
   fi

@@ -54,8 +54,9 @@ pub struct Engine {
     pub origin: WeightsOrigin,
     /// The weights file's header (its provenance), when there is a file.
     pub header: Option<WeightsHeader>,
-    /// The weights file, to rebuild the engine on another backend (none for untrained weights).
-    pub weights: Option<Rc<[u8]>>,
+    /// The weights file (for untrained weights, their bytes), to rebuild the engine on another
+    /// backend.
+    pub weights: Rc<[u8]>,
     /// What the WebGPU result check found, on WebGPU ([`crate::webgpu_check`]).
     pub check: Option<String>,
 }
@@ -100,8 +101,8 @@ pub enum EngineError {
     /// The untrained fallback network cannot be built.
     #[error("the untrained H-Net cannot be built")]
     Untrained(#[source] HNetConfigError),
-    /// The untrained network's weights cannot be written for the WebGPU worker.
-    #[error("the untrained H-Net cannot be handed to WebGPU")]
+    /// The untrained network's weights cannot be written down.
+    #[error("the untrained H-Net's weights cannot be written down")]
     UntrainedWeights(#[source] WeightsError),
     /// The forward pass or the read-back failed.
     #[error(transparent)]
@@ -140,13 +141,12 @@ impl Engine {
             weights_name: name.to_string(),
             origin,
             header: Some(header),
-            weights: Some(bytes),
-            ..Self::without_file(model, config.image_size, reason)
+            ..Self::without_file(model, config.image_size, bytes, reason)
         })
     }
 
-    /// An engine on the CPU for `model` that came from no file.
-    fn without_file(model: HNet, input: ImageSize, reason: String) -> Self {
+    /// An engine on the CPU for `model`, whose weights are `weights`, that came from no file.
+    fn without_file(model: HNet, input: ImageSize, weights: Rc<[u8]>, reason: String) -> Self {
         Self {
             params: model.num_params(),
             runner: Runner::Cpu(Box::new(model)),
@@ -155,22 +155,28 @@ impl Engine {
             weights_name: "untrained".into(),
             origin: WeightsOrigin::Untrained,
             header: None,
-            weights: None,
+            weights,
             check: None,
         }
     }
 
-    /// An untrained H-Net on the CPU (paper architecture at [`FALLBACK_INPUT`] pixels).
+    /// An untrained H-Net on the CPU (paper architecture at [`FALLBACK_INPUT`] pixels). Its
+    /// freshly initialised weights are kept as a file's bytes, so that WebGPU and a later switch
+    /// of backend get the same numbers.
     pub fn untrained(reason: String) -> Result<Self, EngineError> {
-        let config = Self::untrained_config();
+        let config = HNetConfig::new().with_image_size(ImageSize::square(FALLBACK_INPUT));
         let model = config
             .init(&Device::flex())
             .map_err(EngineError::Untrained)?;
-        Ok(Self::without_file(model, config.image_size, reason))
-    }
-
-    fn untrained_config() -> HNetConfig {
-        HNetConfig::new().with_image_size(ImageSize::square(FALLBACK_INPUT))
+        let bytes = model
+            .to_weights_bytes(&config, &BTreeMap::new())
+            .map_err(EngineError::UntrainedWeights)?;
+        Ok(Self::without_file(
+            model,
+            config.image_size,
+            bytes.into(),
+            reason,
+        ))
     }
 
     /// This engine on the CPU, `reason` saying why the CPU is used.
@@ -189,21 +195,10 @@ impl Engine {
         }
     }
 
-    /// The same network on WebGPU, in `worker`, which loads these weights (an untrained
-    /// network's too, so that both backends hold the same numbers). The CPU engine is kept by
-    /// the caller, for the check and the fallback.
+    /// The same network on WebGPU, in `worker`, which loads the same weights. The CPU engine is
+    /// kept by the caller, for the check and the fallback.
     pub async fn on_webgpu(&self, worker: &Rc<GpuWorker>) -> Result<Self, EngineError> {
-        let Runner::Cpu(model) = &self.runner else {
-            unreachable!("an engine moves to WebGPU from the CPU")
-        };
-        let bytes: Rc<[u8]> = match &self.weights {
-            Some(bytes) => bytes.clone(),
-            None => model
-                .to_weights_bytes(&Self::untrained_config(), &BTreeMap::new())
-                .map_err(EngineError::UntrainedWeights)?
-                .into(),
-        };
-        let network = worker.load(&bytes, &self.weights_name).await?;
+        let network = worker.load(&self.weights, &self.weights_name).await?;
         Ok(Self {
             runner: Runner::WebGpu(network),
             backend: Backend::WebGpu,

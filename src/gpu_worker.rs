@@ -62,23 +62,32 @@ pub struct GpuWorker {
 }
 
 thread_local! {
-    /// The page's worker, once started: one WebGPU device per page, reused when the user
-    /// switches back to WebGPU or loads other weights.
-    static SHARED: RefCell<Option<Rc<GpuWorker>>> = const { RefCell::new(None) };
+    /// The page's worker and the reply to its `start` call (awaited by every caller, so that
+    /// loads asked for while it starts share it): one WebGPU device per page, reused when the
+    /// user switches back to WebGPU or loads other weights.
+    static SHARED: RefCell<Option<(Rc<GpuWorker>, Promise)>> = const { RefCell::new(None) };
 }
 
 impl GpuWorker {
-    /// The page's worker, started (and WebGPU set up in it) on first use.
+    /// The page's worker, started (and WebGPU set up in it) on first use, and again after it
+    /// stopped.
     pub async fn shared() -> Result<Rc<Self>, GpuWorkerError> {
-        if let Some(worker) = SHARED.with_borrow(Clone::clone) {
-            return Ok(worker);
-        }
-        let worker = Rc::new(Self::spawn()?);
-        if let Err(e) = worker.call("start", &Array::new(), &Array::new()).await {
-            worker.worker.terminate();
+        let running = SHARED
+            .with_borrow(Clone::clone)
+            .filter(|(worker, _)| worker.stopped.borrow().is_none());
+        let (worker, started) = match running {
+            Some(running) => running,
+            None => {
+                let worker = Rc::new(Self::spawn()?);
+                let started = worker.send("start", &Array::new(), &Array::new())?;
+                SHARED.set(Some((worker.clone(), started.clone())));
+                (worker, started)
+            }
+        };
+        if let Err(e) = worker.reply("start", started).await {
+            worker.discard(&hnet_units::with_causes(&e));
             return Err(e);
         }
-        SHARED.set(Some(worker.clone()));
         Ok(worker)
     }
 
@@ -90,7 +99,7 @@ impl GpuWorker {
         SHARED.with_borrow_mut(|shared| {
             if shared
                 .as_ref()
-                .is_some_and(|w| std::ptr::eq(Rc::as_ptr(w), self))
+                .is_some_and(|(w, _)| std::ptr::eq(Rc::as_ptr(w), self))
             {
                 *shared = None;
             }
@@ -155,13 +164,14 @@ impl GpuWorker {
         })
     }
 
-    /// Calls the worker's `call` with `args`, handing over the buffers in `transfer`.
-    async fn call(
+    /// Sends the worker a call of `call` with `args`, handing over the buffers in `transfer`;
+    /// the promise settles with its reply.
+    fn send(
         &self,
         call: &'static str,
         args: &Array,
         transfer: &Array,
-    ) -> Result<JsValue, GpuWorkerError> {
+    ) -> Result<Promise, GpuWorkerError> {
         if let Some(why) = self.stopped.borrow().clone() {
             return Err(GpuWorkerError::Stopped(why));
         }
@@ -181,6 +191,11 @@ impl GpuWorker {
                 cause: e.into(),
             });
         }
+        Ok(reply)
+    }
+
+    /// The reply to a call of `call`.
+    async fn reply(&self, call: &'static str, reply: Promise) -> Result<JsValue, GpuWorkerError> {
         JsFuture::from(reply).await.map_err(|e| {
             let cause = JsError::from(e);
             match self.stopped.borrow().clone() {
@@ -188,6 +203,22 @@ impl GpuWorker {
                 None => GpuWorkerError::Call { call, cause },
             }
         })
+    }
+
+    /// Calls the worker's `call` with `args`, handing over the buffers in `transfer`. A failed
+    /// call stops the worker: a module that trapped (a panic aborts it) cannot be trusted again.
+    async fn call(
+        &self,
+        call: &'static str,
+        args: &Array,
+        transfer: &Array,
+    ) -> Result<JsValue, GpuWorkerError> {
+        let reply = self.send(call, args, transfer)?;
+        let result = self.reply(call, reply).await;
+        if let Err(e) = &result {
+            self.discard(&hnet_units::with_causes(e));
+        }
+        result
     }
 
     /// Loads a weights file (`name` names it in errors) onto WebGPU; the network lives in the
@@ -214,6 +245,15 @@ impl GpuWorker {
     }
 }
 
+impl Drop for GpuWorker {
+    /// The last user of a worker stops it; its replies find no handler any more.
+    fn drop(&mut self) {
+        self.worker.set_onmessage(None);
+        self.worker.set_onerror(None);
+        self.worker.terminate();
+    }
+}
+
 /// A network loaded in the WebGPU worker; dropping it frees it there.
 pub struct GpuNetwork {
     worker: Rc<GpuWorker>,
@@ -230,28 +270,17 @@ impl GpuNetwork {
     ) -> Result<StereoPrediction, GpuWorkerError> {
         let (a, b) = (Uint8Array::from(view_a), Uint8Array::from(view_b));
         let args = Array::of3(&JsValue::from(self.handle), &a, &b);
-        let reply = self
+        let values = self
             .worker
             .call("infer", &args, &Array::of2(&a.buffer(), &b.buffer()))
-            .await;
-        let values = match reply {
-            Ok(values) => values.dyn_into::<Float32Array>().map(|v| v.to_vec()),
-            Err(e) => {
-                // A worker whose module trapped (a panic aborts it) cannot be trusted again.
-                self.worker.discard(&hnet_units::with_causes(&e));
-                return Err(e);
-            }
-        };
-        let values = values.map_err(|_| GpuWorkerError::NotAPrediction { found: 0, size })?;
+            .await?
+            .dyn_into::<Float32Array>()
+            .map_err(|_| GpuWorkerError::NotAPrediction { found: 0, size })?
+            .to_vec();
         StereoPrediction::from_packed(&values, size).ok_or(GpuWorkerError::NotAPrediction {
             found: values.len(),
             size,
         })
-    }
-
-    /// The worker the network lives in.
-    pub fn worker(&self) -> &Rc<GpuWorker> {
-        &self.worker
     }
 }
 

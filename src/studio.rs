@@ -470,24 +470,27 @@ impl Studio {
     }
 
     /// After `engine` failed on WebGPU with `error`, the same weights on the CPU, which says why
-    /// (the worker is stopped: every later call would fail too). Any other failure changes
-    /// nothing.
-    fn leave_webgpu_after(&self, engine: &Engine, error: &EngineError) {
-        if !matches!(error, EngineError::WebGpu(_)) || engine.backend != Backend::WebGpu {
+    /// (the worker is stopped: every later call would fail too), and the pair on screen again.
+    /// Any other failure, or an engine the page no longer uses, changes nothing.
+    fn leave_webgpu_after(&self, engine: &Rc<Engine>, error: &EngineError) {
+        let in_use = matches!(
+            self.model.get_untracked(),
+            ModelState::Ready(current) if Rc::ptr_eq(&current, engine)
+        );
+        if !in_use || !matches!(error, EngineError::WebGpu(_)) {
             return;
         }
         let reason = format!("WebGPU failed ({}), so the CPU is used", with_causes(error));
-        let cpu = match &engine.weights {
-            Some(bytes) => Engine::from_weights(
-                bytes.clone(),
-                &engine.weights_name,
-                engine.origin.clone(),
-                reason,
-            ),
-            None => Engine::untrained(reason),
-        };
-        match cpu {
-            Ok(cpu) => self.model.set(ModelState::Ready(Rc::new(cpu))),
+        match Engine::from_weights(
+            engine.weights.clone(),
+            &engine.weights_name,
+            engine.origin.clone(),
+            reason,
+        ) {
+            Ok(cpu) => {
+                self.model.set(ModelState::Ready(Rc::new(cpu)));
+                self.run_model();
+            }
             Err(e) => self.model.set(ModelState::Failed(with_causes(&e))),
         }
     }

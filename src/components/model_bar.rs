@@ -27,10 +27,11 @@ pub fn ModelBar() -> impl IntoView {
         studio.backend_choice.set(choice);
         // The same weights on the other device.
         let weights = match studio.model.get_untracked() {
-            ModelState::Ready(engine) => engine
-                .weights
-                .clone()
-                .map(|bytes| (bytes, engine.weights_name.clone(), engine.origin.clone())),
+            ModelState::Ready(engine) => Some((
+                engine.weights.clone(),
+                engine.weights_name.clone(),
+                engine.origin.clone(),
+            )),
             _ => None,
         };
         load_model(studio, weights);
