@@ -880,51 +880,46 @@ async fn load_engine(
 /// the tolerances of the CPU's; with what the check found. When the worker cannot be started,
 /// fails, or differs beyond them, `cpu` itself, whose reason says why.
 async fn onto_webgpu(cpu: Engine) -> Engine {
-    let worker = match GpuWorker::shared().await {
-        Ok(worker) => worker,
-        Err(e) => {
-            return cpu.with_cpu_reason(format!(
-                "WebGPU could not be set up ({}), so the CPU is used",
-                with_causes(&e)
-            ));
-        }
-    };
-    let gpu = match cpu.on_webgpu(&worker).await {
+    match checked_on_webgpu(&cpu).await {
         Ok(gpu) => gpu,
-        Err(e) => {
-            return cpu.with_cpu_reason(format!(
-                "WebGPU could not load the network ({}), so the CPU is used",
-                with_causes(&e)
-            ));
-        }
-    };
+        Err(reason) => cpu.with_cpu_reason(reason),
+    }
+}
+
+/// [`onto_webgpu`]'s engine on WebGPU, or why the CPU is to be used.
+async fn checked_on_webgpu(cpu: &Engine) -> Result<Engine, String> {
+    const CPU_USED: &str = "so the CPU is used";
+    /// What happened (`error`, with its causes), and so what.
+    fn reason(what: &str, error: &dyn std::error::Error, so: &str) -> String {
+        format!("{what} ({}), {so}", with_causes(error))
+    }
+    let worker = GpuWorker::shared()
+        .await
+        .map_err(|e| reason("WebGPU could not be set up", &e, CPU_USED))?;
+    let gpu = cpu
+        .on_webgpu(&worker)
+        .await
+        .map_err(|e| reason("WebGPU could not load the network", &e, CPU_USED))?;
     let pair = match webgpu_check::check_pair() {
         Ok(pair) => pair,
         Err(e) => {
-            return gpu.with_check(format!(
+            return Ok(gpu.with_check(format!(
                 "not checked against the CPU: the check pair could not be made ({})",
                 with_causes(&e)
-            ));
+            )));
         }
     };
-    let expected = match cpu.infer(&pair.view_a, &pair.view_b).await {
-        Ok(expected) => expected,
-        Err(e) => {
-            return cpu.with_cpu_reason(format!(
-                "the CPU failed on the check pair ({}), so WebGPU's result cannot be checked",
-                with_causes(&e)
-            ));
-        }
-    };
-    let found = match gpu.infer(&pair.view_a, &pair.view_b).await {
-        Ok(found) => found,
-        Err(e) => {
-            return cpu.with_cpu_reason(format!(
-                "WebGPU failed on a check pair ({}), so the CPU is used",
-                with_causes(&e)
-            ));
-        }
-    };
+    let expected = cpu.infer(&pair.view_a, &pair.view_b).await.map_err(|e| {
+        reason(
+            "the CPU failed on the check pair",
+            &e,
+            "so WebGPU's result cannot be checked",
+        )
+    })?;
+    let found = gpu
+        .infer(&pair.view_a, &pair.view_b)
+        .await
+        .map_err(|e| reason("WebGPU failed on a check pair", &e, CPU_USED))?;
     fn output(p: &Prediction) -> webgpu_check::Output<'_> {
         webgpu_check::Output {
             masks: [&p.mask_a[..], &p.mask_b[..]],
@@ -936,9 +931,9 @@ async fn onto_webgpu(cpu: Engine) -> Engine {
         .map_or(1.0, |query| webgpu_check::tolerance_scale(&query));
     let difference = webgpu_check::Difference::between(output(&expected), output(&found));
     if !difference.within(scale) {
-        return cpu.with_cpu_reason(difference.refusal(scale));
+        return Err(difference.refusal(scale));
     }
-    gpu.with_check(difference.text())
+    Ok(gpu.with_check(difference.text()))
 }
 
 /// Loads the model (bundled weights, or `weights`) on the chosen backend. On failure the model
