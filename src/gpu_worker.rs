@@ -19,6 +19,11 @@ use crate::browser::JsError;
 /// The worker's script, next to the page (trunk copies it; index.html).
 pub const WORKER_SCRIPT: &str = "gpu-worker.js";
 
+/// How long the worker may take to start: to fetch and compile its module (2.4 MB gzipped,
+/// docs/benchmarks.md) and set WebGPU up, seconds. A browser whose WebGPU never answers would
+/// otherwise leave the page loading for ever; then the page uses the CPU.
+pub const START_TIMEOUT_S: i32 = 120;
+
 /// Why the WebGPU worker gave no answer.
 #[derive(Debug, thiserror::Error)]
 pub enum GpuWorkerError {
@@ -79,7 +84,8 @@ impl GpuWorker {
             Some(running) => running,
             None => {
                 let worker = Rc::new(Self::spawn()?);
-                let started = worker.send("start", &Array::new(), &Array::new())?;
+                let started =
+                    within_start_time(worker.send("start", &Array::new(), &Array::new())?);
                 SHARED.set(Some((worker.clone(), started.clone())));
                 (worker, started)
             }
@@ -295,6 +301,23 @@ impl Drop for GpuNetwork {
 
 /// The id of a message whose reply nobody waits for (calls count up from 0).
 const UNANSWERED: u32 = u32::MAX;
+
+/// `started`, or a rejection once [`START_TIMEOUT_S`] have passed without its settling.
+fn within_start_time(started: Promise) -> Promise {
+    let timeout = Promise::new(&mut |_, reject| {
+        let error = js_sys::Error::new(&format!("it did not start within {START_TIMEOUT_S} s"));
+        if let Some(window) = web_sys::window() {
+            window
+                .set_timeout_with_callback_and_timeout_and_arguments_1(
+                    &reject,
+                    START_TIMEOUT_S * 1000,
+                    &error,
+                )
+                .ok();
+        }
+    });
+    Promise::race(&Array::of2(&started, &timeout))
+}
 
 /// The message that calls the worker's `call` with `args`; its reply carries `id`.
 fn message(id: u32, call: &str, args: &Array) -> Object {
