@@ -12,6 +12,7 @@ use crate::error_text::with_causes;
 use crate::force_reading::{ABLATION_BAND_N, BandPosition, Disagreement, TrainingDomain, Verdict};
 use crate::studio::{ModelState, Studio};
 use crate::workspace::{implausible_label, parse_force_labels, parse_newtons};
+use hnet_twin::physics_force::combined_force_n;
 use hnet_units::force_magnitude as magnitude;
 
 /// Full scale of the magnitude gauge, newtons.
@@ -154,6 +155,12 @@ pub fn ForcePanel() -> impl IntoView {
                 <tbody>
                     {move || row("H-Net", estimate(), "estimate")}
                     {move || row("Physics (rod fit)", physics(), "physics")}
+                    // Fx and Fy of the physics estimate, Fz the mean of both: the most accurate
+                    // force the page has (docs/app.md, "The tip force").
+                    {move || match (estimate(), physics()) {
+                        (Some(e), Some(p)) => Some(row("Combined", Some(combined_force_n(e, p)), "combined")),
+                        _ => None,
+                    }}
                     {move || truth().map(|t| row("True (twin)", Some(t), "truth"))}
                     {move || match (estimate(), truth()) {
                         (Some(e), Some(t)) => Some(row("Error", Some([e[0] - t[0], e[1] - t[1], e[2] - t[2]]), "error")),

@@ -50,6 +50,10 @@ pub struct EvalArgs {
     /// true and the predicted masks).
     #[arg(long)]
     no_physics: bool,
+    /// Also write each pair's true force, the network's and the physics estimate from its masks
+    /// to this CSV file (a run folder keeps it as `predictions-<split>.csv` anyway).
+    #[arg(long)]
+    predictions: Option<PathBuf>,
     /// Where to compute.
     #[arg(long, value_enum, default_value = "flex")]
     backend: BackendChoice,
@@ -87,7 +91,7 @@ pub struct Evaluation {
     pub physics: Vec<PhysicsEvaluation>,
 }
 
-/// One pair's true and predicted force, for `hnet report`.
+/// One pair's true and predicted force, for `hnet report` and the predictions file.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ForcePrediction {
     /// The pair's id.
@@ -96,6 +100,26 @@ pub struct ForcePrediction {
     pub truth: [f32; 3],
     /// Predicted force (N).
     pub predicted: [f32; 3],
+    /// The physics estimate from the network's own masks (the twin's rod fitted to the catheter
+    /// they show, N), when the physics check ran and the pair could be fitted.
+    #[serde(default)]
+    pub physics: Option<[f32; 3]>,
+}
+
+/// The predictions file: one line per pair, its true force, the network's and the physics
+/// estimate from the network's masks (empty where there is none), N.
+pub fn predictions_csv(predictions: &[ForcePrediction]) -> String {
+    let mut csv =
+        String::from("id,fx,fy,fz,fx_pred,fy_pred,fz_pred,fx_physics,fy_physics,fz_physics\n");
+    for p in predictions {
+        let physics = p
+            .physics
+            .map_or_else(|| ",,".to_string(), |[x, y, z]| format!("{x},{y},{z}"));
+        let [tx, ty, tz] = p.truth;
+        let [px, py, pz] = p.predicted;
+        let _ = writeln!(csv, "{},{tx},{ty},{tz},{px},{py},{pz},{physics}", p.id);
+    }
+    csv
 }
 
 /// A trained model loaded from a run folder.
@@ -288,6 +312,7 @@ pub fn evaluate(
                     id: item.id.to_string(),
                     truth: item.force_n,
                     predicted: force,
+                    physics: None,
                 });
             }
         },
@@ -306,6 +331,14 @@ pub fn evaluate(
         Some(records) => physics_checks(&dataset, split, model, &pairs.items, &predicted, records)?,
         None => Vec::new(),
     };
+    // The physics estimate from the network's masks, beside its force (both are per item).
+    if let Some(from_network) = physics.iter().find(|c| c.masks == MaskOrigin::Predicted)
+        && from_network.force_per_pair_n.len() == predictions.len()
+    {
+        for (prediction, physics) in predictions.iter_mut().zip(&from_network.force_per_pair_n) {
+            prediction.physics = *physics;
+        }
+    }
     Ok((
         Evaluation {
             architecture: model.spec.name().to_string(),
@@ -492,21 +525,14 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         let [json, md] = run.eval_files(args.split);
         write(json, &serde_json::to_vec_pretty(&evaluation)?)?;
         write(md, markdown(&evaluation).as_bytes())?;
-        let mut csv = String::from("id,fx,fy,fz,fx_pred,fy_pred,fz_pred\n");
-        for p in &predictions {
-            let _ = writeln!(
-                csv,
-                "{},{},{},{},{},{},{}",
-                p.id,
-                p.truth[0],
-                p.truth[1],
-                p.truth[2],
-                p.predicted[0],
-                p.predicted[1],
-                p.predicted[2]
-            );
-        }
-        write(run.predictions_file(args.split), csv.as_bytes())?;
+        write(
+            run.predictions_file(args.split),
+            predictions_csv(&predictions).as_bytes(),
+        )?;
+    }
+    if let Some(path) = &args.predictions {
+        std::fs::write(path, predictions_csv(&predictions))
+            .with_context(|| format!("cannot write '{}'", path.display()))?;
     }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&evaluation)?);

@@ -10,7 +10,7 @@ use std::time::Instant;
 use hnet_model::metrics::{AXES, ForceAccumulator, ForceMetrics};
 use hnet_twin::centreline::Mask;
 use hnet_twin::dataset::Dataset;
-use hnet_twin::physics_force::physics_estimate;
+use hnet_twin::physics_force::{combined_force_n, physics_estimate};
 use hnet_twin::render::PROXIMAL_SHAFT_MM;
 use hnet_twin::rod;
 use hnet_twin::rod_fit::distances_to_rod;
@@ -62,8 +62,16 @@ pub struct PhysicsEvaluation {
     pub force: Option<ForceMetrics>,
     /// Table I of the network's force on the same pairs, when it estimates one.
     pub network_force: Option<ForceMetrics>,
+    /// Table I of the network's force combined with the physics estimate on the same pairs
+    /// (`hnet_twin::physics_force::combined_force_n`), when it estimates one.
+    #[serde(default)]
+    pub combined_force: Option<ForceMetrics>,
     /// Wall time per pair (centrelines, reconstruction and fit; all cores), ms.
     pub millis_per_pair: f64,
+    /// The fitted rod's tip force per pair, in the order of the pairs checked (`None` where the
+    /// pair could not be fitted), N. Kept out of the JSON; `hnet eval` writes it per pair.
+    #[serde(skip)]
+    pub force_per_pair_n: Vec<Option<[f32; 3]>>,
 }
 
 /// One pair to check.
@@ -134,7 +142,11 @@ pub fn check(
     let millis_per_pair = started.elapsed().as_secs_f64() * 1e3 / pairs.len().max(1) as f64;
 
     let mut failures = BTreeMap::new();
-    let (mut physics, mut network) = (ForceAccumulator::new(), ForceAccumulator::new());
+    let (mut physics, mut network, mut combined) = (
+        ForceAccumulator::new(),
+        ForceAccumulator::new(),
+        ForceAccumulator::new(),
+    );
     let (mut centreline, mut tip) = (Vec::new(), Vec::new());
     for (pair, outcome) in pairs.iter().zip(&outcomes) {
         match outcome {
@@ -146,6 +158,7 @@ pub fn check(
                 physics.push(*force_n, pair.truth_n);
                 if let Some(n) = pair.network_n {
                     network.push(n, pair.truth_n);
+                    combined.push(combined_force_n(n, *force_n), pair.truth_n);
                 }
                 centreline.extend(*centreline_error_mm);
                 tip.extend(*tip_error_mm);
@@ -164,7 +177,15 @@ pub fn check(
         tip_error_mm: mean(&tip),
         force: physics.finish(),
         network_force: network.finish(),
+        combined_force: combined.finish(),
         millis_per_pair,
+        force_per_pair_n: outcomes
+            .iter()
+            .map(|outcome| match outcome {
+                Outcome::Fitted { force_n, .. } => Some(*force_n),
+                Outcome::Failed(_) => None,
+            })
+            .collect(),
     }
 }
 
@@ -182,9 +203,9 @@ pub fn markdown(checks: &[PhysicsEvaluation]) -> String {
     let _ = writeln!(
         s,
         "| masks | fitted | centreline error (mm) | tip error (mm) | R² Fx / Fy / Fz, physics | \
-         R² Fx / Fy / Fz, network, same pairs | failures | ms per pair |"
+         R² Fx / Fy / Fz, network, same pairs | R² Fx / Fy / Fz, combined | failures | ms per pair |"
     );
-    let _ = writeln!(s, "| --- | --- | --- | --- | --- | --- | --- | --- |");
+    let _ = writeln!(s, "| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     let r2 = |m: &Option<ForceMetrics>| match m {
         Some(m) => AXES
             .iter()
@@ -207,7 +228,7 @@ pub fn markdown(checks: &[PhysicsEvaluation]) -> String {
         };
         let _ = writeln!(
             s,
-            "| {} ({}) | {} of {} | {} | {} | {} | {} | {} | {:.0} |",
+            "| {} ({}) | {} of {} | {} | {} | {} | {} | {} | {} | {:.0} |",
             c.masks.describe(),
             c.size,
             c.fitted,
@@ -216,6 +237,7 @@ pub fn markdown(checks: &[PhysicsEvaluation]) -> String {
             mm(c.tip_error_mm),
             r2(&c.force),
             r2(&c.network_force),
+            r2(&c.combined_force),
             failures,
             c.millis_per_pair
         );

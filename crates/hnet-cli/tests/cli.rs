@@ -120,6 +120,13 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
             .map(|n| n.as_u64().unwrap())
             .sum();
         assert_eq!(check["fitted"].as_u64().unwrap() + failed, 40, "{check}");
+        // H-Net's force combined with the physics estimate, on the same fitted pairs.
+        if check["fitted"].as_u64().unwrap() > 0 {
+            assert_eq!(
+                check["combined_force"]["samples"], check["fitted"],
+                "{check}"
+            );
+        }
     }
     assert!(eval["force"]["axes"][2]["rmse"].as_f64().unwrap() >= 0.0);
     assert!(eval["segmentation"][1]["mdice"].as_f64().unwrap() > 0.0);
@@ -127,6 +134,7 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
 
     // Any weights file on any data: the same tables from the weights alone.
     let weights = runs.join("model.bpk");
+    let predictions = runs.with_extension("predictions.csv");
     let out = run(&[
         "eval",
         "--weights",
@@ -134,9 +142,28 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
         "--data",
         data.to_str().unwrap(),
         "--json",
+        "--predictions",
+        predictions.to_str().unwrap(),
     ]);
     let alone: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(alone["force"], eval["force"]);
+    // Per pair: the true force, the network's, and the physics estimate from its masks wherever
+    // the rod was fitted; the same file as the run folder keeps.
+    let csv = std::fs::read_to_string(&predictions).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(
+        lines.next(),
+        Some("id,fx,fy,fz,fx_pred,fy_pred,fz_pred,fx_physics,fy_physics,fz_physics")
+    );
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 40);
+    assert!(rows.iter().all(|r| r.len() == 10));
+    let with_physics = rows.iter().filter(|r| !r[7].is_empty()).count() as u64;
+    assert_eq!(with_physics, physics[1]["fitted"].as_u64().unwrap());
+    assert_eq!(
+        csv,
+        std::fs::read_to_string(runs.join("predictions-test.csv")).unwrap()
+    );
     // The force in its pooled features, beside its head's (the same test pairs).
     let out = run(&[
         "study",
