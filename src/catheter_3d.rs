@@ -25,7 +25,9 @@
 
 use hnet_twin::carm::{Biplane, CArm, CameraMatrix};
 use hnet_twin::centreline::{CentrelineError, Mask};
-use hnet_twin::physics_force::{PhysicsError, PhysicsEstimate, PhysicsSetup, physics_estimate};
+use hnet_twin::physics_force::{
+    PhysicsError, PhysicsEstimate, PhysicsSetup, combined_force_n, physics_estimate,
+};
 use hnet_twin::reconstruction::{EpipolarGeometry, ReconstructionError, clip_line};
 use hnet_twin::rod::{RodBase, RodConfig};
 use hnet_twin::rod_fit::RodFitError;
@@ -203,6 +205,16 @@ impl Catheter3d {
     /// The physics estimate in the page's force type.
     pub fn force_f32(&self) -> [f32; 3] {
         self.force_n.map(|f| f as f32)
+    }
+
+    /// The tip force combined from H-Net's estimate `hnet_n` and this physics estimate
+    /// ([`combined_force_n`]: its Fx and Fy, the mean of both Fz), when the rod was fitted to
+    /// H-Net's own masks, the case whose errors were measured (docs/results.md, "The combined
+    /// estimate"). From label masks (the twin's exact ones, or drawn ones) there is none: the
+    /// physics estimate from exact masks is far better than H-Net on every axis, and mixing in
+    /// H-Net's Fz would only make it worse.
+    pub fn combined_with(&self, hnet_n: [f32; 3]) -> Option<[f32; 3]> {
+        (self.masks == MaskSource::Predicted).then(|| combined_force_n(hnet_n, self.force_f32()))
     }
 
     /// The catheter's tip (the last centreline point), mm.
@@ -456,6 +468,12 @@ mod tests {
         let geometry = PairGeometry::of(&pair, &TwinControls::default()).unwrap();
         let c = reconstruct_pair(&geometry, &masks).unwrap();
         assert_eq!(c.masks, MaskSource::Predicted);
+        // Only a rod fitted to H-Net's masks is combined with H-Net's force.
+        let hnet = [0.3, 0.2, -0.3];
+        let physics = c.force_f32();
+        let combined = [physics[0], physics[1], (hnet[2] + physics[2]) / 2.0];
+        assert_eq!(c.combined_with(hnet), Some(combined));
+        assert_eq!(run(&pair).map(|c| c.combined_with(hnet)).ok(), Some(None));
     }
 
     #[test]

@@ -354,7 +354,7 @@ test("keyboard, screen readers and small screens", async () => {
   await page.close();
 });
 
-test("a twin pair in 3D: the catheter, the physics force beside H-Net's and combined with it, the epipolar line", async () => {
+test("a twin pair in 3D: the catheter, the physics force beside H-Net's, the epipolar line", async () => {
   const { page, errors } = await openPage(context, server.url);
   await waitForModel(page);
   await page.click("#tab-twin");
@@ -379,11 +379,9 @@ test("a twin pair in 3D: the catheter, the physics force beside H-Net's and comb
   // Beside H-Net's, with their disagreement.
   await page.waitForSelector("#force-disagreement", { timeout: 120_000 });
   assert.match(await page.textContent("#force-disagreement"), /\|ΔF\| = \d\.\d{3} N/);
-  // And the two combined: the physics estimate's Fx and Fy, the mean of both Fz.
-  const row = (name) => page.$$eval(`#force-table tr.${name} td`, (tds) => tds.map((td) => Number(td.textContent)));
-  const [hnet, combined] = [await row("estimate"), await row("combined")];
-  assert.deepEqual(combined.slice(0, 2), physics.slice(0, 2));
-  assert.ok(Math.abs(combined[2] - (hnet[2] + physics[2]) / 2) <= 0.0011, `combined ${combined}`);
+  // Fitted to the twin's exact label masks, the physics estimate stands alone: no Combined row
+  // (that is for a rod fitted to H-Net's masks; src/catheter_3d.rs tests it).
+  assert.equal(await page.$("#force-table tr.combined"), null);
   // The keys rotate the focused 3D view.
   await page.focus("#catheter-3d");
   await page.keyboard.press("ArrowRight");

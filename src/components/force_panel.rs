@@ -7,17 +7,28 @@ use leptos::prelude::*;
 
 use crate::browser::{read_file_with, take_picked_file};
 use crate::bundled::BUNDLED_FORCE_CAVEAT;
+use crate::catheter_3d::Catheter3d;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
 use crate::force_reading::{ABLATION_BAND_N, BandPosition, Disagreement, TrainingDomain, Verdict};
 use crate::studio::{ModelState, Studio};
 use crate::workspace::{implausible_label, parse_force_labels, parse_newtons};
-use hnet_twin::physics_force::combined_force_n;
 use hnet_units::force_magnitude as magnitude;
 
 /// Full scale of the magnitude gauge, newtons.
 const GAUGE_MAX_N: f32 = 0.5;
 const AXES: [&str; 3] = ["Fx", "Fy", "Fz"];
+
+/// `read` of the 3D catheter of the pair on screen, if it was reconstructed.
+fn shown_catheter<T>(studio: Studio, read: impl FnOnce(&Catheter3d) -> Option<T>) -> Option<T> {
+    let id = studio.shown_id()?;
+    studio.catheter.with(|c| {
+        c.as_ref()
+            .filter(|c| c.id == id)
+            .and_then(|c| c.result.as_ref().ok())
+            .and_then(read)
+    })
+}
 
 /// The force panel.
 #[component]
@@ -29,14 +40,11 @@ pub fn ForcePanel() -> impl IntoView {
     };
     let truth = move || studio.with_shown(|p| p.and_then(|p| p.true_force()));
     // The physics estimate of the pair on screen, if its catheter was reconstructed.
-    let physics = move || {
-        let id = studio.shown_id()?;
-        studio.catheter.with(|c| {
-            c.as_ref()
-                .filter(|c| c.id == id)
-                .and_then(|c| c.result.as_ref().ok())
-                .map(|c| c.force_f32())
-        })
+    let physics = move || shown_catheter(studio, |c| Some(c.force_f32()));
+    // H-Net's and the physics estimate combined, where the rod was fitted to H-Net's masks.
+    let combined = move || {
+        let e = estimate()?;
+        shown_catheter(studio, |c| c.combined_with(e))
     };
     let label = move || studio.with_shown(|p| p.and_then(|p| p.force_n));
     // The label being typed, per axis, exactly as typed. The fields show the pair's label when
@@ -155,12 +163,9 @@ pub fn ForcePanel() -> impl IntoView {
                 <tbody>
                     {move || row("H-Net", estimate(), "estimate")}
                     {move || row("Physics (rod fit)", physics(), "physics")}
-                    // Fx and Fy of the physics estimate, Fz the mean of both: the most accurate
-                    // force the page has (docs/app.md, "The tip force").
-                    {move || match (estimate(), physics()) {
-                        (Some(e), Some(p)) => Some(row("Combined", Some(combined_force_n(e, p)), "combined")),
-                        _ => None,
-                    }}
+                    // Fx and Fy of the physics estimate fitted to H-Net's masks, Fz the mean of
+                    // both: the most accurate force the page has there (docs/app.md).
+                    {move || combined().map(|c| row("Combined", Some(c), "combined"))}
                     {move || truth().map(|t| row("True (twin)", Some(t), "truth"))}
                     {move || match (estimate(), truth()) {
                         (Some(e), Some(t)) => Some(row("Error", Some([e[0] - t[0], e[1] - t[1], e[2] - t[2]]), "error")),
