@@ -473,7 +473,8 @@ mod tests {
         let physics = c.force_f32();
         let combined = [physics[0], physics[1], (hnet[2] + physics[2]) / 2.0];
         assert_eq!(c.combined_with(hnet), Some(combined));
-        assert_eq!(run(&pair).map(|c| c.combined_with(hnet)).ok(), Some(None));
+        let labeled = run(&twin(TwinControls::default())).unwrap();
+        assert_eq!(labeled.combined_with(hnet), None);
     }
 
     #[test]
