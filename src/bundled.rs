@@ -18,7 +18,8 @@ pub const BUNDLED_FORCE_CAVEAT: &str = "The bundled weights were trained on the 
     measurement. The physics estimate, fitted to these masks, is closer across the catheter \
     (R² 0.96 on x and y on the bench, 0.93-0.95 on radiographs) and as coarse along it (Fz: R² \
     0.53 on the bench). The two err independently along it, so the Combined row (physics Fx and \
-    Fy, the mean of both Fz; shown when the rod was fitted to these masks) is the closest: R² 0.96 / 0.96 / 0.76, RMSE 0.032 N on the bench; \
+    Fy, the mean of both Fz; shown when the rod was fitted to these masks) is the closest on twin \
+    bench pairs: R² 0.96 / 0.96 / 0.76, RMSE 0.032 N on the bench; \
     0.95 / 0.93 / 0.70 on radiographs.";
 
 /// A file of the page's own that could not be fetched.

@@ -209,10 +209,10 @@ impl Catheter3d {
 
     /// The tip force combined from H-Net's estimate `hnet_n` and this physics estimate
     /// ([`combined_force_n`]: its Fx and Fy, the mean of both Fz), when the rod was fitted to
-    /// H-Net's own masks, the case whose errors were measured (docs/results.md, "The combined
-    /// estimate"). From label masks (the twin's exact ones, or drawn ones) there is none: the
-    /// physics estimate from exact masks is far better than H-Net on every axis, and mixing in
-    /// H-Net's Fz would only make it worse.
+    /// H-Net's own masks, the case the combination is for (measured on twin bench pairs with
+    /// the exact base and catheter: docs/results.md, "The combined estimate"). From label masks
+    /// there is none: from the twin's exact masks the physics estimate is far better than H-Net
+    /// on every axis, and for drawn or accepted masks nothing was measured.
     pub fn combined_with(&self, hnet_n: [f32; 3]) -> Option<[f32; 3]> {
         (self.masks == MaskSource::Predicted).then(|| combined_force_n(hnet_n, self.force_f32()))
     }

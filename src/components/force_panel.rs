@@ -164,7 +164,7 @@ pub fn ForcePanel() -> impl IntoView {
                     {move || row("H-Net", estimate(), "estimate")}
                     {move || row("Physics (rod fit)", physics(), "physics")}
                     // Fx and Fy of the physics estimate fitted to H-Net's masks, Fz the mean of
-                    // both: the most accurate force the page has there (docs/app.md).
+                    // both (docs/app.md, "The catheter in 3D and the physics estimate").
                     {move || combined().map(|c| row("Combined", Some(c), "combined"))}
                     {move || truth().map(|t| row("True (twin)", Some(t), "truth"))}
                     {move || match (estimate(), truth()) {

@@ -63,7 +63,8 @@ pub struct PhysicsEvaluation {
     /// Table I of the network's force on the same pairs, when it estimates one.
     pub network_force: Option<ForceMetrics>,
     /// Table I of the network's force combined with the physics estimate on the same pairs
-    /// (`hnet_twin::physics_force::combined_force_n`), when it estimates one.
+    /// (`hnet_twin::physics_force::combined_force_n`), for the network's own masks when it
+    /// estimates a force.
     #[serde(default)]
     pub combined_force: Option<ForceMetrics>,
     /// Wall time per pair (centrelines, reconstruction and fit; all cores), ms.
@@ -158,7 +159,11 @@ pub fn check(
                 physics.push(*force_n, pair.truth_n);
                 if let Some(n) = pair.network_n {
                     network.push(n, pair.truth_n);
-                    combined.push(combined_force_n(n, *force_n), pair.truth_n);
+                    // Combined only with the physics estimate from the network's own masks,
+                    // the case it is for (from true masks the physics estimate is near exact).
+                    if origin == MaskOrigin::Predicted {
+                        combined.push(combined_force_n(n, *force_n), pair.truth_n);
+                    }
                 }
                 centreline.extend(*centreline_error_mm);
                 tip.extend(*tip_error_mm);
