@@ -228,6 +228,10 @@ fn every_parameter_gets_a_gradient_from_the_total_loss() {
 
 #[test]
 fn a_few_training_steps_on_a_fixed_batch_lower_the_loss() {
+    // The seed does not make this run repeatable: flex has one random generator per process,
+    // which the other tests of this binary draw from concurrently, so the weights and views
+    // differ from run to run. Enough steps for any such start (15 left one start at 0.86 of its
+    // first loss, still falling).
     let device = Device::flex().autodiff();
     device.seed(7);
     let mut model: HNet = small_config().init(&device).unwrap();
@@ -240,7 +244,7 @@ fn a_few_training_steps_on_a_fixed_batch_lower_the_loss() {
         .with_epsilon(1e-7)
         .init();
     let mut losses = Vec::new();
-    for _ in 0..15 {
+    for _ in 0..30 {
         let out = model.forward(a.clone(), b.clone());
         let loss = loss_fn.forward(&out, mask_a.clone(), mask_b.clone(), force.clone());
         losses.push(loss.total.clone().into_scalar::<f32>());
