@@ -117,11 +117,11 @@ pub fn physics_estimate(
 ///
 /// Measured on fresh bench pairs with the rod fitted to the network's own masks, the exact base
 /// and the known catheter (docs/results.md, "The combined estimate"): across the catheter the
-/// physics estimate is far better than H-Net's head (R² 0.96-0.97 against 0.63-0.69 on x and y);
-/// along it both are coarse (R² 0.49-0.51 for the head, 0.53-0.71 for physics), but their Fz
-/// errors are uncorrelated (correlation within ±0.02 for two seeds, on bench and radiograph
-/// backgrounds), so their mean has less error variance than either (half, when the two are
-/// equal): R² 0.76-0.80 on the bench.
+/// physics estimate is far better than H-Net's head (R² 0.90-0.97 against 0.63-0.69 on x and y,
+/// three seeds); along it both are coarse (R² 0.49-0.51 for the head, 0.42-0.71 for physics),
+/// but their Fz errors are uncorrelated (correlation within ±0.05 for three seeds, on bench and
+/// radiograph backgrounds), so their mean has less error variance than either (half, when the
+/// two are equal): Fz R² 0.74-0.80 on the bench.
 pub fn combined_force_n(network_n: [f32; 3], physics_n: [f32; 3]) -> [f32; 3] {
     [
         physics_n[0],
