@@ -427,7 +427,12 @@ test("a DICOM cine: sample, step, scrub, play, window/level, trace with cancel, 
   // Window/level: a drag on view A changes plane A's window only.
   const windows = await page.textContent("#cine-windows");
   await page.click("#tool-window");
+  // Drag only once the tool is on (a run dragged a frame early and changed no window).
+  await page.waitForSelector("#tool-window[aria-pressed=true]");
   await paint(page, "a", [0.3, 0.5], [0.6, 0.7]);
+  await page
+    .waitForFunction((w) => document.querySelector("#cine-windows").textContent !== w, windows, { timeout: 5_000 })
+    .catch(() => {});
   const dragged = await page.textContent("#cine-windows");
   assert.notEqual(dragged, windows);
   assert.equal(dragged.split("·")[1], windows.split("·")[1]);
