@@ -249,3 +249,64 @@ pub fn markdown(checks: &[PhysicsEvaluation]) -> String {
     }
     s
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hnet_twin::scene::{Backgrounds, Modality, TwinConfig};
+    use hnet_twin::simulate::simulate_dataset;
+
+    /// Bench pairs whose true masks stand in for a network's, its force the truth 0.05 N off on
+    /// every axis: each fitted pair gets its physics force, and the combined estimate (the
+    /// physics estimate's x and y, the mean z) is reported for the network's masks only.
+    #[test]
+    fn the_network_force_is_combined_with_the_physics_estimate_from_its_own_masks() {
+        let root = std::env::temp_dir().join(format!("hnet-physics-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let twin = TwinConfig::new(Modality::Xray2, 128);
+        let backgrounds = Backgrounds::phantom(&twin.views);
+        let names = ["phantom:+0/+0".to_string(), "phantom:+90/+0".to_string()];
+        simulate_dataset(&twin, &backgrounds, &names, 4, 11, &root, &|_| {}).unwrap();
+        let dataset = Dataset::open(&root).unwrap();
+        let loaded: Vec<_> = dataset
+            .rows
+            .iter()
+            .map(|row| dataset.load_pair(row, None).unwrap())
+            .collect();
+        let ids: Vec<&str> = dataset.rows.iter().map(|row| row.id.as_str()).collect();
+        let records = read_records(&dataset, &ids).unwrap();
+        let size = dataset.header.image_size;
+        let truth: Vec<[f32; 3]> = dataset
+            .rows
+            .iter()
+            .map(|row| row.force_n.map(|f| f as f32))
+            .collect();
+        let pairs: Vec<PairToCheck> = loaded
+            .iter()
+            .zip(&truth)
+            .map(|(pair, truth)| PairToCheck {
+                truth_n: *truth,
+                network_n: Some(truth.map(|f| f + 0.05)),
+                masks: [&pair.mask_a, &pair.mask_b].map(|m| Mask::soft(size.width, size.height, m)),
+            })
+            .collect();
+
+        let network = check(MaskOrigin::Predicted, size, &pairs, &records);
+        assert_eq!(network.fitted, 4, "{:?}", network.failures);
+        assert_eq!(network.combined_force.as_ref().unwrap().samples, 4);
+        for ((physics, pair), truth) in network.force_per_pair_n.iter().zip(&pairs).zip(&truth) {
+            let physics = physics.unwrap();
+            let combined = combined_force_n(pair.network_n.unwrap(), physics);
+            assert_eq!(combined[..2], physics[..2]);
+            // From exact masks the physics force is close, so the mean z is about 0.025 N off.
+            assert!(
+                (combined[2] - truth[2] - 0.025).abs() < 0.02,
+                "{combined:?} {truth:?}"
+            );
+        }
+        let from_truth = check(MaskOrigin::True, size, &pairs, &records);
+        assert_eq!(from_truth.fitted, 4);
+        assert!(from_truth.combined_force.is_none());
+        let _ = std::fs::remove_dir_all(&root);
+    }
+}

@@ -121,15 +121,10 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
             .sum();
         assert_eq!(check["fitted"].as_u64().unwrap() + failed, 40, "{check}");
     }
-    // H-Net's force combined with the physics estimate from its own masks, on the same fitted
-    // pairs; not from the true masks.
+    // No combined force from the true masks (the physics estimate there is near exact). This
+    // small network's masks give no centreline, so the combined force from its masks is tested
+    // in physics_check.rs on pairs that fit.
     assert!(physics[0]["combined_force"].is_null());
-    if physics[1]["fitted"].as_u64().unwrap() > 1 {
-        assert_eq!(
-            physics[1]["combined_force"]["samples"],
-            physics[1]["fitted"]
-        );
-    }
     assert!(eval["force"]["axes"][2]["rmse"].as_f64().unwrap() >= 0.0);
     assert!(eval["segmentation"][1]["mdice"].as_f64().unwrap() > 0.0);
     assert!(runs.join("eval-test.md").is_file());
