@@ -3,7 +3,8 @@
 // time of the catheter's 3D reconstruction and rod fit (centrelines, matching, triangulation,
 // Levenberg-Marquardt) per twin pair, on the page's thread (WebAssembly).
 // Also the time to the first inference: from opening the page to the model loaded on the CPU, and
-// to the twin tab's first estimate.
+// to the twin tab's first estimate; and the time from choosing the backend to its model ready
+// (for WebGPU: the worker started, the weights loaded and checked against the CPU).
 // Usage, after `trunk build`: node end2end/bench.mjs [runs]   (docs/benchmarks.md)
 // HNET_DIST=<folder> times another build (e.g. scripts/bundle-size.sh's release page).
 // HNET_WEIGHTS=<model.bpk> loads those weights through the model bar first (e.g. a 128 px model
@@ -37,6 +38,7 @@ try {
     const { page } = await openPage(context, server.url);
     await waitForModel(page);
     const modelReadyMs = performance.now() - opened;
+    const chosen = performance.now();
     await page.selectOption("#backend-choice", choice);
     // The model reloads on the chosen device; wait until the model bar names it (a browser
     // without a WebGPU adapter stays on the CPU: then "webgpu" is timed on the CPU).
@@ -47,6 +49,10 @@ try {
       })
       .catch(() => {});
     await waitForModel(page);
+    // From the choice to the model ready on that backend: on WebGPU, fetching the worker's
+    // module, setting WebGPU up in it, loading the weights and the check against the CPU.
+    const switchMs = performance.now() - chosen;
+    const check = (await page.$("#backend-check")) && (await page.textContent("#backend-check"));
     await loadWeightsFromEnv(page);
     const backend = await page.textContent("#backend");
     await page.click("#tab-twin");
@@ -70,6 +76,8 @@ try {
       min_ms: times[0],
       // Only meaningful for the first backend timed (a fresh page; the second reloads the model).
       model_ready_ms: Math.round(modelReadyMs),
+      switch_ms: Math.round(switchMs),
+      webgpu_check: check,
       first_estimate_ms: Math.round(firstEstimateMs),
     });
     await page.close();
