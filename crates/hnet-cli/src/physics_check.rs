@@ -67,6 +67,11 @@ pub struct PhysicsEvaluation {
     /// estimates a force.
     #[serde(default)]
     pub combined_force: Option<ForceMetrics>,
+    /// Pearson correlation of the network's and the physics estimate's Fz errors on the same
+    /// pairs, for the network's own masks: near 0, their mean has less error than either (what
+    /// the combined estimate relies on).
+    #[serde(default)]
+    pub fz_error_correlation: Option<f64>,
     /// Wall time per pair (centrelines, reconstruction and fit; all cores), ms.
     pub millis_per_pair: f64,
     /// The fitted rod's tip force per pair, in the order of the pairs checked (`None` where the
@@ -149,6 +154,8 @@ pub fn check(
         ForceAccumulator::new(),
     );
     let (mut centreline, mut tip) = (Vec::new(), Vec::new());
+    // (network, physics) Fz errors, N, for the correlation.
+    let mut fz_errors = Vec::new();
     for (pair, outcome) in pairs.iter().zip(&outcomes) {
         match outcome {
             Outcome::Fitted {
@@ -163,6 +170,8 @@ pub fn check(
                     // the case it is for (from true masks the physics estimate is near exact).
                     if origin == MaskOrigin::Predicted {
                         combined.push(combined_force_n(n, *force_n), pair.truth_n);
+                        let truth = f64::from(pair.truth_n[2]);
+                        fz_errors.push((f64::from(n[2]) - truth, f64::from(force_n[2]) - truth));
                     }
                 }
                 centreline.extend(*centreline_error_mm);
@@ -183,6 +192,7 @@ pub fn check(
         force: physics.finish(),
         network_force: network.finish(),
         combined_force: combined.finish(),
+        fz_error_correlation: correlation(&fz_errors),
         millis_per_pair,
         force_per_pair_n: outcomes
             .iter()
@@ -192,6 +202,24 @@ pub fn check(
             })
             .collect(),
     }
+}
+
+/// Pearson correlation of paired values; `None` for fewer than 3 pairs or a constant side.
+fn correlation(pairs: &[(f64, f64)]) -> Option<f64> {
+    if pairs.len() < 3 {
+        return None;
+    }
+    let n = pairs.len() as f64;
+    let (mx, my) = pairs
+        .iter()
+        .fold((0.0, 0.0), |(x, y), (a, b)| (x + a / n, y + b / n));
+    let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+    for (a, b) in pairs {
+        sxy += (a - mx) * (b - my);
+        sxx += (a - mx) * (a - mx);
+        syy += (b - my) * (b - my);
+    }
+    (sxx > 0.0 && syy > 0.0).then(|| sxy / (sxx * syy).sqrt())
 }
 
 /// The physics check as markdown.
@@ -294,6 +322,11 @@ mod tests {
         let network = check(MaskOrigin::Predicted, size, &pairs, &records);
         assert_eq!(network.fitted, 4, "{:?}", network.failures);
         assert_eq!(network.combined_force.as_ref().unwrap().samples, 4);
+        assert!(
+            network
+                .fz_error_correlation
+                .is_some_and(|r| (-1.0..=1.0).contains(&r))
+        );
         for ((physics, pair), truth) in network.force_per_pair_n.iter().zip(&pairs).zip(&truth) {
             let physics = physics.unwrap();
             let combined = combined_force_n(pair.network_n.unwrap(), physics);
@@ -307,6 +340,11 @@ mod tests {
         let from_truth = check(MaskOrigin::True, size, &pairs, &records);
         assert_eq!(from_truth.fitted, 4);
         assert!(from_truth.combined_force.is_none());
+        assert_eq!(from_truth.fz_error_correlation, None);
+        // The correlation itself: perfectly together, opposed, and too few pairs.
+        assert!((correlation(&[(1.0, 2.0), (2.0, 4.1), (3.0, 6.0)]).unwrap() - 1.0).abs() < 1e-3);
+        assert!((correlation(&[(1.0, 3.0), (2.0, 2.0), (3.0, 1.0)]).unwrap() + 1.0).abs() < 1e-9);
+        assert_eq!(correlation(&[(1.0, 3.0), (2.0, 2.0)]), None);
         let _ = std::fs::remove_dir_all(&root);
     }
 }
