@@ -26,7 +26,7 @@
 use hnet_twin::carm::{Biplane, CArm, CameraMatrix};
 use hnet_twin::centreline::{CentrelineError, Mask};
 use hnet_twin::physics_force::{
-    PhysicsError, PhysicsEstimate, PhysicsSetup, combined_force_n, physics_estimate,
+    ForceCombination, PhysicsError, PhysicsEstimate, PhysicsSetup, physics_estimate,
 };
 use hnet_twin::reconstruction::{EpipolarGeometry, ReconstructionError, clip_line};
 use hnet_twin::rod::{RodBase, RodConfig};
@@ -193,6 +193,9 @@ pub struct Catheter3d {
     pub tip_seen: bool,
     /// The physics estimate: the tip force of the fitted rod, N (world frame).
     pub force_n: [f64; 3],
+    /// The fit's standard error of each force component, N (a relative measure until scaled by
+    /// a [`ForceCombination`]); `None` for a singular fit.
+    pub force_sd_n: Option<[f64; 3]>,
     /// Root mean square distance of the centreline from the fitted rod, mm.
     pub rms_mm: f64,
     /// The fitted rod's centreline, mm, from its base to its tip.
@@ -207,14 +210,22 @@ impl Catheter3d {
         self.force_n.map(|f| f as f32)
     }
 
-    /// The tip force combined from H-Net's estimate `hnet_n` and this physics estimate
-    /// ([`combined_force_n`]: its Fx and Fy, the mean of both Fz), when the rod was fitted to
-    /// H-Net's own masks, the case the combination is for (measured on twin bench pairs with
-    /// the exact base and catheter: docs/results.md, "The combined estimate"). From label masks
-    /// there is none: from the twin's exact masks the physics estimate is far better than H-Net
-    /// on every axis, and for drawn or accepted masks nothing was measured.
-    pub fn combined_with(&self, hnet_n: [f32; 3]) -> Option<[f32; 3]> {
-        (self.masks == MaskSource::Predicted).then(|| combined_force_n(hnet_n, self.force_f32()))
+    /// The tip force combined from H-Net's estimate `hnet_n` and this physics estimate, each
+    /// axis weighted by the inverse of its error variance as `combination` calibrated them for
+    /// these weights ([`ForceCombination::combine`]), when the rod was fitted to H-Net's own
+    /// masks, the case the combination is for (measured on twin bench pairs with the exact base
+    /// and catheter: docs/results.md, "The combined estimate"). From label masks there is none:
+    /// from the twin's exact masks the physics estimate is far better than H-Net on every axis,
+    /// and for drawn or accepted masks nothing was measured.
+    pub fn combined_with(
+        &self,
+        hnet_n: [f32; 3],
+        combination: &ForceCombination,
+    ) -> Option<[f32; 3]> {
+        (self.masks == MaskSource::Predicted).then(|| {
+            let sd = self.force_sd_n.map(|sd| sd.map(|v| v as f32));
+            combination.combine(hnet_n, self.force_f32(), sd)
+        })
     }
 
     /// The catheter's tip (the last centreline point), mm.
@@ -329,6 +340,7 @@ pub fn reconstruct_pair(
         mean_residual_px: reconstruction.mean_residual_px,
         tip_seen: reconstruction.tip_seen,
         force_n: fit.force_n.0,
+        force_sd_n: fit.force_sd_n.map(|sd| sd.0),
         rms_mm: fit.rms_mm,
         rod_mm: fit.shape.points_mm.iter().map(|p| p.0).collect(),
         base_fitted: !geometry.base_known,
@@ -400,6 +412,7 @@ pub fn scene_points(catheter: &Catheter3d, views: &Biplane) -> Vec<[f64; 3]> {
 mod tests {
     use super::*;
     use crate::error_text::with_causes;
+    use crate::force_reading::TrainingDomain;
     use crate::twin_live::XrayBackground;
     use crate::workspace::PairSource;
     use hnet_twin::vec3::Vec3;
@@ -468,13 +481,15 @@ mod tests {
         let geometry = PairGeometry::of(&pair, &TwinControls::default()).unwrap();
         let c = reconstruct_pair(&geometry, &masks).unwrap();
         assert_eq!(c.masks, MaskSource::Predicted);
-        // Only a rod fitted to H-Net's masks is combined with H-Net's force.
+        // Only a rod fitted to H-Net's masks is combined with H-Net's force, with the fit's
+        // standard error.
         let hnet = [0.3, 0.2, -0.3];
-        let physics = c.force_f32();
-        let combined = [physics[0], physics[1], (hnet[2] + physics[2]) / 2.0];
-        assert_eq!(c.combined_with(hnet), Some(combined));
+        let combination = TrainingDomain::bundled().force_combination;
+        let sd = c.force_sd_n.expect("a fitted rod has a standard error");
+        let expected = combination.combine(hnet, c.force_f32(), Some(sd.map(|v| v as f32)));
+        assert_eq!(c.combined_with(hnet, &combination), Some(expected));
         let labeled = run(&twin(TwinControls::default())).unwrap();
-        assert_eq!(labeled.combined_with(hnet), None);
+        assert_eq!(labeled.combined_with(hnet, &combination), None);
     }
 
     #[test]

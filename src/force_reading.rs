@@ -4,6 +4,7 @@
 //! to the catheter in 3D, [`crate::catheter_3d`]) disagree beyond what their errors explain.
 
 use hnet_twin::carm::Biplane;
+use hnet_twin::physics_force::ForceCombination;
 use hnet_twin::scene::{Modality, SceneParams, SceneSampling};
 
 use crate::workspace::{LabeledPair, PairSource};
@@ -52,6 +53,9 @@ pub struct TrainingDomain {
     /// Root-mean-square length of the force error vector on held-out pairs, newtons: a bound on
     /// the RMS error of the estimated magnitude |F|.
     pub force_error_n: f32,
+    /// How these weights' force and the physics estimate from their masks are combined: each
+    /// one's error, measured on calibration pairs.
+    pub force_combination: ForceCombination,
     /// The images' look.
     pub modality: Modality,
     /// How the training scenes were drawn.
@@ -67,10 +71,18 @@ impl TrainingDomain {
     /// on phantom backgrounds, the default biplane (0°/0° and 90°/0°); other catheters, poses,
     /// angles and radiograph backgrounds taught their masks only. Their force error is √(ΣMSE)
     /// over the three axes of 480 fresh bench pairs (seed 33):
-    /// √(0.00478 + 0.00516 + 0.00375) N = 0.117 N.
+    /// √(0.00478 + 0.00516 + 0.00375) N = 0.117 N. Their combination with the physics estimate
+    /// was calibrated on the 595 fitted pairs of the val split of their training data
+    /// (`hnet eval --weights assets/hnet-cpu.bpk --data data/xray2-bench-224-s7`, docs/results.md,
+    /// "The combined estimate").
     pub fn bundled() -> Self {
         Self {
             force_error_n: 0.117,
+            force_combination: ForceCombination {
+                network_error_n: [0.0756, 0.0740, 0.0680],
+                physics_sd_scale: 2.91,
+                pairs: 595,
+            },
             modality: Modality::Xray2,
             scenes: SceneSampling::bench(),
             views_deg: [[0.0, 0.0], [90.0, 0.0]],
@@ -225,21 +237,22 @@ impl Verdict {
 pub const PHYSICS_FORCE_ERROR_N: f32 = 0.013;
 
 /// The physics estimate's per-axis mean square errors (x, y, z), N², when the rod is fitted to
-/// the bundled weights' own masks rather than exact ones: 0.00061, 0.00070 and 0.00360 over 479
-/// fresh bench pairs (`hnet eval` on `data/xray2-bench-224-s33`, docs/results.md, "The catheter
-/// in 3D"). This is how the page reads a pair without label masks.
-pub const PHYSICS_FORCE_MSE_FROM_HNET_MASKS_N2: [f32; 3] = [0.00061, 0.00070, 0.00360];
+/// the bundled weights' own masks rather than exact ones: 0.00053, 0.00061 and 0.00222 over 479
+/// fresh bench pairs (`hnet eval` on `data/xray2-bench-224-s33`, docs/results.md, "The combined
+/// estimate"; the fit holds the force to pushing, `hnet_twin::rod_fit::RodFitSettings::pushing_only`).
+/// This is how the page reads a pair without label masks.
+pub const PHYSICS_FORCE_MSE_FROM_HNET_MASKS_N2: [f32; 3] = [0.00053, 0.00061, 0.00222];
 
 /// H-Net's and the physics estimate are said to disagree when their difference |ΔF| exceeds
 /// this, newtons. If both err as measured, independently and normally (H-Net: the bundled
 /// weights' per-axis mean square errors 0.00478, 0.00516 and 0.00375 N²,
 /// [`TrainingDomain::bundled`]; the physics estimate fitted to H-Net's own masks:
-/// [`PHYSICS_FORCE_MSE_FROM_HNET_MASKS_N2`]), |ΔF| stays below 0.22 N on 95 % of pairs (0.12 N
-/// median; by sampling 400,000 draws). From exact masks ([`PHYSICS_FORCE_ERROR_N`]) it stays
-/// below 0.19 N on 95 % and below 0.22 N on 98 %. Beyond 0.22 N, one of the two is off by more
+/// [`PHYSICS_FORCE_MSE_FROM_HNET_MASKS_N2`]), |ΔF| stays below 0.21 N on 95 % of pairs (0.12 N
+/// median; by sampling 2,000,000 draws). From exact masks ([`PHYSICS_FORCE_ERROR_N`]) it stays
+/// below 0.19 N on 95 % and below 0.21 N on 97.6 %. Beyond 0.21 N, one of the two is off by more
 /// than its usual error. H-Net's coarse force dominates it: with weights ten times as accurate
 /// the tolerance would shrink accordingly.
-pub const DISAGREEMENT_TOLERANCE_N: f32 = 0.22;
+pub const DISAGREEMENT_TOLERANCE_N: f32 = 0.21;
 
 /// How far H-Net's estimate and the physics estimate are apart.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -406,7 +419,7 @@ mod tests {
         assert!((0.94..=0.96).contains(&p), "{p}");
         let exact = [f64::from(PHYSICS_FORCE_ERROR_N).powi(2) / 3.0; 3];
         let p = within(f64::from(DISAGREEMENT_TOLERANCE_N), exact);
-        assert!((0.975..=0.99).contains(&p), "{p}");
+        assert!((0.97..=0.99).contains(&p), "{p}");
     }
 
     #[test]
@@ -416,7 +429,7 @@ mod tests {
         assert!(!agree.beyond_tolerance());
         assert_eq!(
             agree.text(),
-            "H-Net and the physics estimate agree within 0.22 N: |ΔF| = 0.100 N."
+            "H-Net and the physics estimate agree within 0.21 N: |ΔF| = 0.100 N."
         );
         let apart = Disagreement::between([0.1, 0.0, -0.1], [-0.1, 0.2, -0.1]);
         assert!(apart.beyond_tolerance());

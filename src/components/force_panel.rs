@@ -41,10 +41,21 @@ pub fn ForcePanel() -> impl IntoView {
     let truth = move || studio.with_shown(|p| p.and_then(|p| p.true_force()));
     // The physics estimate of the pair on screen, if its catheter was reconstructed.
     let physics = move || shown_catheter(studio, |c| Some(c.force_f32()));
-    // H-Net's and the physics estimate combined, where the rod was fitted to H-Net's masks.
+    // What the loaded weights were trained on, when the page knows (the bundled ones).
+    let domain = move || {
+        studio.model.with(|m| match m {
+            ModelState::Ready(e) if e.origin == WeightsOrigin::Bundled => {
+                Some(TrainingDomain::bundled())
+            }
+            _ => None,
+        })
+    };
+    // H-Net's and the physics estimate combined, where the rod was fitted to H-Net's masks and
+    // the combination was calibrated for the weights (the bundled ones).
     let combined = move || {
         let e = estimate()?;
-        shown_catheter(studio, |c| c.combined_with(e))
+        let combination = domain()?.force_combination;
+        shown_catheter(studio, |c| c.combined_with(e, &combination))
     };
     let label = move || studio.with_shown(|p| p.and_then(|p| p.force_n));
     // The label being typed, per axis, exactly as typed. The fields show the pair's label when
@@ -127,15 +138,6 @@ pub fn ForcePanel() -> impl IntoView {
         });
     };
 
-    // What the loaded weights were trained on, when the page knows (the bundled ones).
-    let domain = move || {
-        studio.model.with(|m| match m {
-            ModelState::Ready(e) if e.origin == WeightsOrigin::Bundled => {
-                Some(TrainingDomain::bundled())
-            }
-            _ => None,
-        })
-    };
     // The verdict says no more than the weights' accuracy and training data support.
     let verdict_text = move |estimate: [f32; 3]| {
         let domain = domain();
@@ -163,8 +165,9 @@ pub fn ForcePanel() -> impl IntoView {
                 <tbody>
                     {move || row("H-Net", estimate(), "estimate")}
                     {move || row("Physics (rod fit)", physics(), "physics")}
-                    // Fx and Fy of the physics estimate fitted to H-Net's masks, Fz the mean of
-                    // both (docs/app.md, "The catheter in 3D and the physics estimate").
+                    // Each axis of H-Net's and the physics estimate fitted to its masks, weighted
+                    // by the inverse of its error variance (docs/app.md, "The catheter in 3D and
+                    // the physics estimate").
                     {move || combined().map(|c| row("Combined", Some(c), "combined"))}
                     {move || truth().map(|t| row("True (twin)", Some(t), "truth"))}
                     {move || match (estimate(), truth()) {

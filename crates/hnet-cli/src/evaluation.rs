@@ -21,6 +21,7 @@ use crate::data::{StereoBatcher, StereoItem, StereoSplit};
 use crate::physics_check::{self, MaskOrigin, PairToCheck, PhysicsEvaluation};
 use crate::run_dir::RunDir;
 use hnet_twin::centreline::Mask;
+use hnet_twin::physics_force::{ForceCombination, MIN_CALIBRATION_PAIRS};
 use hnet_twin::simulate::SampleRecord;
 
 #[derive(clap::Args, Debug)]
@@ -54,6 +55,11 @@ pub struct EvalArgs {
     /// to this CSV file (a run folder keeps it as `predictions-<split>.csv` anyway).
     #[arg(long)]
     predictions: Option<PathBuf>,
+    /// Dataset whose pairs calibrate the combined force (the network's error and the physics
+    /// estimate's, each axis weighted by the inverse of its error variance): its val split (its
+    /// test split when that is the split evaluated here). By default the evaluated dataset.
+    #[arg(long)]
+    calibration: Option<PathBuf>,
     /// Where to compute.
     #[arg(long, value_enum, default_value = "flex")]
     backend: BackendChoice,
@@ -89,6 +95,12 @@ pub struct Evaluation {
     /// for networks that segment (empty when skipped or when the data was not simulated).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub physics: Vec<PhysicsEvaluation>,
+    /// The split the combined force was calibrated on, when there is one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration_split: Option<String>,
+    /// The dataset it was calibrated on, when not the evaluated one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration_data: Option<PathBuf>,
 }
 
 /// One pair's true and predicted force, for `hnet report` and the predictions file.
@@ -104,20 +116,38 @@ pub struct ForcePrediction {
     /// they show, N), when the physics check ran and the pair could be fitted.
     #[serde(default)]
     pub physics: Option<[f32; 3]>,
+    /// Its fit's standard error per axis, N (a relative measure; see
+    /// `hnet_twin::rod_fit::RodFit::force_sd_n`).
+    #[serde(default)]
+    pub physics_sd: Option<[f32; 3]>,
+    /// The network's force combined with the physics estimate, N, when a combination was
+    /// calibrated.
+    #[serde(default)]
+    pub combined: Option<[f32; 3]>,
 }
 
-/// The predictions file: one line per pair, its true force, the network's and the physics
-/// estimate from the network's masks (empty where there is none), N.
+/// The predictions file: one line per pair, its true force, the network's, the physics estimate
+/// from the network's masks with its fit's standard error, and the two combined (empty where
+/// there is none), N.
 pub fn predictions_csv(predictions: &[ForcePrediction]) -> String {
-    let mut csv =
-        String::from("id,fx,fy,fz,fx_pred,fy_pred,fz_pred,fx_physics,fy_physics,fz_physics\n");
+    let mut csv = String::from(
+        "id,fx,fy,fz,fx_pred,fy_pred,fz_pred,fx_physics,fy_physics,fz_physics,\
+         fx_physics_sd,fy_physics_sd,fz_physics_sd,fx_combined,fy_combined,fz_combined\n",
+    );
+    let triple = |v: Option<[f32; 3]>| {
+        v.map_or_else(|| ",,".to_string(), |[x, y, z]| format!("{x},{y},{z}"))
+    };
     for p in predictions {
-        let physics = p
-            .physics
-            .map_or_else(|| ",,".to_string(), |[x, y, z]| format!("{x},{y},{z}"));
         let [tx, ty, tz] = p.truth;
         let [px, py, pz] = p.predicted;
-        let _ = writeln!(csv, "{},{tx},{ty},{tz},{px},{py},{pz},{physics}", p.id);
+        let _ = writeln!(
+            csv,
+            "{},{tx},{ty},{tz},{px},{py},{pz},{},{},{}",
+            p.id,
+            triple(p.physics),
+            triple(p.physics_sd),
+            triple(p.combined)
+        );
     }
     csv
 }
@@ -242,15 +272,25 @@ pub fn load_weights(
     })
 }
 
+/// What [`evaluate`] checks besides the network's own tables.
+#[derive(Debug, Clone, Default)]
+pub struct PhysicsOptions {
+    /// Run the physics check on simulated pairs.
+    pub check: bool,
+    /// The dataset that calibrates the combined force (default: the evaluated one).
+    pub calibration: Option<PathBuf>,
+}
+
 /// Evaluates a trained model on a split; returns the tables and the per-pair forces. With
-/// `physics`, simulated pairs also get the physics check.
+/// `options.check`, simulated pairs also get the physics check, and a network that segments and
+/// estimates a force the combined estimate, calibrated on other pairs ([`calibration_split`]).
 pub fn evaluate(
     model: &TrainedModel,
     data: &Path,
     split: Split,
     device: &Device,
     batch_size: usize,
-    physics: bool,
+    options: &PhysicsOptions,
 ) -> anyhow::Result<(Evaluation, Vec<ForcePrediction>)> {
     let dataset = Dataset::open(data)?;
     let pairs = StereoSplit::load(&dataset, split, model.image_size, None)?;
@@ -267,7 +307,7 @@ pub fn evaluate(
     let mut forces = ForceAccumulator::new();
     let mut predictions = Vec::new();
     let mut error = None;
-    let records = if physics {
+    let records = if options.check {
         let ids: Vec<&str> = pairs.items.iter().map(|item| &*item.id).collect();
         let records = physics_check::read_records(&dataset, &ids);
         if records.is_none() {
@@ -313,6 +353,8 @@ pub fn evaluate(
                     truth: item.force_n,
                     predicted: force,
                     physics: None,
+                    physics_sd: None,
+                    combined: None,
                 });
             }
         },
@@ -327,16 +369,50 @@ pub fn evaluate(
         both.merge(&heads[1]);
         both.finish().expect("pairs were seen")
     });
+    let calibration = match (&records, force_head_and_masks(model)) {
+        (Some(_), true) => {
+            // Another dataset calibrates on its val split; the evaluated one on the split next
+            // to the one evaluated.
+            let other = match &options.calibration {
+                Some(path) => Some(Dataset::open(path)?).filter(|d| d.root != dataset.root),
+                None => None,
+            };
+            let (calibration_data, calibration_split) = match other {
+                Some(other) => (other, Split::Val),
+                None => (dataset.clone(), calibration_split(split)),
+            };
+            calibrate_combination(
+                model,
+                &calibration_data,
+                calibration_split,
+                device,
+                batch_size,
+            )?
+        }
+        _ => None,
+    };
     let physics = match &records {
-        Some(records) => physics_checks(&dataset, split, model, &pairs.items, &predicted, records)?,
+        Some(records) => physics_checks(
+            &dataset,
+            split,
+            model,
+            &pairs.items,
+            &predicted,
+            records,
+            calibration.as_ref().map(|(_, c)| c),
+        )?,
         None => Vec::new(),
     };
     // The physics estimate from the network's masks, beside its force (both are per item).
     if let Some(from_network) = physics.iter().find(|c| c.masks == MaskOrigin::Predicted)
-        && from_network.force_per_pair_n.len() == predictions.len()
+        && from_network.force_per_pair.len() == predictions.len()
     {
-        for (prediction, physics) in predictions.iter_mut().zip(&from_network.force_per_pair_n) {
-            prediction.physics = *physics;
+        for (prediction, physics) in predictions.iter_mut().zip(&from_network.force_per_pair) {
+            prediction.physics = physics.map(|p| p.force_n);
+            prediction.physics_sd = physics.and_then(|p| p.sd_n);
+            prediction.combined = physics
+                .zip(from_network.combination)
+                .map(|(p, c)| c.combine(prediction.predicted, p.force_n, p.sd_n));
         }
     }
     Ok((
@@ -350,9 +426,105 @@ pub fn evaluate(
             segmentation,
             segmentation_mean,
             physics,
+            calibration_split: calibration.map(|(split, _)| split.name().to_string()),
+            calibration_data: calibration
+                .is_some()
+                .then(|| options.calibration.clone())
+                .flatten(),
         },
         predictions,
     ))
+}
+
+/// Whether the network both segments and estimates a force (what the combined estimate needs).
+fn force_head_and_masks(model: &TrainedModel) -> bool {
+    model.spec.heads() == (true, true)
+}
+
+/// The split a combination is calibrated on when `evaluated` is evaluated: the validation split,
+/// or the test split when the validation split is the one evaluated.
+pub fn calibration_split(evaluated: Split) -> Split {
+    match evaluated {
+        Split::Val => Split::Test,
+        Split::Train | Split::Test => Split::Val,
+    }
+}
+
+/// Calibrates the combination of the network's force and the physics estimate from its own masks
+/// ([`ForceCombination::calibrate`]) on `split` of `dataset`; `None` (with a note) where that
+/// split has too few simulated pairs.
+fn calibrate_combination(
+    model: &TrainedModel,
+    dataset: &Dataset,
+    split: Split,
+    device: &Device,
+    batch_size: usize,
+) -> anyhow::Result<Option<(Split, ForceCombination)>> {
+    let pairs = StereoSplit::load(dataset, split, model.image_size, None)?;
+    let ids: Vec<&str> = pairs.items.iter().map(|item| &*item.id).collect();
+    let records = match physics_check::read_records(dataset, &ids) {
+        Some(records) if !records.is_empty() => records,
+        _ => {
+            eprintln!(
+                "no combined force: the {} split of {} has no simulated pairs to calibrate it on",
+                split.name(),
+                dataset.root.display()
+            );
+            return Ok(None);
+        }
+    };
+    let mut predicted = Vec::with_capacity(pairs.items.len());
+    predict(
+        model,
+        &pairs.items,
+        batch_size,
+        device,
+        |_, masks, force| {
+            predicted.push(NetworkOutput { masks, force });
+        },
+    )?;
+    let to_check = network_pairs(model, &pairs.items, &predicted);
+    let check = physics_check::check(
+        MaskOrigin::Predicted,
+        model.image_size,
+        &to_check,
+        &records,
+        None,
+    );
+    let combination = ForceCombination::calibrate(&check.calibration_pairs(&to_check));
+    if combination.is_none() {
+        eprintln!(
+            "no combined force: {} of the {} pairs of the {} split of {} were fitted, at least {} \
+             needed to calibrate it",
+            check.fitted,
+            check.pairs,
+            split.name(),
+            dataset.root.display(),
+            MIN_CALIBRATION_PAIRS
+        );
+    }
+    Ok(combination.map(|c| (split, c)))
+}
+
+/// The pairs to check from the network's own masks (every item has them: the network segments).
+fn network_pairs<'a>(
+    model: &TrainedModel,
+    items: &[StereoItem],
+    predicted: &'a [NetworkOutput],
+) -> Vec<PairToCheck<'a>> {
+    let net = model.image_size;
+    predicted
+        .iter()
+        .zip(items)
+        .filter_map(|(p, item)| {
+            let [a, b] = p.masks.as_ref()?;
+            Some(PairToCheck {
+                truth_n: item.force_n,
+                network_n: p.force,
+                masks: [a, b].map(|m| Mask::soft(net.width, net.height, m)),
+            })
+        })
+        .collect()
 }
 
 /// What the network said about one pair: its masks' probabilities and its force (N), for the
@@ -371,6 +543,7 @@ fn physics_checks(
     items: &[StereoItem],
     predicted: &[NetworkOutput],
     records: &[SampleRecord],
+    combination: Option<&ForceCombination>,
 ) -> anyhow::Result<Vec<PhysicsEvaluation>> {
     use rayon::prelude::*;
     let rows: Vec<_> = dataset.split(split).collect();
@@ -408,27 +581,15 @@ fn physics_checks(
         size,
         &from_truth,
         records,
+        None,
     )];
     if predicted.iter().all(|p| p.masks.is_some()) {
-        let net = model.image_size;
-        let from_network: Vec<_> = predicted
-            .iter()
-            .enumerate()
-            .filter_map(|(i, p)| {
-                let [a, b] = p.masks.as_ref()?;
-                Some(pair(
-                    items,
-                    predicted,
-                    i,
-                    [a, b].map(|m| Mask::soft(net.width, net.height, m)),
-                ))
-            })
-            .collect();
         checks.push(physics_check::check(
             MaskOrigin::Predicted,
-            net,
-            &from_network,
+            model.image_size,
+            &network_pairs(model, items, predicted),
             records,
+            combination,
         ));
     }
     Ok(checks)
@@ -488,6 +649,23 @@ pub fn markdown(e: &Evaluation) -> String {
         }
     }
     s.push_str(&physics_check::markdown(&e.physics));
+    if let (Some(split), Some(c)) = (
+        &e.calibration_split,
+        e.physics.iter().find_map(|check| check.combination),
+    ) {
+        let [x, y, z] = c.network_error_n;
+        let _ = writeln!(
+            s,
+            "\nCombined: each axis weighted by the inverse of its error variance, calibrated on {} \
+             pairs of the {split} split{} (network error {x:.4} / {y:.4} / {z:.4} N, the fit's \
+             standard error times {:.2}).",
+            c.pairs,
+            e.calibration_data
+                .as_ref()
+                .map_or_else(String::new, |d| format!(" of {}", d.display())),
+            c.physics_sd_scale
+        );
+    }
     s
 }
 
@@ -514,7 +692,10 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         args.split,
         &device,
         args.batch_size,
-        !args.no_physics,
+        &PhysicsOptions {
+            check: !args.no_physics,
+            calibration: args.calibration.clone(),
+        },
     )?;
     // A run keeps its tables and predictions; weights on their own are only printed.
     if let Some(run) = &run {

@@ -10,7 +10,7 @@ use std::time::Instant;
 use hnet_model::metrics::{AXES, ForceAccumulator, ForceMetrics};
 use hnet_twin::centreline::Mask;
 use hnet_twin::dataset::Dataset;
-use hnet_twin::physics_force::{combined_force_n, physics_estimate};
+use hnet_twin::physics_force::{CalibrationPair, ForceCombination, physics_estimate};
 use hnet_twin::render::PROXIMAL_SHAFT_MM;
 use hnet_twin::rod;
 use hnet_twin::rod_fit::distances_to_rod;
@@ -63,10 +63,13 @@ pub struct PhysicsEvaluation {
     /// Table I of the network's force on the same pairs, when it estimates one.
     pub network_force: Option<ForceMetrics>,
     /// Table I of the network's force combined with the physics estimate on the same pairs
-    /// (`hnet_twin::physics_force::combined_force_n`), for the network's own masks when it
-    /// estimates a force.
+    /// ([`ForceCombination::combine`], with [`Self::combination`]), for the network's own masks
+    /// when it estimates a force and a combination was calibrated.
     #[serde(default)]
     pub combined_force: Option<ForceMetrics>,
+    /// The calibration the combined force used (measured on other pairs than these).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub combination: Option<ForceCombination>,
     /// Pearson correlation of the network's and the physics estimate's Fz errors on the same
     /// pairs, for the network's own masks: near 0, their mean has less error than either (what
     /// the combined estimate relies on).
@@ -75,9 +78,38 @@ pub struct PhysicsEvaluation {
     /// Wall time per pair (centrelines, reconstruction and fit; all cores), ms.
     pub millis_per_pair: f64,
     /// The fitted rod's tip force per pair, in the order of the pairs checked (`None` where the
-    /// pair could not be fitted), N. Kept out of the JSON; `hnet eval` writes it per pair.
+    /// pair could not be fitted). Kept out of the JSON; `hnet eval` writes it per pair.
     #[serde(skip)]
-    pub force_per_pair_n: Vec<Option<[f32; 3]>>,
+    pub force_per_pair: Vec<Option<PhysicsForce>>,
+}
+
+impl PhysicsEvaluation {
+    /// The calibration pairs these checks give: every fitted pair with a network force and a
+    /// standard error.
+    pub fn calibration_pairs(&self, pairs: &[PairToCheck<'_>]) -> Vec<CalibrationPair> {
+        pairs
+            .iter()
+            .zip(&self.force_per_pair)
+            .filter_map(|(pair, physics)| {
+                let physics = physics.as_ref()?;
+                Some(CalibrationPair {
+                    truth_n: pair.truth_n,
+                    network_n: pair.network_n?,
+                    physics_n: physics.force_n,
+                    physics_sd_n: physics.sd_n?,
+                })
+            })
+            .collect()
+    }
+}
+
+/// One pair's physics estimate: the fitted rod's tip force and the fit's standard error, N.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PhysicsForce {
+    /// The tip force, N.
+    pub force_n: [f32; 3],
+    /// Its standard error from the fit ([`hnet_twin::rod_fit::RodFit::force_sd_n`]), N.
+    pub sd_n: Option<[f32; 3]>,
 }
 
 /// One pair to check.
@@ -109,19 +141,21 @@ fn distance_from_truth(record: &SampleRecord, points: &[Vec3]) -> Option<f64> {
 /// What one pair gave.
 enum Outcome {
     Fitted {
-        force_n: [f32; 3],
+        physics: PhysicsForce,
         centreline_error_mm: Option<f64>,
         tip_error_mm: Option<f64>,
     },
     Failed(&'static str),
 }
 
-/// Checks `pairs` (with their `records`; masks all of `size`) from the masks `origin`.
+/// Checks `pairs` (with their `records`; masks all of `size`) from the masks `origin`; with a
+/// `combination`, the network's force is combined with the physics estimate from its own masks.
 pub fn check(
     origin: MaskOrigin,
     size: ImageSize,
     pairs: &[PairToCheck<'_>],
     records: &[SampleRecord],
+    combination: Option<&ForceCombination>,
 ) -> PhysicsEvaluation {
     let started = Instant::now();
     let outcomes: Vec<Outcome> = pairs
@@ -132,7 +166,10 @@ pub fn check(
                 Ok(estimate) => {
                     let reconstruction = &estimate.reconstruction;
                     Outcome::Fitted {
-                        force_n: estimate.fit.force_n.0.map(|f| f as f32),
+                        physics: PhysicsForce {
+                            force_n: estimate.fit.force_n.0.map(|f| f as f32),
+                            sd_n: estimate.fit.force_sd_n.map(|sd| sd.0.map(|v| v as f32)),
+                        },
                         centreline_error_mm: distance_from_truth(record, &reconstruction.points_mm),
                         tip_error_mm: reconstruction
                             .tip_seen
@@ -159,17 +196,20 @@ pub fn check(
     for (pair, outcome) in pairs.iter().zip(&outcomes) {
         match outcome {
             Outcome::Fitted {
-                force_n,
+                physics: fitted,
                 centreline_error_mm,
                 tip_error_mm,
             } => {
-                physics.push(*force_n, pair.truth_n);
+                let force_n = fitted.force_n;
+                physics.push(force_n, pair.truth_n);
                 if let Some(n) = pair.network_n {
                     network.push(n, pair.truth_n);
                     // Combined only with the physics estimate from the network's own masks,
                     // the case it is for (from true masks the physics estimate is near exact).
                     if origin == MaskOrigin::Predicted {
-                        combined.push(combined_force_n(n, *force_n), pair.truth_n);
+                        if let Some(c) = combination {
+                            combined.push(c.combine(n, force_n, fitted.sd_n), pair.truth_n);
+                        }
                         let truth = f64::from(pair.truth_n[2]);
                         fz_errors.push((f64::from(n[2]) - truth, f64::from(force_n[2]) - truth));
                     }
@@ -192,12 +232,15 @@ pub fn check(
         force: physics.finish(),
         network_force: network.finish(),
         combined_force: combined.finish(),
+        combination: combination
+            .copied()
+            .filter(|_| origin == MaskOrigin::Predicted && !combined.is_empty()),
         fz_error_correlation: correlation(&fz_errors),
         millis_per_pair,
-        force_per_pair_n: outcomes
+        force_per_pair: outcomes
             .iter()
             .map(|outcome| match outcome {
-                Outcome::Fitted { force_n, .. } => Some(*force_n),
+                Outcome::Fitted { physics, .. } => Some(*physics),
                 Outcome::Failed(_) => None,
             })
             .collect(),
@@ -285,8 +328,8 @@ mod tests {
     use hnet_twin::simulate::simulate_dataset;
 
     /// Bench pairs whose true masks stand in for a network's, its force the truth 0.05 N off on
-    /// every axis: each fitted pair gets its physics force, and the combined estimate (the
-    /// physics estimate's x and y, the mean z) is reported for the network's masks only.
+    /// every axis: each fitted pair gets its physics force and standard error, and the combined
+    /// estimate is reported for the network's masks only.
     #[test]
     fn the_network_force_is_combined_with_the_physics_estimate_from_its_own_masks() {
         let root = std::env::temp_dir().join(format!("hnet-physics-{}", std::process::id()));
@@ -319,27 +362,47 @@ mod tests {
             })
             .collect();
 
-        let network = check(MaskOrigin::Predicted, size, &pairs, &records);
+        let combination = ForceCombination {
+            network_error_n: [0.05; 3],
+            physics_sd_scale: 3.0,
+            pairs: 10,
+        };
+        let network = check(
+            MaskOrigin::Predicted,
+            size,
+            &pairs,
+            &records,
+            Some(&combination),
+        );
         assert_eq!(network.fitted, 4, "{:?}", network.failures);
         assert_eq!(network.combined_force.as_ref().unwrap().samples, 4);
+        assert_eq!(network.combination, Some(combination));
+        assert_eq!(network.calibration_pairs(&pairs).len(), 4);
         assert!(
             network
                 .fz_error_correlation
                 .is_some_and(|r| (-1.0..=1.0).contains(&r))
         );
-        for ((physics, pair), truth) in network.force_per_pair_n.iter().zip(&pairs).zip(&truth) {
+        for ((physics, pair), truth) in network.force_per_pair.iter().zip(&pairs).zip(&truth) {
             let physics = physics.unwrap();
-            let combined = combined_force_n(pair.network_n.unwrap(), physics);
-            assert_eq!(combined[..2], physics[..2]);
-            // From exact masks the physics force is close, so the mean z is about 0.025 N off.
-            assert!(
-                (combined[2] - truth[2] - 0.025).abs() < 0.02,
-                "{combined:?} {truth:?}"
-            );
+            let combined =
+                combination.combine(pair.network_n.unwrap(), physics.force_n, physics.sd_n);
+            // From exact masks the fit is tight (its standard error well under the network's
+            // 0.05 N), so the combination stays near the physics estimate and the truth.
+            for axis in 0..3 {
+                let sd = physics.sd_n.unwrap()[axis];
+                assert!(sd > 0.0 && sd * 3.0 < 0.05, "{physics:?}");
+                assert!(
+                    (combined[axis] - truth[axis]).abs() < 0.02,
+                    "{combined:?} {truth:?}"
+                );
+            }
         }
-        let from_truth = check(MaskOrigin::True, size, &pairs, &records);
+        let without = check(MaskOrigin::Predicted, size, &pairs, &records, None);
+        assert!(without.combined_force.is_none() && without.combination.is_none());
+        let from_truth = check(MaskOrigin::True, size, &pairs, &records, Some(&combination));
         assert_eq!(from_truth.fitted, 4);
-        assert!(from_truth.combined_force.is_none());
+        assert!(from_truth.combined_force.is_none() && from_truth.combination.is_none());
         assert_eq!(from_truth.fz_error_correlation, None);
         // The correlation itself: perfectly together, opposed, and too few pairs.
         assert!((correlation(&[(1.0, 2.0), (2.0, 4.1), (3.0, 6.0)]).unwrap() - 1.0).abs() < 1e-3);

@@ -20,7 +20,9 @@ use plotters::prelude::*;
 
 use crate::backend::BackendChoice;
 use crate::data::StereoSplit;
-use crate::evaluation::{ForcePrediction, TrainedModel, evaluate, load_run, predict};
+use crate::evaluation::{
+    ForcePrediction, PhysicsOptions, TrainedModel, evaluate, load_run, predict,
+};
 use crate::run_dir::{EpochRow, LOSS_METRIC, RunDir};
 use crate::training::metrics::Quantity;
 
@@ -369,7 +371,14 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     }
     let device = args.backend.device()?;
     let model = load_run(&run, &device)?;
-    let (_, predictions) = evaluate(&model, &data, Split::Test, &device, 16, false)?;
+    let (_, predictions) = evaluate(
+        &model,
+        &data,
+        Split::Test,
+        &device,
+        16,
+        &PhysicsOptions::default(),
+    )?;
     // Each figure with its file stem and size in pixels.
     let mut figures = Vec::new();
     if !predictions.is_empty() {

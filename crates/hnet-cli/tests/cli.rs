@@ -144,17 +144,21 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
     ]);
     let alone: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(alone["force"], eval["force"]);
-    // Per pair: the true force, the network's, and the physics estimate from its masks wherever
-    // the rod was fitted; the same file as the run folder keeps.
+    // Per pair: the true force, the network's, and the physics estimate from its masks with its
+    // fit's standard error wherever the rod was fitted (the combined estimate where a
+    // combination was calibrated); the same file as the run folder keeps.
     let csv = std::fs::read_to_string(&predictions).unwrap();
     let mut lines = csv.lines();
     assert_eq!(
         lines.next(),
-        Some("id,fx,fy,fz,fx_pred,fy_pred,fz_pred,fx_physics,fy_physics,fz_physics")
+        Some(
+            "id,fx,fy,fz,fx_pred,fy_pred,fz_pred,fx_physics,fy_physics,fz_physics,\
+             fx_physics_sd,fy_physics_sd,fz_physics_sd,fx_combined,fy_combined,fz_combined"
+        )
     );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 40);
-    assert!(rows.iter().all(|r| r.len() == 10));
+    assert!(rows.iter().all(|r| r.len() == 16));
     let with_physics = rows.iter().filter(|r| !r[7].is_empty()).count() as u64;
     assert_eq!(with_physics, physics[1]["fitted"].as_u64().unwrap());
     assert_eq!(

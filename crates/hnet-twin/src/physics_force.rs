@@ -3,6 +3,8 @@
 //! ([`crate::centreline`]), their epipolar matching and triangulation
 //! ([`crate::reconstruction`]), and the twin's rod fitted to the result ([`crate::rod_fit`]).
 
+use serde::{Deserialize, Serialize};
+
 use crate::carm::CameraMatrix;
 use crate::centreline::{
     Centreline, CentrelineError, CentrelineSettings, Mask, extract_centreline,
@@ -111,23 +113,114 @@ pub fn physics_estimate(
     })
 }
 
-/// The tip force combined from a network's estimate `network_n` and the physics estimate
-/// `physics_n` of the same pair (its rod fitted to the network's masks), newtons: Fx and Fy from
-/// the physics estimate, Fz the mean of both.
+/// Below this many calibration pairs no combination is calibrated.
+pub const MIN_CALIBRATION_PAIRS: usize = 10;
+
+/// The median of `|z|` for a standard normal `z`, which turns a median absolute deviation into a
+/// standard deviation.
+const NORMAL_MEDIAN_ABS: f64 = 0.674_489_75;
+
+/// How one network's tip force and the physics estimate from its own masks are weighed against
+/// each other: on each axis, each by the inverse of its error variance. The network's error is
+/// one number per axis; the physics estimate's is the rod fit's own standard error
+/// ([`crate::rod_fit::RodFit::force_sd_n`]) times [`Self::physics_sd_scale`], so it differs from
+/// pair to pair with how much the reconstructed shape says about the force.
 ///
-/// Measured on fresh bench pairs with the rod fitted to the network's own masks, the exact base
-/// and the known catheter (docs/results.md, "The combined estimate"): across the catheter the
-/// physics estimate is far better than H-Net's head (R² 0.90-0.97 against 0.63-0.69 on x and y,
-/// three seeds); along it both are coarse (R² 0.49-0.51 for the head, 0.42-0.71 for physics),
-/// but their Fz errors are uncorrelated (correlation within ±0.05 for three seeds, on bench and
-/// radiograph backgrounds), so their mean has less error variance than either (half, when the
-/// two are equal): Fz R² 0.74-0.80 on the bench.
-pub fn combined_force_n(network_n: [f32; 3], physics_n: [f32; 3]) -> [f32; 3] {
-    [
-        physics_n[0],
-        physics_n[1],
-        (network_n[2] + physics_n[2]) / 2.0,
-    ]
+/// Both are measured on calibration pairs the estimates are not evaluated on
+/// ([`Self::calibrate`]; `hnet eval` uses the split next to the one it evaluates). The two
+/// errors are independent (their Fz errors correlate within ±0.05 on every set measured,
+/// docs/results.md, "The combined estimate"), which is what inverse-variance weights need.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ForceCombination {
+    /// The network's error per axis (x, y, z), N: its root mean square error on the calibration
+    /// pairs.
+    pub network_error_n: [f32; 3],
+    /// The physics estimate's error per unit of the fit's standard error, dimensionless: the
+    /// median of `|error / standard error|` over the calibration pairs' three axes, divided by
+    /// a normal's median `|z|` (0.6745). Above 1 because the centreline's points are not
+    /// independent (about 3 on the bench).
+    pub physics_sd_scale: f32,
+    /// Calibration pairs it was measured on.
+    pub pairs: usize,
+}
+
+/// One calibration pair: the true force, the network's and the physics estimate with its fit's
+/// standard error, N.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CalibrationPair {
+    /// True tip force, N.
+    pub truth_n: [f32; 3],
+    /// The network's estimate, N.
+    pub network_n: [f32; 3],
+    /// The physics estimate from the network's masks, N.
+    pub physics_n: [f32; 3],
+    /// Its fit's standard error per axis, N.
+    pub physics_sd_n: [f32; 3],
+}
+
+impl ForceCombination {
+    /// Measures both errors on `pairs`; `None` with fewer than [`MIN_CALIBRATION_PAIRS`] pairs
+    /// (or no usable standard error).
+    pub fn calibrate(pairs: &[CalibrationPair]) -> Option<Self> {
+        if pairs.len() < MIN_CALIBRATION_PAIRS {
+            return None;
+        }
+        let network_error_n = std::array::from_fn(|axis| {
+            let mse = pairs
+                .iter()
+                .map(|p| f64::from(p.network_n[axis] - p.truth_n[axis]).powi(2))
+                .sum::<f64>()
+                / pairs.len() as f64;
+            mse.sqrt() as f32
+        });
+        let mut z: Vec<f64> = pairs
+            .iter()
+            .flat_map(|p| {
+                (0..3).filter_map(move |axis| {
+                    let sd = f64::from(p.physics_sd_n[axis]);
+                    (sd > 0.0 && sd.is_finite())
+                        .then(|| f64::from(p.physics_n[axis] - p.truth_n[axis]).abs() / sd)
+                })
+            })
+            .filter(|z| z.is_finite())
+            .collect();
+        if z.len() < MIN_CALIBRATION_PAIRS {
+            return None;
+        }
+        let middle = z.len() / 2;
+        let (_, median, _) = z.select_nth_unstable_by(middle, f64::total_cmp);
+        Some(Self {
+            network_error_n,
+            physics_sd_scale: (*median / NORMAL_MEDIAN_ABS) as f32,
+            pairs: pairs.len(),
+        })
+    }
+
+    /// The combined tip force, N: per axis, `(n/σn² + p/σp²) / (1/σn² + 1/σp²)` for the
+    /// network's `network_n` and the physics estimate `physics_n` (its fit's standard error
+    /// `physics_sd_n`, N, scaled). Without a standard error (a singular fit) both weigh the
+    /// same.
+    pub fn combine(
+        &self,
+        network_n: [f32; 3],
+        physics_n: [f32; 3],
+        physics_sd_n: Option<[f32; 3]>,
+    ) -> [f32; 3] {
+        std::array::from_fn(|axis| {
+            let network_var = f64::from(self.network_error_n[axis]).powi(2);
+            let physics_var = physics_sd_n
+                .map(|sd| f64::from(sd[axis] * self.physics_sd_scale).powi(2))
+                .filter(|v| v.is_finite())
+                .unwrap_or(network_var);
+            // The physics estimate's weight: 1 when it is exact, 0 when it says nothing.
+            let w = if network_var + physics_var > 0.0 {
+                network_var / (network_var + physics_var)
+            } else {
+                0.5
+            };
+            (w * f64::from(physics_n[axis]) + (1.0 - w) * f64::from(network_n[axis])) as f32
+        })
+    }
 }
 
 #[cfg(test)]
@@ -136,11 +229,38 @@ mod tests {
     use crate::reconstruction::tests::bench_sample;
 
     #[test]
-    fn the_combined_force_takes_x_and_y_from_physics_and_averages_z() {
-        assert_eq!(
-            combined_force_n([0.3, -0.2, -0.1], [0.1, 0.05, -0.3]),
-            [0.1, 0.05, -0.2]
-        );
+    fn the_combination_weighs_each_estimate_by_its_calibrated_error() {
+        // Network off by ±0.06 N on every axis; physics off by 3·0.6745 of its fit's standard
+        // error (0.01 N): calibrated, σ_network = 0.06 N and σ_physics = 3 · 0.01 N.
+        let pairs: Vec<CalibrationPair> = (0..20)
+            .map(|i| {
+                let sign = if i % 2 == 0 { 1.0 } else { -1.0 };
+                let truth_n = [0.1 * i as f32 / 20.0, -0.05, -0.2];
+                CalibrationPair {
+                    truth_n,
+                    network_n: truth_n.map(|t| t + 0.06 * sign),
+                    physics_n: truth_n.map(|t| t - 0.03 * 0.674_489_75 * sign),
+                    physics_sd_n: [0.01; 3],
+                }
+            })
+            .collect();
+        let c = ForceCombination::calibrate(&pairs).unwrap();
+        assert_eq!(c.pairs, 20);
+        for e in c.network_error_n {
+            assert!((e - 0.06).abs() < 1e-6, "{c:?}");
+        }
+        assert!((c.physics_sd_scale - 3.0).abs() < 1e-4, "{c:?}");
+        // Variances 0.0036 and 0.0009: the physics estimate weighs 0.8.
+        let combined = c.combine([0.1; 3], [0.0; 3], Some([0.01; 3]));
+        for v in combined {
+            assert!((v - 0.02).abs() < 1e-6, "{combined:?}");
+        }
+        // A fit whose shape says little about an axis leaves it to the network.
+        let vague = c.combine([0.1; 3], [0.0; 3], Some([0.01, 0.01, 1.0]));
+        assert!(vague[2] > 0.099, "{vague:?}");
+        // Without a standard error, both weigh the same.
+        assert_eq!(c.combine([0.1; 3], [0.0; 3], None), [0.05; 3]);
+        assert_eq!(ForceCombination::calibrate(&pairs[..9]), None);
     }
 
     #[test]

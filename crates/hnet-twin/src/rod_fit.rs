@@ -18,6 +18,20 @@
 //! Optionally, the rod tip's offset from the reconstructed tip counts too, with weight
 //! [`RodFitSettings::tip_weight`]. The objective is the weighted mean square.
 //!
+//! **Contact.** A catheter's tip force is a contact's reaction: it pushes the tip back, never
+//! pulls it on. With [`RodFitSettings::pushing_only`] (the default) a penalty row holds the
+//! force's component along the base's axis (the direction the rod leaves the base) at or below
+//! zero: [`PULL_PENALTY_MM_PER_N`] millimetres of residual per newton of pull, so that 1 mN of
+//! pull costs as much as a 0.1 mm offset of every point. On the twin's bench the axial push is
+//! what a centreline shows least, and without the constraint a fit to a network's mask now and
+//! then answers a pull of 0.1-0.5 N (docs/results.md, "The combined estimate").
+//!
+//! **Uncertainty.** [`RodFit::force_sd_n`]: the standard error of the force from the Jacobian
+//! and the residual at the solution (`s² (JᵀJ)⁻¹`, other unknowns marginalised). The
+//! centreline's points are not independent, so it ranks pairs by how much their shape says
+//! about the force rather than giving the error itself; [`crate::physics_force`] scales it on
+//! calibration pairs.
+//!
 //! **Unknowns.** The force (three components, N), and as options the base position (offset, mm),
 //! the base orientation (a rotation vector, rad) and the bending stiffness (its logarithm). The
 //! force and the stiffness cannot both be fitted without gravity: the equilibrium then depends
@@ -64,6 +78,10 @@ pub struct RodFitSettings {
     /// point (it is placed from the outline of the tip's rounded end), and on the twin's bench
     /// pairs any weight made the axial force worse (R² 0.995 at 0, 0.987 at 1, 0.955 at 5).
     pub tip_weight: f64,
+    /// Hold the force's component along the base's axis at or below zero (a contact pushes the
+    /// tip back, it does not pull it on; see the module's "Contact").
+    #[serde(default = "pushing_only_default")]
+    pub pushing_only: bool,
     /// Largest force considered, N: beyond it the rod may buckle into several shapes.
     pub max_force_n: f64,
     /// The rod's integration step during the fit, mm.
@@ -75,6 +93,14 @@ pub struct RodFitSettings {
     pub patience: usize,
 }
 
+fn pushing_only_default() -> bool {
+    true
+}
+
+/// Residual of the contact constraint per newton of pull along the base's axis, mm/N (scaled
+/// residuals are mean-square millimetres; see the module's "Contact").
+pub const PULL_PENALTY_MM_PER_N: f64 = 100.0;
+
 impl Default for RodFitSettings {
     fn default() -> Self {
         Self {
@@ -85,6 +111,7 @@ impl Default for RodFitSettings {
             fit_stiffness: false,
             proximal_shaft_mm: PROXIMAL_SHAFT_MM,
             tip_weight: 0.0,
+            pushing_only: true,
             max_force_n: 2.0,
             fit_step_mm: 1.0,
             tolerance: 1e-8,
@@ -114,6 +141,11 @@ pub struct RodFit {
     pub iterations: usize,
     /// Rod solves spent, Jacobians included.
     pub rod_solves: usize,
+    /// Standard error of each component of the fitted force, N (world frame), from the fit's
+    /// Jacobian and residual at the solution: `sqrt(diag(s² (JᵀJ)⁻¹))`, with the other fitted
+    /// unknowns (base pose, stiffness) marginalised. `None` when the force was not fitted or
+    /// `JᵀJ` is singular.
+    pub force_sd_n: Option<Vec3>,
 }
 
 /// Why no force was fitted.
@@ -283,16 +315,22 @@ impl Problem<'_> {
         Ok((model, shape))
     }
 
-    fn solve(&self, x: &DVector<f64>) -> Result<RodShape, Unsolved> {
-        self.solve_with(x, &self.config).map(|(_, shape)| shape)
+    fn solve(&self, x: &DVector<f64>) -> Result<(Model, RodShape), Unsolved> {
+        self.solve_with(x, &self.config)
     }
 
-    /// Number of residuals.
+    /// Number of residuals: three per point, three for the tip when it counts, one for the
+    /// contact constraint when it applies.
     fn rows(&self) -> usize {
-        3 * (self.target.len() + usize::from(self.tip.is_some()))
+        3 * (self.target.len() + usize::from(self.tip.is_some())) + usize::from(self.pulls())
     }
 
-    fn residuals_of(&self, shape: &RodShape) -> DVector<f64> {
+    /// Whether the contact constraint applies (the force is fitted and must push).
+    fn pulls(&self) -> bool {
+        self.settings.pushing_only && self.layout.force.is_some()
+    }
+
+    fn residuals_of(&self, shape: &RodShape, model: &Model) -> DVector<f64> {
         let curve = ModelCurve::new(shape, self.settings.proximal_shaft_mm);
         let tip_weight = self.tip.map_or(0.0, |_| self.settings.tip_weight.max(0.0));
         let scale = 1.0 / (self.target.len() as f64 + tip_weight).sqrt();
@@ -324,7 +362,39 @@ impl Problem<'_> {
                 r[at + c] = d[c];
             }
         }
+        if self.pulls() {
+            let axis = model.base.orientation.column(2);
+            let pull_n = model.force.dot(axis).max(0.0);
+            r[self.rows() - 1] = PULL_PENALTY_MM_PER_N * pull_n;
+        }
         r
+    }
+
+    /// Standard error of the fitted force at `params`, N: `s² (JᵀJ)⁻¹` over the centreline's
+    /// (and the tip's) rows, with `s²` their residual variance per degree of freedom (residuals
+    /// and Jacobian are scaled by `1/√n` here, which cancels). The contact constraint's row is
+    /// left out: this is what the shape says about the force. Points along a centreline are not
+    /// independent (they are 1 px apart and their errors are smooth), so it is a relative
+    /// measure; [`crate::physics_force::ForceCombination`] scales it on calibration pairs.
+    fn force_standard_error(&self) -> Option<Vec3> {
+        let at = self.layout.force?;
+        let shape_rows = self.rows() - usize::from(self.pulls());
+        let r = self
+            .evaluate(&self.params)?
+            .rows(0, shape_rows)
+            .into_owned();
+        let j = LeastSquaresProblem::jacobian(self)?
+            .rows(0, shape_rows)
+            .into_owned();
+        let dof = shape_rows
+            .checked_sub(self.params.len())
+            .filter(|&d| d > 0)?;
+        // Scaled residuals r = d/√n: the per-coordinate variance is s² = n‖r‖²/dof and the
+        // unscaled JᵀJ is n times this one, so s² (J_uᵀJ_u)⁻¹ = ‖r‖²/dof · (JᵀJ)⁻¹.
+        let s2 = r.norm_squared() / dof as f64;
+        let covariance = (j.transpose() * &j).try_inverse()? * s2;
+        let sd = |c: usize| covariance[(at + c, at + c)].max(0.0).sqrt();
+        Some(Vec3::new(sd(0), sd(1), sd(2)))
     }
 
     /// Residuals at `x`, or `None` where the rod cannot be solved.
@@ -335,8 +405,8 @@ impl Problem<'_> {
             return Some(r.clone());
         }
         match self.solve(x) {
-            Ok(shape) => {
-                let r = self.residuals_of(&shape);
+            Ok((model, shape)) => {
+                let r = self.residuals_of(&shape, &model);
                 *self.cache.borrow_mut() = Some((x.clone(), r.clone()));
                 Some(r)
             }
@@ -382,11 +452,11 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
             let mut probe = x.clone();
             probe[j] += h;
             let column = match self.solve(&probe) {
-                Ok(shape) => (self.residuals_of(&shape) - &r0) / h,
+                Ok((model, shape)) => (self.residuals_of(&shape, &model) - &r0) / h,
                 Err(_) => {
                     probe[j] = x[j] - h;
-                    let shape = self.solve(&probe).ok()?;
-                    (&r0 - self.residuals_of(&shape)) / h
+                    let (model, shape) = self.solve(&probe).ok()?;
+                    (&r0 - self.residuals_of(&shape, &model)) / h
                 }
             };
             jacobian.set_column(j, &column);
@@ -616,6 +686,7 @@ pub fn fit_rod(
         }
     };
     let (rms_mm, max_mm) = rms_of(&shape);
+    let force_sd_n = problem.force_standard_error();
     Ok(RodFit {
         force_n: model.force,
         base: model.base,
@@ -626,6 +697,7 @@ pub fn fit_rod(
         max_mm,
         iterations,
         rod_solves: problem.solves.get(),
+        force_sd_n,
     })
 }
 
