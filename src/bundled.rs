@@ -16,11 +16,12 @@ pub const BUNDLED_FORCE_CAVEAT: &str = "The bundled weights were trained on the 
     angles and chest radiographs) but their force only coarse (RMSE 0.068 N, R² 0.63), and \
     learned on the bench pose alone: read the arrows as a direction and a rough size, not a \
     measurement. The physics estimate, fitted to these masks, is closer across the catheter \
-    (R² 0.96 on x and y on the bench, 0.93-0.95 on radiographs) and as coarse along it (Fz: R² \
-    0.53 on the bench). The two err independently along it, so the Combined row (physics Fx and \
-    Fy, the mean of both Fz; shown when the rod was fitted to these masks) is the closest on twin \
-    bench pairs: R² 0.96 / 0.96 / 0.76, RMSE 0.032 N on the bench; \
-    0.95 / 0.93 / 0.70 on radiographs.";
+    (R² 0.96-0.97 on x and y on the bench, 0.95 on radiographs) and along it (Fz: R² 0.71 on \
+    the bench). The two err independently, so the Combined row (each axis weighted by the \
+    inverse of its measured error; shown when the rod was fitted to these masks) is the closest \
+    on twin bench pairs: R² 0.97 / 0.97 / 0.81, RMSE 0.029 N on the bench; 0.96 / 0.94 / 0.76 \
+    on radiographs. These figures assume the twin's catheter and a known base; for uploads the \
+    base is fitted and nothing was measured.";
 
 /// A file of the page's own that could not be fetched.
 #[derive(Debug, thiserror::Error)]

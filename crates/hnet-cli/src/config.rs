@@ -2,7 +2,7 @@
 //! the input size, the loss weights and the optimiser's schedule. Read by `hnet train`, and by
 //! `hnet eval` for the input size a run was trained at.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, anyhow, bail};
 use hnet_model::HNetLossConfig;
@@ -94,6 +94,11 @@ pub struct TrainingConfig {
     /// the dataset's val split.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stream: Option<TwinStreamConfig>,
+    /// Start from the network in this weights file instead of a random initialisation (a
+    /// recipe's second stage): it must hold the config's network exactly, its input size and
+    /// force statistics included. `hnet train --init FILE` sets it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub init_weights: Option<PathBuf>,
 }
 
 /// The training split's memory budget when a config sets none, MiB.

@@ -31,7 +31,7 @@ use burn::train::metric::LossMetric;
 use burn::train::metric::store::{Aggregate, Direction, Split as MetricSplit};
 use burn::train::{Learner, MetricEarlyStoppingStrategy, StoppingCondition, SupervisedTraining};
 use hnet_model::HNet;
-use hnet_model::architectures::ModelSpec;
+use hnet_model::architectures::{ModelSpec, StereoModel};
 use hnet_model::model::ForceScale;
 use hnet_twin::dataset::{Dataset, Split};
 
@@ -130,6 +130,11 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
         Ok(pairs)
     };
     let valid_split = load(Split::Val, config.max_valid_samples)?;
+    if let Some(path) = &config.init_weights
+        && !request.resume
+    {
+        initial_network(path, &config.model, &request.backend.device()?)?;
+    }
     if !request.resume {
         std::fs::create_dir_all(run.root())
             .with_context(|| format!("cannot create run folder '{}'", run.root().display()))?;
@@ -198,10 +203,14 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
     );
     let loader_valid = builder().set_device(device.clone()).build(valid_split);
 
-    let net = config
-        .model
-        .init(&device.clone().autodiff())
-        .map_err(anyhow::Error::msg)?;
+    let net = match &config.init_weights {
+        // A resumed run loads its checkpoint over whatever it starts from.
+        Some(path) if !request.resume => initial_network(path, &config.model, &device.clone().autodiff())?,
+        _ => config
+            .model
+            .init(&device.clone().autodiff())
+            .map_err(anyhow::Error::msg)?,
+    };
     let trainee = StereoTrainee::new(net, &config.model, config.loss.clone());
     let optimizer = RmsPropConfig::new()
         .with_alpha(config.rmsprop_alpha)
@@ -327,6 +336,21 @@ fn with_force_statistics(
     if !config.standardise_force || network.force_scale.is_some() {
         return Ok(config);
     }
+    // A second stage keeps the force statistics its starting network was trained with.
+    if let Some(path) = &config.init_weights {
+        let source = path.display().to_string();
+        let bytes = std::fs::read(path)
+            .with_context(|| format!("init_weights: cannot read weights file '{source}'"))?;
+        let header = hnet_model::weights::read_header(&bytes, &source)?;
+        if let Ok(ModelSpec::Hnet(start)) =
+            ModelSpec::from_settings_json(&header.architecture, &header.config_json)
+            && let Some(scale) = start.force_scale
+        {
+            network.force_scale = Some(scale);
+            config.loss.force_std_n = Some(scale.std_n);
+            return Ok(config);
+        }
+    }
     let dataset = Dataset::open(data)?;
     let scale =
         ForceScale::of(dataset.split(Split::Train).map(|row| row.force_n)).with_context(|| {
@@ -339,6 +363,29 @@ fn with_force_statistics(
     network.force_scale = Some(scale);
     config.loss.force_std_n = Some(scale.std_n);
     Ok(config)
+}
+
+/// The network of the weights file `path`, which must hold `expected` exactly (architecture,
+/// settings, input size and force statistics): a recipe's second stage starts from it.
+fn initial_network(
+    path: &Path,
+    expected: &ModelSpec,
+    device: &Device,
+) -> anyhow::Result<StereoModel> {
+    let bytes = std::fs::read(path)
+        .with_context(|| format!("init_weights: cannot read weights file '{}'", path.display()))?;
+    let (net, spec, _) =
+        StereoModel::from_weights_bytes(&bytes, device, &path.display().to_string())?;
+    if &spec != expected {
+        bail!(
+            "init_weights: weights file '{}' holds another network than the config's (its \
+             settings: {}; the config's: {})",
+            path.display(),
+            serde_json::to_string(&spec).unwrap_or_default(),
+            serde_json::to_string(expected).unwrap_or_default()
+        );
+    }
+    Ok(net)
 }
 
 /// Writes `metrics.csv` and exports the checkpoint with the lowest validation loss as
@@ -458,6 +505,10 @@ pub struct TrainArgs {
     /// measure its spread.
     #[arg(long)]
     seed: Option<u64>,
+    /// Start from the network in this weights file (the config's network exactly, its force
+    /// statistics included) instead of a random initialisation: a recipe's second stage.
+    #[arg(long)]
+    init: Option<PathBuf>,
     /// Where to compute.
     #[arg(long, value_enum, default_value = "flex")]
     backend: BackendChoice,
@@ -511,6 +562,9 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
     }
     if let Some(seed) = args.seed {
         config.seed = seed;
+    }
+    if let Some(init) = &args.init {
+        config.init_weights = Some(init.clone());
     }
     let data = args
         .data

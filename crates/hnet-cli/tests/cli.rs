@@ -367,6 +367,24 @@ fn a_time_budget_ends_training_cleanly_with_the_best_checkpoint() {
         "{metrics}"
     );
     assert!(runs.join("model.bpk").is_file());
+    // A second stage starts from the first's network (recorded in its config.json); weights of
+    // another network are refused, naming the file, before a run folder exists.
+    let first = runs.join("model.bpk");
+    succeeds(
+        train(&data, &dir.join("second"), &config)
+            .args(["--time-budget", "0s", "--init"])
+            .arg(&first),
+    );
+    assert!(dir.join("second/model.bpk").is_file());
+    let saved = std::fs::read_to_string(dir.join("second/config.json")).unwrap();
+    assert!(saved.contains("\"init_weights\""), "{saved}");
+    let wider = edited_config(&dir, "wider", |c| c["model"]["filters"] = 16.into());
+    let err = fails(train(&data, &dir.join("third"), &wider).arg("--init").arg(&first));
+    assert!(
+        err.contains("init_weights") && err.contains("model.bpk") && err.contains("another network"),
+        "{err}"
+    );
+    assert!(!dir.join("third").exists());
     // A training split larger than the memory budget is read from disk batch by batch.
     let from_disk = edited_config(&dir, "from-disk", |c| c["max_memory_mib"] = 0.into());
     let out = succeeds(train(&data, &dir.join("disk"), &from_disk).args(["--time-budget", "0s"]));

@@ -231,7 +231,7 @@ macro_rules! architectures {
             }
 
             /// Settings read from a weights file's `hnet.config`, for the architecture `name`.
-            fn from_settings_json(name: &str, json: &str) -> Result<Self, ConfigProblem> {
+            pub fn from_settings_json(name: &str, json: &str) -> Result<Self, ConfigProblem> {
                 $(if name == <$settings as Architecture>::NAME {
                     return serde_json::from_str(json)
                         .map(Self::$variant)
