@@ -205,7 +205,9 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
 
     let net = match &config.init_weights {
         // A resumed run loads its checkpoint over whatever it starts from.
-        Some(path) if !request.resume => initial_network(path, &config.model, &device.clone().autodiff())?,
+        Some(path) if !request.resume => {
+            initial_network(path, &config.model, &device.clone().autodiff())?
+        }
         _ => config
             .model
             .init(&device.clone().autodiff())
@@ -372,8 +374,12 @@ fn initial_network(
     expected: &ModelSpec,
     device: &Device,
 ) -> anyhow::Result<StereoModel> {
-    let bytes = std::fs::read(path)
-        .with_context(|| format!("init_weights: cannot read weights file '{}'", path.display()))?;
+    let bytes = std::fs::read(path).with_context(|| {
+        format!(
+            "init_weights: cannot read weights file '{}'",
+            path.display()
+        )
+    })?;
     let (net, spec, _) =
         StereoModel::from_weights_bytes(&bytes, device, &path.display().to_string())?;
     if &spec != expected {

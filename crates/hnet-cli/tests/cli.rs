@@ -379,9 +379,15 @@ fn a_time_budget_ends_training_cleanly_with_the_best_checkpoint() {
     let saved = std::fs::read_to_string(dir.join("second/config.json")).unwrap();
     assert!(saved.contains("\"init_weights\""), "{saved}");
     let wider = edited_config(&dir, "wider", |c| c["model"]["filters"] = 16.into());
-    let err = fails(train(&data, &dir.join("third"), &wider).arg("--init").arg(&first));
+    let err = fails(
+        train(&data, &dir.join("third"), &wider)
+            .arg("--init")
+            .arg(&first),
+    );
     assert!(
-        err.contains("init_weights") && err.contains("model.bpk") && err.contains("another network"),
+        err.contains("init_weights")
+            && err.contains("model.bpk")
+            && err.contains("another network"),
         "{err}"
     );
     assert!(!dir.join("third").exists());

@@ -769,6 +769,40 @@ mod tests {
         }
     }
 
+    /// A shape that only a pull explains: unconstrained, the fit finds the pull; holding the
+    /// force to pushing, it answers none along the base's axis, and its standard error is small
+    /// where the shape says much about the force.
+    #[test]
+    fn a_pull_is_held_to_zero_when_the_force_must_push() {
+        let (_, config, base, _) = bench_rod(1);
+        let axis = base.orientation.column(2);
+        let pull = axis * 0.2 + base.orientation.column(0) * 0.1;
+        let shape = rod::solve(&config, &base, pull).unwrap();
+        let free = RodFitSettings {
+            pushing_only: false,
+            ..RodFitSettings::default()
+        };
+        let fit = fit_rod(&config, &base, &seen(&shape), true, &free).unwrap();
+        assert!((fit.force_n - pull).max_abs() < 1e-3, "{:?}", fit.force_n);
+        let sd = fit.force_sd_n.unwrap();
+        assert!(sd.0.iter().all(|&v| v >= 0.0 && v < 1e-3), "{sd:?}");
+        let held = fit_rod(
+            &config,
+            &base,
+            &seen(&shape),
+            true,
+            &RodFitSettings::default(),
+        )
+        .unwrap();
+        let along = held.force_n.dot(axis);
+        assert!(
+            (0.0..0.002).contains(&along),
+            "{:?}: {along} N along",
+            held.force_n
+        );
+        assert!(held.rms_mm > fit.rms_mm);
+    }
+
     #[test]
     fn the_force_is_recovered_from_the_true_masks() {
         let size = 128;
