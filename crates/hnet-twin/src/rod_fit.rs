@@ -785,7 +785,7 @@ mod tests {
         let fit = fit_rod(&config, &base, &seen(&shape), true, &free).unwrap();
         assert!((fit.force_n - pull).max_abs() < 1e-3, "{:?}", fit.force_n);
         let sd = fit.force_sd_n.unwrap();
-        assert!(sd.0.iter().all(|&v| v >= 0.0 && v < 1e-3), "{sd:?}");
+        assert!(sd.0.iter().all(|v| (0.0..1e-3).contains(v)), "{sd:?}");
         let held = fit_rod(
             &config,
             &base,
