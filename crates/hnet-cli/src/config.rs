@@ -226,6 +226,9 @@ mod tests {
             }
         }
         names.sort();
-        assert_eq!(names, ["cpu", "cpu-ynet", "force-128", "paper"]);
+        assert_eq!(
+            names,
+            ["cpu", "cpu-ynet", "force-128", "force-128-masks", "paper"]
+        );
     }
 }
