@@ -777,23 +777,19 @@ mod tests {
         let (_, config, base, _) = bench_rod(1);
         let axis = base.orientation.column(2);
         let pull = axis * 0.2 + base.orientation.column(0) * 0.1;
-        let shape = rod::solve(&config, &base, pull).unwrap();
-        let free = RodFitSettings {
-            pushing_only: false,
-            ..RodFitSettings::default()
+        let points = seen(&rod::solve(&config, &base, pull).unwrap());
+        let fit_with = |pushing_only: bool| {
+            let settings = RodFitSettings {
+                pushing_only,
+                ..RodFitSettings::default()
+            };
+            fit_rod(&config, &base, &points, true, &settings).unwrap()
         };
-        let fit = fit_rod(&config, &base, &seen(&shape), true, &free).unwrap();
+        let fit = fit_with(false);
         assert!((fit.force_n - pull).max_abs() < 1e-3, "{:?}", fit.force_n);
         let sd = fit.force_sd_n.unwrap();
         assert!(sd.0.iter().all(|v| (0.0..1e-3).contains(v)), "{sd:?}");
-        let held = fit_rod(
-            &config,
-            &base,
-            &seen(&shape),
-            true,
-            &RodFitSettings::default(),
-        )
-        .unwrap();
+        let held = fit_with(true);
         let along = held.force_n.dot(axis);
         assert!(
             (0.0..0.002).contains(&along),
