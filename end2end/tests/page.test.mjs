@@ -115,7 +115,10 @@ test("load a pair, run H-Net, paint, undo, reload with labels kept, export the d
   await page.waitForSelector('#pairs li[data-id="pair-0001"] .flag.done[title="masks"]');
   await page.waitForFunction((n) => document.querySelector("#view-a").dataset.labelPixels === String(n), painted);
   assert.equal(await labelPixels(page, "b"), erased);
-  assert.equal(await page.inputValue("#label-fx"), "0.12");
+  // The force label comes back too (its fields fill once the restored pair is shown).
+  await page.waitForSelector('#pairs li[data-id="pair-0001"] .flag.done[title="force"]');
+  await page.waitForFunction(() => document.querySelector("#label-fx").value === "0.12", null, { timeout: 10_000 });
+  assert.equal(await page.inputValue("#label-fz"), "0.2");
 
   // Export: a zip in the dataset format.
   const [download] = await Promise.all([page.waitForEvent("download"), page.click("#export")]);
