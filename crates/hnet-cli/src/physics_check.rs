@@ -71,8 +71,8 @@ pub struct PhysicsEvaluation {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub combination: Option<ForceCombination>,
     /// Pearson correlation of the network's and the physics estimate's Fz errors on the same
-    /// pairs, for the network's own masks: near 0, their mean has less error than either (what
-    /// the combined estimate relies on).
+    /// pairs, for the network's own masks: the combined estimate's inverse-variance weights
+    /// assume it near 0.
     #[serde(default)]
     pub fz_error_correlation: Option<f64>,
     /// Wall time per pair (centrelines, reconstruction and fit; all cores), ms.

@@ -133,7 +133,7 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
     if let Some(path) = &config.init_weights
         && !request.resume
     {
-        initial_network(path, &config.model, &request.backend.device()?)?;
+        check_initial_spec(path, &config.model)?;
     }
     if !request.resume {
         std::fs::create_dir_all(run.root())
@@ -206,7 +206,14 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
     let net = match &config.init_weights {
         // A resumed run loads its checkpoint over whatever it starts from.
         Some(path) if !request.resume => {
-            initial_network(path, &config.model, &device.clone().autodiff())?
+            let bytes = std::fs::read(path).with_context(|| {
+                format!(
+                    "init_weights: cannot read weights file '{}'",
+                    path.display()
+                )
+            })?;
+            let source = path.display().to_string();
+            StereoModel::from_weights_bytes(&bytes, &device.clone().autodiff(), &source)?.0
         }
         _ => config
             .model
@@ -339,19 +346,13 @@ fn with_force_statistics(
         return Ok(config);
     }
     // A second stage keeps the force statistics its starting network was trained with.
-    if let Some(path) = &config.init_weights {
-        let source = path.display().to_string();
-        let bytes = std::fs::read(path)
-            .with_context(|| format!("init_weights: cannot read weights file '{source}'"))?;
-        let header = hnet_model::weights::read_header(&bytes, &source)?;
-        if let Ok(ModelSpec::Hnet(start)) =
-            ModelSpec::from_settings_json(&header.architecture, &header.config_json)
-            && let Some(scale) = start.force_scale
-        {
-            network.force_scale = Some(scale);
-            config.loss.force_std_n = Some(scale.std_n);
-            return Ok(config);
-        }
+    if let Some(path) = &config.init_weights
+        && let ModelSpec::Hnet(start) = initial_spec(path)?
+        && let Some(scale) = start.force_scale
+    {
+        network.force_scale = Some(scale);
+        config.loss.force_std_n = Some(scale.std_n);
+        return Ok(config);
     }
     let dataset = Dataset::open(data)?;
     let scale =
@@ -367,21 +368,21 @@ fn with_force_statistics(
     Ok(config)
 }
 
-/// The network of the weights file `path`, which must hold `expected` exactly (architecture,
-/// settings, input size and force statistics): a recipe's second stage starts from it.
-fn initial_network(
-    path: &Path,
-    expected: &ModelSpec,
-    device: &Device,
-) -> anyhow::Result<StereoModel> {
-    let bytes = std::fs::read(path).with_context(|| {
-        format!(
-            "init_weights: cannot read weights file '{}'",
-            path.display()
-        )
-    })?;
-    let (net, spec, _) =
-        StereoModel::from_weights_bytes(&bytes, device, &path.display().to_string())?;
+/// The settings of the network in the weights file `path` (its header only).
+fn initial_spec(path: &Path) -> anyhow::Result<ModelSpec> {
+    let source = path.display().to_string();
+    let bytes = std::fs::read(path)
+        .with_context(|| format!("init_weights: cannot read weights file '{source}'"))?;
+    let header = hnet_model::weights::read_header(&bytes, &source)?;
+    ModelSpec::from_settings_json(&header.architecture, &header.config_json).map_err(|e| {
+        anyhow::anyhow!("init_weights: weights file '{source}' has unreadable settings: {e}")
+    })
+}
+
+/// Refuses a weights file `path` that does not hold `expected` exactly (architecture, settings,
+/// input size and force statistics): a recipe's second stage starts from it.
+fn check_initial_spec(path: &Path, expected: &ModelSpec) -> anyhow::Result<()> {
+    let spec = initial_spec(path)?;
     if &spec != expected {
         bail!(
             "init_weights: weights file '{}' holds another network than the config's (its \
@@ -391,7 +392,7 @@ fn initial_network(
             serde_json::to_string(expected).unwrap_or_default()
         );
     }
-    Ok(net)
+    Ok(())
 }
 
 /// Writes `metrics.csv` and exports the checkpoint with the lowest validation loss as

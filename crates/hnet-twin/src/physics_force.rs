@@ -127,9 +127,10 @@ const NORMAL_MEDIAN_ABS: f64 = 0.674_489_75;
 /// pair to pair with how much the reconstructed shape says about the force.
 ///
 /// Both are measured on calibration pairs the estimates are not evaluated on
-/// ([`Self::calibrate`]; `hnet eval` uses the split next to the one it evaluates). The two
-/// errors are independent (their Fz errors correlate within ±0.05 on every set measured,
-/// docs/results.md, "The combined estimate"), which is what inverse-variance weights need.
+/// ([`Self::calibrate`]; `hnet eval` uses the split next to the one it evaluates).
+/// Inverse-variance weights assume the two errors independent; their Fz errors correlate at
+/// -0.01 to 0.15 on the sets measured (docs/results.md, "The combined estimate"), so the
+/// combined error is a little larger than the weights assume.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ForceCombination {
     /// The network's error per axis (x, y, z), N: its root mean square error on the calibration
