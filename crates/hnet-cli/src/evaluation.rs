@@ -103,7 +103,8 @@ pub struct Evaluation {
     pub calibration_data: Option<PathBuf>,
 }
 
-/// One pair's true and predicted force, for `hnet report` and the predictions file.
+/// One pair's true and predicted force (and how well its masks fit), for `hnet report` and the
+/// predictions file.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ForcePrediction {
     /// The pair's id.
@@ -124,15 +125,20 @@ pub struct ForcePrediction {
     /// calibrated.
     #[serde(default)]
     pub combined: Option<[f32; 3]>,
+    /// Catheter IoU of the pair's predicted masks in views A and B, when the network segments
+    /// (each mask thresholded as the set's IoU is; 1 where neither mask shows the catheter).
+    #[serde(default)]
+    pub catheter_iou: Option<[f64; 2]>,
 }
 
 /// The predictions file: one line per pair, its true force, the network's, the physics estimate
 /// from the network's masks with its fit's standard error, and the two combined (empty where
-/// there is none), N.
+/// there is none), N; then the catheter IoU of its masks in views A and B (empty without masks).
 pub fn predictions_csv(predictions: &[ForcePrediction]) -> String {
     let mut csv = String::from(
         "id,fx,fy,fz,fx_pred,fy_pred,fz_pred,fx_physics,fy_physics,fz_physics,\
-         fx_physics_sd,fy_physics_sd,fz_physics_sd,fx_combined,fy_combined,fz_combined\n",
+         fx_physics_sd,fy_physics_sd,fz_physics_sd,fx_combined,fy_combined,fz_combined,\
+         catheter_iou_a,catheter_iou_b\n",
     );
     let triple = |v: Option<[f32; 3]>| {
         v.map_or_else(|| ",,".to_string(), |[x, y, z]| format!("{x},{y},{z}"))
@@ -142,11 +148,13 @@ pub fn predictions_csv(predictions: &[ForcePrediction]) -> String {
         let [px, py, pz] = p.predicted;
         let _ = writeln!(
             csv,
-            "{},{tx},{ty},{tz},{px},{py},{pz},{},{},{}",
+            "{},{tx},{ty},{tz},{px},{py},{pz},{},{},{},{}",
             p.id,
             triple(p.physics),
             triple(p.physics_sd),
-            triple(p.combined)
+            triple(p.combined),
+            p.catheter_iou
+                .map_or_else(|| ",".to_string(), |[a, b]| format!("{a:.4},{b:.4}"))
         );
     }
     csv
@@ -334,17 +342,30 @@ pub fn evaluate(
                     force,
                 });
             }
+            let mut catheter_iou = None;
             if let Some(masks) = masks {
-                for ((head, predicted), target) in heads
+                let mut iou = [1.0; 2];
+                for (((head, predicted), target), iou) in heads
                     .iter_mut()
                     .zip(masks)
                     .zip([&item.mask_a, &item.mask_b])
+                    .zip(&mut iou)
                 {
                     let target: Vec<f32> = target.iter().map(|&v| f32::from(v) / 255.0).collect();
-                    if let Err(e) = head.push(&predicted, &target) {
-                        error.get_or_insert(e.to_string());
+                    let mut this_pair = SegmentationAccumulator::new();
+                    match this_pair.push(&predicted, &target) {
+                        Ok(()) => {
+                            head.merge(&this_pair);
+                            if let Some(m) = this_pair.finish() {
+                                *iou = m.catheter.iou;
+                            }
+                        }
+                        Err(e) => {
+                            error.get_or_insert(e.to_string());
+                        }
                     }
                 }
+                catheter_iou = Some(iou);
             }
             if let Some(force) = force {
                 forces.push(force, item.force_n);
@@ -355,6 +376,7 @@ pub fn evaluate(
                     physics: None,
                     physics_sd: None,
                     combined: None,
+                    catheter_iou,
                 });
             }
         },

@@ -76,7 +76,9 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {
-            eprintln!("error: {error:#}");
+            // Each cause once: a wrapper that already words its cause (a weights file's name and
+            // its problem) is not followed by the cause again.
+            eprintln!("error: {}", hnet_units::with_causes(error.as_ref()));
             ExitCode::FAILURE
         }
     }

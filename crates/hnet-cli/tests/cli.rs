@@ -146,19 +146,25 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
     assert_eq!(alone["force"], eval["force"]);
     // Per pair: the true force, the network's, and the physics estimate from its masks with its
     // fit's standard error wherever the rod was fitted (the combined estimate where a
-    // combination was calibrated); the same file as the run folder keeps.
+    // combination was calibrated), and its masks' catheter IoU in each view; the same file as
+    // the run folder keeps.
     let csv = std::fs::read_to_string(&predictions).unwrap();
     let mut lines = csv.lines();
     assert_eq!(
         lines.next(),
         Some(
             "id,fx,fy,fz,fx_pred,fy_pred,fz_pred,fx_physics,fy_physics,fz_physics,\
-             fx_physics_sd,fy_physics_sd,fz_physics_sd,fx_combined,fy_combined,fz_combined"
+             fx_physics_sd,fy_physics_sd,fz_physics_sd,fx_combined,fy_combined,fz_combined,\
+             catheter_iou_a,catheter_iou_b"
         )
     );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 40);
-    assert!(rows.iter().all(|r| r.len() == 16));
+    assert!(rows.iter().all(|r| r.len() == 18));
+    assert!(rows.iter().all(|r| r[16..].iter().all(|v| {
+        let iou: f64 = v.parse().unwrap();
+        (0.0..=1.0).contains(&iou)
+    })));
     let with_physics = rows.iter().filter(|r| !r[7].is_empty()).count() as u64;
     assert_eq!(with_physics, physics[1]["fitted"].as_u64().unwrap());
     assert_eq!(
@@ -197,7 +203,8 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
         ),
     ] {
         let stderr = fails(hnet().arg("eval").args(&args).arg("--data").arg(&data));
-        assert!(stderr.contains(message), "{stderr}");
+        // Said once: the file's name and its problem, not the problem again as its cause.
+        assert_eq!(stderr.matches(message).count(), 1, "{stderr}");
     }
     assert_eq!(std::fs::read_dir(&runs).unwrap().count(), files_before);
 
