@@ -10,9 +10,10 @@ use burn::tensor::Device;
 use hnet_model::architectures::{ModelSpec, StereoModel};
 use hnet_model::inference::host_values;
 use hnet_model::metrics::{
-    AXES, AxisMetrics, ForceAccumulator, ForceMetrics, SegmentationAccumulator, SegmentationMetrics,
+    AXES, AxisMetrics, ForceAccumulator, ForceMetrics, MASK_THRESHOLD, SegmentationAccumulator,
+    SegmentationMetrics,
 };
-use hnet_twin::dataset::{Dataset, Split};
+use hnet_twin::dataset::{Dataset, ImageRef, Split, encode_png};
 use hnet_units::ImageSize;
 use serde::{Deserialize, Serialize};
 
@@ -55,6 +56,11 @@ pub struct EvalArgs {
     /// to this CSV file (a run folder keeps it as `predictions-<split>.csv` anyway).
     #[arg(long)]
     predictions: Option<PathBuf>,
+    /// Also write each pair's predicted masks into this folder (`<id>_mask_a.png`, at the
+    /// network's input size), with error maps against the label masks (`<id>_errors_a.png`:
+    /// white the catheter found, blue missed, red spurious).
+    #[arg(long)]
+    masks: Option<PathBuf>,
     /// Dataset whose pairs calibrate the combined force (the network's error and the physics
     /// estimate's, each axis weighted by the inverse of its error variance): its val split (its
     /// test split when that is the split evaluated here). By default the evaluated dataset.
@@ -280,13 +286,65 @@ pub fn load_weights(
     })
 }
 
-/// What [`evaluate`] checks besides the network's own tables.
+/// What [`evaluate`] checks and writes besides the network's own tables.
 #[derive(Debug, Clone, Default)]
-pub struct PhysicsOptions {
+pub struct EvalOptions {
     /// Run the physics check on simulated pairs.
     pub check: bool,
     /// The dataset that calibrates the combined force (default: the evaluated one).
     pub calibration: Option<PathBuf>,
+    /// A folder to write each pair's predicted masks into, with their error maps
+    /// ([`write_predicted_masks`]).
+    pub masks: Option<PathBuf>,
+}
+
+/// Colours of an error map, RGB: the catheter found, missed, spurious; the background.
+const FOUND_RGB: [u8; 3] = [255, 255, 255];
+const MISSED_RGB: [u8; 3] = [64, 128, 255];
+const SPURIOUS_RGB: [u8; 3] = [255, 64, 64];
+const BACKGROUND_RGB: [u8; 3] = [0, 0, 0];
+
+/// Writes pair `id`'s predicted masks (catheter probabilities of views A and B, thresholded at
+/// [`MASK_THRESHOLD`]) into `folder` as `<id>_mask_a.png` and `<id>_mask_b.png`, at the
+/// network's input size, beside error maps against the label masks `targets` (`<id>_errors_a.png`:
+/// white the catheter found, blue missed, red spurious).
+pub fn write_predicted_masks(
+    folder: &Path,
+    id: &str,
+    size: ImageSize,
+    predicted: &[Vec<f32>; 2],
+    targets: [&[u8]; 2],
+) -> anyhow::Result<()> {
+    for ((view, predicted), target) in ["a", "b"].iter().zip(predicted).zip(targets) {
+        let mask: Vec<u8> = predicted
+            .iter()
+            .map(|&p| if p >= MASK_THRESHOLD { 255 } else { 0 })
+            .collect();
+        let errors: Vec<u8> = mask
+            .iter()
+            .zip(target)
+            .flat_map(
+                |(&p, &t)| match (p > 0, f32::from(t) / 255.0 >= MASK_THRESHOLD) {
+                    (true, true) => FOUND_RGB,
+                    (false, true) => MISSED_RGB,
+                    (true, false) => SPURIOUS_RGB,
+                    (false, false) => BACKGROUND_RGB,
+                },
+            )
+            .collect();
+        for (kind, pixels, channels) in [("mask", &mask, 1), ("errors", &errors, 3)] {
+            let path = folder.join(format!("{id}_{kind}_{view}.png"));
+            let png = encode_png(ImageRef {
+                width: size.width,
+                height: size.height,
+                channels,
+                pixels,
+            });
+            std::fs::write(&path, png)
+                .with_context(|| format!("cannot write '{}'", path.display()))?;
+        }
+    }
+    Ok(())
 }
 
 /// Evaluates a trained model on a split; returns the tables and the per-pair forces. With
@@ -298,7 +356,7 @@ pub fn evaluate(
     split: Split,
     device: &Device,
     batch_size: usize,
-    options: &PhysicsOptions,
+    options: &EvalOptions,
 ) -> anyhow::Result<(Evaluation, Vec<ForcePrediction>)> {
     let dataset = Dataset::open(data)?;
     let pairs = StereoSplit::load(&dataset, split, model.image_size, None)?;
@@ -328,6 +386,10 @@ pub fn evaluate(
     } else {
         None
     };
+    if let Some(folder) = &options.masks {
+        std::fs::create_dir_all(folder)
+            .with_context(|| format!("cannot create the masks folder '{}'", folder.display()))?;
+    }
     // Per pair, what the physics check reads: the predicted masks and force.
     let mut predicted: Vec<NetworkOutput> = Vec::new();
     predict(
@@ -343,6 +405,18 @@ pub fn evaluate(
                 });
             }
             let mut catheter_iou = None;
+            if let (Some(folder), Some(masks)) = (&options.masks, &masks)
+                && error.is_none()
+                && let Err(e) = write_predicted_masks(
+                    folder,
+                    &item.id,
+                    model.image_size,
+                    masks,
+                    [&item.mask_a, &item.mask_b],
+                )
+            {
+                error.get_or_insert(format!("{e:#}"));
+            }
             if let Some(masks) = masks {
                 let mut iou = [1.0; 2];
                 for (((head, predicted), target), iou) in heads
@@ -714,9 +788,10 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         args.split,
         &device,
         args.batch_size,
-        &PhysicsOptions {
+        &EvalOptions {
             check: !args.no_physics,
             calibration: args.calibration.clone(),
+            masks: args.masks.clone(),
         },
     )?;
     // A run keeps its tables and predictions; weights on their own are only printed.

@@ -20,9 +20,7 @@ use plotters::prelude::*;
 
 use crate::backend::BackendChoice;
 use crate::data::StereoSplit;
-use crate::evaluation::{
-    ForcePrediction, PhysicsOptions, TrainedModel, evaluate, load_run, predict,
-};
+use crate::evaluation::{EvalOptions, ForcePrediction, TrainedModel, evaluate, load_run, predict};
 use crate::run_dir::{EpochRow, LOSS_METRIC, RunDir};
 use crate::training::metrics::Quantity;
 
@@ -377,7 +375,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         Split::Test,
         &device,
         16,
-        &PhysicsOptions::default(),
+        &EvalOptions::default(),
     )?;
     // Each figure with its file stem and size in pixels.
     let mut figures = Vec::new();

@@ -132,6 +132,7 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
     // Any weights file on any data: the same tables from the weights alone.
     let weights = runs.join("model.bpk");
     let predictions = runs.with_extension("predictions.csv");
+    let masks = runs.with_extension("masks");
     let out = run(&[
         "eval",
         "--weights",
@@ -141,6 +142,8 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
         "--json",
         "--predictions",
         predictions.to_str().unwrap(),
+        "--masks",
+        masks.to_str().unwrap(),
     ]);
     let alone: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(alone["force"], eval["force"]);
@@ -165,6 +168,27 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
         let iou: f64 = v.parse().unwrap();
         (0.0..=1.0).contains(&iou)
     })));
+    // Each pair's predicted masks at the network's input size, and error maps whose colours
+    // count the same IoU (white found, blue missed, red spurious).
+    assert_eq!(std::fs::read_dir(&masks).unwrap().count(), 40 * 4);
+    for row in &rows {
+        for (view, iou) in ["a", "b"].iter().zip(&row[16..]) {
+            let mask = image::open(masks.join(format!("{}_mask_{view}.png", row[0]))).unwrap();
+            assert_eq!((mask.width(), mask.height()), (48, 32));
+            let errors = image::open(masks.join(format!("{}_errors_{view}.png", row[0])))
+                .unwrap()
+                .to_rgb8();
+            let count = |rgb: [u8; 3]| errors.pixels().filter(|p| p.0 == rgb).count() as f64;
+            let [found, missed, spurious] =
+                [[255, 255, 255], [64, 128, 255], [255, 64, 64]].map(count);
+            let union = found + missed + spurious;
+            let from_map = if union == 0.0 { 1.0 } else { found / union };
+            assert!(
+                (from_map - iou.parse::<f64>().unwrap()).abs() < 1e-4,
+                "{row:?}"
+            );
+        }
+    }
     let with_physics = rows.iter().filter(|r| !r[7].is_empty()).count() as u64;
     assert_eq!(with_physics, physics[1]["fitted"].as_u64().unwrap());
     assert_eq!(
