@@ -14,7 +14,8 @@
 //!   is not known exactly).
 //! - **Masks.** The label masks when the pair has them (the twin's exact masks, H-Net's masks
 //!   accepted as labels, or the user's strokes), else H-Net's predicted masks (soft, as they come
-//!   out of the network).
+//!   out of the network); or H-Net's masks also where there are labels, when the user asks
+//!   ([`FitMasks`]).
 //!
 //! Every way this can fail is a [`Catheter3dError`] naming the step and keeping the cause; the
 //! page shows it in the 3D panel and nothing else changes. Browser-free: it builds and is tested
@@ -56,6 +57,35 @@ impl MaskSource {
     }
 }
 
+/// Which masks the user asked the rod to be fitted to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FitMasks {
+    /// The label masks when the pair has them, else H-Net's.
+    #[default]
+    LabelsFirst,
+    /// H-Net's masks, also where the pair has labels (on a twin pair: the physics estimate as
+    /// a real pair would get it, and the combined estimate the bundled weights are calibrated
+    /// for).
+    Hnet,
+}
+
+impl FitMasks {
+    /// The value of its option in the page's choice.
+    pub fn key(self) -> &'static str {
+        match self {
+            Self::LabelsFirst => "labels",
+            Self::Hnet => "hnet",
+        }
+    }
+
+    /// The choice with option value `key`.
+    pub fn from_key(key: &str) -> Option<Self> {
+        [Self::LabelsFirst, Self::Hnet]
+            .into_iter()
+            .find(|c| c.key() == key)
+    }
+}
+
 /// Both views' masks at [`WORK_SIZE`], as a reconstruction reads them.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum PairMasks<'a> {
@@ -66,13 +96,15 @@ pub enum PairMasks<'a> {
 }
 
 impl<'a> PairMasks<'a> {
-    /// The masks of `pair` to reconstruct from: its labels when it has them, else `predicted`
-    /// (H-Net's masks of view A and view B), else none.
+    /// The masks of `pair` to reconstruct from, as `choice` asks: its labels when it has them
+    /// (unless `choice` asks for H-Net's), else `predicted` (H-Net's masks of view A and view
+    /// B), else none.
     pub fn of(
         pair: &'a LabeledPair,
         predicted: Option<[&'a [f32]; 2]>,
+        choice: FitMasks,
     ) -> Result<Self, Catheter3dError> {
-        if pair.masks_labeled {
+        if pair.masks_labeled && choice == FitMasks::LabelsFirst {
             Ok(Self::Labels([pair.mask(View::A), pair.mask(View::B)]))
         } else {
             predicted
@@ -430,7 +462,10 @@ mod tests {
 
     fn run(pair: &LabeledPair) -> Result<Catheter3d, Catheter3dError> {
         let geometry = PairGeometry::of(pair, &TwinControls::default())?;
-        reconstruct_pair(&geometry, &PairMasks::of(pair, None)?)
+        reconstruct_pair(
+            &geometry,
+            &PairMasks::of(pair, None, FitMasks::LabelsFirst)?,
+        )
     }
 
     #[test]
@@ -473,10 +508,11 @@ mod tests {
             .collect();
         pair.masks_labeled = false;
         assert!(matches!(
-            PairMasks::of(&pair, None),
+            PairMasks::of(&pair, None, FitMasks::LabelsFirst),
             Err(Catheter3dError::NoMasks)
         ));
-        let masks = PairMasks::of(&pair, Some([&soft[0], &soft[1]])).unwrap();
+        let masks =
+            PairMasks::of(&pair, Some([&soft[0], &soft[1]]), FitMasks::LabelsFirst).unwrap();
         assert_eq!(masks.source(), MaskSource::Predicted);
         let geometry = PairGeometry::of(&pair, &TwinControls::default()).unwrap();
         let c = reconstruct_pair(&geometry, &masks).unwrap();
@@ -490,6 +526,18 @@ mod tests {
         assert_eq!(c.combined_with(hnet, &combination), Some(expected));
         let labeled = run(&twin(TwinControls::default())).unwrap();
         assert_eq!(labeled.combined_with(hnet, &combination), None);
+        // Asked for, H-Net's masks are used also where the pair has labels; without them there
+        // is nothing to fit.
+        pair.masks_labeled = true;
+        let chosen = PairMasks::of(&pair, Some([&soft[0], &soft[1]]), FitMasks::Hnet).unwrap();
+        assert_eq!(chosen.source(), MaskSource::Predicted);
+        assert!(matches!(
+            PairMasks::of(&pair, None, FitMasks::Hnet),
+            Err(Catheter3dError::NoMasks)
+        ));
+        for choice in [FitMasks::LabelsFirst, FitMasks::Hnet] {
+            assert_eq!(FitMasks::from_key(choice.key()), Some(choice));
+        }
     }
 
     #[test]
@@ -510,7 +558,11 @@ mod tests {
         let geometry = PairGeometry::of(&pair, &TwinControls::default()).unwrap();
         assert_eq!(geometry.views, pair_views(&twin_pair));
         assert!(!geometry.base_known);
-        let c = reconstruct_pair(&geometry, &PairMasks::of(&pair, None).unwrap()).unwrap();
+        let c = reconstruct_pair(
+            &geometry,
+            &PairMasks::of(&pair, None, FitMasks::LabelsFirst).unwrap(),
+        )
+        .unwrap();
         assert!(c.base_fitted);
         assert!(c.summary().contains("base pose fitted"));
     }
@@ -598,7 +650,7 @@ mod tests {
     fn a_rod_that_does_not_fit_is_reported() {
         let pair = twin(TwinControls::default());
         let geometry = PairGeometry::of(&pair, &TwinControls::default()).unwrap();
-        let masks = PairMasks::of(&pair, None).unwrap();
+        let masks = PairMasks::of(&pair, None, FitMasks::LabelsFirst).unwrap();
         // A catheter far too stiff to bend this way within the largest force considered.
         let stiff = PairGeometry {
             rod: geometry.rod.clone().with_bending_stiffness(1e9),

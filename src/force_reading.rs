@@ -47,6 +47,26 @@ impl BandPosition {
     }
 }
 
+/// Which of the page's tip-force estimates a verdict reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Estimator {
+    /// H-Net's force head.
+    Hnet,
+    /// H-Net's force combined with the physics estimate from H-Net's own masks
+    /// ([`TrainingDomain::force_combination`]).
+    Combined,
+}
+
+impl Estimator {
+    /// Its name on the page (the force table's row).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Hnet => "H-Net",
+            Self::Combined => "Combined",
+        }
+    }
+}
+
 /// What a set of weights was trained on, and how far its force estimates are off there.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TrainingDomain {
@@ -56,6 +76,8 @@ pub struct TrainingDomain {
     /// How these weights' force and the physics estimate from their masks are combined: each
     /// one's error, measured on calibration pairs.
     pub force_combination: ForceCombination,
+    /// [`Self::force_error_n`] of that combined estimate, newtons.
+    pub combined_force_error_n: f32,
     /// The images' look.
     pub modality: Modality,
     /// How the training scenes were drawn.
@@ -71,13 +93,15 @@ impl TrainingDomain {
     /// on phantom backgrounds, the default biplane (0°/0° and 90°/0°); other catheters, poses,
     /// angles and radiograph backgrounds taught their masks only. Their force error is √(ΣMSE)
     /// over the three axes of 480 fresh bench pairs (seed 33):
-    /// √(0.00463 + 0.00502 + 0.00370) N = 0.116 N. Their combination with the physics estimate
+    /// √(0.00463 + 0.00502 + 0.00370) N = 0.116 N; their combined estimate's on the same pairs
+    /// √(0.00042 + 0.00047 + 0.00138) N = 0.048 N. Their combination with the physics estimate
     /// was calibrated on the 599 fitted pairs of the val split of their training data
     /// (`hnet eval --weights assets/hnet-cpu.bpk --data data/xray2-bench-224-s7`, docs/results.md,
     /// "The combined estimate").
     pub fn bundled() -> Self {
         Self {
             force_error_n: 0.116,
+            combined_force_error_n: 0.048,
             force_combination: ForceCombination {
                 network_error_n: [0.0732, 0.0722, 0.0678],
                 physics_sd_scale: 2.86,
@@ -87,6 +111,14 @@ impl TrainingDomain {
             scenes: SceneSampling::bench(),
             views_deg: [[0.0, 0.0], [90.0, 0.0]],
             phantom_backgrounds: true,
+        }
+    }
+
+    /// The force error of `estimator`'s estimates, newtons.
+    pub fn force_error_of(&self, estimator: Estimator) -> f32 {
+        match estimator {
+            Estimator::Hnet => self.force_error_n,
+            Estimator::Combined => self.combined_force_error_n,
         }
     }
 
@@ -183,9 +215,14 @@ pub enum Verdict {
 }
 
 impl Verdict {
-    /// The verdict on estimate `force_n` of `pair` by weights trained on `domain` (`None`:
-    /// unknown weights).
-    pub fn of(force_n: [f32; 3], domain: Option<&TrainingDomain>, pair: &LabeledPair) -> Self {
+    /// The verdict on `estimator`'s estimate `force_n` of `pair` from weights trained on
+    /// `domain` (`None`: unknown weights).
+    pub fn of(
+        force_n: [f32; 3],
+        estimator: Estimator,
+        domain: Option<&TrainingDomain>,
+        pair: &LabeledPair,
+    ) -> Self {
         let Some(domain) = domain else {
             return Self::UnknownAccuracy;
         };
@@ -194,7 +231,7 @@ impl Verdict {
             return Self::OutsideTraining(departures);
         }
         let m = magnitude(force_n);
-        let error_n = domain.force_error_n;
+        let error_n = domain.force_error_of(estimator);
         let (low, high) = (BandPosition::of(m - error_n), BandPosition::of(m + error_n));
         if low == high {
             Self::Clear {
@@ -310,7 +347,7 @@ mod tests {
         let pair = twin(TwinControls::default());
         assert_eq!(domain.departures(&pair), Vec::<String>::new());
         // 0.18 N ± 0.116 N spans the band's lower edge: no verdict.
-        let unclear = Verdict::of([0.18, 0.0, 0.0], Some(&domain), &pair);
+        let unclear = Verdict::of([0.18, 0.0, 0.0], Estimator::Hnet, Some(&domain), &pair);
         assert_eq!(unclear, Verdict::Unclear { error_n: 0.116 });
         assert!(unclear.text([0.18, 0.0, 0.0]).contains("too uncertain"));
         // Precise weights may place it.
@@ -319,12 +356,22 @@ mod tests {
             ..domain.clone()
         };
         assert_eq!(
-            Verdict::of([0.18, 0.0, 0.0], Some(&precise), &pair).text([0.18, 0.0, 0.0]),
+            Verdict::of([0.18, 0.0, 0.0], Estimator::Hnet, Some(&precise), &pair)
+                .text([0.18, 0.0, 0.0]),
             "|F| = 0.180 ± 0.010 N: within the 0.1–0.3 N ablation band"
         );
         assert_eq!(
-            Verdict::of([0.18, 0.0, 0.0], None, &pair),
+            Verdict::of([0.18, 0.0, 0.0], Estimator::Hnet, None, &pair),
             Verdict::UnknownAccuracy
+        );
+        // The combined estimate, several times closer, places the same magnitude.
+        let combined = Verdict::of([0.18, 0.0, 0.0], Estimator::Combined, Some(&domain), &pair);
+        assert_eq!(
+            combined,
+            Verdict::Clear {
+                position: BandPosition::Within,
+                error_n: domain.combined_force_error_n,
+            }
         );
     }
 
@@ -337,7 +384,7 @@ mod tests {
             view_a_deg: [30.0, 0.0],
             ..TwinControls::default()
         });
-        let verdict = Verdict::of([0.1, 0.1, 0.1], Some(&domain), &pair);
+        let verdict = Verdict::of([0.1, 0.1, 0.1], Estimator::Hnet, Some(&domain), &pair);
         let Verdict::OutsideTraining(departures) = &verdict else {
             panic!("{verdict:?}");
         };
@@ -369,7 +416,12 @@ mod tests {
             Vec::new(),
             Vec::new(),
         );
-        let verdict = Verdict::of([0.5, 0.0, 0.0], Some(&TrainingDomain::bundled()), &upload);
+        let verdict = Verdict::of(
+            [0.5, 0.0, 0.0],
+            Estimator::Combined,
+            Some(&TrainingDomain::bundled()),
+            &upload,
+        );
         assert!(
             verdict
                 .text([0.5, 0.0, 0.0])

@@ -11,7 +11,9 @@ use leptos::prelude::*;
 
 use crate::browser::{download, now_ms};
 use crate::bundled::{self, FetchError};
-use crate::catheter_3d::{Catheter3d, PairGeometry, PairMasks, pair_views, reconstruct_pair};
+use crate::catheter_3d::{
+    Catheter3d, FitMasks, PairGeometry, PairMasks, pair_views, reconstruct_pair,
+};
 use crate::cine::CinePlayer;
 use crate::compute::{self, Backend, BackendChoice};
 use crate::engine::{Engine, EngineError, Prediction, WeightsOrigin};
@@ -194,6 +196,8 @@ pub struct Studio {
     pub rerun: RwSignal<bool>,
     /// The catheter in 3D and its physics force, for the pair on screen.
     pub catheter: RwSignal<Option<CatheterReading>>,
+    /// Which masks the rod is fitted to.
+    pub fit_masks: RwSignal<FitMasks>,
     /// The pointer on a view (image pixels), whose epipolar line the other view draws.
     pub epipolar_pointer: RwSignal<Option<(View, [f64; 2])>>,
     /// The 3D view's camera (its target and framing follow the catheter).
@@ -244,6 +248,7 @@ impl Studio {
             draft_serial: RwSignal::new(0),
             rerun: RwSignal::new(false),
             catheter: RwSignal::new(None),
+            fit_masks: RwSignal::new(FitMasks::default()),
             epipolar_pointer: RwSignal::new(None),
             orbit: RwSignal::new(OrbitCamera::default()),
             cine: RwSignal::new(None),
@@ -795,7 +800,7 @@ impl Studio {
     }
 
     /// Reconstructs the catheter of the pair on screen in 3D and fits the rod to it (the label
-    /// masks, else H-Net's), into [`Studio::catheter`]. A failure is kept there as its message;
+    /// masks, else H-Net's, or H-Net's as [`Studio::fit_masks`] asks), into [`Studio::catheter`]. A failure is kept there as its message;
     /// nothing else changes.
     pub fn reconstruct_shown(&self) {
         let shown = self
@@ -811,12 +816,13 @@ impl Studio {
                 .map(|p| (p.mask_a.clone(), p.mask_b.clone()))
         });
         let controls = self.twin.get_untracked();
+        let choice = self.fit_masks.get_untracked();
         let clock = web_sys::window().and_then(|w| w.performance());
         let now = || clock.as_ref().map_or(0.0, |p| p.now());
         let start = now();
         let result = PairGeometry::of(&pair, &controls).and_then(|geometry| {
             let predicted = prediction.as_ref().map(|(a, b)| [&a[..], &b[..]]);
-            reconstruct_pair(&geometry, &PairMasks::of(&pair, predicted)?)
+            reconstruct_pair(&geometry, &PairMasks::of(&pair, predicted, choice)?)
         });
         let millis = now() - start;
         self.catheter.set(Some(CatheterReading {
@@ -970,8 +976,8 @@ pub fn load_model(studio: Studio, weights: Option<(Rc<[u8]>, String, WeightsOrig
     });
 }
 
-/// Keeps [`Studio::catheter`] up to date: after the pair on screen, its masks, H-Net's masks or
-/// the twin's catheter settings change (not during a brush stroke), the catheter is
+/// Keeps [`Studio::catheter`] up to date: after the pair on screen, its masks, H-Net's masks,
+/// the masks the rod is to be fitted to or the twin's catheter settings change (not during a brush stroke), the catheter is
 /// reconstructed again, once the changes have paused for a moment (a slider being dragged
 /// renders many pairs).
 pub fn install_reconstruction(studio: Studio) {
@@ -980,6 +986,7 @@ pub fn install_reconstruction(studio: Studio) {
         let shown = studio.shown_id();
         studio.predictions.track();
         studio.twin.track();
+        studio.fit_masks.track();
         if studio.workspace.with(Workspace::is_stroking) {
             return;
         }

@@ -386,6 +386,19 @@ test("a twin pair in 3D: the catheter, the physics force beside H-Net's, the epi
   // Fitted to the twin's exact label masks, the physics estimate stands alone: no Combined row
   // (that is for a rod fitted to H-Net's masks; src/catheter_3d.rs tests it).
   assert.equal(await page.$("#force-table tr.combined"), null);
+  assert.equal(await page.getAttribute("#force-verdict", "data-estimator"), "H-Net");
+  // Fitted to H-Net's masks instead (as a real pair would be), the Combined row appears, the
+  // bundled weights' calibration applied, and the verdict reads it with its smaller error
+  // (`combined_force_error_n`, src/force_reading.rs).
+  await page.selectOption("#fit-masks", "hnet");
+  await page.waitForSelector("#force-table tr.combined", { timeout: 60_000 });
+  assert.match(await page.textContent("#catheter-summary"), /reconstructed from H-Net's masks/);
+  assert.equal(await page.getAttribute("#force-verdict", "data-estimator"), "Combined");
+  assert.match(await page.textContent("#force-verdict"), /^Combined: \|F\| = \d\.\d{3} ± 0\.0\d{2} N: /);
+  const combined = await page.$$eval("#force-table tr.combined td", (tds) => tds.map((td) => Number(td.textContent)));
+  assert.ok(Math.abs(combined[0] - 0.15) < 0.06 && Math.abs(combined[2] + 0.1) < 0.06, `combined ${combined}`);
+  await page.selectOption("#fit-masks", "labels");
+  await page.waitForFunction(() => !document.querySelector("#force-table tr.combined"));
   // The keys rotate the focused 3D view.
   await page.focus("#catheter-3d");
   await page.keyboard.press("ArrowRight");

@@ -14,7 +14,8 @@
 use leptos::prelude::*;
 
 use crate::catheter_3d::{
-    ARROW_MM_PER_NEWTON, CARM_SKETCH_SCALE, CArmSketch, Catheter3d, force_arrow_mm, scene_points,
+    ARROW_MM_PER_NEWTON, CARM_SKETCH_SCALE, CArmSketch, Catheter3d, FitMasks, force_arrow_mm,
+    scene_points,
 };
 use crate::components::stereo_view::{ESTIMATE_ARROW, TRUE_ARROW, context_2d, draw_arrow};
 use crate::keymap::{self, Command, Scope, scope_help};
@@ -310,6 +311,24 @@ pub fn CatheterView() -> impl IntoView {
                 <span class="dot view-b"></span>"C-arm B (sources and detectors drawn at "
                 {format!("{:.0} % of their size about the isocentre)", CARM_SKETCH_SCALE * 100.0)}
             </p>
+            <label class="fit-masks">
+                "Fit the rod to "
+                <select id="fit-masks" on:change=move |ev| {
+                    if let Some(choice) = FitMasks::from_key(&event_target_value(&ev)) {
+                        studio.fit_masks.set(choice);
+                    }
+                }>
+                    {[
+                        (FitMasks::LabelsFirst, "the label masks (H-Net's where there are none)"),
+                        // On a twin pair: the physics estimate as a real pair would get it, and
+                        // the Combined force row the bundled weights are calibrated for.
+                        (FitMasks::Hnet, "H-Net's masks"),
+                    ].into_iter().map(|(choice, text)| view! {
+                        <option value=choice.key()
+                            selected=move || studio.fit_masks.get() == choice>{text}</option>
+                    }).collect_view()}
+                </select>
+            </label>
             <p id="catheter-summary" role="status">{summary}</p>
             {move || error().map(|e| view! { <p id="catheter-error" class="warning">{e}</p> })}
         </section>

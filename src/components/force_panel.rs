@@ -1,6 +1,7 @@
-//! The tip force: H-Net's estimate in newtons, its magnitude against the ablation band, the true
-//! force and the error for twin pairs, the physics estimate (the rod fitted to the catheter in
-//! 3D) and its disagreement with H-Net's; and the pair's force label (typed, accepted from the
+//! The tip force: H-Net's estimate in newtons, the physics estimate (the rod fitted to the
+//! catheter in 3D) and its disagreement with H-Net's, the two combined where the rod was fitted to
+//! H-Net's masks, the best of them against the ablation band, the true force and the error for
+//! twin pairs; and the pair's force label (typed, accepted from the
 //! estimate or the truth, or imported from a CSV file).
 
 use leptos::prelude::*;
@@ -10,7 +11,9 @@ use crate::bundled::BUNDLED_FORCE_CAVEAT;
 use crate::catheter_3d::Catheter3d;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
-use crate::force_reading::{ABLATION_BAND_N, BandPosition, Disagreement, TrainingDomain, Verdict};
+use crate::force_reading::{
+    ABLATION_BAND_N, BandPosition, Disagreement, Estimator, TrainingDomain, Verdict,
+};
 use crate::studio::{ModelState, Studio};
 use crate::workspace::{implausible_label, parse_force_labels, parse_newtons};
 use hnet_units::force_magnitude as magnitude;
@@ -56,6 +59,13 @@ pub fn ForcePanel() -> impl IntoView {
         let e = estimate()?;
         let combination = domain()?.force_combination;
         shown_catheter(studio, |c| c.combined_with(e, &combination))
+    };
+    // The estimate the gauge and the verdict read: the combined one where there is one (it is
+    // the closer), else H-Net's.
+    let reading = move || {
+        combined()
+            .map(|c| (c, Estimator::Combined))
+            .or_else(|| estimate().map(|e| (e, Estimator::Hnet)))
     };
     let label = move || studio.with_shown(|p| p.and_then(|p| p.force_n));
     // The label being typed, per axis, exactly as typed. The fields show the pair's label when
@@ -139,10 +149,13 @@ pub fn ForcePanel() -> impl IntoView {
     };
 
     // The verdict says no more than the weights' accuracy and training data support.
-    let verdict_text = move |estimate: [f32; 3]| {
+    let verdict_text = move |estimate: [f32; 3], estimator: Estimator| {
         let domain = domain();
         studio.with_shown(|pair| {
-            pair.map(|pair| Verdict::of(estimate, domain.as_ref(), pair).text(estimate))
+            pair.map(|pair| {
+                let verdict = Verdict::of(estimate, estimator, domain.as_ref(), pair);
+                format!("{}: {}", estimator.name(), verdict.text(estimate))
+            })
         })
     };
     let row = move |name: &'static str, values: Option<[f32; 3]>, class: &'static str| {
@@ -190,18 +203,20 @@ pub fn ForcePanel() -> impl IntoView {
             {move || {
                 domain().map(|_| view! { <p class="caveat" id="force-caveat">{BUNDLED_FORCE_CAVEAT}</p> })
             }}
-            {move || estimate().map(|e| {
+            {move || reading().map(|(e, estimator)| {
                 let m = magnitude(e);
                 let pct = |v: f32| format!("{:.1}%", (v / GAUGE_MAX_N).clamp(0.0, 1.0) * 100.0);
                 view! {
                     <div class="gauge" id="force-gauge" role="img"
-                        aria-label=format!("estimated {m:.3} N on a 0 to {GAUGE_MAX_N} N scale")>
+                        aria-label=format!("{} estimate {m:.3} N on a 0 to {GAUGE_MAX_N} N scale", estimator.name())>
                         <div class="band" style:left=pct(ABLATION_BAND_N[0])
                             style:width=pct(ABLATION_BAND_N[1] - ABLATION_BAND_N[0])></div>
                         <div class="marker" style:left=pct(m)></div>
                         {truth().map(|t| view! { <div class="marker truth" style:left=pct(magnitude(t))></div> })}
                     </div>
-                    <p class="verdict" id="force-verdict">{verdict_text(e)}</p>
+                    <p class="verdict" id="force-verdict" data-estimator=estimator.name()>
+                        {verdict_text(e, estimator)}
+                    </p>
                     {truth().map(|t| {
                         let m = magnitude(t);
                         view! {
