@@ -228,7 +228,14 @@ mod tests {
         names.sort();
         assert_eq!(
             names,
-            ["cpu", "cpu-ynet", "force-128", "force-128-masks", "paper"]
+            [
+                "cpu",
+                "cpu-ynet",
+                "force-128",
+                "force-128-masks",
+                "force-128-off-bench",
+                "paper"
+            ]
         );
     }
 }
