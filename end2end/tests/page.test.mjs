@@ -394,6 +394,7 @@ test("a twin pair in 3D: the catheter, the physics force beside H-Net's, the epi
   await page.waitForSelector("#force-table tr.combined", { timeout: 60_000 });
   assert.match(await page.textContent("#catheter-summary"), /reconstructed from H-Net's masks/);
   assert.equal(await page.getAttribute("#force-verdict", "data-estimator"), "Combined");
+  assert.equal(await page.textContent("#force-table tr.error th"), "Error (Combined)");
   assert.match(await page.textContent("#force-verdict"), /^Combined: \|F\| = \d\.\d{3} ± 0\.0\d{2} N: /);
   const combined = await page.$$eval("#force-table tr.combined td", (tds) => tds.map((td) => Number(td.textContent)));
   assert.ok(Math.abs(combined[0] - 0.15) < 0.06 && Math.abs(combined[2] + 0.1) < 0.06, `combined ${combined}`);

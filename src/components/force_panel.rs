@@ -158,7 +158,7 @@ pub fn ForcePanel() -> impl IntoView {
             })
         })
     };
-    let row = move |name: &'static str, values: Option<[f32; 3]>, class: &'static str| {
+    let row = move |name: String, values: Option<[f32; 3]>, class: &'static str| {
         view! {
             <tr class=class>
                 <th scope="row">{name}</th>
@@ -176,15 +176,20 @@ pub fn ForcePanel() -> impl IntoView {
             <table id="force-table">
                 <thead><tr><th></th><th>"Fx (N)"</th><th>"Fy (N)"</th><th>"Fz (N)"</th><th>"|F| (N)"</th></tr></thead>
                 <tbody>
-                    {move || row("H-Net", estimate(), "estimate")}
-                    {move || row("Physics (rod fit)", physics(), "physics")}
+                    {move || row("H-Net".into(), estimate(), "estimate")}
+                    {move || row("Physics (rod fit)".into(), physics(), "physics")}
                     // Each axis of H-Net's and the physics estimate fitted to its masks, weighted
                     // by the inverse of its error variance (docs/app.md, "The catheter in 3D and
                     // the physics estimate").
-                    {move || combined().map(|c| row("Combined", Some(c), "combined"))}
-                    {move || truth().map(|t| row("True (twin)", Some(t), "truth"))}
-                    {move || match (estimate(), truth()) {
-                        (Some(e), Some(t)) => Some(row("Error", Some([e[0] - t[0], e[1] - t[1], e[2] - t[2]]), "error")),
+                    {move || combined().map(|c| row("Combined".into(), Some(c), "combined"))}
+                    {move || truth().map(|t| row("True (twin)".into(), Some(t), "truth"))}
+                    // The error of the estimate the gauge and the verdict read.
+                    {move || match (reading(), truth()) {
+                        (Some((e, estimator)), Some(t)) => Some(row(
+                            format!("Error ({})", estimator.name()),
+                            Some([e[0] - t[0], e[1] - t[1], e[2] - t[2]]),
+                            "error",
+                        )),
                         _ => None,
                     }}
                 </tbody>
