@@ -1,0 +1,168 @@
+"""Where a network's masks fail on a simulated dataset (docs/results.md, "What limits the masks
+off the bench").
+
+Reads what `hnet eval` wrote for the dataset's pairs (`--predictions`: each pair's catheter IoU
+per view; `--masks`: its predicted masks and error maps, white found, blue missed, red spurious)
+and the pairs' twin records, and prints:
+
+  - per-pair IoU by quartile of each scene setting (catheter length, stiffness, pre-curve, base
+    tilt, force magnitude) and of the label mask's area;
+  - for long catheters (>= --long-mm) and the others, IoU by distance from the tip along the
+    catheter (each error-map pixel takes its nearest centreline point);
+  - with --bench DIR, IoU by how often that dataset's label masks cover each region of the view
+    (the position prior a network trained there may have learned).
+
+Usage:
+  hnet eval --weights W --data D --split train --no-physics --predictions p.csv --masks m/
+  python bench/mask_errors.py --data D --predictions p.csv --masks m/ [--bench B]
+Needs numpy and Pillow.
+"""
+
+import argparse
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+# Error-map colours, as `hnet eval --masks` writes them (crates/hnet-cli/src/evaluation.rs).
+FOUND = (255, 255, 255)
+MISSED = (64, 128, 255)
+SPURIOUS = (255, 64, 64)
+# Label masks are 8-bit coverage; a pixel is catheter at or above half (MASK_THRESHOLD).
+HALF = 128
+GRID = 8
+
+
+def record(data, pair_id):
+    return json.loads((data / "samples" / f"{pair_id}.json").read_text())["record"]
+
+
+def error_classes(path):
+    e = np.asarray(Image.open(path).convert("RGB")).astype(int)
+    return [(e == colour).all(-1) for colour in (FOUND, MISSED, SPURIOUS)]
+
+
+def quartile_table(name, values, iou):
+    """Mean IoU (one column per view) of the pairs in each quartile of `values`."""
+
+    def mean(k):
+        return "/".join(f"{iou[k, v].mean():.3f}" for v in range(iou.shape[1]))
+
+    q = np.quantile(values, [0, 0.25, 0.5, 0.75, 1])
+    if q[0] == q[-1]:
+        print(f"{name:12s} constant {q[0]:.4g}: IoU {mean(slice(None))}")
+        return
+    bins = np.digitize(values, q[1:-1])
+    cells = [f"{q[i]:.4g}-{q[i + 1]:.4g}: {mean(bins == i)}" for i in range(4) if (bins == i).any()]
+    print(f"{name:12s} " + " | ".join(cells))
+
+
+def by_setting(data, rows, iou):
+    settings = {"length mm": [], "stiffness": [], "pre-curve": [], "tilt deg": [], "|F| N": []}
+    for r in rows:
+        scene = record(data, r["id"])["scene"]
+        settings["length mm"].append(scene["length_mm"])
+        settings["stiffness"].append(scene["bending_stiffness_n_m2"])
+        settings["pre-curve"].append(scene["precurvature_per_mm"])
+        settings["tilt deg"].append(scene["base_tilt_deg"])
+        settings["|F| N"].append(float(np.linalg.norm(scene["tip_force_n"])))
+    print("per-pair catheter IoU A/B by quartile")
+    for name, values in settings.items():
+        quartile_table(name, np.array(values), iou)
+    for v, view in enumerate("ab"):
+        area = np.array(
+            [
+                (np.asarray(Image.open(data / "samples" / f"{r['id']}_mask_{view}.png").convert("L")) >= HALF).sum()
+                for r in rows
+            ]
+        )
+        quartile_table(f"mask px {view.upper()}", area, iou[:, v : v + 1])
+
+
+def along_catheter(data, masks, rows, long_mm):
+    edges = [0, 5, 10, 20, 30, 40, 50, 61]
+    counts = {}
+    for r in rows:
+        rec = record(data, r["id"])
+        length = rec["rod"]["length_mm"]
+        group = "long" if length >= long_mm else "other"
+        centreline = np.array(rec["centreline_mm"])
+        for v, view in enumerate("ab"):
+            classes = error_classes(masks / f"{r['id']}_errors_{view}.png")
+            side = classes[0].shape[1]
+            camera = np.array(rec["views"][v]["camera_matrix"])
+            size = rec["views"][v]["carm"]["image_size"]["width"]
+            h = np.c_[centreline, np.ones(len(centreline))] @ camera.T
+            uv = h[:, :2] / h[:, 2:] * side / size
+            ys, xs = np.nonzero(np.ones_like(classes[0]))
+            pixels = np.stack([xs + 0.5, ys + 0.5], 1)
+            for name, m in zip(("found", "missed", "spurious"), classes):
+                p = pixels[m.ravel()]
+                if len(p) == 0:
+                    continue
+                nearest = ((p[:, None, :] - uv[None, ::4, :]) ** 2).sum(-1).argmin(1) * 4
+                from_tip = (len(centreline) - 1 - nearest) / (len(centreline) - 1) * length
+                hist = np.histogram(from_tip, edges)[0]
+                counts[(group, name)] = counts.get((group, name), 0) + hist
+    for group in ("other", "long"):
+        if (group, "found") not in counts:
+            continue
+        label = f">= {long_mm} mm" if group == "long" else f"< {long_mm} mm"
+        print(f"catheters {label}: IoU by distance from the tip")
+        f, m, s = (counts.get((group, n), np.zeros(len(edges) - 1)) for n in ("found", "missed", "spurious"))
+        for i in range(len(edges) - 1):
+            union = max(f[i] + m[i] + s[i], 1)
+            print(f"  {edges[i]:2d}-{edges[i + 1]:2d} mm: IoU {f[i] / union:.3f} (found {int(f[i])}, missed {int(m[i])}, spurious {int(s[i])})")
+
+
+def by_region(bench, masks, rows):
+    first = error_classes(masks / f"{rows[0]['id']}_errors_a.png")[0]
+    side = first.shape[0]
+    totals = np.zeros((3, 2, side, side))
+    for r in rows:
+        for v, view in enumerate("ab"):
+            for k, m in enumerate(error_classes(masks / f"{r['id']}_errors_{view}.png")):
+                totals[k, v] += m
+    cover = np.zeros((2, side, side))
+    for v, view in enumerate("ab"):
+        files = sorted((bench / "samples").glob(f"*_mask_{view}.png"))[:300]
+        for path in files:
+            cover[v] += np.asarray(Image.open(path).convert("L").resize((side, side), Image.BILINEAR)) >= HALF
+        cover[v] /= len(files)
+
+    def cells(a):
+        return a.reshape(a.shape[0], GRID, side // GRID, GRID, side // GRID).sum((2, 4))
+
+    found, missed, spurious = (cells(t) for t in totals)
+    covered = cells(cover) / (side // GRID) ** 2
+    catheter = found + missed
+    print(f"IoU by how often {bench.name}'s label masks cover the region ({GRID}x{GRID} grid)")
+    for lo, hi, name in ((0, 1e-3, "never covered"), (1e-3, 0.01, "covered < 1 %"), (0.01, 1.01, "covered >= 1 %")):
+        k = (covered >= lo) & (covered < hi)
+        union = max((found + missed + spurious)[k].sum(), 1)
+        print(f"  {name:15s}: {catheter[k].sum() / catheter.sum():.2f} of the catheter pixels, IoU {found[k].sum() / union:.3f}")
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--data", type=Path, required=True, help="the simulated dataset evaluated")
+    parser.add_argument("--predictions", type=Path, required=True, help="hnet eval --predictions file")
+    parser.add_argument("--masks", type=Path, required=True, help="hnet eval --masks folder")
+    parser.add_argument("--bench", type=Path, help="a dataset whose label masks give the position prior")
+    parser.add_argument("--long-mm", type=float, default=55.0, help="catheters this long or longer are 'long'")
+    args = parser.parse_args()
+    rows = [r for r in csv.DictReader(args.predictions.open()) if r["catheter_iou_a"]]
+    if not rows:
+        raise SystemExit(f"{args.predictions}: no catheter IoU columns (a network without masks?)")
+    iou = np.array([[float(r["catheter_iou_a"]), float(r["catheter_iou_b"])] for r in rows])
+    print(f"{len(rows)} pairs; per-pair catheter IoU mean {iou[:, 0].mean():.3f}/{iou[:, 1].mean():.3f}")
+    by_setting(args.data, rows, iou)
+    along_catheter(args.data, args.masks, rows, args.long_mm)
+    if args.bench:
+        by_region(args.bench, args.masks, rows)
+
+
+if __name__ == "__main__":
+    main()
