@@ -396,8 +396,14 @@ test("a twin pair in 3D: the catheter, the physics force beside H-Net's, the epi
   assert.equal(await page.getAttribute("#force-verdict", "data-estimator"), "Combined");
   assert.equal(await page.textContent("#force-table tr.error th"), "Error (Combined)");
   assert.match(await page.textContent("#force-verdict"), /^Combined: \|F\| = \d\.\d{3} ± 0\.0\d{2} N: /);
-  const combined = await page.$$eval("#force-table tr.combined td", (tds) => tds.map((td) => Number(td.textContent)));
-  assert.ok(Math.abs(combined[0] - 0.15) < 0.06 && Math.abs(combined[2] + 0.1) < 0.06, `combined ${combined}`);
+  // Each axis a weighted mean of the two: between H-Net's and the physics estimate (how close
+  // it comes to the truth is measured over many pairs by `hnet eval`, not on one).
+  const row = (name) => page.$$eval(`#force-table tr.${name} td`, (tds) => tds.map((td) => Number(td.textContent)));
+  const [hnet, fitted, combined] = [await row("estimate"), await row("physics"), await row("combined")];
+  for (let axis = 0; axis < 3; axis++) {
+    const [low, high] = [Math.min(hnet[axis], fitted[axis]), Math.max(hnet[axis], fitted[axis])];
+    assert.ok(combined[axis] >= low - 0.001 && combined[axis] <= high + 0.001, `axis ${axis}: ${hnet} / ${fitted} / ${combined}`);
+  }
   await page.selectOption("#fit-masks", "labels");
   await page.waitForFunction(() => !document.querySelector("#force-table tr.combined"));
   // The keys rotate the focused 3D view.
