@@ -86,9 +86,11 @@ def along_catheter(data, masks, rows, long_mm):
     counts = {}
     for r in rows:
         rec = record(data, r["id"])
-        length = rec["rod"]["length_mm"]
+        length = rec["scene"]["length_mm"]
         group = "long" if length >= long_mm else "other"
         centreline = np.array(rec["centreline_mm"])
+        # Each centreline point's distance from the tip along the catheter, mm.
+        to_tip = np.array(rec["arc_mm"])[-1] - np.array(rec["arc_mm"])
         for v, view in enumerate("ab"):
             classes = error_classes(masks / f"{r['id']}_errors_{view}.png")
             side = classes[0].shape[1]
@@ -102,9 +104,8 @@ def along_catheter(data, masks, rows, long_mm):
                 p = pixels[m.ravel()]
                 if len(p) == 0:
                     continue
-                nearest = ((p[:, None, :] - uv[None, ::4, :]) ** 2).sum(-1).argmin(1) * 4
-                from_tip = (len(centreline) - 1 - nearest) / (len(centreline) - 1) * length
-                hist = np.histogram(from_tip, edges)[0]
+                nearest = ((p[:, None, :] - uv[None, :, :]) ** 2).sum(-1).argmin(1)
+                hist = np.histogram(to_tip[nearest], edges)[0]
                 counts[(group, name)] = counts.get((group, name), 0) + hist
     for group in ("other", "long"):
         if (group, "found") not in counts:
@@ -139,8 +140,12 @@ def by_region(bench, masks, rows):
     covered = cells(cover) / (side // GRID) ** 2
     catheter = found + missed
     print(f"IoU by how often {bench.name}'s label masks cover the region ({GRID}x{GRID} grid)")
-    for lo, hi, name in ((0, 1e-3, "never covered"), (1e-3, 0.01, "covered < 1 %"), (0.01, 1.01, "covered >= 1 %")):
-        k = (covered >= lo) & (covered < hi)
+    buckets = (
+        ("never covered", covered == 0),
+        ("covered < 1 %", (covered > 0) & (covered < 0.01)),
+        ("covered >= 1 %", covered >= 0.01),
+    )
+    for name, k in buckets:
         union = max((found + missed + spurious)[k].sum(), 1)
         print(f"  {name:15s}: {catheter[k].sum() / catheter.sum():.2f} of the catheter pixels, IoU {found[k].sum() / union:.3f}")
 
@@ -153,7 +158,7 @@ def main():
     parser.add_argument("--bench", type=Path, help="a dataset whose label masks give the position prior")
     parser.add_argument("--long-mm", type=float, default=55.0, help="catheters this long or longer are 'long'")
     args = parser.parse_args()
-    rows = [r for r in csv.DictReader(args.predictions.open()) if r["catheter_iou_a"]]
+    rows = [r for r in csv.DictReader(args.predictions.open()) if r.get("catheter_iou_a")]
     if not rows:
         raise SystemExit(f"{args.predictions}: no catheter IoU columns (a network without masks?)")
     iou = np.array([[float(r["catheter_iou_a"]), float(r["catheter_iou_b"])] for r in rows])

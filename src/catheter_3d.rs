@@ -71,18 +71,18 @@ pub enum FitMasks {
 
 impl FitMasks {
     /// The value of its option in the page's choice.
-    pub fn key(self) -> &'static str {
+    pub fn value(self) -> &'static str {
         match self {
             Self::LabelsFirst => "labels",
             Self::Hnet => "hnet",
         }
     }
 
-    /// The choice with option value `key`.
-    pub fn from_key(key: &str) -> Option<Self> {
+    /// The choice with option value `value`.
+    pub fn from_value(value: &str) -> Option<Self> {
         [Self::LabelsFirst, Self::Hnet]
             .into_iter()
-            .find(|c| c.key() == key)
+            .find(|c| c.value() == value)
     }
 }
 
@@ -107,9 +107,10 @@ impl<'a> PairMasks<'a> {
         if pair.masks_labeled && choice == FitMasks::LabelsFirst {
             Ok(Self::Labels([pair.mask(View::A), pair.mask(View::B)]))
         } else {
-            predicted
-                .map(Self::Predicted)
-                .ok_or(Catheter3dError::NoMasks)
+            predicted.map(Self::Predicted).ok_or(match choice {
+                FitMasks::Hnet => Catheter3dError::NoPredictedMasks,
+                FitMasks::LabelsFirst => Catheter3dError::NoMasks,
+            })
         }
     }
 
@@ -303,6 +304,9 @@ pub enum Catheter3dError {
     /// Neither label masks nor H-Net's masks.
     #[error("no masks to reconstruct from: label the catheter in both views, or run H-Net")]
     NoMasks,
+    /// H-Net's masks were asked for, and H-Net has not run on the pair.
+    #[error("the rod is to be fitted to H-Net's masks, and H-Net has not run on this pair yet")]
+    NoPredictedMasks,
     /// A twin pair whose recorded settings cannot be read.
     #[error("the pair's twin settings cannot be read")]
     TwinSettings(#[source] serde_json::Error),
@@ -533,10 +537,10 @@ mod tests {
         assert_eq!(chosen.source(), MaskSource::Predicted);
         assert!(matches!(
             PairMasks::of(&pair, None, FitMasks::Hnet),
-            Err(Catheter3dError::NoMasks)
+            Err(Catheter3dError::NoPredictedMasks)
         ));
         for choice in [FitMasks::LabelsFirst, FitMasks::Hnet] {
-            assert_eq!(FitMasks::from_key(choice.key()), Some(choice));
+            assert_eq!(FitMasks::from_value(choice.value()), Some(choice));
         }
     }
 

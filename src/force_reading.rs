@@ -88,20 +88,33 @@ pub struct TrainingDomain {
     pub phantom_backgrounds: bool,
 }
 
+/// The bundled weights' force head's per-axis mean square errors (x, y, z), N², on 480 fresh
+/// bench pairs (`hnet eval` on `data/xray2-bench-224-s33`, assets/MODEL.md).
+pub const BUNDLED_FORCE_MSE_N2: [f32; 3] = [0.00456, 0.00486, 0.00374];
+
+/// Their combined estimate's ([`TrainingDomain::force_combination`]) on the same pairs, N²
+/// (docs/results.md, "The combined estimate").
+pub const BUNDLED_COMBINED_FORCE_MSE_N2: [f32; 3] = [0.00042, 0.00047, 0.00138];
+
+/// The root-mean-square length of an error vector whose per-axis mean square errors are
+/// `mse_n2` (N²), newtons: a bound on the RMS error of the magnitude |F|.
+fn error_length_n(mse_n2: [f32; 3]) -> f32 {
+    mse_n2.iter().sum::<f32>().sqrt()
+}
+
 impl TrainingDomain {
     /// The bundled weights (`assets/MODEL.md`): their force was trained on XRay-2 bench scenes
     /// on phantom backgrounds, the default biplane (0°/0° and 90°/0°); other catheters, poses,
     /// angles and radiograph backgrounds taught their masks only. Their force error is √(ΣMSE)
-    /// over the three axes of 480 fresh bench pairs (seed 33):
-    /// √(0.00456 + 0.00486 + 0.00374) N = 0.115 N; their combined estimate's on the same pairs
-    /// √(0.00042 + 0.00047 + 0.00138) N = 0.048 N. Their combination with the physics estimate
+    /// of [`BUNDLED_FORCE_MSE_N2`], 0.115 N; their combined estimate's of
+    /// [`BUNDLED_COMBINED_FORCE_MSE_N2`], 0.048 N. Their combination with the physics estimate
     /// was calibrated on the 597 fitted pairs of the val split of their training data
     /// (`hnet eval --weights assets/hnet-cpu.bpk --data data/xray2-bench-224-s7`, docs/results.md,
     /// "The combined estimate").
     pub fn bundled() -> Self {
         Self {
-            force_error_n: 0.115,
-            combined_force_error_n: 0.048,
+            force_error_n: error_length_n(BUNDLED_FORCE_MSE_N2),
+            combined_force_error_n: error_length_n(BUNDLED_COMBINED_FORCE_MSE_N2),
             force_combination: ForceCombination {
                 network_error_n: [0.0722, 0.0718, 0.0680],
                 physics_sd_scale: 2.75,
@@ -200,12 +213,12 @@ pub enum Verdict {
     Clear {
         /// Where.
         position: BandPosition,
-        /// The weights' force error, newtons.
+        /// The force error of the estimate read (the weights', or their combined estimate's), N.
         error_n: f32,
     },
     /// Within its error, the estimate could lie on either side of an edge of the band.
     Unclear {
-        /// The weights' force error, newtons.
+        /// The force error of the estimate read (the weights', or their combined estimate's), N.
         error_n: f32,
     },
     /// Weights whose accuracy is not known (loaded by the user, or untrained).
@@ -276,14 +289,15 @@ pub const PHYSICS_FORCE_ERROR_N: f32 = 0.013;
 /// The physics estimate's per-axis mean square errors (x, y, z), N², when the rod is fitted to
 /// the bundled weights' own masks rather than exact ones: 0.00045, 0.00049 and 0.00214 over 480
 /// fresh bench pairs (`hnet eval` on `data/xray2-bench-224-s33`, docs/results.md, "The combined
-/// estimate"; the fit holds the force to pushing, `hnet_twin::rod_fit::RodFitSettings::pushing_only`).
-/// This is how the page reads a pair without label masks.
+/// estimate"; the fit holds the force to pushing,
+/// `hnet_twin::rod_fit::RodFitSettings::pushing_only`).
+/// This is how the page reads a pair without label masks, or any pair with the rod fitted to
+/// H-Net's masks.
 pub const PHYSICS_FORCE_MSE_FROM_HNET_MASKS_N2: [f32; 3] = [0.00045, 0.00049, 0.00214];
 
 /// H-Net's and the physics estimate are said to disagree when their difference |ΔF| exceeds
 /// this, newtons. If both err as measured, independently and normally (H-Net: the bundled
-/// weights' per-axis mean square errors 0.00456, 0.00486 and 0.00374 N²,
-/// [`TrainingDomain::bundled`]; the physics estimate fitted to H-Net's own masks:
+/// weights' [`BUNDLED_FORCE_MSE_N2`]; the physics estimate fitted to H-Net's own masks:
 /// [`PHYSICS_FORCE_MSE_FROM_HNET_MASKS_N2`]), |ΔF| stays below 0.21 N on 95.7 % of pairs; from
 /// exact masks ([`PHYSICS_FORCE_ERROR_N`]) on 98.0 % (the test below integrates both; `cargo
 /// test -p hnet-studio --lib the_tolerance -- --nocapture` prints them). Beyond 0.21 N, one of
@@ -346,9 +360,17 @@ mod tests {
         let domain = TrainingDomain::bundled();
         let pair = twin(TwinControls::default());
         assert_eq!(domain.departures(&pair), Vec::<String>::new());
+        // The errors the page states for the bundled weights.
+        assert!((domain.force_error_n - 0.115).abs() < 5e-4);
+        assert!((domain.combined_force_error_n - 0.048).abs() < 5e-4);
         // 0.18 N ± 0.115 N spans the band's lower edge: no verdict.
         let unclear = Verdict::of([0.18, 0.0, 0.0], Estimator::Hnet, Some(&domain), &pair);
-        assert_eq!(unclear, Verdict::Unclear { error_n: 0.115 });
+        assert_eq!(
+            unclear,
+            Verdict::Unclear {
+                error_n: domain.force_error_n
+            }
+        );
         assert!(unclear.text([0.18, 0.0, 0.0]).contains("too uncertain"));
         // Precise weights may place it.
         let precise = TrainingDomain {
@@ -364,7 +386,7 @@ mod tests {
             Verdict::of([0.18, 0.0, 0.0], Estimator::Hnet, None, &pair),
             Verdict::UnknownAccuracy
         );
-        // The combined estimate, several times closer, places the same magnitude.
+        // The combined estimate, 2.4 times closer, places the same magnitude.
         let combined = Verdict::of([0.18, 0.0, 0.0], Estimator::Combined, Some(&domain), &pair);
         assert_eq!(
             combined,
@@ -436,9 +458,7 @@ mod tests {
     fn the_tolerance_is_what_the_measured_errors_explain() {
         // The bundled weights' per-axis mean square errors, N² (assets/MODEL.md), whose root
         // sum is the domain's error.
-        let hnet = [0.00456f64, 0.00486, 0.00374];
-        let error_n = hnet.iter().sum::<f64>().sqrt();
-        assert!((error_n - f64::from(TrainingDomain::bundled().force_error_n)).abs() < 5e-4);
+        let hnet = BUNDLED_FORCE_MSE_N2.map(f64::from);
         let within = |tolerance: f64, physics: [f64; 3]| {
             let sd: Vec<f64> = (0..3).map(|i| (hnet[i] + physics[i]).sqrt()).collect();
             let steps = 90;

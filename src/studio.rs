@@ -25,6 +25,7 @@ use crate::twin_live::{TwinControls, XrayBackground};
 use crate::webgpu_check;
 use crate::workspace::{LabeledPair, RemovedPair, Tool, View, Workspace};
 use hnet_twin::carm::Biplane;
+use hnet_twin::physics_force::ForceCombination;
 
 /// The model's state.
 #[derive(Clone)]
@@ -134,12 +135,36 @@ impl ViewTransform {
 pub struct CatheterReading {
     /// The pair's id.
     pub id: String,
+    /// The masks the rod was asked to be fitted to.
+    pub fit_masks: FitMasks,
+    /// H-Net's force estimate of the prediction on hand when it was made, newtons (whose masks
+    /// it was fitted to, when it was fitted to H-Net's).
+    pub prediction_force_n: Option<[f32; 3]>,
     /// Its views (for drawing the C-arms).
     pub views: Biplane,
     /// The catheter and its physics force, or why there is none (with its causes).
     pub result: Result<Catheter3d, String>,
     /// Time of the centrelines, the reconstruction and the rod fit, milliseconds.
     pub millis: f64,
+}
+
+impl CatheterReading {
+    /// H-Net's estimate `hnet_n` combined with this physics estimate
+    /// ([`Catheter3d::combined_with`]), when the rod was fitted to the masks of the prediction
+    /// that gave `hnet_n` (not to an earlier prediction's, of other weights).
+    pub fn combined_with(
+        &self,
+        hnet_n: [f32; 3],
+        combination: &ForceCombination,
+    ) -> Option<[f32; 3]> {
+        if self.prediction_force_n != Some(hnet_n) {
+            return None;
+        }
+        self.result
+            .as_ref()
+            .ok()?
+            .combined_with(hnet_n, combination)
+    }
 }
 
 /// Which source panel is open.
@@ -800,8 +825,8 @@ impl Studio {
     }
 
     /// Reconstructs the catheter of the pair on screen in 3D and fits the rod to it (the label
-    /// masks, else H-Net's, or H-Net's as [`Studio::fit_masks`] asks), into [`Studio::catheter`]. A failure is kept there as its message;
-    /// nothing else changes.
+    /// masks, else H-Net's, or H-Net's as [`Studio::fit_masks`] asks), into
+    /// [`Studio::catheter`]. A failure is kept there as its message; nothing else changes.
     pub fn reconstruct_shown(&self) {
         let shown = self
             .draft
@@ -813,7 +838,7 @@ impl Studio {
         };
         let prediction = self.predictions.with_untracked(|p| {
             p.get(&pair.id)
-                .map(|p| (p.mask_a.clone(), p.mask_b.clone()))
+                .map(|p| (p.mask_a.clone(), p.mask_b.clone(), p.force_n))
         });
         let controls = self.twin.get_untracked();
         let choice = self.fit_masks.get_untracked();
@@ -821,13 +846,15 @@ impl Studio {
         let now = || clock.as_ref().map_or(0.0, |p| p.now());
         let start = now();
         let result = PairGeometry::of(&pair, &controls).and_then(|geometry| {
-            let predicted = prediction.as_ref().map(|(a, b)| [&a[..], &b[..]]);
+            let predicted = prediction.as_ref().map(|(a, b, _)| [&a[..], &b[..]]);
             reconstruct_pair(&geometry, &PairMasks::of(&pair, predicted, choice)?)
         });
         let millis = now() - start;
         self.catheter.set(Some(CatheterReading {
             views: pair_views(&pair),
             id: pair.id,
+            fit_masks: choice,
+            prediction_force_n: prediction.map(|(_, _, force)| force),
             result: result.map_err(|e| with_causes(&e)),
             millis,
         }));
@@ -977,9 +1004,9 @@ pub fn load_model(studio: Studio, weights: Option<(Rc<[u8]>, String, WeightsOrig
 }
 
 /// Keeps [`Studio::catheter`] up to date: after the pair on screen, its masks, H-Net's masks,
-/// the masks the rod is to be fitted to or the twin's catheter settings change (not during a brush stroke), the catheter is
-/// reconstructed again, once the changes have paused for a moment (a slider being dragged
-/// renders many pairs).
+/// the masks the rod is to be fitted to or the twin's catheter settings change (not during a
+/// brush stroke), the catheter is reconstructed again, once the changes have paused for a
+/// moment (a slider being dragged renders many pairs).
 pub fn install_reconstruction(studio: Studio) {
     let serial = StoredValue::new(0u64);
     Effect::new(move |_| {

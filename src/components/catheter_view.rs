@@ -314,7 +314,7 @@ pub fn CatheterView() -> impl IntoView {
             <label class="fit-masks">
                 "Fit the rod to "
                 <select id="fit-masks" on:change=move |ev| {
-                    if let Some(choice) = FitMasks::from_key(&event_target_value(&ev)) {
+                    if let Some(choice) = FitMasks::from_value(&event_target_value(&ev)) {
                         studio.fit_masks.set(choice);
                     }
                 }>
@@ -324,7 +324,7 @@ pub fn CatheterView() -> impl IntoView {
                         // the Combined force row the bundled weights are calibrated for.
                         (FitMasks::Hnet, "H-Net's masks"),
                     ].into_iter().map(|(choice, text)| view! {
-                        <option value=choice.key()
+                        <option value=choice.value()
                             selected=move || studio.fit_masks.get() == choice>{text}</option>
                     }).collect_view()}
                 </select>

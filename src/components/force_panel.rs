@@ -1,20 +1,19 @@
 //! The tip force: H-Net's estimate in newtons, the physics estimate (the rod fitted to the
 //! catheter in 3D) and its disagreement with H-Net's, the two combined where the rod was fitted to
 //! H-Net's masks, the best of them against the ablation band, the true force and the error for
-//! twin pairs; and the pair's force label (typed, accepted from the
-//! estimate or the truth, or imported from a CSV file).
+//! twin pairs; and the pair's force label (typed, accepted from the estimate or the truth, or
+//! imported from a CSV file).
 
 use leptos::prelude::*;
 
 use crate::browser::{read_file_with, take_picked_file};
 use crate::bundled::BUNDLED_FORCE_CAVEAT;
-use crate::catheter_3d::Catheter3d;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
 use crate::force_reading::{
     ABLATION_BAND_N, BandPosition, Disagreement, Estimator, TrainingDomain, Verdict,
 };
-use crate::studio::{ModelState, Studio};
+use crate::studio::{CatheterReading, ModelState, Studio};
 use crate::workspace::{implausible_label, parse_force_labels, parse_newtons};
 use hnet_units::force_magnitude as magnitude;
 
@@ -22,13 +21,14 @@ use hnet_units::force_magnitude as magnitude;
 const GAUGE_MAX_N: f32 = 0.5;
 const AXES: [&str; 3] = ["Fx", "Fy", "Fz"];
 
-/// `read` of the 3D catheter of the pair on screen, if it was reconstructed.
-fn shown_catheter<T>(studio: Studio, read: impl FnOnce(&Catheter3d) -> Option<T>) -> Option<T> {
+/// `read` of the reconstruction of the pair on screen, if it was made from the masks the rod is
+/// now to be fitted to (a reading from before the choice changed is not shown).
+fn shown_reading<T>(studio: Studio, read: impl FnOnce(&CatheterReading) -> Option<T>) -> Option<T> {
     let id = studio.shown_id()?;
-    studio.catheter.with(|c| {
-        c.as_ref()
-            .filter(|c| c.id == id)
-            .and_then(|c| c.result.as_ref().ok())
+    let fit_masks = studio.fit_masks.get();
+    studio.catheter.with(|r| {
+        r.as_ref()
+            .filter(|r| r.id == id && r.fit_masks == fit_masks)
             .and_then(read)
     })
 }
@@ -43,7 +43,7 @@ pub fn ForcePanel() -> impl IntoView {
     };
     let truth = move || studio.with_shown(|p| p.and_then(|p| p.true_force()));
     // The physics estimate of the pair on screen, if its catheter was reconstructed.
-    let physics = move || shown_catheter(studio, |c| Some(c.force_f32()));
+    let physics = move || shown_reading(studio, |r| Some(r.result.as_ref().ok()?.force_f32()));
     // What the loaded weights were trained on, when the page knows (the bundled ones).
     let domain = move || {
         studio.model.with(|m| match m {
@@ -58,7 +58,7 @@ pub fn ForcePanel() -> impl IntoView {
     let combined = move || {
         let e = estimate()?;
         let combination = domain()?.force_combination;
-        shown_catheter(studio, |c| c.combined_with(e, &combination))
+        shown_reading(studio, |r| r.combined_with(e, &combination))
     };
     // The estimate the gauge and the verdict read: the combined one where there is one (it is
     // the closer), else H-Net's.
@@ -176,12 +176,12 @@ pub fn ForcePanel() -> impl IntoView {
             <table id="force-table">
                 <thead><tr><th></th><th>"Fx (N)"</th><th>"Fy (N)"</th><th>"Fz (N)"</th><th>"|F| (N)"</th></tr></thead>
                 <tbody>
-                    {move || row("H-Net".into(), estimate(), "estimate")}
+                    {move || row(Estimator::Hnet.name().into(), estimate(), "estimate")}
                     {move || row("Physics (rod fit)".into(), physics(), "physics")}
                     // Each axis of H-Net's and the physics estimate fitted to its masks, weighted
                     // by the inverse of its error variance (docs/app.md, "The catheter in 3D and
                     // the physics estimate").
-                    {move || combined().map(|c| row("Combined".into(), Some(c), "combined"))}
+                    {move || combined().map(|c| row(Estimator::Combined.name().into(), Some(c), "combined"))}
                     {move || truth().map(|t| row("True (twin)".into(), Some(t), "truth"))}
                     // The error of the estimate the gauge and the verdict read.
                     {move || match (reading(), truth()) {

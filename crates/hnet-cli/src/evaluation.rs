@@ -10,8 +10,8 @@ use burn::tensor::Device;
 use hnet_model::architectures::{ModelSpec, StereoModel};
 use hnet_model::inference::host_values;
 use hnet_model::metrics::{
-    AXES, AxisMetrics, ForceAccumulator, ForceMetrics, MASK_THRESHOLD, SegmentationAccumulator,
-    SegmentationMetrics,
+    AXES, AxisMetrics, ForceAccumulator, ForceMetrics, MASK_THRESHOLD, PixelOutcome,
+    SegmentationAccumulator, SegmentationMetrics,
 };
 use hnet_twin::dataset::{Dataset, ImageRef, Split, encode_png};
 use hnet_units::ImageSize;
@@ -52,12 +52,13 @@ pub struct EvalArgs {
     /// true and the predicted masks).
     #[arg(long)]
     no_physics: bool,
-    /// Also write each pair's true force, the network's and the physics estimate from its masks
-    /// to this CSV file (a run folder keeps it as `predictions-<split>.csv` anyway).
+    /// Also write each pair's true force, the network's and the physics estimate from its masks,
+    /// and its masks' catheter IoU per view, to this CSV file (a run folder keeps it as
+    /// `predictions-<split>.csv` anyway).
     #[arg(long)]
     predictions: Option<PathBuf>,
-    /// Also write each pair's predicted masks into this folder (`<id>_mask_a.png`, at the
-    /// network's input size), with error maps against the label masks (`<id>_errors_a.png`:
+    /// Also write each pair's predicted masks into this folder (`<id>_predicted_mask_a.png`, at
+    /// the network's input size), with error maps against the label masks (`<id>_errors_a.png`:
     /// white the catheter found, blue missed, red spurious).
     #[arg(long)]
     masks: Option<PathBuf>,
@@ -290,7 +291,7 @@ pub fn load_weights(
 #[derive(Debug, Clone, Default)]
 pub struct EvalOptions {
     /// Run the physics check on simulated pairs.
-    pub check: bool,
+    pub physics_check: bool,
     /// The dataset that calibrates the combined force (default: the evaluated one).
     pub calibration: Option<PathBuf>,
     /// A folder to write each pair's predicted masks into, with their error maps
@@ -298,41 +299,39 @@ pub struct EvalOptions {
     pub masks: Option<PathBuf>,
 }
 
-/// Colours of an error map, RGB: the catheter found, missed, spurious; the background.
-const FOUND_RGB: [u8; 3] = [255, 255, 255];
-const MISSED_RGB: [u8; 3] = [64, 128, 255];
-const SPURIOUS_RGB: [u8; 3] = [255, 64, 64];
-const BACKGROUND_RGB: [u8; 3] = [0, 0, 0];
+/// Colour of each pixel of an error map, RGB.
+fn error_rgb(outcome: PixelOutcome) -> [u8; 3] {
+    match outcome {
+        PixelOutcome::Found => [255, 255, 255],
+        PixelOutcome::Missed => [64, 128, 255],
+        PixelOutcome::Spurious => [255, 64, 64],
+        PixelOutcome::Background => [0, 0, 0],
+    }
+}
 
 /// Writes pair `id`'s predicted masks (catheter probabilities of views A and B, thresholded at
-/// [`MASK_THRESHOLD`]) into `folder` as `<id>_mask_a.png` and `<id>_mask_b.png`, at the
-/// network's input size, beside error maps against the label masks `targets` (`<id>_errors_a.png`:
-/// white the catheter found, blue missed, red spurious).
+/// [`MASK_THRESHOLD`]) into `folder` as `<id>_predicted_mask_a.png` and `_b`, at the network's
+/// input size (`size`), beside error maps against the label masks `targets` (catheter
+/// probabilities, the same size) as `<id>_errors_a.png` and `_b`: white the catheter found, blue
+/// missed, red spurious.
 pub fn write_predicted_masks(
     folder: &Path,
     id: &str,
     size: ImageSize,
     predicted: &[Vec<f32>; 2],
-    targets: [&[u8]; 2],
+    targets: &[Vec<f32>; 2],
 ) -> anyhow::Result<()> {
     for ((view, predicted), target) in ["a", "b"].iter().zip(predicted).zip(targets) {
         let mask: Vec<u8> = predicted
             .iter()
             .map(|&p| if p >= MASK_THRESHOLD { 255 } else { 0 })
             .collect();
-        let errors: Vec<u8> = mask
+        let errors: Vec<u8> = predicted
             .iter()
             .zip(target)
-            .flat_map(
-                |(&p, &t)| match (p > 0, f32::from(t) / 255.0 >= MASK_THRESHOLD) {
-                    (true, true) => FOUND_RGB,
-                    (false, true) => MISSED_RGB,
-                    (true, false) => SPURIOUS_RGB,
-                    (false, false) => BACKGROUND_RGB,
-                },
-            )
+            .flat_map(|(&p, &t)| error_rgb(PixelOutcome::of(p, t)))
             .collect();
-        for (kind, pixels, channels) in [("mask", &mask, 1), ("errors", &errors, 3)] {
+        for (kind, pixels, channels) in [("predicted_mask", &mask, 1), ("errors", &errors, 3)] {
             let path = folder.join(format!("{id}_{kind}_{view}.png"));
             let png = encode_png(ImageRef {
                 width: size.width,
@@ -348,8 +347,11 @@ pub fn write_predicted_masks(
 }
 
 /// Evaluates a trained model on a split; returns the tables and the per-pair forces. With
-/// `options.check`, simulated pairs also get the physics check, and a network that segments and
-/// estimates a force the combined estimate, calibrated on other pairs ([`calibration_split`]).
+/// `options.physics_check`, simulated pairs also get the physics check, and a network that
+/// segments and estimates a force the combined estimate, calibrated on other pairs
+/// ([`calibration_split`]). With `options.masks`, each pair's predicted masks and error maps
+/// are written there ([`write_predicted_masks`]); after an error the folder keeps what was
+/// written before it.
 pub fn evaluate(
     model: &TrainedModel,
     data: &Path,
@@ -373,7 +375,7 @@ pub fn evaluate(
     let mut forces = ForceAccumulator::new();
     let mut predictions = Vec::new();
     let mut error = None;
-    let records = if options.check {
+    let records = if options.physics_check {
         let ids: Vec<&str> = pairs.items.iter().map(|item| &*item.id).collect();
         let records = physics_check::read_records(&dataset, &ids);
         if records.is_none() {
@@ -387,6 +389,11 @@ pub fn evaluate(
         None
     };
     if let Some(folder) = &options.masks {
+        anyhow::ensure!(
+            model.spec.heads().0,
+            "--masks: a `{}` network gives no masks",
+            model.spec.name()
+        );
         std::fs::create_dir_all(folder)
             .with_context(|| format!("cannot create the masks folder '{}'", folder.display()))?;
     }
@@ -404,42 +411,39 @@ pub fn evaluate(
                     force,
                 });
             }
-            let mut catheter_iou = None;
-            if let (Some(folder), Some(masks)) = (&options.masks, &masks)
-                && error.is_none()
-                && let Err(e) = write_predicted_masks(
-                    folder,
-                    &item.id,
-                    model.image_size,
-                    masks,
-                    [&item.mask_a, &item.mask_b],
-                )
-            {
-                error.get_or_insert(format!("{e:#}"));
+            // After the first error nothing more is computed or written.
+            if error.is_some() {
+                return;
             }
+            let mut catheter_iou = None;
             if let Some(masks) = masks {
+                let targets = [&item.mask_a, &item.mask_b].map(|t| {
+                    t.iter()
+                        .map(|&v| f32::from(v) / 255.0)
+                        .collect::<Vec<f32>>()
+                });
                 let mut iou = [1.0; 2];
-                for (((head, predicted), target), iou) in heads
-                    .iter_mut()
-                    .zip(masks)
-                    .zip([&item.mask_a, &item.mask_b])
-                    .zip(&mut iou)
+                for (((head, predicted), target), iou) in
+                    heads.iter_mut().zip(&masks).zip(&targets).zip(&mut iou)
                 {
-                    let target: Vec<f32> = target.iter().map(|&v| f32::from(v) / 255.0).collect();
                     let mut this_pair = SegmentationAccumulator::new();
-                    match this_pair.push(&predicted, &target) {
-                        Ok(()) => {
-                            head.merge(&this_pair);
-                            if let Some(m) = this_pair.finish() {
-                                *iou = m.catheter.iou;
-                            }
-                        }
-                        Err(e) => {
-                            error.get_or_insert(e.to_string());
-                        }
+                    if let Err(e) = this_pair.push(predicted, target) {
+                        error = Some(anyhow::Error::new(e).context(format!("pair {}", item.id)));
+                        return;
+                    }
+                    head.merge(&this_pair);
+                    if let Some(m) = this_pair.finish() {
+                        *iou = m.catheter.iou;
                     }
                 }
                 catheter_iou = Some(iou);
+                if let Some(folder) = &options.masks
+                    && let Err(e) =
+                        write_predicted_masks(folder, &item.id, model.image_size, &masks, &targets)
+                {
+                    error = Some(e);
+                    return;
+                }
             }
             if let Some(force) = force {
                 forces.push(force, item.force_n);
@@ -456,7 +460,7 @@ pub fn evaluate(
         },
     )?;
     if let Some(e) = error {
-        anyhow::bail!("{e}");
+        return Err(e);
     }
     let (segments, force_head) = model.spec.heads();
     let segmentation = segments.then(|| heads.map(|h| h.finish().expect("pairs were seen")));
@@ -789,7 +793,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         &device,
         args.batch_size,
         &EvalOptions {
-            check: !args.no_physics,
+            physics_check: !args.no_physics,
             calibration: args.calibration.clone(),
             masks: args.masks.clone(),
         },

@@ -173,7 +173,8 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
     assert_eq!(std::fs::read_dir(&masks).unwrap().count(), 40 * 4);
     for row in &rows {
         for (view, iou) in ["a", "b"].iter().zip(&row[16..]) {
-            let mask = image::open(masks.join(format!("{}_mask_{view}.png", row[0]))).unwrap();
+            let mask =
+                image::open(masks.join(format!("{}_predicted_mask_{view}.png", row[0]))).unwrap();
             assert_eq!((mask.width(), mask.height()), (48, 32));
             let errors = image::open(masks.join(format!("{}_errors_{view}.png", row[0])))
                 .unwrap()
@@ -305,6 +306,19 @@ fn every_baseline_trains_and_evaluates_in_the_same_harness() {
         );
         let said = String::from_utf8_lossy(&out.stderr);
         assert_eq!(said.contains("and fig3-samples.png"), segments, "{said}");
+        if !segments {
+            // No masks to write: refused before anything is created.
+            let masks = dir.join(format!("{architecture}-masks"));
+            let err = fails(
+                hnet()
+                    .args(["eval", "--no-physics", "--run"])
+                    .arg(&runs)
+                    .arg("--masks")
+                    .arg(&masks),
+            );
+            assert!(err.contains("gives no masks"), "{err}");
+            assert!(!masks.exists());
+        }
     }
     std::fs::remove_dir_all(dir).ok();
 }

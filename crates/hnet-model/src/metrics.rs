@@ -189,6 +189,32 @@ pub struct MaskSizeMismatch {
     pub target: usize,
 }
 
+/// What a predicted pixel is against its target, catheter being the positive class.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PixelOutcome {
+    /// Catheter in both.
+    Found,
+    /// Catheter in the target only.
+    Missed,
+    /// Catheter in the prediction only.
+    Spurious,
+    /// Catheter in neither.
+    Background,
+}
+
+impl PixelOutcome {
+    /// The outcome of catheter probability `predicted` against `target`, each thresholded at
+    /// [`MASK_THRESHOLD`].
+    pub fn of(predicted: f32, target: f32) -> Self {
+        match (predicted >= MASK_THRESHOLD, target >= MASK_THRESHOLD) {
+            (true, true) => Self::Found,
+            (false, true) => Self::Missed,
+            (true, false) => Self::Spurious,
+            (false, false) => Self::Background,
+        }
+    }
+}
+
 /// Confusion counts of one segmentation head, catheter being the positive class.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct SegmentationAccumulator {
@@ -213,12 +239,12 @@ impl SegmentationAccumulator {
                 target: target.len(),
             });
         }
-        for (p, t) in predicted.iter().zip(target) {
-            match (*p >= MASK_THRESHOLD, *t >= MASK_THRESHOLD) {
-                (true, true) => self.true_positive += 1,
-                (true, false) => self.false_positive += 1,
-                (false, true) => self.false_negative += 1,
-                (false, false) => self.true_negative += 1,
+        for (&p, &t) in predicted.iter().zip(target) {
+            match PixelOutcome::of(p, t) {
+                PixelOutcome::Found => self.true_positive += 1,
+                PixelOutcome::Spurious => self.false_positive += 1,
+                PixelOutcome::Missed => self.false_negative += 1,
+                PixelOutcome::Background => self.true_negative += 1,
             }
         }
         Ok(())
