@@ -63,6 +63,13 @@ impl OffBench {
         }
     }
 
+    /// The same generator drawing its scenes from `scenes` instead of the
+    /// [`SceneSampling::varied`] preset (checked with [`SceneSampling::check`] by its caller).
+    pub fn with_scenes(mut self, scenes: SceneSampling) -> Self {
+        self.twin.scene = scenes;
+        self
+    }
+
     /// The chest radiographs it draws on.
     pub fn radiographs(&self) -> usize {
         self.radiographs.len()
@@ -148,5 +155,20 @@ mod tests {
             );
             assert!(sample.views.iter().all(|v| v.mask.iter().any(|&m| m > 0)));
         }
+        // Other scenes, when asked for: here only the longest catheters.
+        let long = SceneSampling {
+            length_mm: [55.0, 60.0],
+            ..SceneSampling::varied()
+        };
+        assert_eq!(long.check(), Ok(()));
+        let off = off.with_scenes(long.clone());
+        let (_, sample) = off.generate(3, 0).unwrap();
+        assert!(long.departures(&sample.params).is_empty());
+        assert!(sample.params.length_mm >= 55.0);
+        let reversed = SceneSampling {
+            length_mm: [60.0, 55.0],
+            ..long
+        };
+        assert!(reversed.check().unwrap_err().starts_with("length_mm"));
     }
 }

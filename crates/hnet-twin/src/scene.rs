@@ -180,6 +180,45 @@ impl SceneParams {
 }
 
 impl SceneSampling {
+    /// Why these settings cannot be drawn from, if they cannot: a range whose ends are not
+    /// finite or are reversed, a negative force, a cone outside 0-180°, a length or stiffness
+    /// that is not positive, a negative jitter or tilt.
+    pub fn check(&self) -> Result<(), String> {
+        let ranges = [
+            ("force_magnitude_n", self.force_magnitude_n),
+            ("bending_stiffness_n_m2", self.bending_stiffness_n_m2),
+            ("length_mm", self.length_mm),
+            ("precurvature_per_mm", self.precurvature_per_mm),
+            ("base_roll_deg", self.base_roll_deg),
+        ];
+        for (name, [lo, hi]) in ranges {
+            if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+                return Err(format!(
+                    "{name} must be a range [low, high] of finite numbers, low ≤ high"
+                ));
+            }
+        }
+        let positive = [
+            ("force_magnitude_n", self.force_magnitude_n[0] >= 0.0),
+            (
+                "bending_stiffness_n_m2",
+                self.bending_stiffness_n_m2[0] > 0.0,
+            ),
+            ("length_mm", self.length_mm[0] > 0.0),
+            ("base_jitter_mm", self.base_jitter_mm >= 0.0),
+            ("base_tilt_deg", (0.0..=90.0).contains(&self.base_tilt_deg)),
+            (
+                "force_cone_deg",
+                (0.0..=180.0).contains(&self.force_cone_deg),
+            ),
+        ];
+        match positive.into_iter().find(|(_, ok)| !ok) {
+            Some((name, _)) => Err(format!("{name} is out of range")),
+            None if self.base_position_mm.0.iter().all(|v| v.is_finite()) => Ok(()),
+            None => Err("base_position_mm must be finite".into()),
+        }
+    }
+
     /// How `scene` lies outside what this sampling draws, one phrase per departure (empty when
     /// it could have been drawn): a network trained on these scenes has not seen such a one.
     pub fn departures(&self, scene: &SceneParams) -> Vec<String> {

@@ -23,7 +23,7 @@ use burn::data::dataset::{Dataset as BurnDataset, DatasetError};
 use burn::tensor::Device;
 use hnet_twin::dataset::{Dataset, LoadedPair};
 use hnet_twin::off_bench::OffBench;
-use hnet_twin::scene::{Backgrounds, TwinConfig, generate, sample_rng};
+use hnet_twin::scene::{Backgrounds, SceneSampling, TwinConfig, generate, sample_rng};
 use hnet_twin::simulate::OFF_BENCH_VIEWS;
 use hnet_units::ImageSize;
 use rand::RngExt;
@@ -59,6 +59,10 @@ pub struct OffBenchConfig {
     /// are given.
     #[serde(default = "half")]
     pub radiograph_fraction: f64,
+    /// The catheters and poses off-bench pairs draw (every field of a
+    /// [`hnet_twin::scene::SceneSampling`]); the twin's `varied` preset when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scenes: Option<SceneSampling>,
 }
 
 fn half() -> f64 {
@@ -76,6 +80,11 @@ impl TwinStreamConfig {
                 && (0.0..=1.0).contains(&off.radiograph_fraction))
         {
             bail!("stream.off_bench's fractions must lie in [0, 1]");
+        }
+        if let Some(scenes) = self.off_bench.as_ref().and_then(|o| o.scenes.as_ref()) {
+            scenes
+                .check()
+                .map_err(|why| anyhow::anyhow!("stream.off_bench.scenes: {why}"))?;
         }
         Ok(())
     }
@@ -162,11 +171,11 @@ impl TwinStream {
             Some(off) => {
                 let (radiographs, _) =
                     radiographs(&off.radiographs).context("stream.off_bench.radiographs")?;
-                Some(OffBench::new(
-                    twin.clone(),
-                    radiographs,
-                    off.radiograph_fraction,
-                ))
+                let off_bench = OffBench::new(twin.clone(), radiographs, off.radiograph_fraction);
+                Some(match &off.scenes {
+                    Some(scenes) => off_bench.with_scenes(scenes.clone()),
+                    None => off_bench,
+                })
             }
             None => None,
         };
@@ -338,8 +347,22 @@ mod tests {
                 fraction: 0.5,
                 radiographs: Vec::new(),
                 radiograph_fraction: 0.5,
+                scenes: None,
             }),
         };
+        // Off-bench scenes that cannot be drawn are refused with the config's field named.
+        let mut reversed = config.clone();
+        if let Some(off) = &mut reversed.off_bench {
+            off.scenes = Some(SceneSampling {
+                length_mm: [60.0, 55.0],
+                ..SceneSampling::varied()
+            });
+        }
+        let error = reversed.check().unwrap_err();
+        assert!(
+            format!("{error:#}").starts_with("stream.off_bench.scenes: length_mm"),
+            "{error:#}"
+        );
         let size = ImageSize::square(16);
         let first = loader(TwinStream::new(&config, &data, size, 0).unwrap());
         let (one, two) = (epoch(&first), epoch(&first));
