@@ -217,15 +217,24 @@ mod tests {
     #[test]
     fn every_checked_in_config_loads() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs");
-        let mut names = Vec::new();
-        for entry in std::fs::read_dir(&dir).unwrap() {
-            let path = entry.unwrap().path();
-            if path.extension().is_some_and(|e| e == "json") {
-                let config = TrainingConfig::load(&path).unwrap_or_else(|e| panic!("{e:#}"));
-                names.push(config.name);
+        let names_in = |dir: &Path| {
+            let mut names = Vec::new();
+            for entry in std::fs::read_dir(dir).unwrap() {
+                let path = entry.unwrap().path();
+                if path.extension().is_some_and(|e| e == "json") {
+                    let config = TrainingConfig::load(&path).unwrap_or_else(|e| panic!("{e:#}"));
+                    names.push(config.name);
+                }
             }
-        }
-        names.sort();
+            names.sort();
+            names
+        };
+        // The experiments of docs/results.md too.
+        assert_eq!(
+            names_in(&dir.join("experiments")),
+            ["force-128-off-bench-long"]
+        );
+        let names = names_in(&dir);
         assert_eq!(
             names,
             [
