@@ -84,6 +84,8 @@ def by_setting(data, rows, iou):
 def along_catheter(data, masks, rows, long_mm):
     edges = [0, 5, 10, 20, 30, 40, 50, 61]
     counts = {}
+    # Missed pixels of each long catheter's view: (missed, id, view, IoU).
+    long_views = []
     for r in rows:
         rec = record(data, r["id"])
         length = rec["scene"]["length_mm"]
@@ -100,6 +102,8 @@ def along_catheter(data, masks, rows, long_mm):
             uv = h[:, :2] / h[:, 2:] * side / size
             ys, xs = np.nonzero(np.ones_like(classes[0]))
             pixels = np.stack([xs + 0.5, ys + 0.5], 1)
+            if group == "long":
+                long_views.append((int(classes[1].sum()), r["id"], view, float(r[f"catheter_iou_{view}"])))
             for name, m in zip(("found", "missed", "spurious"), classes):
                 p = pixels[m.ravel()]
                 if len(p) == 0:
@@ -116,6 +120,12 @@ def along_catheter(data, masks, rows, long_mm):
         for i in range(len(edges) - 1):
             union = max(f[i] + m[i] + s[i], 1)
             print(f"  {edges[i]:2d}-{edges[i + 1]:2d} mm: IoU {f[i] / union:.3f} (found {int(f[i])}, missed {int(m[i])}, spurious {int(s[i])})")
+    if long_views:
+        long_views.sort(reverse=True)
+        share = sum(v[0] for v in long_views[:10]) / max(sum(v[0] for v in long_views), 1)
+        print(f"the 10 of {len(long_views)} long catheters' views that miss most hold {share:.0%} of their missed pixels:")
+        for missed, pair_id, view, iou in long_views[:10]:
+            print(f"  {pair_id} view {view.upper()}: {missed} missed, IoU {iou:.3f}")
 
 
 def by_region(bench, masks, rows):
