@@ -243,6 +243,7 @@ mod tests {
                 "force-128",
                 "force-128-masks",
                 "force-128-off-bench",
+                "force-224",
                 "paper"
             ]
         );

@@ -53,8 +53,8 @@ pub struct EvalArgs {
     #[arg(long)]
     no_physics: bool,
     /// Also write each pair's true force, the network's and the physics estimate from its masks,
-    /// and its masks' catheter IoU per view, to this CSV file (a run folder keeps it as
-    /// `predictions-<split>.csv` anyway).
+    /// and its masks' catheter IoU per view, to this CSV file, one row per pair (empty columns
+    /// for a head the network lacks; a run folder keeps it as `predictions-<split>.csv` anyway).
     #[arg(long)]
     predictions: Option<PathBuf>,
     /// Also write each pair's predicted masks into this folder (`<id>_predicted_mask_a.png`, at
@@ -110,16 +110,16 @@ pub struct Evaluation {
     pub calibration_data: Option<PathBuf>,
 }
 
-/// One pair's true and predicted force (and how well its masks fit), for `hnet report` and the
-/// predictions file.
+/// What the network made of one pair: its force and how well its masks fit, for `hnet report`
+/// and the predictions file.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct ForcePrediction {
+pub struct PairPrediction {
     /// The pair's id.
     pub id: String,
     /// True force (N).
     pub truth: [f32; 3],
-    /// Predicted force (N).
-    pub predicted: [f32; 3],
+    /// Predicted force (N), when the network estimates it.
+    pub predicted: Option<[f32; 3]>,
     /// The physics estimate from the network's own masks (the twin's rod fitted to the catheter
     /// they show, N), when the physics check ran and the pair could be fitted.
     #[serde(default)]
@@ -141,7 +141,7 @@ pub struct ForcePrediction {
 /// The predictions file: one line per pair, its true force, the network's, the physics estimate
 /// from the network's masks with its fit's standard error, and the two combined (empty where
 /// there is none), N; then the catheter IoU of its masks in views A and B (empty without masks).
-pub fn predictions_csv(predictions: &[ForcePrediction]) -> String {
+pub fn predictions_csv(predictions: &[PairPrediction]) -> String {
     let mut csv = String::from(
         "id,fx,fy,fz,fx_pred,fy_pred,fz_pred,fx_physics,fy_physics,fz_physics,\
          fx_physics_sd,fy_physics_sd,fz_physics_sd,fx_combined,fy_combined,fz_combined,\
@@ -152,11 +152,11 @@ pub fn predictions_csv(predictions: &[ForcePrediction]) -> String {
     };
     for p in predictions {
         let [tx, ty, tz] = p.truth;
-        let [px, py, pz] = p.predicted;
         let _ = writeln!(
             csv,
-            "{},{tx},{ty},{tz},{px},{py},{pz},{},{},{},{}",
+            "{},{tx},{ty},{tz},{},{},{},{},{}",
             p.id,
+            triple(p.predicted),
             triple(p.physics),
             triple(p.physics_sd),
             triple(p.combined),
@@ -359,7 +359,7 @@ pub fn evaluate(
     device: &Device,
     batch_size: usize,
     options: &EvalOptions,
-) -> anyhow::Result<(Evaluation, Vec<ForcePrediction>)> {
+) -> anyhow::Result<(Evaluation, Vec<PairPrediction>)> {
     let dataset = Dataset::open(data)?;
     let pairs = StereoSplit::load(&dataset, split, model.image_size, None)?;
     anyhow::ensure!(
@@ -447,16 +447,16 @@ pub fn evaluate(
             }
             if let Some(force) = force {
                 forces.push(force, item.force_n);
-                predictions.push(ForcePrediction {
-                    id: item.id.to_string(),
-                    truth: item.force_n,
-                    predicted: force,
-                    physics: None,
-                    physics_sd: None,
-                    combined: None,
-                    catheter_iou,
-                });
             }
+            predictions.push(PairPrediction {
+                id: item.id.to_string(),
+                truth: item.force_n,
+                predicted: force,
+                physics: None,
+                physics_sd: None,
+                combined: None,
+                catheter_iou,
+            });
         },
     )?;
     if let Some(e) = error {
@@ -512,7 +512,8 @@ pub fn evaluate(
             prediction.physics_sd = physics.and_then(|p| p.sd_n);
             prediction.combined = physics
                 .zip(from_network.combination)
-                .map(|(p, c)| c.combine(prediction.predicted, p.force_n, p.sd_n));
+                .zip(prediction.predicted)
+                .map(|((p, c), network)| c.combine(network, p.force_n, p.sd_n));
         }
     }
     Ok((

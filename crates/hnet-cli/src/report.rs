@@ -20,7 +20,7 @@ use plotters::prelude::*;
 
 use crate::backend::BackendChoice;
 use crate::data::StereoSplit;
-use crate::evaluation::{EvalOptions, ForcePrediction, TrainedModel, evaluate, load_run, predict};
+use crate::evaluation::{EvalOptions, TrainedModel, evaluate, load_run, predict};
 use crate::run_dir::{EpochRow, LOSS_METRIC, RunDir};
 use crate::training::metrics::Quantity;
 
@@ -66,17 +66,23 @@ fn register_font() -> anyhow::Result<()> {
     .map_err(|_| anyhow::anyhow!("'{}' is not a usable TrueType font", path.display()))
 }
 
+/// One test pair's true and predicted tip force, N.
+struct ForcePoint {
+    truth: [f32; 3],
+    predicted: [f32; 3],
+}
+
 /// One chart of the report.
 enum Figure<'a> {
     /// Fig. 4: predicted and true force along one axis.
     Force {
         axis: usize,
-        predictions: &'a [ForcePrediction],
+        predictions: &'a [ForcePoint],
     },
     /// Fig. 5 a-c: force error histogram along one axis.
     Errors {
         axis: usize,
-        predictions: &'a [ForcePrediction],
+        predictions: &'a [ForcePoint],
     },
     /// Fig. 5 d-f: a metric over the epochs, training and validation.
     Curve {
@@ -192,7 +198,7 @@ fn legend<'a, DB: PlotBackend + 'a>(chart: &mut Chart<'a, DB>) -> anyhow::Result
 fn force_plot<DB: PlotBackend>(
     area: &DrawingArea<DB, Shift>,
     axis: usize,
-    predictions: &[ForcePrediction],
+    predictions: &[ForcePoint],
 ) -> anyhow::Result<()> {
     let shown = &predictions[..predictions.len().min(80)];
     let (lo, hi) = range_of(
@@ -208,7 +214,7 @@ fn force_plot<DB: PlotBackend>(
         56,
     )?;
     /// A curve of the figure: its label, colour and which force of a pair it draws.
-    type Curve = (&'static str, RGBColor, fn(&ForcePrediction) -> [f32; 3]);
+    type Curve = (&'static str, RGBColor, fn(&ForcePoint) -> [f32; 3]);
     let curves: [Curve; 2] = [
         ("true", BLACK, |p| p.truth),
         ("predicted", RED, |p| p.predicted),
@@ -226,7 +232,7 @@ fn force_plot<DB: PlotBackend>(
 fn error_histogram<DB: PlotBackend>(
     area: &DrawingArea<DB, Shift>,
     axis: usize,
-    predictions: &[ForcePrediction],
+    predictions: &[ForcePoint],
 ) -> anyhow::Result<()> {
     let errors: Vec<f64> = predictions
         .iter()
@@ -379,8 +385,17 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     )?;
     // Each figure with its file stem and size in pixels.
     let mut figures = Vec::new();
-    if !predictions.is_empty() {
-        let predictions = &predictions;
+    let forces: Vec<ForcePoint> = predictions
+        .iter()
+        .filter_map(|p| {
+            Some(ForcePoint {
+                truth: p.truth,
+                predicted: p.predicted?,
+            })
+        })
+        .collect();
+    if !forces.is_empty() {
+        let predictions = &forces;
         for (axis, name) in AXES.iter().enumerate() {
             let force = Figure::Force { axis, predictions };
             figures.push((force, format!("fig4-force-{name}"), (900, 420)));

@@ -379,17 +379,29 @@ fn initial_spec(path: &Path) -> anyhow::Result<ModelSpec> {
     })
 }
 
-/// Refuses a weights file `path` that does not hold `expected` exactly (architecture, settings,
-/// input size and force statistics): a recipe's second stage starts from it.
+/// Refuses a weights file `path` whose network is not `expected`'s (architecture, settings and
+/// force statistics; H-Net's input size may differ, [`ModelSpec::carries_over_to`]): a recipe's
+/// next stage starts from it. Says so when the stage changes the input size.
 fn check_initial_spec(path: &Path, expected: &ModelSpec) -> anyhow::Result<()> {
     let spec = initial_spec(path)?;
-    if &spec != expected {
+    if !spec.carries_over_to(expected) {
         bail!(
             "init_weights: weights file '{}' holds another network than the config's (its \
              settings: {}; the config's: {})",
             path.display(),
             serde_json::to_string(&spec).unwrap_or_default(),
             serde_json::to_string(expected).unwrap_or_default()
+        );
+    }
+    if let (ModelSpec::Hnet(start), ModelSpec::Hnet(goal)) = (&spec, expected)
+        && start.image_size != goal.image_size
+    {
+        eprintln!(
+            "init_weights: '{}' was trained at {}; its weights go on training at {} (H-Net's \
+             parameters do not depend on the input size)",
+            path.display(),
+            start.image_size,
+            goal.image_size
         );
     }
     Ok(())

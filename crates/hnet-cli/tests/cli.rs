@@ -276,6 +276,19 @@ fn every_baseline_trains_and_evaluates_in_the_same_harness() {
         assert!(eval.get("physics").is_none(), "{architecture}");
         assert_eq!(!eval["segmentation"].is_null(), segments, "{architecture}");
         assert_eq!(!eval["force"].is_null(), force, "{architecture}");
+        // One row per pair whatever the heads: its force where the network estimates one, its
+        // masks' IoU where it segments.
+        let csv = std::fs::read_to_string(runs.join("predictions-test.csv")).unwrap();
+        let rows: Vec<Vec<&str>> = csv
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').collect())
+            .collect();
+        assert!(!rows.is_empty(), "{architecture}");
+        for row in &rows {
+            assert_eq!(!row[4].is_empty(), force, "{architecture}: {row:?}");
+            assert_eq!(!row[16].is_empty(), segments, "{architecture}: {row:?}");
+        }
         // Each epoch logs the metrics of the heads the network has, and no others.
         for split in ["train", "valid"] {
             let logs = runs.join(split).join("epoch-1");
@@ -436,6 +449,42 @@ fn a_time_budget_ends_training_cleanly_with_the_best_checkpoint() {
         "{err}"
     );
     assert!(!dir.join("third").exists());
+    // H-Net's parameters do not depend on the input size: a stage at another size starts from
+    // the first's weights and says so; its own weights file records the new size.
+    let smaller = edited_config(&dir, "smaller", |c| {
+        let size = serde_json::json!({"width": 24, "height": 16});
+        c["image_size"] = size.clone();
+        c["model"]["image_size"] = size;
+    });
+    let out = succeeds(
+        train(&data, &dir.join("resized"), &smaller)
+            .args(["--time-budget", "0s", "--init"])
+            .arg(&first),
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("was trained at 48×32; its weights go on training at 24×16"),
+        "{stderr}"
+    );
+    let out = succeeds(
+        hnet()
+            .args([
+                "eval",
+                "--no-physics",
+                "--json",
+                "--split",
+                "val",
+                "--weights",
+            ])
+            .arg(dir.join("resized/model.bpk"))
+            .arg("--data")
+            .arg(&data),
+    );
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        report["image_size"],
+        serde_json::json!({"width": 24, "height": 16})
+    );
     // A training split larger than the memory budget is read from disk batch by batch.
     let from_disk = edited_config(&dir, "from-disk", |c| c["max_memory_mib"] = 0.into());
     let out = succeeds(train(&data, &dir.join("disk"), &from_disk).args(["--time-budget", "0s"]));

@@ -342,6 +342,22 @@ impl ModelSpec {
             }
         }
     }
+
+    /// Whether weights trained with these settings go on training or run with `goal`'s: the same
+    /// settings, or for H-Net the same but for the input size. H-Net's parameters do not depend
+    /// on the input size (its force head reads globally averaged features, its position channels
+    /// span `[-1, 1]` at any size), so a network trained at 128 px can go on at 224 px.
+    pub fn carries_over_to(&self, goal: &ModelSpec) -> bool {
+        match (self, goal) {
+            (ModelSpec::Hnet(start), ModelSpec::Hnet(goal)) => {
+                &HNetConfig {
+                    image_size: goal.image_size,
+                    ..start.clone()
+                } == goal
+            }
+            _ => self == goal,
+        }
+    }
 }
 
 #[cfg(test)]
