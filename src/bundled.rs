@@ -10,19 +10,19 @@ pub const BUNDLED_WEIGHTS: &str = "assets/hnet-cpu.bpk";
 
 /// What the bundled weights can and cannot be trusted with, shown beside their force estimate.
 /// Keep in step with the evaluation in `assets/MODEL.md`.
-pub const BUNDLED_FORCE_CAVEAT: &str = "The bundled weights were trained on the CPU at \
-    128 x 128 px on 84,000 twin pairs (assets/MODEL.md). On fresh twin pairs their masks are \
-    accurate (catheter IoU 0.92-0.93 on the bench, 0.88-0.91 on other catheters, poses, C-arm \
-    angles and chest radiographs) but their force only coarse (RMSE 0.066 N, R² 0.64), and \
-    learned on the bench pose alone: read the arrows as a direction and a rough size, not a \
-    measurement. The physics estimate, fitted to these masks, is closer across the catheter \
-    (R² 0.97 on x and y on the bench, 0.95-0.97 on radiographs) and along it (Fz: R² 0.72 on \
-    the bench). The two err independently, so the Combined row (each axis weighted by the \
-    inverse of its measured error; shown when the rod was fitted to these masks: on a twin \
-    pair, choose H-Net's masks in the 3D panel) is the closest on twin bench pairs: R² 0.97 / \
-    0.97 / 0.82, RMSE 0.028 N on the bench; 0.97 / 0.95 / 0.81 on radiographs; the verdict \
-    reads it where it is shown. These figures assume the twin's catheter and a known base; for \
-    uploads the base is fitted and nothing was measured.";
+pub const BUNDLED_FORCE_CAVEAT: &str = "The bundled weights were trained on the CPU, at \
+    128 x 128 px on 84,000 twin pairs and then at 224 x 224 px on 10,000 more (assets/MODEL.md). \
+    On fresh twin pairs their masks are accurate (catheter IoU 0.93-0.94 on the bench, 0.88-0.92 \
+    on other catheters, poses, C-arm angles and chest radiographs) but their force only coarse \
+    (RMSE 0.067 N, R² 0.63), and learned on the bench pose alone: read the arrows as a \
+    direction and a rough size, not a measurement. The physics estimate, fitted to these masks, \
+    is closer across the catheter (R² 0.98 on x and y on the bench and on radiographs) and along \
+    it (Fz: R² 0.81 on the bench). The two err independently, so the Combined row (each axis \
+    weighted by the inverse of its measured error; shown when the rod was fitted to these masks: \
+    on a twin pair, choose H-Net's masks in the 3D panel) is the closest on twin bench pairs: \
+    R² 0.98 / 0.98 / 0.89, RMSE 0.021 N on the bench; 0.98 / 0.98 / 0.86 on radiographs; the \
+    verdict reads it where it is shown. These figures assume the twin's catheter and a known \
+    base; for uploads the base is fitted and nothing was measured.";
 
 /// A file of the page's own that could not be fetched.
 #[derive(Debug, thiserror::Error)]
