@@ -92,7 +92,8 @@ pub struct TrainingDomain {
 /// bench pairs (`hnet eval` on `data/xray2-bench-224-s33`, assets/MODEL.md).
 pub const BUNDLED_FORCE_MSE_N2: [f32; 3] = [0.00480, 0.00514, 0.00370];
 
-/// Their combined estimate's ([`TrainingDomain::force_combination`]) on the same pairs, N²
+/// Their combined estimate's ([`TrainingDomain::force_combination`]) on the 478 of those pairs
+/// whose masks gave a centreline, N²
 /// (docs/results.md, "The combined estimate").
 pub const BUNDLED_COMBINED_FORCE_MSE_N2: [f32; 3] = [0.00025, 0.00027, 0.00083];
 
@@ -288,9 +289,9 @@ pub const PHYSICS_FORCE_ERROR_N: f32 = 0.013;
 
 /// The physics estimate's per-axis mean square errors (x, y, z), N², when the rod is fitted to
 /// the bundled weights' own masks rather than exact ones: 0.00026, 0.00030 and 0.00143 over the
-/// 478 of 480 fresh bench pairs whose masks gave a centreline (`hnet eval` on `data/xray2-bench-224-s33`, docs/results.md, "The combined
-/// estimate"; the fit holds the force to pushing,
-/// `hnet_twin::rod_fit::RodFitSettings::pushing_only`).
+/// 478 of 480 fresh bench pairs whose masks gave a centreline (`hnet eval` on
+/// `data/xray2-bench-224-s33`, docs/results.md, "The combined estimate"; the fit holds the force
+/// to pushing, `hnet_twin::rod_fit::RodFitSettings::pushing_only`).
 /// This is how the page reads a pair without label masks, or any pair with the rod fitted to
 /// H-Net's masks.
 pub const PHYSICS_FORCE_MSE_FROM_HNET_MASKS_N2: [f32; 3] = [0.00026, 0.00030, 0.00143];

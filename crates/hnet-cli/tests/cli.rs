@@ -436,7 +436,13 @@ fn a_time_budget_ends_training_cleanly_with_the_best_checkpoint() {
     assert!(dir.join("second/model.bpk").is_file());
     let saved = std::fs::read_to_string(dir.join("second/config.json")).unwrap();
     assert!(saved.contains("\"init_weights\""), "{saved}");
-    let wider = edited_config(&dir, "wider", |c| c["model"]["filters"] = 16.into());
+    // (Another size as well does not make it the same network.)
+    let wider = edited_config(&dir, "wider", |c| {
+        let size = serde_json::json!({"width": 24, "height": 16});
+        c["image_size"] = size.clone();
+        c["model"]["image_size"] = size;
+        c["model"]["filters"] = 16.into();
+    });
     let err = fails(
         train(&data, &dir.join("third"), &wider)
             .arg("--init")
