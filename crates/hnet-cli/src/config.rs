@@ -95,8 +95,9 @@ pub struct TrainingConfig {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stream: Option<TwinStreamConfig>,
     /// Start from the network in this weights file instead of a random initialisation (a
-    /// recipe's second stage): it must hold the config's network exactly, its input size and
-    /// force statistics included. `hnet train --init FILE` sets it.
+    /// recipe's next stage): it must hold the config's network, its force statistics included;
+    /// an H-Net may have been trained at another input size (its parameters do not depend on
+    /// it). `hnet train --init FILE` sets it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub init_weights: Option<PathBuf>,
 }

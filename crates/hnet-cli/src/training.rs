@@ -524,8 +524,9 @@ pub struct TrainArgs {
     /// measure its spread.
     #[arg(long)]
     seed: Option<u64>,
-    /// Start from the network in this weights file (the config's network exactly, its force
-    /// statistics included) instead of a random initialisation: a recipe's second stage.
+    /// Start from the network in this weights file (the config's network, its force statistics
+    /// included; an H-Net may come from another input size) instead of a random
+    /// initialisation: a recipe's next stage.
     #[arg(long)]
     init: Option<PathBuf>,
     /// Where to compute.
