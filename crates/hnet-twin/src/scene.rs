@@ -198,7 +198,7 @@ impl SceneSampling {
                 ));
             }
         }
-        let positive = [
+        let in_range = [
             ("force_magnitude_n", self.force_magnitude_n[0] >= 0.0),
             (
                 "bending_stiffness_n_m2",
@@ -212,7 +212,7 @@ impl SceneSampling {
                 (0.0..=180.0).contains(&self.force_cone_deg),
             ),
         ];
-        match positive.into_iter().find(|(_, ok)| !ok) {
+        match in_range.into_iter().find(|(_, ok)| !ok) {
             Some((name, _)) => Err(format!("{name} is out of range")),
             None if self.base_position_mm.0.iter().all(|v| v.is_finite()) => Ok(()),
             None => Err("base_position_mm must be finite".into()),
