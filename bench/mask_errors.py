@@ -8,7 +8,8 @@ and the pairs' twin records, and prints:
   - per-pair IoU by quartile of each scene setting (catheter length, stiffness, pre-curve, base
     tilt, force magnitude) and of the label mask's area;
   - for long catheters (>= --long-mm) and the others, IoU by distance from the tip along the
-    catheter (each error-map pixel takes its nearest centreline point);
+    catheter and by the catheter's direction in the view (each error-map pixel takes its nearest
+    centreline point);
   - with --bench DIR, IoU by how often that dataset's label masks cover each region of the view
     (the position prior a network trained there may have learned).
 
@@ -81,9 +82,27 @@ def by_setting(data, rows, iou):
         quartile_table(f"mask px {view.upper()}", area, iou[:, v : v + 1])
 
 
+def iou_table(title, edges, counts, unit):
+    """IoU per bin of `edges` from the found / missed / spurious pixel counts of each group."""
+    for group in ("other", "long"):
+        if (group, "found") not in counts:
+            continue
+        print(f"{title(group)}")
+        f, m, s = (counts.get((group, n), np.zeros(len(edges) - 1)) for n in ("found", "missed", "spurious"))
+        for i in range(len(edges) - 1):
+            union = max(f[i] + m[i] + s[i], 1)
+            print(
+                f"  {edges[i]:2.0f}-{edges[i + 1]:2.0f} {unit}: IoU {f[i] / union:.3f} "
+                f"(found {int(f[i])}, missed {int(m[i])}, spurious {int(s[i])})"
+            )
+
+
 def along_catheter(data, masks, rows, long_mm):
     edges = [0, 5, 10, 20, 30, 40, 50, 61]
+    # The centreline's direction in the view, degrees from the image's horizontal (0-90).
+    angle_edges = [0, 15, 30, 45, 60, 75, 90.01]
     counts = {}
+    by_angle = {}
     # Missed pixels of each long catheter's view: (missed, id, view, IoU).
     long_views = []
     for r in rows:
@@ -100,6 +119,8 @@ def along_catheter(data, masks, rows, long_mm):
             size = rec["views"][v]["carm"]["image_size"]["width"]
             h = np.c_[centreline, np.ones(len(centreline))] @ camera.T
             uv = h[:, :2] / h[:, 2:] * side / size
+            tangent = np.gradient(uv, axis=0)
+            angle = np.degrees(np.arctan2(np.abs(tangent[:, 1]), np.abs(tangent[:, 0])))
             ys, xs = np.nonzero(np.ones_like(classes[0]))
             pixels = np.stack([xs + 0.5, ys + 0.5], 1)
             if group == "long":
@@ -111,15 +132,19 @@ def along_catheter(data, masks, rows, long_mm):
                 nearest = ((p[:, None, :] - uv[None, :, :]) ** 2).sum(-1).argmin(1)
                 hist = np.histogram(to_tip[nearest], edges)[0]
                 counts[(group, name)] = counts.get((group, name), 0) + hist
-    for group in ("other", "long"):
-        if (group, "found") not in counts:
-            continue
-        label = f">= {long_mm} mm" if group == "long" else f"< {long_mm} mm"
-        print(f"catheters {label}: IoU by distance from the tip")
-        f, m, s = (counts.get((group, n), np.zeros(len(edges) - 1)) for n in ("found", "missed", "spurious"))
-        for i in range(len(edges) - 1):
-            union = max(f[i] + m[i] + s[i], 1)
-            print(f"  {edges[i]:2d}-{edges[i + 1]:2d} mm: IoU {f[i] / union:.3f} (found {int(f[i])}, missed {int(m[i])}, spurious {int(s[i])})")
+                hist = np.histogram(angle[nearest], angle_edges)[0]
+                by_angle[(group, name)] = by_angle.get((group, name), 0) + hist
+
+    def label(group):
+        return f">= {long_mm} mm" if group == "long" else f"< {long_mm} mm"
+
+    iou_table(lambda g: f"catheters {label(g)}: IoU by distance from the tip", edges, counts, "mm")
+    iou_table(
+        lambda g: f"catheters {label(g)}: IoU by the catheter's direction in the view, degrees from horizontal",
+        angle_edges,
+        by_angle,
+        "deg",
+    )
     if long_views:
         long_views.sort(reverse=True)
         share = sum(v[0] for v in long_views[:10]) / max(sum(v[0] for v in long_views), 1)

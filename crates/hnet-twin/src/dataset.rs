@@ -749,6 +749,34 @@ mod folder {
             }
         }
 
+        /// The pair with each view, image and mask together, carried by its symmetry of the
+        /// square (`[a, b]`). The views' pixels no longer come from their C-arm's projection, so
+        /// such a pair may teach masks but not force. Square pairs only.
+        pub fn with_symmetries(self, [a, b]: [SquareSymmetry; 2]) -> Self {
+            assert_eq!(
+                self.size.width, self.size.height,
+                "the square's symmetries need a square pair"
+            );
+            let side = self.size.width as u32;
+            let rgb = |pixels: Vec<u8>, s: SquareSymmetry| {
+                let image = image::RgbImage::from_raw(side, side, pixels)
+                    .expect("a loaded view holds size × size RGB pixels");
+                s.apply(&image).into_raw()
+            };
+            let mask = |pixels: Vec<f32>, s: SquareSymmetry| {
+                let image = image::ImageBuffer::<image::Luma<f32>, _>::from_raw(side, side, pixels)
+                    .expect("a loaded mask holds size × size values");
+                s.apply(&image).into_raw()
+            };
+            LoadedPair {
+                size: self.size,
+                view_a: rgb(self.view_a, a),
+                view_b: rgb(self.view_b, b),
+                mask_a: mask(self.mask_a, a),
+                mask_b: mask(self.mask_b, b),
+            }
+        }
+
         /// A twin sample rendered at `rendered` pixels as [`Dataset::load_pair`] would read it
         /// back from the files [`crate::simulate::simulated_sample_files`] writes (lossless
         /// PNG), at `size`: training on samples made on the fly sees the same pixels as
@@ -790,6 +818,58 @@ mod folder {
 
 #[cfg(not(target_arch = "wasm32"))]
 pub use folder::{Dataset, DatasetWriter, LoadedPair};
+
+/// One of the eight symmetries of a square image: `quarter_turns` clockwise quarter turns, then
+/// a left-right mirror when `mirrored`. Exact on the pixel grid (no resampling).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct SquareSymmetry {
+    /// Clockwise quarter turns, 0 to 3.
+    pub quarter_turns: u8,
+    /// Mirrored left to right after the turns.
+    pub mirrored: bool,
+}
+
+impl SquareSymmetry {
+    /// The symmetry that leaves an image as it is.
+    pub const IDENTITY: Self = Self {
+        quarter_turns: 0,
+        mirrored: false,
+    };
+
+    /// Symmetry `index % 8` (`index / 2 % 4` quarter turns, mirrored when `index` is odd): a
+    /// uniform draw of `index` is a uniform draw of a symmetry.
+    pub fn nth(index: u64) -> Self {
+        Self {
+            quarter_turns: (index / 2 % 4) as u8,
+            mirrored: index % 2 == 1,
+        }
+    }
+
+    /// `image` carried by this symmetry (any pixel type; a square image stays the same size).
+    pub fn apply<I>(
+        self,
+        image: &I,
+    ) -> image::ImageBuffer<I::Pixel, Vec<<I::Pixel as image::Pixel>::Subpixel>>
+    where
+        I: image::GenericImageView,
+        I::Pixel: 'static,
+    {
+        use image::imageops::{flip_horizontal_in_place, rotate90, rotate180, rotate270};
+        let mut turned = match self.quarter_turns % 4 {
+            0 => {
+                let (w, h) = image.dimensions();
+                image::ImageBuffer::from_fn(w, h, |x, y| image.get_pixel(x, y))
+            }
+            1 => rotate90(image),
+            2 => rotate180(image),
+            _ => rotate270(image),
+        };
+        if self.mirrored {
+            flip_horizontal_in_place(&mut turned);
+        }
+        turned
+    }
+}
 
 /// The size of a decoded image.
 pub fn image_size_of(image: &image::DynamicImage) -> ImageSize {
@@ -916,6 +996,49 @@ mod tests {
                 "{err} should contain {expected}"
             );
         }
+    }
+
+    #[test]
+    #[cfg(not(target_arch = "wasm32"))]
+    fn the_squares_eight_symmetries_carry_each_mask_with_its_view() {
+        // A 3 × 3 view whose nine pixels all differ, its mask the same values over 255.
+        let values: Vec<u8> = (0..9).map(|v| 20 * v as u8).collect();
+        let pair = LoadedPair {
+            size: ImageSize::square(3),
+            view_a: values.iter().flat_map(|&v| [v, v, v]).collect(),
+            view_b: values.iter().flat_map(|&v| [v, 0, 255 - v]).collect(),
+            mask_a: values.iter().map(|&v| f32::from(v) / 255.0).collect(),
+            mask_b: values.iter().map(|&v| f32::from(v) / 255.0).collect(),
+        };
+        let mut seen = std::collections::HashSet::new();
+        for index in 0..8 {
+            let s = SquareSymmetry::nth(index);
+            let turned = pair.clone().with_symmetries([s, SquareSymmetry::IDENTITY]);
+            let grey: Vec<u8> = turned.view_a.chunks(3).map(|p| p[0]).collect();
+            let mask: Vec<u8> = turned
+                .mask_a
+                .iter()
+                .map(|m| (m * 255.0).round() as u8)
+                .collect();
+            assert_eq!(
+                grey, mask,
+                "symmetry {s:?} moved the mask apart from its view"
+            );
+            assert!(seen.insert(grey), "symmetry {s:?} repeats another");
+            assert_eq!(
+                (turned.view_b, turned.mask_b),
+                (pair.view_b.clone(), pair.mask_b.clone())
+            );
+        }
+        // One clockwise quarter turn takes the top-left pixel to the top-right corner.
+        let quarter = SquareSymmetry {
+            quarter_turns: 1,
+            mirrored: false,
+        };
+        let turned = pair.clone().with_symmetries([quarter; 2]);
+        assert_eq!(turned.view_b[3 * 2..3 * 3], pair.view_b[0..3]);
+        // And the bottom-left one to the top-left.
+        assert_eq!(turned.mask_a[0], pair.mask_a[6]);
     }
 
     #[test]

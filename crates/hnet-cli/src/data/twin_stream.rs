@@ -21,7 +21,7 @@ use anyhow::{Context, bail};
 use burn::data::dataloader::{DataLoader, DataLoaderIterator};
 use burn::data::dataset::{Dataset as BurnDataset, DatasetError};
 use burn::tensor::Device;
-use hnet_twin::dataset::{Dataset, LoadedPair};
+use hnet_twin::dataset::{Dataset, LoadedPair, SquareSymmetry};
 use hnet_twin::off_bench::OffBench;
 use hnet_twin::scene::{Backgrounds, SceneSampling, TwinConfig, generate, sample_rng};
 use hnet_twin::simulate::OFF_BENCH_VIEWS;
@@ -63,6 +63,11 @@ pub struct OffBenchConfig {
     /// [`hnet_twin::scene::SceneSampling`]); the twin's `varied` preset when absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scenes: Option<SceneSampling>,
+    /// Each off-bench view, image and mask together, carried by one of the square's eight
+    /// symmetries (quarter turns, mirror) drawn for it: the masks then see catheters cross the
+    /// image at every angle, where the bench's stand mostly upright. Square networks only.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub turned_views: bool,
 }
 
 fn half() -> f64 {
@@ -92,6 +97,9 @@ impl TwinStreamConfig {
 
 /// Keeps the choice between a bench and an off-bench pair independent of both pairs' draws.
 const MIX_SALT: u64 = 0x6D69_785F_7061_6972;
+
+/// Keeps the symmetries of an off-bench pair's views independent of the pair's own draws.
+const SYMMETRY_SALT: u64 = 0x7475_726E_5F76_6965;
 
 /// The twin's training pairs for the epoch in progress (a Burn dataset).
 pub struct TwinStream {
@@ -167,6 +175,18 @@ impl TwinStream {
                 header_file.display()
             );
         }
+        if config
+            .off_bench
+            .as_ref()
+            .is_some_and(|off| off.turned_views)
+            && size.width != size.height
+        {
+            bail!(
+                "stream.off_bench.turned_views needs a square network; this one is {}×{}",
+                size.width,
+                size.height
+            );
+        }
         let off_bench = match &config.off_bench {
             Some(off) => {
                 let (radiographs, _) =
@@ -203,9 +223,14 @@ impl TwinStream {
     pub fn describe(&self) -> String {
         let off_bench = match &self.config.off_bench {
             Some(off) => format!(
-                ", {:.0} % off the bench ({} radiographs)",
+                ", {:.0} % off the bench ({} radiographs{})",
                 off.fraction * 100.0,
-                self.off_bench.as_ref().map_or(0, OffBench::radiographs)
+                self.off_bench.as_ref().map_or(0, OffBench::radiographs),
+                if off.turned_views {
+                    ", views turned"
+                } else {
+                    ""
+                }
             ),
             None => String::new(),
         };
@@ -224,7 +249,20 @@ impl TwinStream {
             Some(off) => off.generate(self.config.seed, index)?.1,
             None => generate(&self.twin, &self.bench_backgrounds, self.config.seed, index)?,
         };
-        let pair = LoadedPair::from_sample(&sample, self.twin.image_size, self.size);
+        let mut pair = LoadedPair::from_sample(&sample, self.twin.image_size, self.size);
+        if off_bench
+            && self
+                .config
+                .off_bench
+                .as_ref()
+                .is_some_and(|o| o.turned_views)
+        {
+            let mut rng = sample_rng(self.config.seed ^ SYMMETRY_SALT, index);
+            pair = pair.with_symmetries([
+                SquareSymmetry::nth(rng.random::<u64>()),
+                SquareSymmetry::nth(rng.random::<u64>()),
+            ]);
+        }
         let force = sample.params.tip_force_n;
         Ok(StereoItem::new(
             pair,
@@ -296,7 +334,7 @@ impl<O: 'static> DataLoader<O> for EpochCounting<O> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::data::{StereoBatch, StereoBatcher};
+    use crate::data::{StereoBatch, StereoBatcher, StereoItem};
     use burn::data::dataloader::DataLoaderBuilder;
     use hnet_twin::scene::Modality;
     use hnet_twin::simulate::simulate_dataset;
@@ -348,6 +386,7 @@ mod tests {
                 radiographs: Vec::new(),
                 radiograph_fraction: 0.5,
                 scenes: None,
+                turned_views: false,
             }),
         };
         // Off-bench scenes that cannot be drawn are refused with the config's field named.
@@ -377,6 +416,46 @@ mod tests {
         // A run resumed after one epoch trains on what the uninterrupted run's second was.
         let resumed = loader(TwinStream::new(&config, &data, size, 1).unwrap());
         assert_eq!(epoch(&resumed), two);
+
+        // Turned views: each off-bench view is one of the square's symmetries of the same
+        // pair unturned, its mask carried with it; bench pairs are left as they are.
+        let mut turning = config.clone();
+        if let Some(off) = &mut turning.off_bench {
+            off.turned_views = true;
+        }
+        let plain = TwinStream::new(&config, &data, size, 0).unwrap();
+        let turned = TwinStream::new(&turning, &data, size, 0).unwrap();
+        let mut moved = 0;
+        for index in 0..8 {
+            let (p, t) = (plain.pair(index).unwrap(), turned.pair(index).unwrap());
+            if p.force_known {
+                assert_eq!((&p.view_a, &p.mask_b), (&t.view_a, &t.mask_b));
+                continue;
+            }
+            let unturned = |view: &[u8], mask: &[u8]| LoadedPair {
+                size,
+                view_a: view.to_vec(),
+                view_b: view.to_vec(),
+                mask_a: mask.iter().map(|&m| f32::from(m) / 255.0).collect(),
+                mask_b: mask.iter().map(|&m| f32::from(m) / 255.0).collect(),
+            };
+            let candidates = (0..8).map(|k| {
+                let s = SquareSymmetry::nth(k);
+                let c = StereoItem::new(
+                    unturned(&p.view_b, &p.mask_b).with_symmetries([s; 2]),
+                    [0.0; 3],
+                    false,
+                    String::new(),
+                );
+                (c.view_b, c.mask_b, s)
+            });
+            let (.., s) = candidates
+                .into_iter()
+                .find(|(v, m, _)| (v, m) == (&t.view_b, &t.mask_b))
+                .expect("a turned view is a symmetry of the view, its mask with it");
+            moved += usize::from(s != SquareSymmetry::IDENTITY);
+        }
+        assert!(moved > 0, "no off-bench view was turned");
 
         // The dataset's own seed would replay its val and test pairs: refused, naming it.
         let same = TwinStreamConfig { seed: 5, ..config };
