@@ -9,7 +9,8 @@ and the pairs' twin records, and prints:
     tilt, force magnitude) and of the label mask's area;
   - for long catheters (>= --long-mm) and the others, IoU by distance from the tip along the
     catheter and by the catheter's direction in the view (each error-map pixel takes its nearest
-    centreline point);
+    centreline point), and by stretch (the electrodes, the shaft up to 30 mm from the tip, the
+    shaft beyond) and direction (within 30 degrees of horizontal or steeper);
   - with --bench DIR, IoU by how often that dataset's label masks cover each region of the view
     (the position prior a network trained there may have learned).
 
@@ -97,12 +98,24 @@ def iou_table(title, edges, counts, unit):
             )
 
 
+def electrodes_end_mm(data):
+    """Distance from the tip to the proximal edge of the catheter's last electrode, mm (the
+    dataset's twin settings; the shaft beyond it is faint in X-ray)."""
+    design = json.loads((data / "dataset.json").read_text())["source"]["twin"]["catheter"]
+    rings = [r["from_tip_mm"] + r["width_mm"] for r in design["rings"]]
+    return max([design["tip_electrode_mm"], *rings])
+
+
 def along_catheter(data, masks, rows, long_mm):
     edges = [0, 5, 10, 20, 30, 40, 50, 61]
     # The centreline's direction in the view, degrees from the image's horizontal (0-90).
     angle_edges = [0, 15, 30, 45, 60, 75, 90.01]
     counts = {}
     by_angle = {}
+    shaft_from = electrodes_end_mm(data)
+    stretch_edges = [0, shaft_from, 30, np.inf]
+    # (stretch, steep) -> [found, missed, spurious] pixels, every catheter length.
+    by_stretch = np.zeros((3, 2, 3))
     # Missed pixels of each long catheter's view: (missed, id, view, IoU).
     long_views = []
     for r in rows:
@@ -134,6 +147,9 @@ def along_catheter(data, masks, rows, long_mm):
                 counts[(group, name)] = counts.get((group, name), 0) + hist
                 hist = np.histogram(angle[nearest], angle_edges)[0]
                 by_angle[(group, name)] = by_angle.get((group, name), 0) + hist
+                stretch = np.digitize(to_tip[nearest], stretch_edges[1:-1])
+                steep = (angle[nearest] >= 30).astype(int)
+                np.add.at(by_stretch, (stretch, steep, ("found", "missed", "spurious").index(name)), 1)
 
     def label(group):
         return f">= {long_mm} mm" if group == "long" else f"< {long_mm} mm"
@@ -145,6 +161,14 @@ def along_catheter(data, masks, rows, long_mm):
         by_angle,
         "deg",
     )
+    print("all catheters: IoU by stretch and direction in the view")
+    names = (f"electrodes, 0-{shaft_from:g} mm", f"shaft, {shaft_from:g}-30 mm", "shaft, 30 mm on")
+    for k, stretch in enumerate(names):
+        cells = []
+        for steep, direction in ((0, "< 30 deg"), (1, ">= 30 deg")):
+            f, m, sp = by_stretch[k, steep]
+            cells.append(f"{direction} IoU {f / max(f + m + sp, 1):.3f} ({int(f + m)} px)")
+        print(f"  {stretch:22s} " + " | ".join(cells))
     if long_views:
         long_views.sort(reverse=True)
         share = sum(v[0] for v in long_views[:10]) / max(sum(v[0] for v in long_views), 1)
