@@ -43,6 +43,23 @@ pub struct SimulateArgs {
     /// phantom rendered from there, or on the `--background` radiographs when given).
     #[arg(long, default_value = "bench", value_parser = parse_scenes)]
     pub scenes: Scenes,
+    /// Draw catheters and poses from this JSON file instead (every field of a scene sampling, as
+    /// a training config's `stream.off_bench.scenes` takes them; docs/twin.md); with `--scenes
+    /// off-bench`, those scenes seen off the bench.
+    #[arg(long)]
+    pub scene_sampling: Option<PathBuf>,
+}
+
+/// The scene sampling in the JSON file at `path`, checked.
+fn read_scene_sampling(path: &Path) -> anyhow::Result<SceneSampling> {
+    let bytes = std::fs::read(path)
+        .with_context(|| format!("cannot read scene sampling '{}'", path.display()))?;
+    let sampling: SceneSampling = serde_json::from_slice(&bytes)
+        .with_context(|| format!("'{}' is not a scene sampling", path.display()))?;
+    sampling
+        .check()
+        .map_err(|why| anyhow::anyhow!("'{}': {why}", path.display()))?;
+    Ok(sampling)
 }
 
 /// What `--scenes` asks for.
@@ -176,12 +193,17 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     }
     let mut config = TwinConfig::new(args.modality, args.size);
     config.mask = args.mask;
+    let sampling = args
+        .scene_sampling
+        .as_deref()
+        .map(read_scene_sampling)
+        .transpose()?;
     let bar = progress::bar(args.samples as u64, "simulating");
     let progress = |done: usize| bar.set_position(done as u64);
     let start = Instant::now();
     let report = match &args.scenes {
         Scenes::Preset(scenes) => {
-            config.scene = scenes.clone();
+            config.scene = sampling.unwrap_or_else(|| scenes.clone());
             let (backgrounds, names) = backgrounds(&config, &args.backgrounds)?;
             simulate_dataset(
                 &config,
@@ -204,6 +226,14 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
                 radiographs(&args.backgrounds)?
             };
             let off_bench = OffBench::new(config.clone(), radiographs, 1.0);
+            let off_bench = match sampling {
+                Some(scenes) => {
+                    // The header records the scenes drawn.
+                    config.scene = scenes.clone();
+                    off_bench.with_scenes(scenes)
+                }
+                None => off_bench,
+            };
             simulate_off_bench_dataset(
                 &off_bench,
                 &config,

@@ -402,6 +402,47 @@ fn bad_input_gets_a_clear_error_naming_the_file() {
             && err.contains("working directory"),
         "{err}"
     );
+
+    // A scene sampling that cannot be drawn: the file and the field named, nothing written.
+    let sampling = dir.join("sideways.json");
+    let mut scenes = serde_json::json!({
+        "bending_stiffness_n_m2": [0.0004, 0.0009], "length_mm": [60.0, 40.0],
+        "precurvature_per_mm": [0.0, 0.028], "force_magnitude_n": [0.0, 0.4],
+        "force_cone_deg": 80.0, "base_position_mm": [0.0, 0.0, -35.0], "base_jitter_mm": 6.0,
+        "base_tilt_deg": 70.0, "base_roll_deg": [0.0, 360.0]
+    });
+    std::fs::write(&sampling, scenes.to_string()).unwrap();
+    let simulate_with = |sampling: &Path, out: &Path| {
+        let mut command = hnet();
+        command
+            .args([
+                "simulate",
+                "--samples",
+                "2",
+                "--size",
+                "32",
+                "--scenes",
+                "off-bench",
+            ])
+            .arg("--scene-sampling")
+            .arg(sampling)
+            .arg("--out")
+            .arg(out);
+        command
+    };
+    let err = fails(&mut simulate_with(&sampling, &dir.join("reversed")));
+    assert!(
+        err.contains("sideways.json") && err.contains("length_mm"),
+        "{err}"
+    );
+    assert!(!dir.join("reversed").exists());
+    // A valid one is drawn from, and the header records it.
+    scenes["length_mm"] = serde_json::json!([40.0, 60.0]);
+    std::fs::write(&sampling, scenes.to_string()).unwrap();
+    succeeds(&mut simulate_with(&sampling, &dir.join("sideways")));
+    let header: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("sideways/dataset.json")).unwrap()).unwrap();
+    assert_eq!(header["source"]["twin"]["scene"]["base_tilt_deg"], 70.0);
     std::fs::remove_dir_all(dir).ok();
 }
 
