@@ -233,7 +233,11 @@ mod tests {
         // The experiments of docs/results.md too.
         assert_eq!(
             names_in(&dir.join("experiments")),
-            ["force-128-off-bench-long", "force-224-sideways", "force-224-turned"]
+            [
+                "force-128-off-bench-long",
+                "force-224-sideways",
+                "force-224-turned"
+            ]
         );
         let names = names_in(&dir);
         assert_eq!(
