@@ -15,7 +15,7 @@ use burn::data::dataloader::batcher::Batcher;
 use burn::data::dataset::{Dataset as BurnDataset, DatasetError};
 use burn::tensor::{Device, Tensor, TensorData};
 use hnet_model::inference::push_planar;
-use hnet_twin::dataset::{Dataset, LoadedPair, ManifestRow, Split};
+use hnet_twin::dataset::{Dataset, LoadedPair, ManifestRow, Split, SquareSymmetry};
 use hnet_units::ImageSize;
 use rayon::prelude::*;
 
@@ -120,6 +120,22 @@ impl StereoSplit {
         size: ImageSize,
         limit: Option<usize>,
     ) -> anyhow::Result<Self> {
+        Self::load_turned(dataset, split, size, limit, SquareSymmetry::IDENTITY)
+    }
+
+    /// [`Self::load`] with both views of every pair, each with its label mask, carried by
+    /// `symmetry` ([`LoadedPair::with_symmetries`]; square sizes only, unless the identity).
+    pub fn load_turned(
+        dataset: &Dataset,
+        split: Split,
+        size: ImageSize,
+        limit: Option<usize>,
+        symmetry: SquareSymmetry,
+    ) -> anyhow::Result<Self> {
+        anyhow::ensure!(
+            symmetry == SquareSymmetry::IDENTITY || size.width == size.height,
+            "views can only be turned at a square size, not {size}"
+        );
         let rows: Vec<&ManifestRow> = dataset
             .split(split)
             .take(limit.unwrap_or(usize::MAX))
@@ -127,7 +143,10 @@ impl StereoSplit {
         let items = rows
             .par_iter()
             .map(|row| -> anyhow::Result<StereoItem> {
-                let pair = dataset.load_pair(row, Some(size))?;
+                let mut pair = dataset.load_pair(row, Some(size))?;
+                if symmetry != SquareSymmetry::IDENTITY {
+                    pair = pair.with_symmetries([symmetry; 2]);
+                }
                 Ok(StereoItem::new(pair, row.force_n, true, row.id.clone()))
             })
             .collect::<anyhow::Result<Vec<_>>>()

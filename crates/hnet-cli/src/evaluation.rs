@@ -13,7 +13,7 @@ use hnet_model::metrics::{
     AXES, AxisMetrics, ForceAccumulator, ForceMetrics, MASK_THRESHOLD, PixelOutcome,
     SegmentationAccumulator, SegmentationMetrics,
 };
-use hnet_twin::dataset::{Dataset, ImageRef, Split, encode_png};
+use hnet_twin::dataset::{Dataset, ImageRef, Split, SquareSymmetry, encode_png};
 use hnet_units::ImageSize;
 use serde::{Deserialize, Serialize};
 
@@ -73,6 +73,13 @@ pub struct EvalArgs {
     /// Pairs per batch.
     #[arg(long, default_value_t = 16)]
     batch_size: usize,
+    /// Turn both views, each with its label mask, this many quarter turns clockwise before the
+    /// network sees them (0 leaves them as they are): how much the masks depend on the
+    /// catheter's direction in the view. Square networks that segment; the force is not
+    /// evaluated (turned views no longer come from their C-arms) and nothing is saved into a
+    /// run folder.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=3))]
+    turn_views: u8,
 }
 
 pub fn parse_split(text: &str) -> Result<Split, String> {
@@ -108,6 +115,23 @@ pub struct Evaluation {
     /// The dataset it was calibrated on, when not the evaluated one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibration_data: Option<PathBuf>,
+    /// Quarter turns clockwise given to both views and their label masks before the network
+    /// saw them (`hnet eval --turn-views`); 0 for the views as they are.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub view_turns: u8,
+}
+
+fn is_zero(turns: &u8) -> bool {
+    *turns == 0
+}
+
+/// `n` quarter turns in words.
+fn quarter_turns(n: u8) -> String {
+    match n {
+        1 => "a quarter turn".into(),
+        2 => "a half turn".into(),
+        n => format!("{n} quarter turns"),
+    }
 }
 
 /// What the network made of one pair: its force and how well its masks fit, for `hnet report`
@@ -297,6 +321,9 @@ pub struct EvalOptions {
     /// A folder to write each pair's predicted masks into, with their error maps
     /// ([`write_predicted_masks`]).
     pub masks: Option<PathBuf>,
+    /// Quarter turns clockwise of both views and their label masks before the network sees
+    /// them (0-3): masks only, no force or physics check.
+    pub view_turns: u8,
 }
 
 /// Colour of each pixel of an error map, RGB.
@@ -361,7 +388,24 @@ pub fn evaluate(
     options: &EvalOptions,
 ) -> anyhow::Result<(Evaluation, Vec<PairPrediction>)> {
     let dataset = Dataset::open(data)?;
-    let pairs = StereoSplit::load(&dataset, split, model.image_size, None)?;
+    let turn = SquareSymmetry {
+        quarter_turns: options.view_turns % 4,
+        mirrored: false,
+    };
+    let turned = turn != SquareSymmetry::IDENTITY;
+    if turned {
+        anyhow::ensure!(
+            model.spec.heads().0,
+            "--turn-views measures masks; a `{}` network gives none",
+            model.spec.name()
+        );
+        anyhow::ensure!(
+            model.image_size.width == model.image_size.height,
+            "--turn-views needs a square network; this one takes {} images",
+            model.image_size
+        );
+    }
+    let pairs = StereoSplit::load_turned(&dataset, split, model.image_size, None, turn)?;
     anyhow::ensure!(
         !pairs.items.is_empty(),
         "{} has no pairs in its {} split",
@@ -375,7 +419,10 @@ pub fn evaluate(
     let mut forces = ForceAccumulator::new();
     let mut predictions = Vec::new();
     let mut error = None;
-    let records = if options.physics_check {
+    let records = if options.physics_check && turned {
+        eprintln!("views turned: no physics check (they no longer come from their C-arms)");
+        None
+    } else if options.physics_check {
         let ids: Vec<&str> = pairs.items.iter().map(|item| &*item.id).collect();
         let records = physics_check::read_records(&dataset, &ids);
         if records.is_none() {
@@ -445,6 +492,8 @@ pub fn evaluate(
                     return;
                 }
             }
+            // Turned views no longer show their C-arms' projections: no force is read there.
+            let force = force.filter(|_| !turned);
             if let Some(force) = force {
                 forces.push(force, item.force_n);
             }
@@ -523,7 +572,11 @@ pub fn evaluate(
             data: data.to_path_buf(),
             split: split.name().to_string(),
             image_size: model.image_size,
-            force: if force_head { forces.finish() } else { None },
+            force: if force_head && !turned {
+                forces.finish()
+            } else {
+                None
+            },
             segmentation,
             segmentation_mean,
             physics,
@@ -532,6 +585,7 @@ pub fn evaluate(
                 .is_some()
                 .then(|| options.calibration.clone())
                 .flatten(),
+            view_turns: turn.quarter_turns,
         },
         predictions,
     ))
@@ -705,12 +759,16 @@ pub fn markdown(e: &Evaluation) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "{} on the {} split of {} ({}, {} parameters)\n",
+        "{} on the {} split of {} ({}, {} parameters){}\n",
         e.architecture,
         e.split,
         e.data.display(),
         e.image_size,
-        e.params
+        e.params,
+        match e.view_turns {
+            0 => String::new(),
+            n => format!(", both views turned {} clockwise", quarter_turns(n)),
+        }
     );
     if let Some(f) = &e.force {
         let _ = writeln!(s, "Table I: tip force, {} pairs (N, N², N)\n", f.samples);
@@ -797,10 +855,12 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
             physics_check: !args.no_physics,
             calibration: args.calibration.clone(),
             masks: args.masks.clone(),
+            view_turns: args.turn_views,
         },
     )?;
-    // A run keeps its tables and predictions; weights on their own are only printed.
-    if let Some(run) = &run {
+    // A run keeps its tables and predictions (of its views as they are); weights on their own,
+    // and turned views, are only printed.
+    if let Some(run) = run.as_ref().filter(|_| evaluation.view_turns == 0) {
         let write = |path: PathBuf, bytes: &[u8]| {
             std::fs::write(&path, bytes)
                 .with_context(|| format!("cannot write '{}'", path.display()))

@@ -211,7 +211,8 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
         table.contains("| kernel ridge on its pooled features |"),
         "{table}"
     );
-    // Not weights, or weights of another size: named, and the run folder left as it was.
+    // Not weights, weights of another size, or a turn that needs a square network: named, and
+    // the run folder left as it was.
     let files_before = std::fs::read_dir(&runs).unwrap().count();
     for (args, message) in [
         (
@@ -225,6 +226,10 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
         (
             vec!["--weights", weights.to_str().unwrap(), "--size", "64"],
             "takes 48×32 images, not 64×64",
+        ),
+        (
+            vec!["--weights", weights.to_str().unwrap(), "--turn-views", "1"],
+            "--turn-views needs a square network; this one takes 48×32 images",
         ),
     ] {
         let stderr = fails(hnet().arg("eval").args(&args).arg("--data").arg(&data));
@@ -288,6 +293,47 @@ fn every_baseline_trains_and_evaluates_in_the_same_harness() {
         for row in &rows {
             assert_eq!(!row[4].is_empty(), force, "{architecture}: {row:?}");
             assert_eq!(!row[16].is_empty(), segments, "{architecture}: {row:?}");
+        }
+        if architecture == "unet" {
+            // Masks of views turned a quarter turn clockwise, each with its label mask: no
+            // force, and the run's own tables left as they were.
+            let tables = std::fs::read(runs.join("eval-test.json")).unwrap();
+            let masks = dir.join("unet-turned-masks");
+            let out = run(&[
+                "eval",
+                "--run",
+                runs.to_str().unwrap(),
+                "--json",
+                "--turn-views",
+                "1",
+                "--masks",
+                masks.to_str().unwrap(),
+            ]);
+            let turned: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+            assert_eq!(turned["view_turns"], 1);
+            assert!(turned["force"].is_null() && !turned["segmentation"].is_null());
+            assert_eq!(std::fs::read(runs.join("eval-test.json")).unwrap(), tables);
+            // The error maps' catheter (found or missed) is the label mask turned.
+            for row in &rows {
+                let label =
+                    image::open(data.join("samples").join(format!("{}_mask_a.png", row[0])))
+                        .unwrap()
+                        .to_luma8();
+                let errors = image::open(masks.join(format!("{}_errors_a.png", row[0])))
+                    .unwrap()
+                    .to_rgb8();
+                let catheter =
+                    |p: &image::Rgb<u8>| [[255, 255, 255], [64, 128, 255]].contains(&p.0);
+                let turned_label = image::imageops::rotate90(&label);
+                assert!(
+                    turned_label
+                        .pixels()
+                        .zip(errors.pixels())
+                        .all(|(l, e)| (l.0[0] >= 128) == catheter(e)),
+                    "pair {}",
+                    row[0]
+                );
+            }
         }
         // Each epoch logs the metrics of the heads the network has, and no others.
         for split in ["train", "valid"] {
