@@ -10,7 +10,10 @@ and the pairs' twin records, and prints:
   - for long catheters (>= --long-mm) and the others, IoU by distance from the tip along the
     catheter and by the catheter's direction in the view (each error-map pixel takes its nearest
     centreline point), and by stretch (the electrodes, the shaft up to 30 mm from the tip, the
-    shaft beyond) and direction (within 30 degrees of horizontal or steeper);
+    shaft beyond) and direction (within 30 degrees of horizontal or steeper), and the shaft's IoU
+    by direction and by its distance from the nearest background patch seam parallel to it
+    (XRay backgrounds' grid of patches) or by its local contrast (how much darker than the
+    median of its neighbourhood the view is there);
   - with --bench DIR, IoU by how often that dataset's label masks cover each region of the view
     (the position prior a network trained there may have learned).
 
@@ -26,7 +29,7 @@ import json
 from pathlib import Path
 
 import numpy as np
-from PIL import Image
+from PIL import Image, ImageFilter
 
 # Error-map colours, as `hnet eval --masks` writes them (crates/hnet-cli/src/evaluation.rs).
 FOUND = (255, 255, 255)
@@ -106,6 +109,39 @@ def electrodes_end_mm(data):
     return max([design["tip_electrode_mm"], *rings])
 
 
+def patch_grid(data):
+    """Patches per side of the dataset's X-ray backgrounds, or None (no patch grid)."""
+    patches = json.loads((data / "dataset.json").read_text())["source"]["twin"].get("patches")
+    return patches["grid"] if patches else None
+
+
+def local_contrast(path, side):
+    """How much darker each pixel of a view is than the median of its neighbourhood (about a
+    twentieth of the view), relative to that median: 0 on the background, positive on the
+    catheter."""
+    grey = Image.open(path).convert("L").resize((side, side), Image.BILINEAR)
+    window = max(3, side // 20) | 1
+    background = np.asarray(grey.filter(ImageFilter.MedianFilter(window))).astype(float)
+    return (background - np.asarray(grey).astype(float)) / np.maximum(background, 1.0)
+
+
+# The shaft's pools: distance from the nearest parallel patch seam (pixels) and local contrast.
+SEAM_EDGES = [0, 2, 4, 8, 14, np.inf]
+CONTRAST_EDGES = [-np.inf, 0.02, 0.04, 0.06, 0.09, 0.13, np.inf]
+
+
+def shaft_table(title, edges, pool, unit):
+    print(title)
+    for steep, direction in ((0, "< 30 deg"), (1, ">= 30 deg")):
+        cells = []
+        for b in range(len(edges) - 1):
+            f, m, sp = pool[steep, b]
+            lo, hi = edges[b], edges[b + 1]
+            span = f"< {hi:g}" if np.isinf(lo) else f">= {lo:g}" if np.isinf(hi) else f"{lo:g}-{hi:g}"
+            cells.append(f"{span}{unit} {f / max(f + m + sp, 1):.3f} ({int(f + m)} px)")
+        print(f"  {direction:9s} " + " | ".join(cells))
+
+
 def along_catheter(data, masks, rows, long_mm):
     edges = [0, 5, 10, 20, 30, 40, 50, 61]
     # The centreline's direction in the view, degrees from the image's horizontal (0-90).
@@ -118,6 +154,10 @@ def along_catheter(data, masks, rows, long_mm):
     by_stretch = np.zeros((3, 2, 3))
     # Missed pixels of each long catheter's view: (missed, id, view, IoU).
     long_views = []
+    grid = patch_grid(data)
+    # (steep, bin, found/missed/spurious) shaft pixels.
+    by_seam = np.zeros((2, len(SEAM_EDGES) - 1, 3))
+    by_contrast = np.zeros((2, len(CONTRAST_EDGES) - 1, 3))
     for r in rows:
         rec = record(data, r["id"])
         length = rec["scene"]["length_mm"]
@@ -136,6 +176,7 @@ def along_catheter(data, masks, rows, long_mm):
             angle = np.degrees(np.arctan2(np.abs(tangent[:, 1]), np.abs(tangent[:, 0])))
             ys, xs = np.nonzero(np.ones_like(classes[0]))
             pixels = np.stack([xs + 0.5, ys + 0.5], 1)
+            contrast = local_contrast(data / "samples" / f"{r['id']}_view_{view}.png", side)
             if group == "long":
                 long_views.append((int(classes[1].sum()), r["id"], view, float(r[f"catheter_iou_{view}"])))
             for name, m in zip(("found", "missed", "spurious"), classes):
@@ -149,7 +190,19 @@ def along_catheter(data, masks, rows, long_mm):
                 by_angle[(group, name)] = by_angle.get((group, name), 0) + hist
                 stretch = np.digitize(to_tip[nearest], stretch_edges[1:-1])
                 steep = (angle[nearest] >= 30).astype(int)
-                np.add.at(by_stretch, (stretch, steep, ("found", "missed", "spurious").index(name)), 1)
+                k = ("found", "missed", "spurious").index(name)
+                np.add.at(by_stretch, (stretch, steep, k), 1)
+                shaft = to_tip[nearest] > shaft_from
+                xy = p[shaft].astype(int)
+                bins = np.digitize(contrast[xy[:, 1], xy[:, 0]], CONTRAST_EDGES[1:-1])
+                np.add.at(by_contrast, (steep[shaft], bins, k), 1)
+                if grid:
+                    # Distance from the nearest interior seam across the shaft's direction:
+                    # horizontal seams for sideways stretches, vertical ones for steeper.
+                    cell = side / grid
+                    off = np.where(steep[shaft, None] == 1, p[shaft][:, :1], p[shaft][:, 1:]).ravel()
+                    seam = np.abs((off + cell / 2) % cell - cell / 2)
+                    np.add.at(by_seam, (steep[shaft], np.digitize(seam, SEAM_EDGES[1:-1]), k), 1)
 
     def label(group):
         return f">= {long_mm} mm" if group == "long" else f"< {long_mm} mm"
@@ -169,6 +222,19 @@ def along_catheter(data, masks, rows, long_mm):
             f, m, sp = by_stretch[k, steep]
             cells.append(f"{direction} IoU {f / max(f + m + sp, 1):.3f} ({int(f + m)} px)")
         print(f"  {stretch:22s} " + " | ".join(cells))
+    if grid:
+        shaft_table(
+            f"shaft (from {shaft_from:g} mm): IoU by distance from the nearest parallel patch seam ({grid}x{grid} patches)",
+            SEAM_EDGES,
+            by_seam,
+            " px",
+        )
+    shaft_table(
+        f"shaft (from {shaft_from:g} mm): IoU by local contrast (darker than the neighbourhood's median, relative)",
+        CONTRAST_EDGES,
+        by_contrast,
+        "",
+    )
     if long_views:
         long_views.sort(reverse=True)
         share = sum(v[0] for v in long_views[:10]) / max(sum(v[0] for v in long_views), 1)
