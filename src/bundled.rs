@@ -13,7 +13,9 @@ pub const BUNDLED_WEIGHTS: &str = "assets/hnet-cpu.bpk";
 pub const BUNDLED_FORCE_CAVEAT: &str = "The bundled weights were trained on the CPU, at \
     128 x 128 px on 84,000 twin pairs and then at 224 x 224 px on 10,000 more (assets/MODEL.md). \
     On fresh twin pairs their masks are accurate (catheter IoU 0.93-0.94 on the bench, 0.88-0.92 \
-    on other catheters, poses, C-arm angles and chest radiographs) but their force only coarse \
+    on other catheters, poses, C-arm angles and chest radiographs, as long as the catheter comes \
+    up from the bottom of the view, as in every training scene: one entering from the top or a \
+    side loses its shaft) but their force only coarse \
     (RMSE 0.067 N, R² 0.63), and learned on the bench pose alone: read the arrows as a \
     direction and a rough size, not a measurement. The physics estimate, fitted to these masks, \
     is closer across the catheter (R² 0.98 on x and y on the bench and on radiographs) and along \
