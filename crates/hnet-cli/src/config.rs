@@ -234,6 +234,7 @@ mod tests {
         assert_eq!(
             names_in(&dir.join("experiments")),
             [
+                "force-128-any-pose",
                 "force-128-off-bench-long",
                 "force-224-sideways",
                 "force-224-turned"
