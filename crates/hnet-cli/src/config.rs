@@ -235,7 +235,10 @@ mod tests {
             names_in(&dir.join("experiments")),
             [
                 "force-128-any-pose",
+                "force-128-masks-any-pose",
+                "force-128-off-bench-any-pose",
                 "force-128-off-bench-long",
+                "force-224-any-pose",
                 "force-224-sideways",
                 "force-224-turned"
             ]
