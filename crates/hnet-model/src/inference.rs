@@ -237,4 +237,8 @@ pub enum PredictError {
     /// The device could not return the result.
     #[error(transparent)]
     Readback(#[from] ReadbackError),
+    /// A view or a mask could not be turned for its catheter's entry edge
+    /// ([`crate::catheter_entry`]).
+    #[error(transparent)]
+    Turn(#[from] crate::catheter_entry::TurnError),
 }

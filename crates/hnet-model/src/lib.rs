@@ -13,6 +13,8 @@
 //!   they need no backend;
 //! - [`inference`]: turning RGB pixel buffers into input tensors and outputs into masks and a
 //!   tip force;
+//! - [`catheter_entry`]: reading a view whose catheter enters through another edge than the
+//!   bottom, as every training scene had it, by turning it;
 //! - [`weights`]: saving and loading trained weights as a single self-describing burnpack file;
 //! - [`baselines`] and [`architectures`]: the networks H-Net is compared with, and one type for
 //!   all of them so that training and evaluation are written once.
@@ -30,6 +32,7 @@ extern crate alloc;
 
 pub mod architectures;
 pub mod baselines;
+pub mod catheter_entry;
 pub mod inference;
 pub mod loss;
 pub mod metrics;
