@@ -3,11 +3,15 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use anyhow::Context;
 use burn::module::Module;
 use burn::tensor::Device;
 use hnet_model::architectures::{ModelSpec, StereoModel};
+use hnet_model::catheter_entry::{
+    CatheterEntry, EntrySetting, TurnError, TurnedOutput, read_turned, turn_clockwise,
+};
 use hnet_model::inference::host_values;
 use hnet_model::metrics::{
     AXES, AxisMetrics, ForceAccumulator, ForceMetrics, MASK_THRESHOLD, PixelOutcome,
@@ -80,6 +84,20 @@ pub struct EvalArgs {
     /// run folder.
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=3))]
     turn_views: u8,
+    /// The edge through which the catheter enters the views (`bottom`, `left`, `top`, `right`;
+    /// two, comma-separated, for views A and B), or `auto` to find it per view by reading all
+    /// four quarter turns (four times the work) and keeping the one with the most catheter
+    /// pixels. Each view is turned so that its catheter comes up from the bottom, as in training,
+    /// and its masks turned back; the force head's estimate is kept only for pairs read as they
+    /// are. Square networks that segment; nothing is saved into a run folder unless `bottom`.
+    #[arg(long, default_value = "bottom", value_parser = parse_entry)]
+    catheter_entry: EntrySetting,
+}
+
+fn parse_entry(text: &str) -> Result<EntrySetting, String> {
+    EntrySetting::from_text(text).ok_or_else(|| {
+        format!("`{text}` is not auto, an edge (bottom, left, top, right) or two edges `A,B`")
+    })
 }
 
 pub fn parse_split(text: &str) -> Result<Split, String> {
@@ -119,6 +137,21 @@ pub struct Evaluation {
     /// saw them (`hnet eval --turn-views`); 0 for the views as they are.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub view_turns: u8,
+    /// How each view's catheter entry edge was found (`hnet eval --catheter-entry`), when not
+    /// as trained (from the bottom).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub catheter_entry: Option<EntryUse>,
+}
+
+/// How [`Evaluation`]'s pairs were read for their catheters' entry edges.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct EntryUse {
+    /// The setting (`auto`, or the edges of views A and B).
+    pub setting: String,
+    /// Views A and B read turned (entering through another edge than the bottom).
+    pub views_read_turned: [usize; 2],
+    /// Pairs evaluated.
+    pub pairs: usize,
 }
 
 fn is_zero(turns: &u8) -> bool {
@@ -260,6 +293,73 @@ pub fn predict(
     Ok(())
 }
 
+/// [`predict`] with each pair's views read under `entry` ([`hnet_model::catheter_entry`]): each
+/// view turned for every candidate edge, the masks of the kept edge turned back, and the force
+/// only for pairs whose views were both read as they are. Returns how many views A and B were
+/// read turned.
+pub fn predict_entry(
+    model: &TrainedModel,
+    items: &[StereoItem],
+    batch_size: usize,
+    device: &Device,
+    entry: EntrySetting,
+    mut visit: impl FnMut(&StereoItem, Option<[Vec<f32>; 2]>, Option<[f32; 3]>),
+) -> anyhow::Result<[usize; 2]> {
+    if !entry.turns_views() {
+        predict(model, items, batch_size, device, visit)?;
+        return Ok([0, 0]);
+    }
+    let size = model.image_size;
+    anyhow::ensure!(
+        model.spec.heads().0,
+        "--catheter-entry reads masks; a `{}` network gives none",
+        model.spec.name()
+    );
+    anyhow::ensure!(
+        size.width == size.height,
+        "--catheter-entry needs a square network; this one takes {size} images"
+    );
+    let mut read_turned_views = [0, 0];
+    for chunk in items.chunks(batch_size.max(1)) {
+        let mut outputs: Vec<Vec<TurnedOutput>> = vec![Vec::new(); chunk.len()];
+        for candidate in entry.candidates() {
+            let turned = chunk
+                .iter()
+                .map(|item| -> Result<StereoItem, TurnError> {
+                    let turn = |view: &[u8], edge: CatheterEntry| {
+                        turn_clockwise(view, size, 3, edge.quarter_turns()).map(Arc::from)
+                    };
+                    Ok(StereoItem {
+                        view_a: turn(&item.view_a, candidate[0])?,
+                        view_b: turn(&item.view_b, candidate[1])?,
+                        ..item.clone()
+                    })
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            let mut index = 0;
+            predict(model, &turned, batch_size, device, |_, masks, force| {
+                if let Some(masks) = masks {
+                    outputs[index].push(TurnedOutput {
+                        entry: candidate,
+                        masks,
+                        force,
+                    });
+                }
+                index += 1;
+            })?;
+        }
+        for (item, outputs) in chunk.iter().zip(outputs) {
+            let reading = read_turned(outputs, size)
+                .with_context(|| format!("pair {}: reading its turned views", item.id))?;
+            for (count, edge) in read_turned_views.iter_mut().zip(reading.entry) {
+                *count += usize::from(edge != CatheterEntry::Bottom);
+            }
+            visit(item, Some(reading.masks), reading.force);
+        }
+    }
+    Ok(read_turned_views)
+}
+
 /// Reads a weights file and rebuilds its network; errors name the file.
 fn read_weights(path: &Path, device: &Device) -> anyhow::Result<(StereoModel, ModelSpec)> {
     let bytes = std::fs::read(path)
@@ -324,6 +424,8 @@ pub struct EvalOptions {
     /// Quarter turns clockwise of both views and their label masks before the network sees
     /// them (0-3): masks only, no force or physics check.
     pub view_turns: u8,
+    /// How each view's catheter entry edge is found ([`predict_entry`]).
+    pub entry: EntrySetting,
 }
 
 /// Colour of each pixel of an error map, RGB.
@@ -446,11 +548,12 @@ pub fn evaluate(
     }
     // Per pair, what the physics check reads: the predicted masks and force.
     let mut predicted: Vec<NetworkOutput> = Vec::new();
-    predict(
+    let views_read_turned = predict_entry(
         model,
         &pairs.items,
         batch_size,
         device,
+        options.entry,
         |item, masks, force| {
             if records.is_some() {
                 predicted.push(NetworkOutput {
@@ -586,6 +689,11 @@ pub fn evaluate(
                 .then(|| options.calibration.clone())
                 .flatten(),
             view_turns: turn.quarter_turns,
+            catheter_entry: options.entry.turns_views().then(|| EntryUse {
+                setting: options.entry.text(),
+                views_read_turned,
+                pairs: pairs.items.len(),
+            }),
         },
         predictions,
     ))
@@ -770,6 +878,15 @@ pub fn markdown(e: &Evaluation) -> String {
             n => format!(", both views turned {} clockwise", quarter_turns(n)),
         }
     );
+    if let Some(entry) = &e.catheter_entry {
+        let [a, b] = entry.views_read_turned;
+        let _ = writeln!(
+            s,
+            "Catheter entry `{}`: of {} pairs, {a} views A and {b} views B read turned (the \
+             force head's estimate left out for their pairs)\n",
+            entry.setting, entry.pairs
+        );
+    }
     if let Some(f) = &e.force {
         let _ = writeln!(s, "Table I: tip force, {} pairs (N, N², N)\n", f.samples);
         let _ = writeln!(s, "| axis | MAE | MSE | RMSE | R² | R/M | RMSE/range |");
@@ -856,11 +973,15 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
             calibration: args.calibration.clone(),
             masks: args.masks.clone(),
             view_turns: args.turn_views,
+            entry: args.catheter_entry,
         },
     )?;
-    // A run keeps its tables and predictions (of its views as they are); weights on their own,
-    // and turned views, are only printed.
-    if let Some(run) = run.as_ref().filter(|_| evaluation.view_turns == 0) {
+    // A run keeps its tables and predictions (of its views as they are, read as trained);
+    // weights on their own, and turned views, are only printed.
+    if let Some(run) = run
+        .as_ref()
+        .filter(|_| evaluation.view_turns == 0 && evaluation.catheter_entry.is_none())
+    {
         let write = |path: PathBuf, bytes: &[u8]| {
             std::fs::write(&path, bytes)
                 .with_context(|| format!("cannot write '{}'", path.display()))

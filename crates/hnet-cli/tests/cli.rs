@@ -231,6 +231,24 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
             vec!["--weights", weights.to_str().unwrap(), "--turn-views", "1"],
             "--turn-views needs a square network; this one takes 48×32 images",
         ),
+        (
+            vec![
+                "--weights",
+                weights.to_str().unwrap(),
+                "--catheter-entry",
+                "left",
+            ],
+            "--catheter-entry needs a square network; this one takes 48×32 images",
+        ),
+        (
+            vec![
+                "--weights",
+                weights.to_str().unwrap(),
+                "--catheter-entry",
+                "up",
+            ],
+            "`up` is not auto, an edge (bottom, left, top, right) or two edges `A,B`",
+        ),
     ] {
         let stderr = fails(hnet().arg("eval").args(&args).arg("--data").arg(&data));
         // Said once: the file's name and its problem, not the problem again as its cause.
@@ -312,6 +330,33 @@ fn every_baseline_trains_and_evaluates_in_the_same_harness() {
             let turned: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
             assert_eq!(turned["view_turns"], 1);
             assert!(turned["force"].is_null() && !turned["segmentation"].is_null());
+            assert_eq!(std::fs::read(runs.join("eval-test.json")).unwrap(), tables);
+            // Turned a quarter clockwise, the catheter enters from the left: read for that edge,
+            // the network sees the views as they were and its masks, turned back onto the turned
+            // labels, score as the untouched views' did. A search reads all four turns.
+            let untouched: serde_json::Value = serde_json::from_slice(&tables).unwrap();
+            for (entry, read_turned) in [("left", Some(rows.len())), ("auto", None)] {
+                let out = run(&[
+                    "eval",
+                    "--run",
+                    runs.to_str().unwrap(),
+                    "--json",
+                    "--turn-views",
+                    "1",
+                    "--catheter-entry",
+                    entry,
+                ]);
+                let read: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+                assert_eq!(read["catheter_entry"]["setting"], entry);
+                assert_eq!(read["catheter_entry"]["pairs"], rows.len());
+                if let Some(n) = read_turned {
+                    assert_eq!(
+                        read["catheter_entry"]["views_read_turned"],
+                        serde_json::json!([n, n])
+                    );
+                    assert_eq!(read["segmentation"], untouched["segmentation"]);
+                }
+            }
             assert_eq!(std::fs::read(runs.join("eval-test.json")).unwrap(), tables);
             // The error maps' catheter (found or missed) is the label mask turned.
             for row in &rows {
