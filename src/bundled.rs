@@ -15,7 +15,8 @@ pub const BUNDLED_FORCE_CAVEAT: &str = "The bundled weights were trained on the 
     On fresh twin pairs their masks are accurate (catheter IoU 0.93-0.94 on the bench, 0.88-0.92 \
     on other catheters, poses, C-arm angles and chest radiographs, as long as the catheter comes \
     up from the bottom of the view, as in every training scene: one entering from the top or a \
-    side loses its shaft) but their force only coarse \
+    side loses its shaft unless \"Catheter enters from\" names or finds the edge, when each view \
+    is turned for H-Net and its own force is not read) but their force only coarse \
     (RMSE 0.067 N, R² 0.63), and learned on the bench pose alone: read the arrows as a \
     direction and a rough size, not a measurement. The physics estimate, fitted to these masks, \
     is closer across the catheter (R² 0.98 on x and y on the bench and on radiographs) and along \

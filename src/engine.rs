@@ -7,6 +7,9 @@ use std::rc::Rc;
 use burn::module::Module;
 use burn::tensor::Device;
 use hnet_model::architectures::{ModelSpec, StereoModel};
+use hnet_model::catheter_entry::{
+    CatheterEntry, EntryReading, EntrySetting, read_predictions, turned_pairs,
+};
 use hnet_model::inference::{PredictError, StereoPair, StereoPrediction};
 use hnet_model::weights::{WeightsError, WeightsHeader};
 use hnet_model::{HNet, HNetConfig, HNetConfigError};
@@ -68,12 +71,32 @@ pub struct Prediction {
     pub mask_a: Vec<f32>,
     /// Catheter probability of each pixel of view B.
     pub mask_b: Vec<f32>,
-    /// Tip force `(Fx, Fy, Fz)` in newtons.
-    pub force_n: [f32; 3],
+    /// H-Net's tip force `(Fx, Fy, Fz)` in newtons; `None` when a view was read turned (its
+    /// force head learned catheters that come up from the bottom of both views).
+    pub force_n: Option<[f32; 3]>,
+    /// The edge through which each view's catheter was read as entering
+    /// ([`hnet_model::catheter_entry`]).
+    pub entry: [CatheterEntry; 2],
     /// Time of the forward pass and read-back, milliseconds.
     pub millis: f64,
     /// The backend it ran on.
     pub backend: &'static str,
+}
+
+impl Prediction {
+    /// Why H-Net's force was left out of this prediction, when a view was read turned.
+    pub fn force_left_out(&self) -> Option<String> {
+        if self.force_n.is_some() || self.entry == [CatheterEntry::Bottom; 2] {
+            return None;
+        }
+        let [a, b] = self.entry.map(CatheterEntry::name);
+        Some(format!(
+            "H-Net's force is not read: its force head learned catheters that come up from the \
+             bottom of both views, and this pair's were read as entering view A from the {a} and \
+             view B from the {b} (each view turned for its masks). The physics estimate needs no \
+             such pose."
+        ))
+    }
 }
 
 /// Why the page has no network to run, or the network gave no prediction.
@@ -110,9 +133,6 @@ pub enum EngineError {
     /// The WebGPU worker failed.
     #[error(transparent)]
     WebGpu(#[from] GpuWorkerError),
-    /// The network gave no prediction for the pair.
-    #[error("H-Net returned no prediction")]
-    NoPrediction,
 }
 
 impl Engine {
@@ -213,8 +233,15 @@ impl Engine {
     }
 
     /// Runs H-Net on two [`WORK_SIZE`] RGB images, resizing them to the network's input and
-    /// its masks back. Yields to the browser first so that the busy state is painted.
-    pub async fn infer(&self, view_a: &[u8], view_b: &[u8]) -> Result<Prediction, EngineError> {
+    /// its masks back, with each view turned for its catheter's entry edge under `entry` (a
+    /// search runs four times the work). Yields to the browser first so that the busy state is
+    /// painted.
+    pub async fn infer(
+        &self,
+        view_a: &[u8],
+        view_b: &[u8],
+        entry: EntrySetting,
+    ) -> Result<Prediction, EngineError> {
         let side = self.input.width;
         let (a, b) = (
             rescale_rgb(view_a, WORK_SIZE, side),
@@ -222,27 +249,33 @@ impl Engine {
         );
         yield_to_browser().await;
         let start = now_ms();
-        let p: StereoPrediction = match &self.runner {
-            Runner::Cpu(model) => model
-                .predict_async(
-                    &[StereoPair {
-                        view_a: &a,
-                        view_b: &b,
-                    }],
-                    self.input,
-                    &Device::flex(),
-                )
-                .await?
-                .into_iter()
-                .next()
-                .ok_or(EngineError::NoPrediction)?,
-            Runner::WebGpu(network) => network.infer(&a, &b, self.input).await?,
+        let pair = StereoPair {
+            view_a: &a,
+            view_b: &b,
+        };
+        let reading: EntryReading = match &self.runner {
+            Runner::Cpu(model) => {
+                model
+                    .predict_entry_async(pair, self.input, &Device::flex(), entry)
+                    .await?
+            }
+            Runner::WebGpu(network) => {
+                // The worker runs one pair per call: each turned copy in turn.
+                let turned = turned_pairs(&a, &b, self.input, entry).map_err(PredictError::from)?;
+                let mut predictions: Vec<StereoPrediction> = Vec::with_capacity(turned.len());
+                for t in &turned {
+                    predictions.push(network.infer(&t.view_a, &t.view_b, self.input).await?);
+                }
+                read_predictions(&turned, predictions, self.input).map_err(PredictError::from)?
+            }
         };
         let millis = now_ms() - start;
+        let [mask_a, mask_b] = &reading.masks;
         Ok(Prediction {
-            mask_a: rescale_mask(&p.mask_a, side, WORK_SIZE),
-            mask_b: rescale_mask(&p.mask_b, side, WORK_SIZE),
-            force_n: p.force,
+            mask_a: rescale_mask(mask_a, side, WORK_SIZE),
+            mask_b: rescale_mask(mask_b, side, WORK_SIZE),
+            force_n: reading.force,
+            entry: reading.entry,
             millis,
             backend: self.backend.label(),
         })

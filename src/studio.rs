@@ -24,6 +24,7 @@ use crate::storage;
 use crate::twin_live::{TwinControls, XrayBackground};
 use crate::webgpu_check;
 use crate::workspace::{LabeledPair, RemovedPair, Tool, View, Workspace};
+use hnet_model::catheter_entry::EntrySetting;
 use hnet_twin::carm::Biplane;
 use hnet_twin::physics_force::ForceCombination;
 
@@ -187,6 +188,8 @@ pub struct Studio {
     pub model: RwSignal<ModelState, LocalStorage>,
     /// Which backend the user asked for.
     pub backend_choice: RwSignal<BackendChoice>,
+    /// Through which edge the catheter enters the views H-Net reads (as trained: the bottom).
+    pub catheter_entry: RwSignal<EntrySetting>,
     /// The labeled pairs.
     pub workspace: RwSignal<Workspace>,
     /// The live twin's pair, shown until kept or another pair is selected.
@@ -253,6 +256,7 @@ impl Studio {
         Self {
             model: RwSignal::new_local(ModelState::Loading("Loading H-Net…".into())),
             backend_choice: RwSignal::new(BackendChoice::Auto),
+            catheter_entry: RwSignal::new(EntrySetting::AS_TRAINED),
             workspace: RwSignal::new(Workspace::default()),
             draft: RwSignal::new(None),
             predictions: RwSignal::new(HashMap::new()),
@@ -475,9 +479,10 @@ impl Studio {
         };
         let studio = *self;
         let id = pair.id;
+        let entry = self.catheter_entry.get_untracked();
         self.busy.set(Some(format!("Running H-Net on {id}…")));
         leptos::task::spawn_local(async move {
-            match engine.infer(&pair.view_a, &pair.view_b).await {
+            match engine.infer(&pair.view_a, &pair.view_b, entry).await {
                 Ok(prediction) => studio.predictions.update(|p| {
                     p.insert(id, prediction);
                 }),
@@ -703,6 +708,7 @@ impl Studio {
         }
         self.stop_playback();
         let serial = self.cine_serial.get_untracked();
+        let entry = self.catheter_entry.get_untracked();
         self.cine
             .update(|c| c.iter_mut().for_each(CinePlayer::clear_trace));
         self.trace_cancelled.set(false);
@@ -724,10 +730,12 @@ impl Studio {
                     Some((c.rgb(View::A, frame)?, c.rgb(View::B, frame)?))
                 });
                 let Some((a, b)) = views else { break };
-                match engine.infer(&a, &b).await {
+                match engine.infer(&a, &b, entry).await {
+                    // A frame read turned has no force of H-Net's to trace.
                     Ok(prediction) if same_cine() => studio.cine.update(|c| {
-                        c.iter_mut()
-                            .for_each(|c| c.record_force(frame, prediction.force_n))
+                        if let (Some(c), Some(force)) = (c.as_mut(), prediction.force_n) {
+                            c.record_force(frame, force);
+                        }
                     }),
                     Ok(_) => break,
                     Err(e) => {
@@ -854,7 +862,7 @@ impl Studio {
             views: pair_views(&pair),
             id: pair.id,
             fit_masks: choice,
-            prediction_force_n: prediction.map(|(_, _, force)| force),
+            prediction_force_n: prediction.and_then(|(_, _, force)| force),
             result: result.map_err(|e| with_causes(&e)),
             millis,
         }));
@@ -942,21 +950,26 @@ async fn checked_on_webgpu(cpu: &Engine) -> Result<Engine, String> {
             )));
         }
     };
-    let expected = cpu.infer(&pair.view_a, &pair.view_b).await.map_err(|e| {
-        reason(
-            "the CPU failed on the check pair",
-            &e,
-            "so WebGPU's result cannot be checked",
-        )
-    })?;
+    let expected = cpu
+        .infer(&pair.view_a, &pair.view_b, EntrySetting::AS_TRAINED)
+        .await
+        .map_err(|e| {
+            reason(
+                "the CPU failed on the check pair",
+                &e,
+                "so WebGPU's result cannot be checked",
+            )
+        })?;
     let found = gpu
-        .infer(&pair.view_a, &pair.view_b)
+        .infer(&pair.view_a, &pair.view_b, EntrySetting::AS_TRAINED)
         .await
         .map_err(|e| reason("WebGPU failed on a check pair", &e, CPU_USED))?;
     fn output(p: &Prediction) -> webgpu_check::Output<'_> {
         webgpu_check::Output {
             masks: [&p.mask_a[..], &p.mask_b[..]],
-            force_n: p.force_n,
+            // Read as trained, a pair always has the force head's estimate; a missing one
+            // reads as NaN, which the check refuses.
+            force_n: p.force_n.unwrap_or([f32::NAN; 3]),
         }
     }
     let scale = web_sys::window()

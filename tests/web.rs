@@ -7,6 +7,7 @@ use std::collections::BTreeMap;
 use std::rc::Rc;
 
 use burn::tensor::{Device, Tensor};
+use hnet_model::catheter_entry::{CatheterEntry, EntrySetting};
 use hnet_model::{HNet, HNetConfig};
 use hnet_studio::browser::{JsError, yield_to_browser};
 use hnet_studio::compute::{Backend, BackendChoice, choose_backend};
@@ -115,10 +116,29 @@ async fn the_engine_runs_on_a_twin_pair_at_the_working_size() {
     let pair = TwinControls::default()
         .render("pair-0001".into(), &XrayBackground::phantom())
         .unwrap();
-    let prediction = engine.infer(&pair.view_a, &pair.view_b).await.unwrap();
+    let prediction = engine
+        .infer(&pair.view_a, &pair.view_b, EntrySetting::AS_TRAINED)
+        .await
+        .unwrap();
     assert_eq!(prediction.mask_a.len(), WORK_SIZE * WORK_SIZE);
     assert!(prediction.mask_b.iter().all(|p| (0.0..=1.0).contains(p)));
-    assert!(prediction.force_n.iter().all(|f| f.is_finite()));
+    assert!(prediction.force_n.unwrap().iter().all(|f| f.is_finite()));
+    assert_eq!(prediction.force_left_out(), None);
+    // A view read turned for its catheter's entry edge: masks in the view's own frame, and no
+    // force of the head's, with the reason.
+    let turned = engine
+        .infer(
+            &pair.view_a,
+            &pair.view_b,
+            EntrySetting::Known([CatheterEntry::Left, CatheterEntry::Bottom]),
+        )
+        .await
+        .unwrap();
+    assert_eq!(turned.mask_a.len(), WORK_SIZE * WORK_SIZE);
+    assert_eq!(turned.entry, [CatheterEntry::Left, CatheterEntry::Bottom]);
+    assert_eq!(turned.force_n, None);
+    let why = turned.force_left_out().unwrap();
+    assert!(why.contains("view A from the left"), "{why}");
 }
 
 #[wasm_bindgen_test]

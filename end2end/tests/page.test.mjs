@@ -406,6 +406,20 @@ test("a twin pair in 3D: the catheter, the physics force beside H-Net's, the epi
   }
   await page.selectOption("#fit-masks", "labels");
   await page.waitForFunction(() => !document.querySelector("#force-table tr.combined"));
+  // Told that the catheter enters from the left, H-Net reads each view turned so that it comes
+  // up from the bottom (its masks turned back) and leaves its force out, saying why; finding the
+  // edge on this upright twin pair finds the bottom, and the force is back.
+  await page.selectOption("#catheter-entry", "left");
+  await page.waitForSelector("#force-left-out", { timeout: 120_000 });
+  assert.match(await page.textContent("#force-left-out"), /entering view A from the left and view B from the left/);
+  assert.equal(await page.textContent("#force-table tr.estimate td"), "–");
+  await page.selectOption("#catheter-entry", "auto");
+  await page.waitForFunction(
+    () => !document.querySelector("#force-left-out") && document.querySelector("#force-table tr.estimate td")?.textContent !== "–",
+    null,
+    { timeout: 120_000 },
+  );
+  await page.selectOption("#catheter-entry", "bottom");
   // The keys rotate the focused 3D view.
   await page.focus("#catheter-3d");
   await page.keyboard.press("ArrowRight");

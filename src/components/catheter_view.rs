@@ -147,7 +147,9 @@ pub fn CatheterView() -> impl IntoView {
     });
     let estimate = move || {
         let id = studio.shown_id()?;
-        studio.predictions.with(|p| p.get(&id).map(|p| p.force_n))
+        studio
+            .predictions
+            .with(|p| p.get(&id).and_then(|p| p.force_n))
     };
     let truth = move || {
         studio.with_shown(|p| match &p?.source {

@@ -39,7 +39,9 @@ pub fn ForcePanel() -> impl IntoView {
     let studio = expect_context::<Studio>();
     let estimate = move || {
         let id = studio.shown_id()?;
-        studio.predictions.with(|p| p.get(&id).map(|p| p.force_n))
+        studio
+            .predictions
+            .with(|p| p.get(&id).and_then(|p| p.force_n))
     };
     let truth = move || studio.with_shown(|p| p.and_then(|p| p.true_force()));
     // The physics estimate of the pair on screen, if its catheter was reconstructed.
@@ -194,6 +196,11 @@ pub fn ForcePanel() -> impl IntoView {
                     }}
                 </tbody>
             </table>
+            {move || {
+                let id = studio.shown_id()?;
+                let why = studio.predictions.with(|p| p.get(&id).and_then(|p| p.force_left_out()))?;
+                Some(view! { <p id="force-left-out" class="why">{why}</p> })
+            }}
             {move || match (estimate(), physics()) {
                 (Some(e), Some(p)) => {
                     let d = Disagreement::between(e, p);

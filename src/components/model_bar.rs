@@ -5,6 +5,8 @@ use std::rc::Rc;
 
 use leptos::prelude::*;
 
+use hnet_model::catheter_entry::EntrySetting;
+
 use crate::browser::{read_file, take_picked_file};
 use crate::compute::BackendChoice;
 use crate::engine::WeightsOrigin;
@@ -35,6 +37,15 @@ pub fn ModelBar() -> impl IntoView {
             _ => None,
         };
         load_model(studio, weights);
+    };
+    let on_entry = move |ev: leptos::ev::Event| {
+        let Some(entry) = EntrySetting::from_text(&event_target_value(&ev)) else {
+            return;
+        };
+        studio.catheter_entry.set(entry);
+        // Every prediction was read with the previous setting.
+        studio.predictions.update(|p| p.clear());
+        studio.run_model();
     };
     let on_weights = move |ev: leptos::ev::Event| {
         let Some(file) = take_picked_file(&ev) else {
@@ -113,6 +124,25 @@ pub fn ModelBar() -> impl IntoView {
                         ].into_iter().map(|(choice, text)| view! {
                             <option value=choice.value()
                                 selected=move || studio.backend_choice.get() == choice>{text}</option>
+                        }).collect_view()}
+                    </select>
+                </label>
+                <label title="H-Net learned catheters that come up from the bottom of both views. \
+                    For one that enters through another edge, each view is turned so that it does \
+                    and its masks turned back; H-Net's force is then not read. Finding the edge \
+                    reads all four turns: four times the time.">
+                    "Catheter enters from "
+                    <select id="catheter-entry" on:change=on_entry>
+                        {[
+                            ("bottom", "the bottom (as trained)"),
+                            ("auto", "find it (4× the time)"),
+                            ("left", "the left"),
+                            ("top", "the top"),
+                            ("right", "the right"),
+                        ].into_iter().map(|(value, text)| view! {
+                            <option value=value selected=move || {
+                                studio.catheter_entry.get().text() == value
+                            }>{text}</option>
                         }).collect_view()}
                     </select>
                 </label>

@@ -281,7 +281,9 @@ fn ViewCanvas(view: View) -> impl IntoView {
             };
             let tip = tip?;
             Some([
-                prediction.map(|p| force_arrow(&carm, tip, p.force_n)),
+                prediction
+                    .and_then(|p| p.force_n)
+                    .map(|f| force_arrow(&carm, tip, f)),
                 pair.true_force().map(|f| force_arrow(&carm, tip, f)),
             ])
         });
