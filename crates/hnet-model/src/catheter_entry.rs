@@ -303,22 +303,9 @@ pub fn read_turned(outputs: Vec<TurnedOutput>, size: ImageSize) -> Result<EntryR
 }
 
 impl HNet {
-    /// [`HNet::predict`] for one pair (RGB images of `size`) under `setting`: its views turned
-    /// for each candidate edge, run as one batch, read back by [`read_turned`]. Blocks until the
-    /// device is done; use [`HNet::predict_entry_async`] in the browser.
-    pub fn predict_entry(
-        &self,
-        pair: StereoPair<'_>,
-        size: ImageSize,
-        device: &Device,
-        setting: EntrySetting,
-    ) -> Result<EntryReading, PredictError> {
-        let turned = turned_pairs(pair.view_a, pair.view_b, size, setting)?;
-        let predictions = self.predict(&as_pairs(&turned), size, device)?;
-        Ok(read_predictions(&turned, predictions, size)?)
-    }
-
-    /// Like [`HNet::predict_entry`], but waits for the device asynchronously.
+    /// [`HNet::predict_async`] for one pair (RGB images of `size`) under `setting`: its views
+    /// turned for each candidate edge, run as one batch, read back by [`read_turned`]. (`hnet
+    /// eval`, which runs every architecture, turns its batches with the same functions.)
     pub async fn predict_entry_async(
         &self,
         pair: StereoPair<'_>,
