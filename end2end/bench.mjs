@@ -10,6 +10,9 @@
 // HNET_WEIGHTS=<model.bpk> loads those weights through the model bar first (e.g. a 128 px model
 // from `hnet train`), so that the page's time for another network size is measured.
 // HNET_BACKENDS=cpu times the CPU path only (the software WebGPU adapter takes seconds a run).
+// HNET_CATHETER_ENTRY=<value of the model bar's "Catheter enters from": bottom, auto, left, ...>
+// times H-Net with that setting (auto, "find it", reads each pair at its four quarter turns);
+// unset, the page's default (the bottom, as trained).
 import { statSync, readdirSync } from "node:fs";
 import { join } from "node:path";
 import { DIST, serveDist, launchBrowser, openPage, waitForModel, loadWeightsFromEnv } from "./harness.mjs";
@@ -54,6 +57,8 @@ try {
     const switchMs = performance.now() - chosen;
     const check = (await page.$("#backend-check")) && (await page.textContent("#backend-check"));
     await loadWeightsFromEnv(page);
+    const entry = process.env.HNET_CATHETER_ENTRY;
+    if (entry) await page.selectOption("#catheter-entry", entry);
     const backend = await page.textContent("#backend");
     await page.click("#tab-twin");
     await page.waitForSelector("#force-verdict", { timeout: 120_000 });
@@ -71,6 +76,7 @@ try {
       backend,
       weights: await page.textContent("#weights"),
       input: await page.textContent("#input-size"),
+      catheter_entry: entry || "the page's default",
       runs,
       median_ms: times[Math.floor(times.length / 2)],
       min_ms: times[0],
