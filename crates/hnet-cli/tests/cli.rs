@@ -317,16 +317,19 @@ fn every_baseline_trains_and_evaluates_in_the_same_harness() {
             // force, and the run's own tables left as they were.
             let tables = std::fs::read(runs.join("eval-test.json")).unwrap();
             let masks = dir.join("unet-turned-masks");
-            let out = run(&[
-                "eval",
-                "--run",
-                runs.to_str().unwrap(),
-                "--json",
-                "--turn-views",
-                "1",
-                "--masks",
-                masks.to_str().unwrap(),
-            ]);
+            let eval_turned = |more: &[&str]| {
+                let mut args = vec![
+                    "eval",
+                    "--run",
+                    runs.to_str().unwrap(),
+                    "--json",
+                    "--turn-views",
+                    "1",
+                ];
+                args.extend_from_slice(more);
+                run(&args)
+            };
+            let out = eval_turned(&["--masks", masks.to_str().unwrap()]);
             let turned: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
             assert_eq!(turned["view_turns"], 1);
             assert!(turned["force"].is_null() && !turned["segmentation"].is_null());
@@ -336,16 +339,7 @@ fn every_baseline_trains_and_evaluates_in_the_same_harness() {
             // labels, score as the untouched views' did. A search reads all four turns.
             let untouched: serde_json::Value = serde_json::from_slice(&tables).unwrap();
             for (entry, read_turned) in [("left", Some(rows.len())), ("auto", None)] {
-                let out = run(&[
-                    "eval",
-                    "--run",
-                    runs.to_str().unwrap(),
-                    "--json",
-                    "--turn-views",
-                    "1",
-                    "--catheter-entry",
-                    entry,
-                ]);
+                let out = eval_turned(&["--catheter-entry", entry]);
                 let read: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
                 assert_eq!(read["catheter_entry"]["setting"], entry);
                 assert_eq!(read["catheter_entry"]["pairs"], rows.len());
