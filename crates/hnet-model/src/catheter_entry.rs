@@ -17,6 +17,7 @@
 //!
 //! Turning is exact on the pixel grid (no resampling), for square images only.
 
+use alloc::string::String;
 use alloc::vec::Vec;
 
 use hnet_units::ImageSize;
@@ -107,6 +108,12 @@ impl EntrySetting {
         self != Self::AS_TRAINED
     }
 
+    /// Whether this setting can keep the force head's force for a pair: not when it turns a
+    /// view of every pair ([`EntryReading::force`]).
+    pub fn can_read_force(self) -> bool {
+        self == Self::Search || !self.turns_views()
+    }
+
     /// The setting a text names: `auto` (a search), one edge's [`CatheterEntry::name`] for both
     /// views, or two comma-separated for views A and B (`bottom,left`).
     pub fn from_text(text: &str) -> Option<Self> {
@@ -147,6 +154,12 @@ pub struct TurnError {
 
 /// `values`, a square image of `size` with `channels` interleaved values per pixel (row-major),
 /// turned clockwise by `quarter_turns` (counted modulo 4).
+///
+/// On raw buffers, for the page and any network input; `hnet_twin::dataset::SquareSymmetry` turns
+/// a dataset's decoded images (`hnet eval --turn-views`) with the `image` crate, which this
+/// `no_std` crate does not use. The two conventions are checked against each other by `hnet
+/// eval --turn-views 1 --catheter-entry left` reading the untouched views (crates/hnet-cli's
+/// tests).
 pub fn turn_clockwise<T: Copy>(
     values: &[T],
     size: ImageSize,
@@ -440,6 +453,11 @@ mod tests {
         let setting = EntrySetting::Known([CatheterEntry::Bottom, CatheterEntry::Top]);
         assert!(setting.turns_views());
         assert!(!EntrySetting::AS_TRAINED.turns_views());
+        // A pair read with a view turned keeps no force of the head's; a search may read both
+        // views as they are.
+        assert!(!setting.can_read_force());
+        assert!(EntrySetting::AS_TRAINED.can_read_force());
+        assert!(EntrySetting::Search.can_read_force());
         let pairs = turned_pairs(&a, &b, SIZE, setting).unwrap();
         assert_eq!(pairs.len(), 1);
         assert_eq!(pairs[0].view_a, a);
