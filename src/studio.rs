@@ -483,9 +483,16 @@ impl Studio {
         self.busy.set(Some(format!("Running H-Net on {id}…")));
         leptos::task::spawn_local(async move {
             match engine.infer(&pair.view_a, &pair.view_b, entry).await {
-                Ok(prediction) => studio.predictions.update(|p| {
-                    p.insert(id, prediction);
-                }),
+                // A reading under a model or an entry setting the page has left since is not
+                // shown: the rerun below reads the pair again.
+                Ok(prediction)
+                    if studio.uses(&engine) && studio.catheter_entry.get_untracked() == entry =>
+                {
+                    studio.predictions.update(|p| {
+                        p.insert(id, prediction);
+                    })
+                }
+                Ok(_) => {}
                 Err(e) => {
                     studio.error(format!("H-Net failed on {id}: {}", with_causes(&e)));
                     studio.leave_webgpu_after(&engine, &e);
@@ -504,15 +511,19 @@ impl Studio {
         });
     }
 
+    /// Whether `engine` is the model the page runs now (not one it has since replaced).
+    fn uses(&self, engine: &Rc<Engine>) -> bool {
+        matches!(
+            self.model.get_untracked(),
+            ModelState::Ready(current) if Rc::ptr_eq(&current, engine)
+        )
+    }
+
     /// After `engine` failed on WebGPU with `error`, the same weights on the CPU, which says why
     /// (the worker is stopped: every later call would fail too), and the pair on screen again.
     /// Any other failure, or an engine the page no longer uses, changes nothing.
     fn leave_webgpu_after(&self, engine: &Rc<Engine>, error: &EngineError) {
-        let in_use = matches!(
-            self.model.get_untracked(),
-            ModelState::Ready(current) if Rc::ptr_eq(&current, engine)
-        );
-        if !in_use || !matches!(error, EngineError::WebGpu(_)) {
+        if !self.uses(engine) || !matches!(error, EngineError::WebGpu(_)) {
             return;
         }
         let reason = format!("WebGPU failed ({}), so the CPU is used", with_causes(error));
@@ -706,9 +717,18 @@ impl Studio {
             self.error("H-Net is busy: trace the force when it is done");
             return;
         }
+        let entry = self.catheter_entry.get_untracked();
+        if !entry.can_read_force() {
+            self.error(format!(
+                "no tip force to trace with \"Catheter enters from\" set to {}: H-Net's force is \
+                 not read for a view read turned (its force head learned catheters that come up \
+                 from the bottom). Set it to the bottom, or to find it",
+                entry.text()
+            ));
+            return;
+        }
         self.stop_playback();
         let serial = self.cine_serial.get_untracked();
-        let entry = self.catheter_entry.get_untracked();
         self.cine
             .update(|c| c.iter_mut().for_each(CinePlayer::clear_trace));
         self.trace_cancelled.set(false);
@@ -720,6 +740,9 @@ impl Studio {
             let start = now_ms();
             let same_cine = || studio.cine_serial.get_untracked() == serial;
             let mut done = 0;
+            // Frames with a force of H-Net's: under a search, a frame with a view read turned
+            // has none.
+            let mut traced = 0;
             let mut failure = None;
             for frame in 0..total {
                 if studio.trace_cancelled.get_untracked() || !same_cine() {
@@ -735,6 +758,7 @@ impl Studio {
                     Ok(prediction) if same_cine() => studio.cine.update(|c| {
                         if let (Some(c), Some(force)) = (c.as_mut(), prediction.force_n) {
                             c.record_force(frame, force);
+                            traced += 1;
                         }
                     }),
                     Ok(_) => break,
@@ -759,6 +783,11 @@ impl Studio {
                 None if !same_cine() => {}
                 None if done < total => studio.info(format!(
                     "trace stopped: {done} of {total} frames traced in {seconds:.1} s"
+                )),
+                None if traced < total => studio.info(format!(
+                    "tip force traced over {traced} of {total} frames in {seconds:.1} s: the \
+                     other {} had a view read turned, which H-Net's force is not read for",
+                    total - traced
                 )),
                 None => studio.info(format!(
                     "tip force traced over {total} frames in {seconds:.1} s ({:.0} ms per frame)",

@@ -475,6 +475,16 @@ test("a DICOM cine: sample, step, scrub, play, window/level, trace with cancel, 
   assert.notEqual(dragged, windows);
   assert.equal(dragged.split("·")[1], windows.split("·")[1]);
 
+  // With the catheter entering from the left every frame would be read turned, and a turned
+  // view gets no force of H-Net's: the trace says so instead of running.
+  await page.selectOption("#catheter-entry", "left");
+  await page.waitForFunction(() => !document.querySelector("#busy"));
+  await page.click("#cine-trace");
+  assert.match(await page.textContent("#notice"), /no tip force to trace with "Catheter enters from" set to left/);
+  assert.equal(await page.getAttribute("#force-trace", "data-traced"), "0");
+  await page.selectOption("#catheter-entry", "bottom");
+  await page.waitForFunction(() => !document.querySelector("#busy"));
+
   // Trace: cancel keeps what was traced, then a full trace and its CSV.
   await page.click("#cine-trace");
   await page.click("#cine-trace-cancel");
