@@ -11,6 +11,8 @@
 //!   (sub-pixel centrelines, epipolar matching and triangulation) and the tip force of the rod
 //!   that fits it (a physics-checked force, no training); [`physics_force`] runs the three on a
 //!   pair's masks in one call;
+//! - [`catalogue`]: the named catheters a blind force estimate assumes, and their calibration
+//!   from pairs with a measured force;
 //! - [`dataset`]: the on-disk format; [`force_table`]: force tables in CSV (imports and the page's
 //!   labels); natively also [`simulate`], [`import`] and [`files`] (atomic writes).
 //!
@@ -22,6 +24,7 @@
 
 pub mod archive;
 pub mod carm;
+pub mod catalogue;
 pub mod catheter;
 pub mod centreline;
 pub mod dataset;
