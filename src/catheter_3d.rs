@@ -27,7 +27,7 @@
 use hnet_twin::carm::{Biplane, CArm, CameraMatrix};
 use hnet_twin::centreline::{CentrelineError, Mask};
 use hnet_twin::physics_force::{
-    ForceCombination, PhysicsError, PhysicsEstimate, PhysicsSetup, physics_estimate,
+    ForceCombination, MAX_FIT_RMS_MM, PhysicsError, PhysicsEstimate, PhysicsSetup, physics_estimate,
 };
 use hnet_twin::reconstruction::{EpipolarGeometry, ReconstructionError, clip_line};
 use hnet_twin::rod::{RodBase, RodConfig};
@@ -337,14 +337,10 @@ pub enum Catheter3dError {
         /// RMS distance of the reconstruction from the fitted rod, mm.
         rms_mm: f64,
     },
+    /// The rod fits, but not as the catheter assumed could lie.
+    #[error("no physics estimate")]
+    Unreadable(#[source] PhysicsError),
 }
-
-/// Largest RMS distance between the reconstruction and the fitted rod for which the rod's force
-/// is shown, mm. A twin pair's exact masks fit within 0.04 mm at the working size, and the
-/// crate's tests fit true masks at 128 px within 0.3 mm; 1 mm is 2.4 pixels at the isocentre
-/// (0.42 mm per pixel at 224 px), far beyond any mask's own error, so a worse fit means the rod
-/// model does not describe what was reconstructed.
-pub const MAX_FIT_RMS_MM: f64 = 1.0;
 
 /// Reconstructs the catheter of `masks` seen with `geometry` and fits the rod to it.
 pub fn reconstruct_pair(
@@ -354,6 +350,7 @@ pub fn reconstruct_pair(
     let mut setup = PhysicsSetup::new(geometry.cameras(), geometry.rod.clone(), geometry.base);
     setup.fit.fit_base_position = !geometry.base_known;
     setup.fit.fit_base_rotation = !geometry.base_known;
+    setup.max_fit_rms_mm = Some(MAX_FIT_RMS_MM);
     let PhysicsEstimate {
         reconstruction,
         fit,
@@ -365,10 +362,9 @@ pub fn reconstruct_pair(
         },
         PhysicsError::Reconstruction(e) => Catheter3dError::Reconstruction(e),
         PhysicsError::Fit(e) => Catheter3dError::Fit(e),
+        PhysicsError::PoorFit { rms_mm, .. } => Catheter3dError::PoorFit { rms_mm },
+        e @ PhysicsError::BaseOutsideTolerance { .. } => Catheter3dError::Unreadable(e),
     })?;
-    if fit.rms_mm.is_nan() || fit.rms_mm > MAX_FIT_RMS_MM {
-        return Err(Catheter3dError::PoorFit { rms_mm: fit.rms_mm });
-    }
     Ok(Catheter3d {
         masks: masks.source(),
         centreline_mm: reconstruction.points_mm.iter().map(|p| p.0).collect(),

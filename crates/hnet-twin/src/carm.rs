@@ -32,6 +32,35 @@ pub struct CArm {
     pub image_size: ImageSize,
 }
 
+/// How far a C-arm's recorded settings (a DICOM header's angles and distances) may be from the
+/// truth, for simulating a geometry the blind estimate reads wrong: each angle and each distance
+/// is off by a uniform draw within the given bound, per view and per pair.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct HeaderError {
+    /// Bound on the error of each angle (primary, secondary), degrees.
+    pub angle_deg: f64,
+    /// Bound on the error of each distance (source to isocentre, source to detector), mm.
+    pub distance_mm: f64,
+}
+
+impl HeaderError {
+    /// Whether it changes anything.
+    pub fn is_none(&self) -> bool {
+        self.angle_deg == 0.0 && self.distance_mm == 0.0
+    }
+
+    /// `carm` as a header off by this error would record it; `unit` draws in `[0, 1)`.
+    pub fn misread(&self, carm: &CArm, mut unit: impl FnMut() -> f64) -> CArm {
+        let mut off = |bound: f64| bound * (2.0 * unit() - 1.0);
+        let mut read = *carm;
+        read.primary_deg += off(self.angle_deg);
+        read.secondary_deg += off(self.angle_deg);
+        read.source_to_isocentre_mm += off(self.distance_mm);
+        read.source_to_detector_mm += off(self.distance_mm);
+        read
+    }
+}
+
 /// The 3x4 projection matrix `P = K [R | t]` mapping homogeneous world points (mm) to
 /// homogeneous pixel coordinates.
 pub type CameraMatrix = [[f64; 4]; 3];

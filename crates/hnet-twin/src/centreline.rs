@@ -87,6 +87,16 @@ impl<'a> Mask<'a> {
         }
     }
 
+    /// The share of its pixels at half coverage or more (a network's probability 0.5, the
+    /// mask threshold everywhere), 0-1.
+    pub fn share_at_half(&self) -> f64 {
+        let found = match self.values {
+            MaskValues::Coverage8(v) => v.iter().filter(|&&b| b >= 128).count(),
+            MaskValues::Soft(v) => v.iter().filter(|&&x| x >= 0.5).count(),
+        };
+        found as f64 / self.len().max(1) as f64
+    }
+
     fn to_f32(self) -> Vec<f32> {
         match self.values {
             MaskValues::Coverage8(v) => v.iter().map(|&b| f32::from(b) / 255.0).collect(),
@@ -265,6 +275,50 @@ fn neighbours(i: usize, width: usize, height: usize) -> impl Iterator<Item = (us
 }
 
 /// Extracts the centreline of the catheter in `mask`; `view` names the view in errors.
+/// Least share of a view's pixels that must reach half coverage for the view to show a catheter
+/// ([`find_catheter`]). Measured with `hnet study no-catheter` on the bundled model
+/// (docs/results.md, "No catheter, no force").
+pub const MIN_CATHETER_SHARE: f64 = 0.0025;
+
+/// Why a view shows no catheter.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum NoCatheter {
+    /// Too few pixels read as catheter.
+    #[error(
+        "view {view}: no catheter found ({:.2} % of the pixels read as catheter, at least {:.2} % \
+         needed)",
+        share * 100.0,
+        MIN_CATHETER_SHARE * 100.0
+    )]
+    TooFewPixels {
+        /// The view's name.
+        view: String,
+        /// Share of its pixels at half coverage or more, 0-1.
+        share: f64,
+    },
+    /// The pixels do not form one catheter (several blobs, not a tube, too short).
+    #[error("no catheter found")]
+    NotACatheter(#[source] CentrelineError),
+}
+
+/// The catheter in `mask` (view `view`), or why there is none: at least [`MIN_CATHETER_SHARE`]
+/// of its pixels at half coverage or more, forming one tube whose centreline extracts. The one
+/// rule that withholds a force from a view without a catheter (the page, `hnet trace`).
+pub fn find_catheter(
+    mask: &Mask<'_>,
+    view: &str,
+    settings: &CentrelineSettings,
+) -> Result<Centreline, NoCatheter> {
+    let share = mask.share_at_half();
+    if share < MIN_CATHETER_SHARE {
+        return Err(NoCatheter::TooFewPixels {
+            view: view.into(),
+            share,
+        });
+    }
+    extract_centreline(mask, view, settings).map_err(NoCatheter::NotACatheter)
+}
+
 pub fn extract_centreline(
     mask: &Mask<'_>,
     view: &str,

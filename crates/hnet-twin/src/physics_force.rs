@@ -6,6 +6,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::carm::CameraMatrix;
+use crate::catalogue::CatalogueCatheter;
 use crate::centreline::{
     Centreline, CentrelineError, CentrelineSettings, Mask, extract_centreline,
 };
@@ -14,6 +15,7 @@ use crate::reconstruction::{
 };
 use crate::rod::{RodBase, RodConfig};
 use crate::rod_fit::{RodFit, RodFitError, RodFitSettings, fit_rod_to_reconstruction};
+use crate::scene::NominalBase;
 
 /// What the masks are read with: both views' cameras, the catheter as the rod model knows it,
 /// and how each step works.
@@ -32,7 +34,17 @@ pub struct PhysicsSetup {
     pub reconstruction: ReconstructionSettings,
     /// What is fitted.
     pub fit: RodFitSettings,
+    /// Largest RMS distance of the reconstruction from the fitted rod whose force is given, mm
+    /// ([`MAX_FIT_RMS_MM`]); `None` gives every fit's force.
+    pub max_fit_rms_mm: Option<f64>,
 }
+
+/// Largest RMS distance between the reconstruction and the fitted rod for which a blind estimate
+/// (and the page) gives the rod's force, mm. A twin pair's exact masks fit within 0.04 mm at the
+/// page's working size, and true masks at 128 px within 0.3 mm; 1 mm is 2.4 pixels at the
+/// isocentre at 224 px (0.42 mm per pixel), far beyond any mask's own error, so a worse fit means
+/// the rod model does not describe what was reconstructed.
+pub const MAX_FIT_RMS_MM: f64 = 1.0;
 
 impl PhysicsSetup {
     /// The default settings of every step for these cameras and this catheter.
@@ -44,7 +56,32 @@ impl PhysicsSetup {
             centreline: CentrelineSettings::default(),
             reconstruction: ReconstructionSettings::default(),
             fit: RodFitSettings::default(),
+            max_fit_rms_mm: None,
         }
+    }
+
+    /// What a user has, and nothing of the pair's own record: `cameras` from the C-arm
+    /// geometry a DICOM header gives (angles, distances, pixel spacing), the catalogue's
+    /// `catheter`, and a `nominal_base` (the fixture's nominal pose, or the page's catheter
+    /// settings) whose position and orientation are fitted with the force, kept within its
+    /// tolerance unless the shape says otherwise. Fits farther than [`MAX_FIT_RMS_MM`] from the
+    /// reconstruction give no force.
+    pub fn blind(
+        cameras: [CameraMatrix; 2],
+        catheter: &CatalogueCatheter,
+        nominal_base: &NominalBase,
+    ) -> Self {
+        let mut setup = Self::new(
+            cameras,
+            catheter.rod(&RodConfig::default()),
+            nominal_base.base,
+        );
+        setup.fit.fit_base_position = true;
+        setup.fit.fit_base_rotation = true;
+        setup.fit.base_prior = Some(nominal_base.tolerance);
+        setup.fit.start_base_from_centreline = true;
+        setup.max_fit_rms_mm = Some(MAX_FIT_RMS_MM);
+        setup
     }
 }
 
@@ -71,7 +108,37 @@ pub enum PhysicsError {
     /// No rod fits the reconstruction.
     #[error(transparent)]
     Fit(#[from] RodFitError),
+    /// The best rod stays far from the reconstruction: the catheter's settings, the views or the
+    /// masks do not describe this catheter, and its force would mean nothing.
+    #[error(
+        "the best-fitting rod stays {rms_mm:.2} mm RMS from the reconstructed catheter (at most \
+         {limit_mm} mm accepted); the catheter's settings, the C-arm geometry or the masks do not \
+         match this pair"
+    )]
+    PoorFit {
+        /// RMS distance of the reconstruction from the fitted rod, mm.
+        rms_mm: f64,
+        /// The limit, mm.
+        limit_mm: f64,
+    },
+    /// The rod fits only with its base far outside the nominal pose's tolerance: the catheter
+    /// assumed is not this one, or the geometry is wrong.
+    #[error(
+        "the rod fits only with its base {offset_mm:.1} mm and {tilt_deg:.0}° from the nominal \
+         pose, beyond {MAX_BASE_SDS} standard deviations of its tolerance; the catheter assumed or \
+         the C-arm geometry does not match this pair"
+    )]
+    BaseOutsideTolerance {
+        /// Distance of the fitted base from the nominal one, mm.
+        offset_mm: f64,
+        /// Angle between their axes, degrees.
+        tilt_deg: f64,
+    },
 }
+
+/// How many standard deviations of a [`crate::rod_fit::BasePrior`] a fitted base may lie from
+/// the nominal pose (per component of its offset, or in tilt) before its force is refused.
+pub const MAX_BASE_SDS: f64 = 4.0;
 
 impl PhysicsError {
     /// A short name of the failing step (`centreline`, `reconstruction`, `fit`), for counts.
@@ -80,6 +147,8 @@ impl PhysicsError {
             Self::Centreline(_) => "centreline",
             Self::Reconstruction(_) => "reconstruction",
             Self::Fit(_) => "fit",
+            Self::PoorFit { .. } => "poor fit",
+            Self::BaseOutsideTolerance { .. } => "base outside tolerance",
         }
     }
 }
@@ -106,6 +175,33 @@ pub fn physics_estimate(
         &setup.reconstruction,
     )?;
     let fit = fit_rod_to_reconstruction(&setup.rod, &setup.base, &reconstruction, &setup.fit)?;
+    if let Some(limit_mm) = setup.max_fit_rms_mm
+        && !(fit.rms_mm <= limit_mm)
+    {
+        return Err(PhysicsError::PoorFit {
+            rms_mm: fit.rms_mm,
+            limit_mm,
+        });
+    }
+    if let Some(prior) = setup.fit.base_prior {
+        let offset = fit.base.position_mm - setup.base.position_mm;
+        let tilt_deg = fit
+            .base
+            .orientation
+            .column(2)
+            .dot(setup.base.orientation.column(2))
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees();
+        if offset.max_abs() > MAX_BASE_SDS * prior.position_sd_mm
+            || tilt_deg > MAX_BASE_SDS * prior.tilt_sd_deg * 2f64.sqrt()
+        {
+            return Err(PhysicsError::BaseOutsideTolerance {
+                offset_mm: offset.norm(),
+                tilt_deg,
+            });
+        }
+    }
     Ok(PhysicsEstimate {
         centrelines,
         reconstruction,
@@ -115,6 +211,9 @@ pub fn physics_estimate(
 
 /// Below this many calibration pairs no combination is calibrated.
 pub const MIN_CALIBRATION_PAIRS: usize = 10;
+
+/// Half the width of a two-sided 90 % normal interval, in standard deviations.
+pub const INTERVAL_90_Z: f64 = 1.644_853_6;
 
 /// The median of `|z|` for a standard normal `z`, which turns a median absolute deviation into a
 /// standard deviation.
@@ -207,7 +306,20 @@ impl ForceCombination {
         physics_n: [f32; 3],
         physics_sd_n: Option<[f32; 3]>,
     ) -> [f32; 3] {
-        std::array::from_fn(|axis| {
+        self.combine_with_sd(network_n, physics_n, physics_sd_n).0
+    }
+
+    /// [`Self::combine`] with the combined estimate's standard error per axis, N:
+    /// `1/sqrt(1/σn² + 1/σp²)` (both errors taken as independent; a 90 % interval is
+    /// [`INTERVAL_90_Z`] of them either side).
+    pub fn combine_with_sd(
+        &self,
+        network_n: [f32; 3],
+        physics_n: [f32; 3],
+        physics_sd_n: Option<[f32; 3]>,
+    ) -> ([f32; 3], [f32; 3]) {
+        let mut sd = [0.0f32; 3];
+        let force = std::array::from_fn(|axis| {
             let network_var = f64::from(self.network_error_n[axis]).powi(2);
             let physics_var = physics_sd_n
                 .map(|sd| f64::from(sd[axis] * self.physics_sd_scale).powi(2))
@@ -219,8 +331,14 @@ impl ForceCombination {
             } else {
                 0.5
             };
+            sd[axis] = if network_var > 0.0 && physics_var > 0.0 {
+                (1.0 / (1.0 / network_var + 1.0 / physics_var)).sqrt() as f32
+            } else {
+                0.0
+            };
             (w * f64::from(physics_n[axis]) + (1.0 - w) * f64::from(network_n[axis])) as f32
-        })
+        });
+        (force, sd)
     }
 }
 
@@ -286,5 +404,60 @@ mod tests {
             physics_estimate([mask(0), Mask::coverage8(128, 128, &empty)], &setup).unwrap_err();
         assert_eq!(err.step(), "centreline");
         assert!(err.to_string().starts_with("view B"), "{err}");
+    }
+
+    /// Read blind (the catalogue's bench catheter, the base fitted from the fixture's nominal
+    /// pose within its tolerance, never the pair's own record), a twin pair's exact masks give
+    /// its force back nearly as well as with its recorded base; the prior on the base changes
+    /// little where the shape decides (exact masks fit within hundredths of a millimetre).
+    #[test]
+    fn a_twin_pair_read_blind_gives_its_force_back() {
+        use crate::catalogue::{BENCH_CATHETER, CatalogueCatheter};
+        use crate::scene::SceneSampling;
+        let catheter = CatalogueCatheter::find(BENCH_CATHETER).unwrap();
+        let nominal = SceneSampling::bench().nominal_base();
+        for index in 0..3 {
+            let (config, sample) = bench_sample(128, 11, index);
+            let cameras = [
+                config.views.a.camera_matrix(),
+                config.views.b.camera_matrix(),
+            ];
+            let mask = |i: usize| Mask::coverage8(128, 128, &sample.views[i].mask);
+            let blind = PhysicsSetup::blind(cameras, &catheter, &nominal);
+            assert_eq!(blind.max_fit_rms_mm, Some(MAX_FIT_RMS_MM));
+            let estimate = physics_estimate([mask(0), mask(1)], &blind).unwrap();
+            let error = (estimate.fit.force_n - sample.params.tip_force_n).max_abs();
+            assert!(error < 0.03, "{index}: force off by {error} N");
+            assert!(estimate.fit.rms_mm < 0.1, "{}", estimate.fit.rms_mm);
+            let base_error =
+                (estimate.fit.base.position_mm - sample.params.base_position_mm).norm();
+            assert!(base_error < 0.5, "{index}: base off by {base_error} mm");
+        }
+        // A catheter the masks do not show (twice as long): it fits only with its base far
+        // beyond the fixture's play, and no force is given.
+        let (config, sample) = bench_sample(128, 11, 0);
+        let long = CatalogueCatheter {
+            flexible_length_mm: 100.0,
+            ..catheter
+        };
+        let setup = PhysicsSetup::blind(
+            [
+                config.views.a.camera_matrix(),
+                config.views.b.camera_matrix(),
+            ],
+            &long,
+            &nominal,
+        );
+        let mask = |i: usize| Mask::coverage8(128, 128, &sample.views[i].mask);
+        match physics_estimate([mask(0), mask(1)], &setup) {
+            Err(PhysicsError::BaseOutsideTolerance { offset_mm, .. }) => {
+                assert!(offset_mm > 10.0, "{offset_mm}")
+            }
+            Err(other) => panic!("{other}"),
+            Ok(e) => panic!(
+                "a 100 mm rod fitted a 50 mm catheter within {} mm",
+                e.fit.rms_mm
+            ),
+        }
     }
 }

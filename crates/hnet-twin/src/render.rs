@@ -35,7 +35,9 @@ pub struct TubeRaster {
 }
 
 impl TubeRaster {
-    fn empty(width: usize, height: usize) -> Self {
+    /// No catheter in a `width` x `height` view (a catheter-free image through the same
+    /// renderer).
+    pub fn empty(width: usize, height: usize) -> Self {
         let n = width * height;
         Self {
             width,

@@ -14,6 +14,7 @@ use crate::catheter::CatheterDesign;
 use crate::raster::GreyImage;
 use crate::render::{self, TubeRaster, XRayDetector};
 use crate::rod::{self, RodBase, RodConfig, RodError, RodShape};
+use crate::rod_fit::{BasePrior, PRIOR_CORRELATED_POINTS};
 use crate::synthetic_xray::{self, Anatomy, BackgroundSource, PatchLayout, PatchRule};
 use crate::vec3::{Mat3, Vec3};
 
@@ -123,6 +124,42 @@ impl SceneSampling {
         }
     }
 
+    /// The base pose a user of these scenes knows without the pair's own record: the nominal
+    /// position, pointing cranially (no tilt), the section rolled to the middle of the roll
+    /// range (for the bench, the fixture's pre-curve plane), and how far the base may be from it
+    /// (the jitter's and the tilt's spread as standard deviations; the roll about the axis free).
+    /// A blind estimate starts its base fit here and keeps near it unless the shape says
+    /// otherwise.
+    pub fn nominal_base(&self) -> NominalBase {
+        let nominal = SceneParams {
+            tip_force_n: Vec3::ZERO,
+            bending_stiffness_n_m2: self.bending_stiffness_n_m2[0],
+            length_mm: self.length_mm[0],
+            precurvature_per_mm: self.precurvature_per_mm[0],
+            base_position_mm: self.base_position_mm,
+            base_tilt_deg: 0.0,
+            base_azimuth_deg: 0.0,
+            base_roll_deg: 0.5 * (self.base_roll_deg[0] + self.base_roll_deg[1]),
+        };
+        // A uniform draw within ±j has a standard deviation of j/√3; a tilt uniform over a cap
+        // of half-angle t about t/√2 per component. Floors keep a fixed fixture from pinning
+        // the fit (its play is never zero). The roll is left free: `base_frame` turns the
+        // section by the tilt's azimuth too, so the pre-curve's plane is uniform about the axis
+        // in every preset, the bench's included (docs/twin.md, "The base pose").
+        NominalBase {
+            base: RodBase {
+                position_mm: nominal.base_position_mm,
+                orientation: nominal.base_frame(),
+            },
+            tolerance: BasePrior {
+                position_sd_mm: (self.base_jitter_mm / 3f64.sqrt()).max(0.25),
+                tilt_sd_deg: (self.base_tilt_deg / 2f64.sqrt()).max(0.5),
+                roll_sd_deg: None,
+                correlated_points: PRIOR_CORRELATED_POINTS,
+            },
+        }
+    }
+
     /// A preset by name: `bench` or `varied`.
     pub fn preset(name: &str) -> Option<Self> {
         match name {
@@ -131,6 +168,15 @@ impl SceneSampling {
             _ => None,
         }
     }
+}
+
+/// Where a catheter's base is expected before its images are read, and how far off it may be.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NominalBase {
+    /// The nominal pose.
+    pub base: RodBase,
+    /// How far the true base may be from it.
+    pub tolerance: BasePrior,
 }
 
 /// The drawn parameters of one scene. Forces are in the world frame, newtons.
@@ -616,6 +662,22 @@ pub fn render_view(
         camera: view.camera_matrix(),
         background,
     }
+}
+
+/// An X-ray view of `source` with no catheter in it: the same background composition and
+/// detector as [`render_view`], a random region and patch layout; 8-bit grey, `view`'s size.
+/// What "no catheter found" is measured on.
+pub fn render_empty_xray_view(
+    config: &TwinConfig,
+    view: &CArm,
+    source: &BackgroundSource,
+    rng: &mut impl Rng,
+) -> Vec<u8> {
+    let ImageSize { width, height } = view.image_size;
+    let layout = PatchLayout::random(source, &config.anatomies, &config.patches, rng);
+    let transmission = synthetic_xray::compose(source, &layout, &config.patches, width, height);
+    let empty = TubeRaster::empty(width, height);
+    render::render_xray(&transmission, &empty, &config.detector, rng).to_u8()
 }
 
 fn grey_of(pixels: &ViewPixels) -> Vec<u8> {

@@ -4,11 +4,13 @@ use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use hnet_units::ImageSize;
+use rand::RngExt;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
-use crate::carm::{CArm, CameraMatrix};
+use crate::carm::{CArm, CameraMatrix, HeaderError};
+use crate::catalogue::CatalogueCatheter;
 use crate::dataset::{
     Dataset, DatasetError, DatasetHeader, DatasetWriter, ImageRef, ManifestRow, Split,
     assign_splits, sample_files,
@@ -16,7 +18,10 @@ use crate::dataset::{
 use crate::off_bench::OffBench;
 use crate::physics_force::PhysicsSetup;
 use crate::rod::RodConfig;
-use crate::scene::{Backgrounds, SceneParams, StereoSample, TwinConfig, generate};
+use crate::scene::{
+    Backgrounds, NominalBase, SceneParams, SceneSampling, StereoSample, TwinConfig, generate,
+    sample_rng,
+};
 use crate::synthetic_xray::PatchLayout;
 use crate::vec3::Vec3;
 
@@ -122,29 +127,72 @@ impl SampleRecord {
     pub fn physics_setup(&self, size: ImageSize) -> PhysicsSetup {
         let (rod, base) = self.scene.rod(&self.rod);
         PhysicsSetup::new(
-            self.views.each_ref().map(|view| {
-                // Pixel coordinates scale with the image: u' = u·W'/W, v' = v·H'/H.
-                let from = view.carm.image_size;
-                let scale = [
-                    size.width as f64 / from.width as f64,
-                    size.height as f64 / from.height as f64,
-                    1.0,
-                ];
-                let mut camera = view.camera_matrix;
-                for (row, s) in camera.iter_mut().zip(scale) {
-                    row.iter_mut().for_each(|v| *v *= s);
-                }
-                camera
-            }),
+            self.views
+                .each_ref()
+                .map(|view| scale_camera(view.camera_matrix, view.carm.image_size, size)),
             rod,
             base,
         )
+    }
+
+    /// What a blind estimate reads this pair's masks at `size` with ([`PhysicsSetup::blind`]):
+    /// the cameras rebuilt from the C-arms' settings alone (what a DICOM header gives:
+    /// angles, distances, pixel spacing), the catalogue's `catheter` and the `nominal_base`.
+    /// Nothing of the pair's own scene.
+    pub fn blind_setup(
+        &self,
+        size: ImageSize,
+        catheter: &CatalogueCatheter,
+        nominal_base: &NominalBase,
+    ) -> PhysicsSetup {
+        self.blind_setup_misread(size, catheter, nominal_base, &HeaderError::default(), 0)
+    }
+
+    /// [`Self::blind_setup`] with the C-arms read as a header off by `error` would record them
+    /// (the draw seeded by `seed`, one per pair).
+    pub fn blind_setup_misread(
+        &self,
+        size: ImageSize,
+        catheter: &CatalogueCatheter,
+        nominal_base: &NominalBase,
+        error: &HeaderError,
+        seed: u64,
+    ) -> PhysicsSetup {
+        let mut rng = sample_rng(seed, 0);
+        let carms = self
+            .views
+            .each_ref()
+            .map(|view| error.misread(&view.carm, || rng.random::<f64>()));
+        PhysicsSetup::blind(blind_cameras(&carms, size), catheter, nominal_base)
     }
 
     /// The tip of the solved centreline, mm.
     pub fn tip_mm(&self) -> Option<Vec3> {
         self.centreline_mm.last().copied()
     }
+}
+
+/// `camera` (for images of `from`) for images of `to`: pixel coordinates scale with the image,
+/// `u' = u·W'/W`, `v' = v·H'/H`.
+pub fn scale_camera(camera: CameraMatrix, from: ImageSize, to: ImageSize) -> CameraMatrix {
+    let scale = [
+        to.width as f64 / from.width as f64,
+        to.height as f64 / from.height as f64,
+        1.0,
+    ];
+    let mut camera = camera;
+    for (row, s) in camera.iter_mut().zip(scale) {
+        row.iter_mut().for_each(|v| *v *= s);
+    }
+    camera
+}
+
+/// The cameras of `carms` for images of `size`, rebuilt from the C-arms' settings alone (what a
+/// DICOM header gives: angles, distances, pixel spacing), never from a recorded matrix.
+pub fn blind_cameras(carms: &[CArm; 2], size: ImageSize) -> [CameraMatrix; 2] {
+    carms
+        .each_ref()
+        .map(|carm| scale_camera(carm.camera_matrix(), carm.image_size, size))
 }
 
 /// One view of a [`SampleRecord`].
@@ -177,6 +225,43 @@ pub fn read_sample_record(dataset: &Dataset, id: &str) -> Result<SampleRecord, D
                 e,
             )
         })
+}
+
+/// The two C-arms of pair `id` as its record gives them (a simulated pair's, or a DICOM import's
+/// header geometry): what a blind estimate may read of a pair.
+pub fn read_pair_carms(dataset: &Dataset, id: &str) -> Result<[CArm; 2], DatasetError> {
+    let path = dataset.record_file(id);
+    let bytes =
+        std::fs::read(&path).map_err(|e| DatasetError::caused_by(&path, "cannot be read", e))?;
+    #[derive(Deserialize)]
+    struct View {
+        carm: CArm,
+    }
+    #[derive(Deserialize)]
+    struct Record {
+        views: [View; 2],
+    }
+    #[derive(Deserialize)]
+    struct File {
+        record: Record,
+    }
+    serde_json::from_slice::<File>(&bytes)
+        .map(|file| file.record.views.map(|view| view.carm))
+        .map_err(|e| DatasetError::caused_by(&path, "does not record the pair's two C-arms", e))
+}
+
+/// The base pose a blind estimate starts from for pairs of `dataset`: the nominal pose of the
+/// scenes it was simulated with ([`crate::scene::SceneSampling::nominal_base`]), or of the
+/// twin's bench for other datasets.
+pub fn nominal_base(dataset: &Dataset) -> NominalBase {
+    dataset
+        .header
+        .source
+        .get("twin")
+        .and_then(|twin| twin.get("scene"))
+        .and_then(|scene| serde_json::from_value::<SceneSampling>(scene.clone()).ok())
+        .unwrap_or_default()
+        .nominal_base()
 }
 
 /// What a generation did.
