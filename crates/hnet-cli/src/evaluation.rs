@@ -23,11 +23,13 @@ use serde::{Deserialize, Serialize};
 
 use crate::backend::BackendChoice;
 use crate::data::{StereoBatcher, StereoItem, StereoSplit};
-use crate::physics_check::{self, MaskOrigin, PairToCheck, PhysicsEvaluation};
+use crate::physics_check::{self, Estimator, MaskOrigin, PairToCheck, PhysicsEvaluation};
 use crate::run_dir::RunDir;
+use hnet_twin::carm::HeaderError;
+use hnet_twin::catalogue::{BENCH_CATHETER, CatalogueCatheter};
 use hnet_twin::centreline::Mask;
 use hnet_twin::physics_force::{ForceCombination, MIN_CALIBRATION_PAIRS};
-use hnet_twin::simulate::SampleRecord;
+use hnet_twin::simulate::{SampleRecord, nominal_base};
 
 #[derive(clap::Args, Debug)]
 #[command(group(clap::ArgGroup::new("model").required(true).args(["run", "weights"])))]
@@ -92,6 +94,23 @@ pub struct EvalArgs {
     /// are. Square networks that segment; nothing is saved into a run folder unless `bottom`.
     #[arg(long, default_value = "bottom", value_parser = parse_entry)]
     catheter_entry: EntrySetting,
+    /// The catheter the blind physics estimate assumes: a catalogue name or a catheter file
+    /// (`hnet calibrate`'s output).
+    #[arg(long, default_value = BENCH_CATHETER, conflicts_with = "oracle")]
+    catheter: String,
+    /// Hand the physics estimate each pair's recorded catheter and exact base pose (the twin's
+    /// answers, which no user has) instead of reading it blind. Every table and JSON field then
+    /// says `oracle`.
+    #[arg(long)]
+    oracle: bool,
+    /// Read each pair's C-arm angles off by up to this many degrees (uniform, per view and
+    /// pair): a header's error, for the mismatch suite. Blind only.
+    #[arg(long, default_value_t = 0.0, conflicts_with = "oracle")]
+    carm_angle_error: f64,
+    /// Read each pair's C-arm distances (source to isocentre, source to detector) off by up to
+    /// this many millimetres. Blind only.
+    #[arg(long, default_value_t = 0.0, conflicts_with = "oracle")]
+    carm_distance_error: f64,
 }
 
 fn parse_entry(text: &str) -> Result<EntrySetting, String> {
@@ -141,6 +160,21 @@ pub struct Evaluation {
     /// as trained (from the bottom).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub catheter_entry: Option<EntryUse>,
+    /// What the physics estimate was told: `blind` (a catalogue catheter, the base fitted) or
+    /// `oracle` (each pair's recorded catheter and base). Files written before the blind
+    /// estimate existed read as `oracle`, which is what they were.
+    #[serde(default = "oracle_name")]
+    pub estimator: String,
+    /// The catheter a blind estimate assumed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub catheter: Option<CatalogueCatheter>,
+    /// The error the C-arm settings were read with (a blind estimate in the mismatch suite).
+    #[serde(default, skip_serializing_if = "HeaderError::is_none")]
+    pub header_error: HeaderError,
+}
+
+fn oracle_name() -> String {
+    "oracle".into()
 }
 
 /// How [`Evaluation`]'s pairs were read for their catheters' entry edges.
@@ -189,6 +223,10 @@ pub struct PairPrediction {
     /// calibrated.
     #[serde(default)]
     pub combined: Option<[f32; 3]>,
+    /// The combined estimate's standard error per axis, N (its nominal 90 % interval is 1.645
+    /// of them either side).
+    #[serde(default)]
+    pub combined_sd: Option<[f32; 3]>,
     /// Catheter IoU of the pair's predicted masks in views A and B, when the network segments
     /// (each mask thresholded as the set's IoU is; 1 where neither mask shows the catheter).
     #[serde(default)]
@@ -196,13 +234,14 @@ pub struct PairPrediction {
 }
 
 /// The predictions file: one line per pair, its true force, the network's, the physics estimate
-/// from the network's masks with its fit's standard error, and the two combined (empty where
-/// there is none), N; then the catheter IoU of its masks in views A and B (empty without masks).
-pub fn predictions_csv(predictions: &[PairPrediction]) -> String {
+/// from the network's masks with its fit's standard error, and the two combined with its
+/// standard error (empty where there is none), N; then the catheter IoU of its masks in views A
+/// and B (empty without masks), and the physics estimator (`blind` or `oracle`).
+pub fn predictions_csv(predictions: &[PairPrediction], estimator: &str) -> String {
     let mut csv = String::from(
         "id,fx,fy,fz,fx_pred,fy_pred,fz_pred,fx_physics,fy_physics,fz_physics,\
          fx_physics_sd,fy_physics_sd,fz_physics_sd,fx_combined,fy_combined,fz_combined,\
-         catheter_iou_a,catheter_iou_b\n",
+         fx_combined_sd,fy_combined_sd,fz_combined_sd,catheter_iou_a,catheter_iou_b,estimator\n",
     );
     let triple = |v: Option<[f32; 3]>| {
         v.map_or_else(|| ",,".to_string(), |[x, y, z]| format!("{x},{y},{z}"))
@@ -211,12 +250,13 @@ pub fn predictions_csv(predictions: &[PairPrediction]) -> String {
         let [tx, ty, tz] = p.truth;
         let _ = writeln!(
             csv,
-            "{},{tx},{ty},{tz},{},{},{},{},{}",
+            "{},{tx},{ty},{tz},{},{},{},{},{},{},{estimator}",
             p.id,
             triple(p.predicted),
             triple(p.physics),
             triple(p.physics_sd),
             triple(p.combined),
+            triple(p.combined_sd),
             p.catheter_iou
                 .map_or_else(|| ",".to_string(), |[a, b]| format!("{a:.4},{b:.4}"))
         );
@@ -426,6 +466,11 @@ pub struct EvalOptions {
     pub view_turns: u8,
     /// How each view's catheter entry edge is found ([`predict_entry`]).
     pub entry: EntrySetting,
+    /// The catheter a blind physics estimate assumes; `None` hands it each pair's record
+    /// instead (the oracle).
+    pub catheter: Option<CatalogueCatheter>,
+    /// How wrong a blind estimate reads each pair's C-arm settings (none by default).
+    pub header_error: HeaderError,
 }
 
 /// Colour of each pixel of an error map, RGB.
@@ -490,6 +535,15 @@ pub fn evaluate(
     options: &EvalOptions,
 ) -> anyhow::Result<(Evaluation, Vec<PairPrediction>)> {
     let dataset = Dataset::open(data)?;
+    let estimator = match &options.catheter {
+        Some(catheter) => Estimator::Blind {
+            catheter: catheter.clone(),
+            nominal_base: nominal_base(&dataset),
+            header_error: options.header_error,
+            seed: 0x5EED,
+        },
+        None => Estimator::Oracle,
+    };
     let turn = SquareSymmetry {
         quarter_turns: options.view_turns % 4,
         mirrored: false,
@@ -607,6 +661,7 @@ pub fn evaluate(
                 physics: None,
                 physics_sd: None,
                 combined: None,
+                combined_sd: None,
                 catheter_iou,
             });
         },
@@ -639,6 +694,7 @@ pub fn evaluate(
                 calibration_split,
                 device,
                 batch_size,
+                &estimator,
             )?
         }
         _ => None,
@@ -651,6 +707,7 @@ pub fn evaluate(
             &pairs.items,
             &predicted,
             records,
+            &estimator,
             calibration.as_ref().map(|(_, c)| c),
         )?,
         None => Vec::new(),
@@ -662,10 +719,12 @@ pub fn evaluate(
         for (prediction, physics) in predictions.iter_mut().zip(&from_network.force_per_pair) {
             prediction.physics = physics.map(|p| p.force_n);
             prediction.physics_sd = physics.and_then(|p| p.sd_n);
-            prediction.combined = physics
+            let combined = physics
                 .zip(from_network.combination)
                 .zip(prediction.predicted)
-                .map(|((p, c), network)| c.combine(network, p.force_n, p.sd_n));
+                .map(|((p, c), network)| c.combine_with_sd(network, p.force_n, p.sd_n));
+            prediction.combined = combined.map(|(force, _)| force);
+            prediction.combined_sd = combined.map(|(_, sd)| sd);
         }
     }
     Ok((
@@ -694,6 +753,9 @@ pub fn evaluate(
                 views_read_turned,
                 pairs: pairs.items.len(),
             }),
+            estimator: estimator.name().into(),
+            catheter: options.catheter.clone(),
+            header_error: options.header_error,
         },
         predictions,
     ))
@@ -722,6 +784,7 @@ fn calibrate_combination(
     split: Split,
     device: &Device,
     batch_size: usize,
+    estimator: &Estimator,
 ) -> anyhow::Result<Option<(Split, ForceCombination)>> {
     let pairs = StereoSplit::load(dataset, split, model.image_size, None)?;
     let ids: Vec<&str> = pairs.items.iter().map(|item| &*item.id).collect();
@@ -752,6 +815,7 @@ fn calibrate_combination(
         model.image_size,
         &to_check,
         &records,
+        estimator,
         None,
     );
     let combination = ForceCombination::calibrate(&check.calibration_pairs(&to_check));
@@ -806,6 +870,7 @@ fn physics_checks(
     items: &[StereoItem],
     predicted: &[NetworkOutput],
     records: &[SampleRecord],
+    estimator: &Estimator,
     combination: Option<&ForceCombination>,
 ) -> anyhow::Result<Vec<PhysicsEvaluation>> {
     use rayon::prelude::*;
@@ -844,6 +909,7 @@ fn physics_checks(
         size,
         &from_truth,
         records,
+        estimator,
         None,
     )];
     if predicted.iter().all(|p| p.masks.is_some()) {
@@ -852,6 +918,7 @@ fn physics_checks(
             model.image_size,
             &network_pairs(model, items, predicted),
             records,
+            estimator,
             combination,
         ));
     }
@@ -924,6 +991,21 @@ pub fn markdown(e: &Evaluation) -> String {
             );
         }
     }
+    if !e.physics.is_empty() {
+        let _ = write!(
+            s,
+            "\nPhysics estimate: {}{}.\n",
+            physics_check::estimator_caption(e.catheter.as_ref()),
+            if e.header_error.is_none() {
+                String::new()
+            } else {
+                format!(
+                    "; each C-arm's angles read off by up to {}° and its distances by up to {} mm",
+                    e.header_error.angle_deg, e.header_error.distance_mm
+                )
+            }
+        );
+    }
     s.push_str(&physics_check::markdown(&e.physics));
     if let (Some(split), Some(c)) = (
         &e.calibration_split,
@@ -946,6 +1028,15 @@ pub fn markdown(e: &Evaluation) -> String {
 }
 
 pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
+    for (flag, value) in [
+        ("--carm-angle-error", args.carm_angle_error),
+        ("--carm-distance-error", args.carm_distance_error),
+    ] {
+        anyhow::ensure!(
+            value.is_finite() && value >= 0.0,
+            "{flag} must be a bound of 0 or more, not {value}"
+        );
+    }
     let device = args.backend.device()?;
     let run = args.run.as_ref().map(RunDir::new);
     let (model, data) = match (&run, &args.weights) {
@@ -974,6 +1065,15 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
             masks: args.masks.clone(),
             view_turns: args.turn_views,
             entry: args.catheter_entry,
+            catheter: if args.oracle {
+                None
+            } else {
+                Some(CatalogueCatheter::find(&args.catheter)?)
+            },
+            header_error: HeaderError {
+                angle_deg: args.carm_angle_error,
+                distance_mm: args.carm_distance_error,
+            },
         },
     )?;
     // A run keeps its tables and predictions (of its views as they are, read as trained);
@@ -991,11 +1091,11 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         write(md, markdown(&evaluation).as_bytes())?;
         write(
             run.predictions_file(args.split),
-            predictions_csv(&predictions).as_bytes(),
+            predictions_csv(&predictions, &evaluation.estimator).as_bytes(),
         )?;
     }
     if let Some(path) = &args.predictions {
-        std::fs::write(path, predictions_csv(&predictions))
+        std::fs::write(path, predictions_csv(&predictions, &evaluation.estimator))
             .with_context(|| format!("cannot write '{}'", path.display()))?;
     }
     if args.json {

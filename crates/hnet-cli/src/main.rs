@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 mod allocator;
 mod backend;
 mod bench;
+mod calibrate;
 mod cine;
 mod config;
 mod contact_sheet;
@@ -15,6 +16,8 @@ mod evaluation;
 mod import;
 mod import_dicom;
 mod info;
+mod mismatch;
+mod no_catheter;
 mod physics_check;
 mod progress;
 mod progress_renderer;
@@ -54,6 +57,9 @@ enum Command {
     Bench(bench::BenchArgs),
     /// Run a trained model over every frame pair of a biplane DICOM cine: a force trace CSV.
     Trace(trace::TraceArgs),
+    /// Calibrate a catheter's stiffness from pairs labelled with a measured force, for the
+    /// blind force estimate (`hnet eval --catheter FILE`).
+    Calibrate(calibrate::CalibrateArgs),
     /// Study what a dataset allows (`hnet study ceiling`: the force recoverable from its geometry).
     Study(study::StudyArgs),
 }
@@ -72,6 +78,7 @@ fn main() -> ExitCode {
         Command::Bench(args) => bench::run(&args),
         Command::Study(args) => study::run(&args),
         Command::Trace(args) => trace::run(&args),
+        Command::Calibrate(args) => calibrate::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -2,18 +2,28 @@
 //! (the true ones, and the network's) and the tip force of the twin's rod fitted to it
 //! ([`hnet_twin::physics_force`]), against the pair's record: the reconstruction's distance from
 //! the true centreline, and Table I of the physics force beside the network's on the same pairs.
+//!
+//! The fit reads the masks with an [`Estimator`]: **blind** (the default) assumes a catalogue
+//! catheter and fits the base from its nominal pose, with cameras rebuilt from the C-arms'
+//! settings, as a user's pair would be read; **oracle** hands it each pair's recorded catheter
+//! and exact base (the twin's answers), which bounds what the masks allow.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::time::Instant;
 
 use hnet_model::metrics::{AXES, ForceAccumulator, ForceMetrics};
+use hnet_twin::carm::HeaderError;
+use hnet_twin::catalogue::CatalogueCatheter;
 use hnet_twin::centreline::Mask;
 use hnet_twin::dataset::Dataset;
-use hnet_twin::physics_force::{CalibrationPair, ForceCombination, physics_estimate};
+use hnet_twin::physics_force::{
+    CalibrationPair, ForceCombination, INTERVAL_90_Z, PhysicsSetup, physics_estimate,
+};
 use hnet_twin::render::PROXIMAL_SHAFT_MM;
 use hnet_twin::rod;
 use hnet_twin::rod_fit::distances_to_rod;
+use hnet_twin::scene::NominalBase;
 use hnet_twin::simulate::{SampleRecord, read_sample_record};
 use hnet_twin::vec3::Vec3;
 use hnet_units::ImageSize;
@@ -36,6 +46,71 @@ impl MaskOrigin {
             Self::True => "true masks",
             Self::Predicted => "predicted masks",
         }
+    }
+}
+
+/// What the rod fit is told about each pair.
+#[derive(Debug, Clone)]
+pub enum Estimator {
+    /// What a user has: the C-arms' settings, a catalogue `catheter`, and a `nominal_base`
+    /// whose position and orientation are fitted ([`PhysicsSetup::blind`]).
+    Blind {
+        /// The catheter assumed.
+        catheter: CatalogueCatheter,
+        /// Where the base fit starts, and how far it may go.
+        nominal_base: NominalBase,
+        /// How wrong each pair's recorded C-arm settings are read (the mismatch suite's
+        /// geometry errors; none by default), drawn per pair from `seed`.
+        header_error: HeaderError,
+        /// Seed of those draws.
+        seed: u64,
+    },
+    /// The twin's answers: each pair's recorded catheter and exact base
+    /// ([`SampleRecord::physics_setup`]). Bounds what the masks allow; no user has it.
+    Oracle,
+}
+
+impl Estimator {
+    /// `blind` or `oracle`, as tables and JSON name it.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Blind { .. } => "blind",
+            Self::Oracle => "oracle",
+        }
+    }
+
+    /// How the estimator reads `record`'s masks at `size` (the `pair`-th pair checked).
+    pub fn setup(&self, record: &SampleRecord, size: ImageSize, pair: usize) -> PhysicsSetup {
+        match self {
+            Self::Blind {
+                catheter,
+                nominal_base,
+                header_error,
+                seed,
+            } => record.blind_setup_misread(
+                size,
+                catheter,
+                nominal_base,
+                header_error,
+                seed.wrapping_add(pair as u64),
+            ),
+            Self::Oracle => record.physics_setup(size),
+        }
+    }
+}
+
+/// The estimator in a sentence, for table captions: blind with the `catheter` it assumed, or the
+/// oracle (`None`).
+pub fn estimator_caption(catheter: Option<&CatalogueCatheter>) -> String {
+    match catheter {
+        Some(catheter) => format!(
+            "blind (catheter `{}` assumed, base fitted from its nominal pose, C-arms from their \
+             settings; nothing of each pair's own record)",
+            catheter.name
+        ),
+        None => "ORACLE (each pair's recorded catheter and exact base: the twin's answers, which \
+                 no user has)"
+            .into(),
     }
 }
 
@@ -67,6 +142,10 @@ pub struct PhysicsEvaluation {
     /// when it estimates a force and a combination was calibrated.
     #[serde(default)]
     pub combined_force: Option<ForceMetrics>,
+    /// Share of pairs per axis whose true force lies within the combined estimate's nominal
+    /// 90 % interval ([`ForceCombination::combine_with_sd`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub combined_coverage_90: Option<[f64; 3]>,
     /// The calibration the combined force used (measured on other pairs than these).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub combination: Option<ForceCombination>,
@@ -155,14 +234,16 @@ pub fn check(
     size: ImageSize,
     pairs: &[PairToCheck<'_>],
     records: &[SampleRecord],
+    estimator: &Estimator,
     combination: Option<&ForceCombination>,
 ) -> PhysicsEvaluation {
     let started = Instant::now();
     let outcomes: Vec<Outcome> = pairs
         .par_iter()
         .zip(records)
-        .map(
-            |(pair, record)| match physics_estimate(pair.masks, &record.physics_setup(size)) {
+        .enumerate()
+        .map(|(index, (pair, record))| {
+            match physics_estimate(pair.masks, &estimator.setup(record, size, index)) {
                 Ok(estimate) => {
                     let reconstruction = &estimate.reconstruction;
                     Outcome::Fitted {
@@ -179,8 +260,8 @@ pub fn check(
                     }
                 }
                 Err(e) => Outcome::Failed(e.step()),
-            },
-        )
+            }
+        })
         .collect();
     let millis_per_pair = started.elapsed().as_secs_f64() * 1e3 / pairs.len().max(1) as f64;
 
@@ -193,6 +274,8 @@ pub fn check(
     let (mut centreline, mut tip) = (Vec::new(), Vec::new());
     // (network, physics) Fz errors, N, for the correlation.
     let mut fz_errors = Vec::new();
+    // Pairs whose truth lies in the combined 90 % interval, per axis.
+    let mut covered = [0usize; 3];
     for (pair, outcome) in pairs.iter().zip(&outcomes) {
         match outcome {
             Outcome::Fitted {
@@ -208,7 +291,13 @@ pub fn check(
                     // the case it is for (from true masks the physics estimate is near exact).
                     if origin == MaskOrigin::Predicted {
                         if let Some(c) = combination {
-                            combined.push(c.combine(n, force_n, fitted.sd_n), pair.truth_n);
+                            let (force, sd) = c.combine_with_sd(n, force_n, fitted.sd_n);
+                            combined.push(force, pair.truth_n);
+                            for axis in 0..3 {
+                                let off = f64::from((force[axis] - pair.truth_n[axis]).abs());
+                                covered[axis] +=
+                                    usize::from(off <= INTERVAL_90_Z * f64::from(sd[axis]));
+                            }
                         }
                         let truth = f64::from(pair.truth_n[2]);
                         fz_errors.push((f64::from(n[2]) - truth, f64::from(force_n[2]) - truth));
@@ -231,6 +320,8 @@ pub fn check(
         tip_error_mm: mean(&tip),
         force: physics.finish(),
         network_force: network.finish(),
+        combined_coverage_90: (!combined.is_empty())
+            .then(|| covered.map(|n| n as f64 / combined.len() as f64)),
         combined_force: combined.finish(),
         combination: combination
             .copied()
@@ -279,9 +370,13 @@ pub fn markdown(checks: &[PhysicsEvaluation]) -> String {
     let _ = writeln!(
         s,
         "| masks | fitted | centreline error (mm) | tip error (mm) | R² Fx / Fy / Fz, physics | \
-         R² Fx / Fy / Fz, network, same pairs | R² Fx / Fy / Fz, combined | failures | ms per pair |"
+         R² Fx / Fy / Fz, network, same pairs | R² Fx / Fy / Fz, combined | 90 % interval \
+         covers Fx / Fy / Fz | failures | ms per pair |"
     );
-    let _ = writeln!(s, "| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    let _ = writeln!(
+        s,
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+    );
     let r2 = |m: &Option<ForceMetrics>| match m {
         Some(m) => AXES
             .iter()
@@ -304,7 +399,7 @@ pub fn markdown(checks: &[PhysicsEvaluation]) -> String {
         };
         let _ = writeln!(
             s,
-            "| {} ({}) | {} of {} | {} | {} | {} | {} | {} | {} | {:.0} |",
+            "| {} ({}) | {} of {} | {} | {} | {} | {} | {} | {} | {} | {:.0} |",
             c.masks.describe(),
             c.size,
             c.fitted,
@@ -314,6 +409,9 @@ pub fn markdown(checks: &[PhysicsEvaluation]) -> String {
             r2(&c.force),
             r2(&c.network_force),
             r2(&c.combined_force),
+            c.combined_coverage_90.map_or("n/a".into(), |v| v
+                .map(|share| format!("{:.0} %", share * 100.0))
+                .join(" / ")),
             failures,
             c.millis_per_pair
         );
@@ -372,6 +470,7 @@ mod tests {
             size,
             &pairs,
             &records,
+            &Estimator::Oracle,
             Some(&combination),
         );
         assert_eq!(network.fitted, 4, "{:?}", network.failures);
@@ -398,9 +497,23 @@ mod tests {
                 );
             }
         }
-        let without = check(MaskOrigin::Predicted, size, &pairs, &records, None);
+        let without = check(
+            MaskOrigin::Predicted,
+            size,
+            &pairs,
+            &records,
+            &Estimator::Oracle,
+            None,
+        );
         assert!(without.combined_force.is_none() && without.combination.is_none());
-        let from_truth = check(MaskOrigin::True, size, &pairs, &records, Some(&combination));
+        let from_truth = check(
+            MaskOrigin::True,
+            size,
+            &pairs,
+            &records,
+            &Estimator::Oracle,
+            Some(&combination),
+        );
         assert_eq!(from_truth.fitted, 4);
         assert!(from_truth.combined_force.is_none() && from_truth.combination.is_none());
         assert_eq!(from_truth.fz_error_correlation, None);

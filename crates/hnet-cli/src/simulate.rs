@@ -96,7 +96,7 @@ fn parse_mask(text: &str) -> Result<MaskSource, String> {
 }
 
 /// The image files named by `paths` (folders expand to the images in them, sorted).
-fn background_files(paths: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
+pub fn background_files(paths: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
     let mut files = Vec::new();
     for path in paths {
         if path.is_dir() {

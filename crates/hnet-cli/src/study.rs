@@ -10,6 +10,9 @@
 //! are chosen on the val split; R² per axis is reported on the test split, by the same Table I
 //! code as `hnet eval`.
 //!
+//! `hnet study mismatch` ([`crate::mismatch`]) measures the blind force estimate on sets that
+//! depart from what the estimators assume.
+//!
 //! `hnet study features` fits the same regressor to a trained H-Net's pooled features (its force
 //! head's input) and puts it beside the head's own estimates on the test split: if the
 //! regressor does much better, the head (its training) limits the force; if not, the features do.
@@ -49,6 +52,13 @@ enum Study {
     /// head's input), beside what the head itself makes of them: whether the features or the
     /// head limit the network's force.
     Features(FeaturesArgs),
+    /// The blind force estimate on test data the estimators' model does not share: the
+    /// catheter off its catalogue values, the base anywhere, C-arm header errors, radiographs.
+    Mismatch(crate::mismatch::MismatchArgs),
+    /// How often a network's masks find a catheter where there is none (chest radiographs,
+    /// phantom views, noise, blank images), and miss one where there is: the rule that
+    /// withholds a force from views without a catheter.
+    NoCatheter(crate::no_catheter::NoCatheterArgs),
 }
 
 /// `hnet study features`.
@@ -393,6 +403,8 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<()> {
     let args = match &args.study {
         Study::Ceiling(args) => args,
         Study::Features(args) => return study_features(args),
+        Study::Mismatch(args) => return crate::mismatch::run(args),
+        Study::NoCatheter(args) => return crate::no_catheter::run(args),
     };
     if args.points < 2 {
         bail!("--points must be at least 2");

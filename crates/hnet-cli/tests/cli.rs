@@ -104,6 +104,9 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
         serde_json::json!({"width": 48, "height": 32})
     );
     assert_eq!(eval["force"]["samples"], 40);
+    // Blind by default: the catalogue's bench catheter, never the pairs' own records.
+    assert_eq!(eval["estimator"], "blind");
+    assert_eq!(eval["catheter"]["name"], "twin-bench-7f");
     // The physics check: from the dataset's own 32x32 masks and from the network's 48x32 ones,
     // every pair fitted or counted as a failure of a named step.
     let physics = eval["physics"].as_array().unwrap();
@@ -158,13 +161,13 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
         Some(
             "id,fx,fy,fz,fx_pred,fy_pred,fz_pred,fx_physics,fy_physics,fz_physics,\
              fx_physics_sd,fy_physics_sd,fz_physics_sd,fx_combined,fy_combined,fz_combined,\
-             catheter_iou_a,catheter_iou_b"
+             fx_combined_sd,fy_combined_sd,fz_combined_sd,catheter_iou_a,catheter_iou_b,estimator"
         )
     );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 40);
-    assert!(rows.iter().all(|r| r.len() == 18));
-    assert!(rows.iter().all(|r| r[16..].iter().all(|v| {
+    assert!(rows.iter().all(|r| r.len() == 22 && r[21] == "blind"));
+    assert!(rows.iter().all(|r| r[19..21].iter().all(|v| {
         let iou: f64 = v.parse().unwrap();
         (0.0..=1.0).contains(&iou)
     })));
@@ -172,7 +175,7 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
     // count the same IoU (white found, blue missed, red spurious).
     assert_eq!(std::fs::read_dir(&masks).unwrap().count(), 40 * 4);
     for row in &rows {
-        for (view, iou) in ["a", "b"].iter().zip(&row[16..]) {
+        for (view, iou) in ["a", "b"].iter().zip(&row[19..21]) {
             let mask =
                 image::open(masks.join(format!("{}_predicted_mask_{view}.png", row[0]))).unwrap();
             assert_eq!((mask.width(), mask.height()), (48, 32));
@@ -248,6 +251,15 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
                 "up",
             ],
             "`up` is not auto, an edge (bottom, left, top, right) or two edges `A,B`",
+        ),
+        (
+            vec![
+                "--weights",
+                weights.to_str().unwrap(),
+                "--catheter",
+                "no-such-7f",
+            ],
+            "no catheter `no-such-7f` in the catalogue (twin-bench-7f, twin-varied-mid-7f)",
         ),
     ] {
         let stderr = fails(hnet().arg("eval").args(&args).arg("--data").arg(&data));
@@ -1112,5 +1124,80 @@ fn a_biplane_dicom_cine_imports_and_traces_without_patient_identifiers() {
         "{err}"
     );
     assert!(!dir.join("none.csv").exists());
+    std::fs::remove_dir_all(dir).ok();
+}
+
+/// `hnet calibrate`: bench pairs of a catheter 30 % stiffer than the catalogue's, read blind from
+/// their masks, give its stiffness back from 10 labelled pairs; too few pairs and an impossible
+/// catheter file are refused, naming the problem, and nothing is written.
+#[test]
+fn a_stiffer_catheter_is_calibrated_from_ten_labelled_pairs() {
+    let dir = scratch("calibrate");
+    let sampling = dir.join("stiff.json");
+    let mut scenes: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../configs/mismatch/stiff-anywhere.json"),
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    // The bench fixture's pose: this test is about the stiffness.
+    scenes["base_jitter_mm"] = 1.0.into();
+    scenes["base_tilt_deg"] = 2.0.into();
+    std::fs::write(&sampling, scenes.to_string()).unwrap();
+    let data = dir.join("stiff");
+    run(&[
+        "simulate",
+        "--samples",
+        "12",
+        "--size",
+        "128",
+        "--seed",
+        "3",
+        "--scene-sampling",
+        sampling.to_str().unwrap(),
+        "--out",
+        data.to_str().unwrap(),
+    ]);
+    let out = dir.join("catheter.json");
+    let calibrate = |extra: &[&str]| {
+        let mut command = hnet();
+        command.args([
+            "calibrate",
+            "--data",
+            data.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        command.args(extra);
+        command
+    };
+    succeeds(&mut calibrate(&["--pairs", "10"]));
+    let catheter: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+    let scale = catheter["calibration"]["scale"].as_f64().unwrap();
+    assert!((scale - 1.3).abs() < 0.05, "{catheter}");
+    assert_eq!(catheter["calibration"]["pairs"], 10);
+    std::fs::remove_file(&out).unwrap();
+
+    let stderr = fails(&mut calibrate(&["--pairs", "2"]));
+    assert!(stderr.contains("at least 3 are needed"), "{stderr}");
+    let impossible = dir.join("impossible.json");
+    std::fs::write(
+        &impossible,
+        r#"{"name":"x","description":"","bending_stiffness_n_m2":0.0006,
+            "flexible_length_mm":50,"precurvature_per_mm":-1,"diameter_mm":2.33}"#,
+    )
+    .unwrap();
+    let stderr = fails(&mut calibrate(&[
+        "--catheter",
+        impossible.to_str().unwrap(),
+    ]));
+    assert!(
+        stderr.contains("precurvature_per_mm = -1 is impossible"),
+        "{stderr}"
+    );
+    assert!(!out.exists());
     std::fs::remove_dir_all(dir).ok();
 }
