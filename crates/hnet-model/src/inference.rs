@@ -86,15 +86,6 @@ impl StereoPrediction {
 
 pub use hnet_units::force_magnitude;
 
-/// The share of `mask`'s pixels (catheter probabilities) at or above the mask threshold, 0-1.
-pub fn catheter_share(mask: &[f32]) -> f64 {
-    let found = mask
-        .iter()
-        .filter(|&&p| p >= crate::metrics::MASK_THRESHOLD)
-        .count();
-    found as f64 / mask.len().max(1) as f64
-}
-
 /// Appends an interleaved 8-bit RGB image as planar channels scaled to `[0, 1]` (the network's
 /// `[3, H, W]` input layout). The one conversion of images to network input, used by inference
 /// here and by `hnet`'s training batches.
