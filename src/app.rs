@@ -66,7 +66,10 @@ pub fn App() -> impl IntoView {
             <h1>"H-Net Studio"</h1>
             <p class="lede">
                 "Stereo catheter segmentation and 3D tip-force estimation with H-Net, entirely in "
-                "your browser: no image leaves this page."
+                "your browser: no image leaves this page. "
+                <strong>"Research software, not for clinical use"</strong>
+                " (" <a href="https://github.com/hnet-studio/hnet-studio/blob/main/docs/clinicians.md"
+                    target="_blank" rel="noopener">"what the force can and cannot tell"</a> ")."
             </p>
             <ModelBar/>
         </header>
