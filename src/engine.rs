@@ -71,12 +71,19 @@ pub struct Prediction {
     pub mask_a: Vec<f32>,
     /// Catheter probability of each pixel of view B.
     pub mask_b: Vec<f32>,
-    /// H-Net's tip force `(Fx, Fy, Fz)` in newtons; `None` when a view was read turned (its
-    /// force head learned catheters that come up from the bottom of both views).
+    /// H-Net's tip force `(Fx, Fy, Fz)` in newtons as the page reads it; `None` when a view was
+    /// read turned (its force head learned catheters that come up from the bottom of both views)
+    /// or shows no catheter ([`Self::no_catheter`]).
     pub force_n: Option<[f32; 3]>,
+    /// What the force head answered, catheter or not (`None` only for a view read turned): what
+    /// the WebGPU check compares, never shown as a force.
+    pub head_force_n: Option<[f32; 3]>,
     /// The edge through which each view's catheter was read as entering
     /// ([`hnet_model::catheter_entry`]).
     pub entry: [CatheterEntry; 2],
+    /// Why no force is read, when a view's mask shows no catheter
+    /// ([`crate::force_reading::no_catheter_found`]).
+    pub no_catheter: Option<String>,
     /// Time of the forward pass and read-back, milliseconds.
     pub millis: f64,
     /// The backend it ran on.
@@ -84,10 +91,19 @@ pub struct Prediction {
 }
 
 impl Prediction {
-    /// Why H-Net's force was left out of this prediction, when a view was read turned.
+    /// Why H-Net's force was left out of this prediction: a view shows no catheter, or a view
+    /// was read turned.
     pub fn force_left_out(&self) -> Option<String> {
-        if self.force_n.is_some() || self.entry == [CatheterEntry::Bottom; 2] {
+        if self.force_n.is_some() {
             return None;
+        }
+        if self.entry == [CatheterEntry::Bottom; 2] {
+            return self.no_catheter.as_ref().map(|why| {
+                format!(
+                    "No force is read: {why}. H-Net answers a force for any image, a catheter in \
+                     it or not; without one in both views that number would mean nothing."
+                )
+            });
         }
         let [a, b] = self.entry.map(CatheterEntry::name);
         Some(format!(
@@ -271,11 +287,14 @@ impl Engine {
         };
         let millis = now_ms() - start;
         let [mask_a, mask_b] = &reading.masks;
+        let no_catheter = crate::force_reading::no_catheter_found(mask_a, mask_b, side);
         Ok(Prediction {
             mask_a: rescale_mask(mask_a, side, WORK_SIZE),
             mask_b: rescale_mask(mask_b, side, WORK_SIZE),
-            force_n: reading.force,
+            force_n: reading.force.filter(|_| no_catheter.is_none()),
+            head_force_n: reading.force,
             entry: reading.entry,
+            no_catheter,
             millis,
             backend: self.backend.label(),
         })

@@ -4,11 +4,25 @@
 //! to the catheter in 3D, [`crate::catheter_3d`]) disagree beyond what their errors explain.
 
 use hnet_twin::carm::Biplane;
+use hnet_twin::centreline::{CentrelineSettings, Mask, find_catheter};
 use hnet_twin::physics_force::ForceCombination;
 use hnet_twin::scene::{Modality, SceneParams, SceneSampling};
 
 use crate::workspace::{LabeledPair, PairSource};
 use hnet_units::force_magnitude as magnitude;
+
+/// Why no force is read from a pair whose masks (catheter probabilities of views A and B, `side`
+/// pixels square) do not both show a catheter ([`find_catheter`]: enough catheter pixels forming
+/// one tube); `None` when both do. The same rule as `hnet study no-catheter` measures.
+pub fn no_catheter_found(mask_a: &[f32], mask_b: &[f32], side: usize) -> Option<String> {
+    let settings = CentrelineSettings::default();
+    [(mask_a, "A"), (mask_b, "B")]
+        .into_iter()
+        .find_map(|(mask, view)| {
+            find_catheter(&Mask::soft(side, side, mask), view, &settings).err()
+        })
+        .map(|why| hnet_units::with_causes(&why))
+}
 
 /// Contact forces of ablation within this band (newtons) are considered effective and safe
 /// (the paper: ablation needs 0.1-0.3 N at the tip).
@@ -515,6 +529,29 @@ mod tests {
             "{}",
             apart.text()
         );
+    }
+
+    #[test]
+    fn a_pair_without_a_catheter_gets_no_force() {
+        let side = 64;
+        let empty = vec![0.0f32; side * side];
+        // A straight vertical catheter 4 pixels wide from the bottom edge up to mid-height.
+        let tube: Vec<f32> = (0..side * side)
+            .map(|i| {
+                let (x, y) = (i % side, i / side);
+                if (30..34).contains(&x) && y >= side / 2 {
+                    1.0
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        assert_eq!(no_catheter_found(&tube, &tube, side), None);
+        let why = no_catheter_found(&tube, &empty, side).unwrap();
+        assert!(why.contains("view B: no catheter found"), "{why}");
+        // A black image, which the network paints as catheter all over: not one tube.
+        let everywhere = vec![1.0f32; side * side];
+        assert!(no_catheter_found(&everywhere, &tube, side).is_some());
     }
 
     #[test]

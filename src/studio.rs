@@ -996,9 +996,9 @@ async fn checked_on_webgpu(cpu: &Engine) -> Result<Engine, String> {
     fn output(p: &Prediction) -> webgpu_check::Output<'_> {
         webgpu_check::Output {
             masks: [&p.mask_a[..], &p.mask_b[..]],
-            // Read as trained, a pair always has the force head's estimate; a missing one
-            // reads as NaN, which the check refuses.
-            force_n: p.force_n.unwrap_or([f32::NAN; 3]),
+            // Read as trained, a pair always has the force head's estimate (catheter or not);
+            // a missing one reads as NaN, which the check refuses.
+            force_n: p.head_force_n.unwrap_or([f32::NAN; 3]),
         }
     }
     let scale = web_sys::window()

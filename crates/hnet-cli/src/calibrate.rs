@@ -41,6 +41,9 @@ pub struct CalibrateArgs {
     out: PathBuf,
 }
 
+/// A pair's measured force and its blind estimate, N.
+type ForcePair = ([f64; 3], [f64; 3]);
+
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let catheter = CatalogueCatheter::find(&args.catheter)?;
     let dataset = Dataset::open(&args.data)?;
@@ -58,7 +61,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let base = nominal_base(&dataset);
     let size = dataset.header.image_size;
     // Per pair: (measured force, blind estimate) in newtons, or why it gave none.
-    let read: Vec<Result<([f64; 3], [f64; 3]), String>> = rows
+    let read: Vec<Result<ForcePair, String>> = rows
         .par_iter()
         .map(|row| {
             let carms = read_pair_carms(&dataset, &row.id).map_err(|e| e.to_string())?;

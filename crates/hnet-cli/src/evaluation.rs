@@ -23,7 +23,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::backend::BackendChoice;
 use crate::data::{StereoBatcher, StereoItem, StereoSplit};
-use crate::physics_check::{self, Estimator, MaskOrigin, PairToCheck, PhysicsEvaluation};
+use crate::physics_check::{
+    self, BlindEstimator, Estimator, MaskOrigin, PairToCheck, PhysicsEvaluation,
+};
 use crate::run_dir::RunDir;
 use hnet_twin::carm::HeaderError;
 use hnet_twin::catalogue::{BENCH_CATHETER, CatalogueCatheter};
@@ -536,12 +538,12 @@ pub fn evaluate(
 ) -> anyhow::Result<(Evaluation, Vec<PairPrediction>)> {
     let dataset = Dataset::open(data)?;
     let estimator = match &options.catheter {
-        Some(catheter) => Estimator::Blind {
+        Some(catheter) => Estimator::Blind(Box::new(BlindEstimator {
             catheter: catheter.clone(),
             nominal_base: nominal_base(&dataset),
             header_error: options.header_error,
             seed: 0x5EED,
-        },
+        })),
         None => Estimator::Oracle,
     };
     let turn = SquareSymmetry {
@@ -707,8 +709,7 @@ pub fn evaluate(
             &pairs.items,
             &predicted,
             records,
-            &estimator,
-            calibration.as_ref().map(|(_, c)| c),
+            (&estimator, calibration.as_ref().map(|(_, c)| c)),
         )?,
         None => Vec::new(),
     };
@@ -870,8 +871,7 @@ fn physics_checks(
     items: &[StereoItem],
     predicted: &[NetworkOutput],
     records: &[SampleRecord],
-    estimator: &Estimator,
-    combination: Option<&ForceCombination>,
+    (estimator, combination): (&Estimator, Option<&ForceCombination>),
 ) -> anyhow::Result<Vec<PhysicsEvaluation>> {
     use rayon::prelude::*;
     let rows: Vec<_> = dataset.split(split).collect();

@@ -187,9 +187,9 @@ fn row(set: &MismatchSet, e: &Evaluation) -> MismatchRow {
         set: set.name.into(),
         why: set.why.into(),
         pairs: network.map_or(0, |c| c.pairs),
-        head: e.force.clone(),
-        physics: network.and_then(|c| c.force.clone()),
-        combined: network.and_then(|c| c.combined_force.clone()),
+        head: e.force,
+        physics: network.and_then(|c| c.force),
+        combined: network.and_then(|c| c.combined_force),
         estimated: network.map_or(0.0, |c| c.fitted as f64 / c.pairs.max(1) as f64),
         coverage_90: network.and_then(|c| c.combined_coverage_90),
         catheter_iou: e

@@ -52,29 +52,33 @@ impl MaskOrigin {
 /// What the rod fit is told about each pair.
 #[derive(Debug, Clone)]
 pub enum Estimator {
-    /// What a user has: the C-arms' settings, a catalogue `catheter`, and a `nominal_base`
-    /// whose position and orientation are fitted ([`PhysicsSetup::blind`]).
-    Blind {
-        /// The catheter assumed.
-        catheter: CatalogueCatheter,
-        /// Where the base fit starts, and how far it may go.
-        nominal_base: NominalBase,
-        /// How wrong each pair's recorded C-arm settings are read (the mismatch suite's
-        /// geometry errors; none by default), drawn per pair from `seed`.
-        header_error: HeaderError,
-        /// Seed of those draws.
-        seed: u64,
-    },
+    /// What a user has ([`BlindEstimator`]).
+    Blind(Box<BlindEstimator>),
     /// The twin's answers: each pair's recorded catheter and exact base
     /// ([`SampleRecord::physics_setup`]). Bounds what the masks allow; no user has it.
     Oracle,
+}
+
+/// The blind estimator: the C-arms' settings, a catalogue `catheter`, and a `nominal_base`
+/// whose position and orientation are fitted ([`PhysicsSetup::blind`]).
+#[derive(Debug, Clone)]
+pub struct BlindEstimator {
+    /// The catheter assumed.
+    pub catheter: CatalogueCatheter,
+    /// Where the base fit starts, and how far it may go.
+    pub nominal_base: NominalBase,
+    /// How wrong each pair's recorded C-arm settings are read (the mismatch suite's geometry
+    /// errors; none by default), drawn per pair from `seed`.
+    pub header_error: HeaderError,
+    /// Seed of those draws.
+    pub seed: u64,
 }
 
 impl Estimator {
     /// `blind` or `oracle`, as tables and JSON name it.
     pub fn name(&self) -> &'static str {
         match self {
-            Self::Blind { .. } => "blind",
+            Self::Blind(_) => "blind",
             Self::Oracle => "oracle",
         }
     }
@@ -82,17 +86,12 @@ impl Estimator {
     /// How the estimator reads `record`'s masks at `size` (the `pair`-th pair checked).
     pub fn setup(&self, record: &SampleRecord, size: ImageSize, pair: usize) -> PhysicsSetup {
         match self {
-            Self::Blind {
-                catheter,
-                nominal_base,
-                header_error,
-                seed,
-            } => record.blind_setup_misread(
+            Self::Blind(blind) => record.blind_setup_misread(
                 size,
-                catheter,
-                nominal_base,
-                header_error,
-                seed.wrapping_add(pair as u64),
+                &blind.catheter,
+                &blind.nominal_base,
+                &blind.header_error,
+                blind.seed.wrapping_add(pair as u64),
             ),
             Self::Oracle => record.physics_setup(size),
         }

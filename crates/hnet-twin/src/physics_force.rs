@@ -176,7 +176,7 @@ pub fn physics_estimate(
     )?;
     let fit = fit_rod_to_reconstruction(&setup.rod, &setup.base, &reconstruction, &setup.fit)?;
     if let Some(limit_mm) = setup.max_fit_rms_mm
-        && !(fit.rms_mm <= limit_mm)
+        && (fit.rms_mm.is_nan() || fit.rms_mm > limit_mm)
     {
         return Err(PhysicsError::PoorFit {
             rms_mm: fit.rms_mm,
