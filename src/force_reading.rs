@@ -4,7 +4,7 @@
 //! to the catheter in 3D, [`crate::catheter_3d`]) disagree beyond what their errors explain.
 
 use hnet_twin::carm::Biplane;
-use hnet_twin::centreline::{CentrelineSettings, Mask, find_catheter};
+use hnet_twin::centreline::{CentrelineSettings, Mask, catheter_seen};
 use hnet_twin::physics_force::ForceCombination;
 use hnet_twin::scene::{Modality, SceneParams, SceneSampling};
 
@@ -12,14 +12,14 @@ use crate::workspace::{LabeledPair, PairSource};
 use hnet_units::force_magnitude as magnitude;
 
 /// Why no force is read from a pair whose masks (catheter probabilities of views A and B, `side`
-/// pixels square) do not both show a catheter ([`find_catheter`]: enough catheter pixels forming
-/// one tube); `None` when both do. The same rule as `hnet study no-catheter` measures.
+/// pixels square) do not both show a catheter ([`catheter_seen`]: enough catheter pixels, and
+/// not too many, in one blob long enough for a catheter); `None` when both do. The same rule as `hnet study no-catheter` measures.
 pub fn no_catheter_found(mask_a: &[f32], mask_b: &[f32], side: usize) -> Option<String> {
     let settings = CentrelineSettings::default();
     [(mask_a, "A"), (mask_b, "B")]
         .into_iter()
         .find_map(|(mask, view)| {
-            find_catheter(&Mask::soft(side, side, mask), view, &settings).err()
+            catheter_seen(&Mask::soft(side, side, mask), view, &settings).err()
         })
         .map(|why| hnet_units::with_causes(&why))
 }
@@ -549,9 +549,10 @@ mod tests {
         assert_eq!(no_catheter_found(&tube, &tube, side), None);
         let why = no_catheter_found(&tube, &empty, side).unwrap();
         assert!(why.contains("view B: no catheter found"), "{why}");
-        // A black image, which the network paints as catheter all over: not one tube.
+        // A view painted catheter all over (the network does so to a black image).
         let everywhere = vec![1.0f32; side * side];
-        assert!(no_catheter_found(&everywhere, &tube, side).is_some());
+        let why = no_catheter_found(&everywhere, &tube, side).unwrap();
+        assert!(why.contains("more than a catheter covers"), "{why}");
     }
 
     #[test]

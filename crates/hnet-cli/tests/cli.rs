@@ -314,6 +314,15 @@ fn every_baseline_trains_and_evaluates_in_the_same_harness() {
         // One row per pair whatever the heads: its force where the network estimates one, its
         // masks' IoU where it segments.
         let csv = std::fs::read_to_string(runs.join("predictions-test.csv")).unwrap();
+        let column = |name: &str| {
+            csv.lines()
+                .next()
+                .unwrap()
+                .split(',')
+                .position(|c| c == name)
+                .unwrap()
+        };
+        let (predicted, iou) = (column("fx_pred"), column("catheter_iou_a"));
         let rows: Vec<Vec<&str>> = csv
             .lines()
             .skip(1)
@@ -321,8 +330,8 @@ fn every_baseline_trains_and_evaluates_in_the_same_harness() {
             .collect();
         assert!(!rows.is_empty(), "{architecture}");
         for row in &rows {
-            assert_eq!(!row[4].is_empty(), force, "{architecture}: {row:?}");
-            assert_eq!(!row[16].is_empty(), segments, "{architecture}: {row:?}");
+            assert_eq!(!row[predicted].is_empty(), force, "{architecture}: {row:?}");
+            assert_eq!(!row[iou].is_empty(), segments, "{architecture}: {row:?}");
         }
         if architecture == "unet" {
             // Masks of views turned a quarter turn clockwise, each with its label mask: no
