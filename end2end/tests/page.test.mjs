@@ -228,7 +228,23 @@ test("bad input gets a clear message and loses nothing", async () => {
   await page.waitForSelector("#notice-undo");
   await page.click("#notice-undo");
   await page.waitForSelector(`#pairs li[data-id="${newest}"]`);
-  // Restored in the browser's storage too: it survives a reload.
+  // Restored in the browser's storage too (saved as the page goes on, like every change): once
+  // stored, it survives a reload.
+  const storedKeys = () =>
+    page.evaluate(async () => {
+      const db = await new Promise((ok, fail) => {
+        const r = indexedDB.open("hnet-studio", 1);
+        r.onsuccess = () => ok(r.result);
+        r.onerror = () => fail(r.error);
+      });
+      const keys = await new Promise((ok) => {
+        const r = db.transaction("pairs").objectStore("pairs").getAllKeys();
+        r.onsuccess = () => ok(r.result);
+      });
+      db.close();
+      return keys;
+    });
+  for (let i = 0; i < 50 && !(await storedKeys()).includes(newest); i++) await page.waitForTimeout(100);
   await page.reload();
   await waitForModel(page);
   await page.waitForSelector(`#pairs li[data-id="${newest}"]`);
