@@ -296,7 +296,7 @@ impl CinePlayer {
                 force.map(|force_n| TracePoint {
                     frame,
                     time_s: self.time_s(frame),
-                    force_n,
+                    force_n: Ok(force_n),
                 })
             })
             .collect()
@@ -390,7 +390,9 @@ mod tests {
         assert_eq!(player.next_untraced(1), Some(2));
         assert_eq!(
             player.trace_csv(),
-            "frame,time_s,fx_n,fy_n,fz_n,magnitude_n\n1,0.0000,0,0,0.2,0.2\n2,0.0667,0.1,0,0,0.1\n"
+            "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,estimator,note\n\
+             1,0.0000,0.0000,0.0000,0.2000,0.2000,H-Net force head,\n\
+             2,0.0667,0.1000,0.0000,0.0000,0.1000,H-Net force head,\n"
         );
         player.step(-1);
         assert_eq!(player.frame, 2);

@@ -519,9 +519,9 @@ test("a DICOM cine: sample, step, scrub, play, window/level, trace with cancel, 
   assert.equal(csv.suggestedFilename(), "hnet-force-trace.csv");
   await csv.saveAs(join(files, "trace.csv"));
   const lines = (await readFile(join(files, "trace.csv"), "utf8")).trim().split("\n");
-  assert.equal(lines[0], "frame,time_s,fx_n,fy_n,fz_n,magnitude_n");
+  assert.equal(lines[0], "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,estimator,note");
   assert.equal(lines.length, 25);
-  assert.match(lines[2], /^2,0\.0667,-?[\d.e-]+,-?[\d.e-]+,-?[\d.e-]+,[\d.e-]+$/);
+  assert.match(lines[2], /^2,0\.0667,-?\d\.\d{4},-?\d\.\d{4},-?\d\.\d{4},\d\.\d{4},H-Net force head,$/);
 
   // A click on the plot moves the cine there; keep that frame as a labeled pair.
   const plot = await page.locator("#force-trace").boundingBox();

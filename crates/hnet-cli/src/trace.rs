@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use hnet_dicom::{TracePoint, trace_csv};
+use hnet_twin::centreline::{CentrelineSettings, Mask, catheter_seen};
 use hnet_twin::dataset::LoadedPair;
 
 use crate::backend::BackendChoice;
@@ -56,10 +57,25 @@ pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
             })
             .collect();
         let mut forces = Vec::with_capacity(chunk.len());
-        predict(&model, &items, args.batch_size, &device, |_, _, force| {
-            forces.push(force)
-        })?;
-        for (pair, force) in chunk.iter().zip(forces) {
+        let size = model.image_size;
+        predict(
+            &model,
+            &items,
+            args.batch_size,
+            &device,
+            |_, masks, force| {
+                // A frame whose masks show no catheter in a view gets no force, and says why.
+                let no_catheter = masks.as_ref().and_then(|[a, b]| {
+                    let settings = CentrelineSettings::default();
+                    [(a, "A"), (b, "B")].into_iter().find_map(|(mask, view)| {
+                        catheter_seen(&Mask::soft(size.width, size.height, mask), view, &settings)
+                            .err()
+                    })
+                });
+                forces.push((force, no_catheter))
+            },
+        )?;
+        for (pair, (force, no_catheter)) in chunk.iter().zip(forces) {
             let Some(f) = force else {
                 bail!(
                     "weights file '{}' holds a `{}` network, which estimates no force",
@@ -70,7 +86,10 @@ pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
             trace.push(TracePoint {
                 frame: pair.frame,
                 time_s: pair.time_s,
-                force_n: f,
+                force_n: match no_catheter {
+                    Some(why) => Err(hnet_units::with_causes(&why)),
+                    None => Ok(f),
+                },
             });
         }
         bar.inc(chunk.len() as u64);
@@ -78,10 +97,17 @@ pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
     bar.finish_and_clear();
     hnet_twin::files::write_atomically(&args.out, trace_csv(&trace).as_bytes())
         .with_context(|| format!("cannot write {}", args.out.display()))?;
+    let without = trace.iter().filter(|p| p.force_n.is_err()).count();
     eprintln!(
-        "force trace of {} frame pairs written to {}",
+        "force trace of {} frame pairs ({}) written to {}{}",
         pairs.len(),
-        args.out.display()
+        hnet_dicom::TRACE_ESTIMATOR,
+        args.out.display(),
+        if without > 0 {
+            format!("; {without} frame(s) without a force: a view shows no catheter")
+        } else {
+            String::new()
+        }
     );
     Ok(())
 }

@@ -1,42 +1,54 @@
 //! A force trace over a cine: one tip-force estimate per frame pair, written as CSV
-//! (`frame,time_s,fx_n,fy_n,fz_n,magnitude_n`: frames from 1, time in seconds after plane A's
-//! first frame, empty when the headers give no frame time, forces in newtons in the twin's world
-//! frame). The one format of `hnet trace` and the page's trace export; it holds no header value
-//! besides the frame times, so no patient identifier.
+//! (`frame,time_s,fx_n,fy_n,fz_n,magnitude_n,estimator,note`: frames from 1, time in seconds
+//! after plane A's first frame, empty when the headers give no frame time, forces in newtons in
+//! the twin's world frame to 0.1 mN, the estimator that gave them, and for a frame without a
+//! force why, its force columns empty). The one format of `hnet trace` and the page's trace
+//! export; it holds no header value besides the frame times, so no patient identifier.
 
 use std::fmt::Write as _;
 
 use hnet_units::force_magnitude;
 
 /// The trace's header line.
-pub const TRACE_COLUMNS: &str = "frame,time_s,fx_n,fy_n,fz_n,magnitude_n";
+pub const TRACE_COLUMNS: &str = "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,estimator,note";
+
+/// The estimator both traces plot: H-Net's force head (not the combined estimate the page's
+/// verdict reads, which needs a rod fit per frame).
+pub const TRACE_ESTIMATOR: &str = "H-Net force head";
 
 /// One frame pair's estimate.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct TracePoint {
     /// The frame, 0-based (written from 1).
     pub frame: usize,
     /// Time after plane A's first frame, seconds, when the headers give it.
     pub time_s: Option<f64>,
-    /// Tip force `(Fx, Fy, Fz)`, newtons.
-    pub force_n: [f32; 3],
+    /// Tip force `(Fx, Fy, Fz)`, newtons, or why the frame has none.
+    pub force_n: Result<[f32; 3], String>,
 }
 
 /// The CSV of `points`, header line first, one line per point in the given order.
 pub fn trace_csv<'a>(points: impl IntoIterator<Item = &'a TracePoint>) -> String {
     let mut csv = format!("{TRACE_COLUMNS}\n");
     for point in points {
-        let f = point.force_n;
         let time = point.time_s.map(|t| format!("{t:.4}")).unwrap_or_default();
-        writeln!(
-            csv,
-            "{},{time},{},{},{},{}",
-            point.frame + 1,
-            f[0],
-            f[1],
-            f[2],
-            force_magnitude(f)
-        )
+        let frame = point.frame + 1;
+        match &point.force_n {
+            Ok(f) => writeln!(
+                csv,
+                "{frame},{time},{:.4},{:.4},{:.4},{:.4},{TRACE_ESTIMATOR},",
+                f[0],
+                f[1],
+                f[2],
+                force_magnitude(*f)
+            ),
+            // Commas and quotes cannot break the row: the note is quoted, quotes doubled.
+            Err(why) => writeln!(
+                csv,
+                "{frame},{time},,,,,{TRACE_ESTIMATOR},\"{}\"",
+                why.replace('"', "\"\"")
+            ),
+        }
         .expect("writing to a string");
     }
     csv
@@ -52,17 +64,25 @@ mod tests {
             TracePoint {
                 frame: 0,
                 time_s: Some(0.0667),
-                force_n: [0.3, 0.0, -0.4],
+                force_n: Ok([0.3, 0.0, -0.4]),
             },
             TracePoint {
                 frame: 1,
                 time_s: None,
-                force_n: [0.0; 3],
+                force_n: Ok([0.0; 3]),
+            },
+            TracePoint {
+                frame: 2,
+                time_s: Some(0.1333),
+                force_n: Err("view A: no catheter found, \"as said\"".into()),
             },
         ];
         assert_eq!(
             trace_csv(&points),
-            "frame,time_s,fx_n,fy_n,fz_n,magnitude_n\n1,0.0667,0.3,0,-0.4,0.5\n2,,0,0,0,0\n"
+            "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,estimator,note\n\
+             1,0.0667,0.3000,0.0000,-0.4000,0.5000,H-Net force head,\n\
+             2,,0.0000,0.0000,0.0000,0.0000,H-Net force head,\n\
+             3,0.1333,,,,,H-Net force head,\"view A: no catheter found, \"\"as said\"\"\"\n"
         );
     }
 }
