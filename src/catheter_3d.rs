@@ -141,6 +141,9 @@ pub struct PairGeometry {
     pub base: RodBase,
     /// Whether the base pose is exact (twin pairs); if not, the fit moves and turns it.
     pub base_known: bool,
+    /// Whether the views are the page's default biplane, assumed for an uploaded pair rather
+    /// than known: the reconstruction's reprojection error then only reflects that assumption.
+    pub views_assumed: bool,
 }
 
 /// The views of `pair`: the twin's own, or the page's default biplane for an uploaded pair.
@@ -173,6 +176,7 @@ impl PairGeometry {
                     rod,
                     base,
                     base_known: true,
+                    views_assumed: false,
                 })
             }
             PairSource::Upload { .. } | PairSource::Dicom { .. } => {
@@ -182,6 +186,7 @@ impl PairGeometry {
                     rod,
                     base,
                     base_known: false,
+                    views_assumed: matches!(pair.source, PairSource::Upload { .. }),
                 })
             }
         }
@@ -235,6 +240,9 @@ pub struct Catheter3d {
     pub rod_mm: Vec<[f64; 3]>,
     /// Whether the base pose was fitted too (uploaded pairs).
     pub base_fitted: bool,
+    /// Whether the views were assumed (the page's default biplane for an upload), so that the
+    /// reprojection error checks nothing and is not shown.
+    pub views_assumed: bool,
 }
 
 impl Catheter3d {
@@ -274,9 +282,8 @@ impl Catheter3d {
         let f = self.force_n;
         let magnitude = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
         format!(
-            "catheter {:.0} mm reconstructed from {} ({}, {:.2} px mean reprojection error); \
-             physics force ({:+.3}, {:+.3}, {:+.3}) N, |F| {magnitude:.3} N, from a rod fitted \
-             within {:.2} mm RMS{}",
+            "catheter {:.0} mm reconstructed from {} ({}, {}); physics force ({:+.3}, {:+.3}, \
+             {:+.3}) N, |F| {magnitude:.3} N, from a rod fitted within {:.2} mm RMS{}",
             self.length_mm,
             self.masks.phrase(),
             if self.tip_seen {
@@ -284,7 +291,12 @@ impl Catheter3d {
             } else {
                 "tip outside a view"
             },
-            self.mean_residual_px,
+            if self.views_assumed {
+                "C-arms assumed at the page's default angles, not known: no reprojection check"
+                    .to_string()
+            } else {
+                format!("{:.2} px mean reprojection error", self.mean_residual_px)
+            },
             f[0],
             f[1],
             f[2],
@@ -376,6 +388,7 @@ pub fn reconstruct_pair(
         rms_mm: fit.rms_mm,
         rod_mm: fit.shape.points_mm.iter().map(|p| p.0).collect(),
         base_fitted: !geometry.base_known,
+        views_assumed: geometry.views_assumed,
     })
 }
 
@@ -565,6 +578,14 @@ mod tests {
         .unwrap();
         assert!(c.base_fitted);
         assert!(c.summary().contains("base pose fitted"));
+        // An upload's C-arms are assumed, so its reprojection error checks nothing.
+        assert!(geometry.views_assumed && c.views_assumed);
+        assert!(
+            c.summary().contains("no reprojection check"),
+            "{}",
+            c.summary()
+        );
+        assert!(!c.summary().contains("px mean reprojection error"));
     }
 
     /// Each bad input is a typed error with a message naming the step and the view.
