@@ -411,7 +411,14 @@ mod tests {
         let id = ws.pairs[0].id.clone();
         let masks = [0, 1].map(|_| vec![0; WORK_SIZE * WORK_SIZE]);
         ws.set_masks(masks);
-        ws.set_force(&id, Some([0.1, 0.0, 0.0]));
+        // The small cine shows no catheter: its empty masks are labels only once said so.
+        for view in crate::workspace::View::BOTH {
+            ws.mark_no_catheter(&id, view, true);
+        }
+        ws.set_force(
+            &id,
+            Some(([0.1, 0.0, 0.0], hnet_twin::label_origin::LabelOrigin::Typed)),
+        );
         let export = crate::export::dataset_zip(&ws.pairs).unwrap();
         let mut zip = zip::ZipArchive::new(std::io::Cursor::new(&export.zip[..])).unwrap();
         let mut text = |name: &str| {

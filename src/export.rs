@@ -44,7 +44,10 @@ impl Export {
 #[derive(Debug, thiserror::Error)]
 pub enum ExportError {
     /// No pair has both masks labeled and a force label.
-    #[error("no pair is complete yet: a pair needs its masks labeled and a force label")]
+    #[error(
+        "no pair is complete yet: a pair needs a catheter painted in both masks (or a view \
+         marked as showing none) and a force label"
+    )]
     NothingComplete,
     /// The archive could not be built.
     #[error(transparent)]
@@ -183,7 +186,19 @@ impl ExportBuilder {
                 .push((id, "deleted or changed during the export"));
             return Ok(());
         };
-        let (extra, record) = describe(pair);
+        let (mut extra, mut record) = describe(pair);
+        // Where the force label came from: a model's estimate is marked as one, with its
+        // weights, so that training can leave it out (`hnet train --labels`).
+        extra.extend(pair.force_origin.columns());
+        record["force_label"] = serde_json::json!({
+            "origin": pair.force_origin.word(),
+            "described": pair.force_origin.describe(),
+            "made_by": &pair.force_origin,
+        });
+        record["no_catheter"] = serde_json::json!({
+            "a": pair.no_catheter[0],
+            "b": pair.no_catheter[1],
+        });
         // The label's shortest decimal form (0.12, not 0.11999999731779099).
         let force = pair
             .force_n
@@ -251,6 +266,7 @@ mod tests {
     use super::*;
     use crate::twin_live::{TwinControls, XrayBackground};
     use crate::workspace::Workspace;
+    use hnet_twin::label_origin::LabelOrigin;
 
     #[test]
     fn complete_pairs_export_and_incomplete_ones_are_listed() {
@@ -265,6 +281,12 @@ mod tests {
         }
         let id = ws.pairs[1].id.clone();
         ws.set_force(&id, None);
+        // A model's estimate accepted as pair 3's label.
+        let estimate = LabelOrigin::Estimate {
+            weights: "hnet-cpu.bpk".into(),
+            estimator: "combined".into(),
+        };
+        ws.set_force("pair-0003", Some(([0.2, 0.0, -0.1], estimate.clone())));
 
         let export = dataset_zip(&ws.pairs).unwrap();
         assert_eq!(export.exported, vec!["pair-0001", "pair-0003"]);
@@ -286,6 +308,13 @@ mod tests {
         assert_eq!(dataset.rows.len(), 2);
         let row = &dataset.rows[0];
         assert_eq!(row.force_n, [0.1, 0.0, -0.1]);
+        // The twin's label is its exact force; the accepted estimate says what it is.
+        assert_eq!(row.label_origin(), Ok(LabelOrigin::Simulated));
+        assert_eq!(dataset.rows[1].label_origin(), Ok(estimate));
+        assert_eq!(
+            dataset.rows[1].column("label_weights"),
+            Some("hnet-cpu.bpk")
+        );
         let loaded = dataset.load_pair(row, None).unwrap();
         assert_eq!(loaded.size, ImageSize::square(WORK_SIZE));
         let catheter = loaded.mask_a.iter().filter(|&&m| m > 0.5).count();
@@ -342,8 +371,42 @@ mod tests {
         let before = ws.pairs[2].split;
         ws.set_force("pair-0003", None);
         assert!(ws.assign_splits().is_empty());
-        ws.set_force("pair-0003", Some([0.1, 0.0, 0.0]));
+        ws.set_force("pair-0003", Some(([0.1, 0.0, 0.0], LabelOrigin::Typed)));
         assert_eq!(ws.pairs[2].split, before);
+    }
+
+    #[test]
+    fn a_pair_with_one_view_painted_is_not_exported_as_complete() {
+        use crate::workspace::{Tool, View};
+        let rgb = vec![0u8; WORK_SIZE * WORK_SIZE * 3];
+        let mut ws = Workspace::default();
+        for _ in 0..2 {
+            let source = PairSource::Upload {
+                view_a: "a.png".into(),
+                view_b: "b.png".into(),
+            };
+            ws.add(LabeledPair::new(
+                ws.next_id(),
+                source,
+                rgb.clone(),
+                rgb.clone(),
+            ));
+            let id = ws.current().unwrap().id.clone();
+            ws.set_force(&id, Some(([0.1, 0.0, 0.0], LabelOrigin::Typed)));
+            ws.begin_stroke(View::A);
+            ws.stroke_to([10.0, 10.0], [100.0, 10.0], 3.0, Tool::Brush);
+            ws.end_stroke();
+        }
+        // Only view A holds a catheter: nothing is complete, and the export says why.
+        let err = dataset_zip(&ws.pairs).unwrap_err();
+        assert!(matches!(err, ExportError::NothingComplete), "{err}");
+        // Pair 2's view B marked as showing no catheter: it exports, pair 1 is named.
+        ws.mark_no_catheter("pair-0002", View::B, true);
+        let export = dataset_zip(&ws.pairs).unwrap();
+        assert_eq!(export.exported, vec!["pair-0002"]);
+        assert_eq!(export.skipped.len(), 1);
+        assert_eq!(export.skipped[0].0, "pair-0001");
+        assert!(export.skipped[0].1.starts_with("view B's mask is empty"));
     }
 
     fn manifest_of(zip: &[u8]) -> std::collections::HashMap<String, Split> {
@@ -374,6 +437,7 @@ mod tests {
 pub(crate) mod properties {
     use super::*;
     use crate::imaging::properties::cases;
+    use hnet_twin::label_origin::LabelOrigin;
     use proptest::prelude::*;
 
     /// Deterministic pixels from a seed (random bytes per case would be slow to shrink).
@@ -426,6 +490,8 @@ pub(crate) mod properties {
                     mask_b: pixels(seed ^ 3, grey, true),
                     masks_labeled,
                     force_n,
+                    force_origin: LabelOrigin::Typed,
+                    no_catheter: [false; 2],
                     split,
                 }
             })

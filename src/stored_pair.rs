@@ -7,6 +7,7 @@
 //! tests, as well as in the browser.
 
 use hnet_twin::dataset::{ImageRef, Split, encode_png};
+use hnet_twin::label_origin::LabelOrigin;
 
 use crate::imaging::WORK_SIZE;
 use crate::workspace::{LabeledPair, PairSource};
@@ -25,6 +26,12 @@ struct Metadata {
     source: PairSource,
     masks_labeled: bool,
     force_n: Option<[f32; 3]>,
+    /// Absent in records saved before label origins were kept (read as unrecorded).
+    #[serde(default)]
+    force_origin: LabelOrigin,
+    /// Absent in records saved before views could be marked as showing no catheter.
+    #[serde(default)]
+    no_catheter: [bool; 2],
     /// Absent in records saved before splits were kept (they get one at the next export).
     #[serde(default)]
     split: Option<Split>,
@@ -81,6 +88,8 @@ pub fn metadata_json(pair: &LabeledPair) -> Result<String, serde_json::Error> {
         source: pair.source.clone(),
         masks_labeled: pair.masks_labeled,
         force_n: pair.force_n,
+        force_origin: pair.force_origin.clone(),
+        no_catheter: pair.no_catheter,
         split: pair.split,
     })
 }
@@ -161,6 +170,8 @@ pub fn read_record<'a>(
         source: metadata.source,
         masks_labeled: metadata.masks_labeled,
         force_n: metadata.force_n,
+        force_origin: metadata.force_origin,
+        no_catheter: metadata.no_catheter,
         split: metadata.split,
     })
 }

@@ -137,6 +137,7 @@ impl TwinControls {
         pair.mask_b = binary(&views[1].mask);
         pair.masks_labeled = true;
         pair.force_n = Some(self.force_n.map(|f| f as f32));
+        pair.force_origin = hnet_twin::label_origin::LabelOrigin::Simulated;
         Ok(pair)
     }
 }

@@ -7,6 +7,7 @@
 use hnet_twin::carm::Biplane;
 use hnet_twin::dataset::{Split, implausible_tip_force, next_split};
 use hnet_twin::force_table::{ForceTableError, read_force_table};
+use hnet_twin::label_origin::LabelOrigin;
 use serde::{Deserialize, Serialize};
 
 use crate::imaging::WORK_SIZE;
@@ -67,6 +68,14 @@ pub struct LabeledPair {
     pub masks_labeled: bool,
     /// The force label `(Fx, Fy, Fz)` in newtons, once entered, imported or accepted.
     pub force_n: Option<[f32; 3]>,
+    /// Where the force label came from (meaningful only with one): typed, measured, imported,
+    /// simulated, or copied from a model's estimate, which the export marks as such.
+    #[serde(default)]
+    pub force_origin: LabelOrigin,
+    /// Views the user marked as showing no catheter on purpose (A, B): their empty masks are
+    /// labels, not missing ones.
+    #[serde(default)]
+    pub no_catheter: [bool; 2],
     /// Its split in exported datasets, given at its first export and kept from then on (see
     /// [`export_splits`]).
     #[serde(default)]
@@ -108,8 +117,15 @@ impl LabeledPair {
             mask_b: vec![0; pixels],
             masks_labeled: false,
             force_n: None,
+            force_origin: LabelOrigin::Unrecorded,
+            no_catheter: [false; 2],
             split: None,
         }
+    }
+
+    /// Whether the user marked `view` as showing no catheter on purpose.
+    pub fn marked_no_catheter(&self, view: View) -> bool {
+        self.no_catheter[view as usize]
     }
 
     /// A view's label mask.
@@ -143,20 +159,46 @@ impl LabeledPair {
         }
     }
 
-    /// Whether the pair can be exported: both masks labeled and a force label.
+    /// Whether the pair can be exported: both masks labeled, each holding a catheter or its
+    /// view marked as showing none, and a force label.
     pub fn is_complete(&self) -> bool {
         self.incomplete_because().is_none()
     }
 
+    /// Whether both masks are labels: labeled, and each holds a catheter or its view is marked
+    /// as showing none (an empty mask is otherwise a label not made yet, which would teach a
+    /// network "no catheter here").
+    pub fn masks_complete(&self) -> bool {
+        self.masks_incomplete_because().is_none()
+    }
+
+    fn masks_incomplete_because(&self) -> Option<&'static str> {
+        if !self.masks_labeled {
+            return Some("masks not labeled");
+        }
+        let empty = |view: View| self.labeled_pixels(view) == 0 && !self.marked_no_catheter(view);
+        match (empty(View::A), empty(View::B)) {
+            (true, true) => {
+                Some("both masks are empty (paint the catheter, or mark the view as showing none)")
+            }
+            (true, false) => Some(
+                "view A's mask is empty (paint the catheter, or mark the view as showing none)",
+            ),
+            (false, true) => Some(
+                "view B's mask is empty (paint the catheter, or mark the view as showing none)",
+            ),
+            (false, false) => None,
+        }
+    }
+
     /// What keeps the pair from being exported, if anything.
     pub fn incomplete_because(&self) -> Option<&'static str> {
-        if !self.masks_labeled {
-            Some("masks not labeled")
-        } else if self.force_n.is_none() {
-            Some("no force label")
-        } else {
-            None
-        }
+        self.masks_incomplete_because()
+            .or(if self.force_n.is_none() {
+                Some("no force label")
+            } else {
+                None
+            })
     }
 
     /// Catheter pixels of a view's label mask.
@@ -442,11 +484,29 @@ impl Workspace {
         Some(id)
     }
 
-    /// Sets (or clears) the force label of pair `id`; returns whether there is such a pair.
-    pub fn set_force(&mut self, id: &str, force_n: Option<[f32; 3]>) -> bool {
+    /// Sets (or clears) the force label of pair `id`, with where it came from; returns whether
+    /// there is such a pair.
+    pub fn set_force(&mut self, id: &str, label: Option<([f32; 3], LabelOrigin)>) -> bool {
         match self.pairs.iter_mut().find(|p| p.id == id) {
             Some(pair) => {
+                let (force_n, origin) = match label {
+                    Some((force, origin)) => (Some(force), origin),
+                    None => (None, LabelOrigin::Unrecorded),
+                };
                 pair.force_n = force_n;
+                pair.force_origin = origin;
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Marks (or unmarks) `view` of pair `id` as showing no catheter on purpose; returns
+    /// whether there is such a pair.
+    pub fn mark_no_catheter(&mut self, id: &str, view: View, none: bool) -> bool {
+        match self.pairs.iter_mut().find(|p| p.id == id) {
+            Some(pair) => {
+                pair.no_catheter[view as usize] = none;
                 true
             }
             None => false,
@@ -501,11 +561,11 @@ impl Workspace {
 
     /// Applies force labels read from a CSV file (see [`parse_force_labels`]) to the pairs with
     /// those ids. Returns how many were applied and the ids that match no pair.
-    pub fn apply_force_labels(&mut self, labels: &[(String, [f32; 3])]) -> (usize, Vec<String>) {
+    pub fn apply_force_labels(&mut self, labels: &[ForceLabelRow]) -> (usize, Vec<String>) {
         let mut applied = 0;
         let mut unknown = Vec::new();
-        for (id, force) in labels {
-            if self.set_force(id, Some(*force)) {
+        for (id, force, origin) in labels {
+            if self.set_force(id, Some((*force, origin.clone()))) {
                 applied += 1;
             } else {
                 unknown.push(id.clone());
@@ -594,14 +654,15 @@ pub fn implausible_label(force_n: [f32; 3]) -> Option<String> {
     implausible_tip_force(force_n.map(f64::from))
 }
 
+/// A force label read from a file: the pair's id, the force in newtons, and where it came from.
+pub type ForceLabelRow = (String, [f32; 3], LabelOrigin);
+
 /// Reads force labels from a CSV file with a header naming the columns `id`, `fx`, `fy` and `fz`
 /// (newtons; other columns are ignored, so a dataset's `manifest.csv` works too). Every value must
 /// be a finite number of newtons and the label plausible (see [`implausible_label`]); the first
-/// bad line is reported and nothing is applied.
-pub fn parse_force_labels(
-    file: &str,
-    bytes: &[u8],
-) -> Result<Vec<(String, [f32; 3])>, ForceLabelError> {
+/// bad line is reported and nothing is applied. A `label_origin` column says where each label
+/// came from (a sensor's log writes `measured`); without one, they are `imported`.
+pub fn parse_force_labels(file: &str, bytes: &[u8]) -> Result<Vec<ForceLabelRow>, ForceLabelError> {
     let error = |table: ForceTableError| ForceLabelError {
         file: file.to_string(),
         table,
@@ -616,7 +677,11 @@ pub fn parse_force_labels(
                 format!("the force of `{}` is refused: {why}", row.key),
             )));
         }
-        labels.push((row.key, force));
+        let origin = match row.origin {
+            LabelOrigin::Unrecorded => LabelOrigin::Imported,
+            origin => origin,
+        };
+        labels.push((row.key, force, origin));
     }
     if labels.is_empty() {
         return Err(error(ForceTableError::new(None, "holds no force labels")));
@@ -737,7 +802,7 @@ mod tests {
         let mut ws = workspace(3);
         ws.select(1);
         brush(&mut ws, View::A, [10.0, 10.0], [60.0, 10.0], 3.0);
-        ws.set_force("pair-0002", Some([0.1, 0.2, -0.1]));
+        ws.set_force("pair-0002", Some(([0.1, 0.2, -0.1], LabelOrigin::Typed)));
         let before = ws.pairs.clone();
         let removed = ws.remove_current().unwrap();
         assert_eq!(ws.pairs.len(), 2);
@@ -785,7 +850,20 @@ mod tests {
     fn force_labels_come_from_csv_with_clear_errors() {
         let labels =
             parse_force_labels("f.csv", b"id,fx,fy,fz\npair-0001, 0.1,-0.2,0.05\n").unwrap();
-        assert_eq!(labels, vec![("pair-0001".to_string(), [0.1, -0.2, 0.05])]);
+        assert_eq!(
+            labels,
+            vec![(
+                "pair-0001".to_string(),
+                [0.1, -0.2, 0.05],
+                LabelOrigin::Imported
+            )]
+        );
+        // A table that says where its labels came from keeps it.
+        let measured = b"id,fx,fy,fz,label_origin\np1,0.1,0,0,measured\n";
+        assert_eq!(
+            parse_force_labels("s.csv", measured).unwrap()[0].2,
+            LabelOrigin::Measured
+        );
         // A dataset's manifest (extra columns, other order) works too.
         let manifest = b"id,split,fx,fy,fz,source\np1,train,0.1,0.2,0.3,x\n";
         assert_eq!(
@@ -813,11 +891,52 @@ mod tests {
 
         let mut ws = workspace(1);
         let (applied, unknown) = ws.apply_force_labels(&[
-            ("pair-0001".into(), [0.1, 0.0, 0.0]),
-            ("pair-0099".into(), [0.0; 3]),
+            ("pair-0001".into(), [0.1, 0.0, 0.0], LabelOrigin::Measured),
+            ("pair-0099".into(), [0.0; 3], LabelOrigin::Imported),
         ]);
         assert_eq!((applied, unknown), (1, vec!["pair-0099".to_string()]));
         assert_eq!(ws.pairs[0].force_n, Some([0.1, 0.0, 0.0]));
+        assert_eq!(ws.pairs[0].force_origin, LabelOrigin::Measured);
+    }
+
+    #[test]
+    fn a_pair_is_complete_only_when_both_masks_hold_a_catheter_or_are_marked_empty() {
+        let mut ws = workspace(1);
+        let id = ws.current().unwrap().id.clone();
+        ws.set_force(&id, Some(([0.1, 0.0, 0.0], LabelOrigin::Typed)));
+        assert_eq!(
+            ws.current().unwrap().incomplete_because(),
+            Some("masks not labeled")
+        );
+        // Only view A painted: view B's empty mask is a label not made yet.
+        brush(&mut ws, View::A, [10.0, 10.0], [60.0, 10.0], 3.0);
+        let pair = ws.current().unwrap();
+        assert!(pair.masks_labeled && !pair.masks_complete() && !pair.is_complete());
+        assert!(
+            pair.incomplete_because()
+                .unwrap()
+                .starts_with("view B's mask is empty"),
+            "{:?}",
+            pair.incomplete_because()
+        );
+        // Marked as showing no catheter on purpose, it is a label.
+        assert!(ws.mark_no_catheter(&id, View::B, true));
+        assert!(ws.current().unwrap().is_complete());
+        ws.mark_no_catheter(&id, View::B, false);
+        brush(&mut ws, View::B, [10.0, 20.0], [60.0, 20.0], 3.0);
+        assert!(ws.current().unwrap().is_complete());
+        // Erased again to nothing: incomplete again.
+        erase(&mut ws, View::A, [10.0, 10.0], [60.0, 10.0], 6.0);
+        assert!(
+            ws.current()
+                .unwrap()
+                .incomplete_because()
+                .unwrap()
+                .starts_with("view A's mask is empty")
+        );
+        // Cleared, the label's origin goes with it.
+        ws.set_force(&id, None);
+        assert_eq!(ws.current().unwrap().force_origin, LabelOrigin::Unrecorded);
     }
 }
 
@@ -856,7 +975,7 @@ mod properties {
             let bytes = [header.as_bytes(), &bytes].concat();
             if let Ok(labels) = parse_force_labels("f.csv", &bytes) {
                 prop_assert!(!labels.is_empty());
-                for (id, force) in labels {
+                for (id, force, _) in labels {
                     prop_assert!(!id.is_empty());
                     prop_assert!(force.iter().all(|f| f.is_finite()), "{:?}", force);
                     prop_assert!(implausible_label(force).is_none());
@@ -896,7 +1015,7 @@ mod properties {
             }
             let read = parse_force_labels("f.csv", csv.as_bytes()).unwrap();
             prop_assert_eq!(read.len(), labels.len());
-            for ((id, force), (want_id, want)) in read.iter().zip(&labels) {
+            for ((id, force, _), (want_id, want)) in read.iter().zip(&labels) {
                 prop_assert_eq!(id, want_id);
                 prop_assert_eq!(force.map(f32::to_bits), want.map(f32::to_bits), "{}", csv);
             }
@@ -931,6 +1050,11 @@ mod properties {
                 mask_b: vec![255],
                 masks_labeled,
                 force_n: force,
+                force_origin: LabelOrigin::Estimate {
+                    weights: "w.bpk".into(),
+                    estimator: "combined".into(),
+                },
+                no_catheter: [masks_labeled, false],
                 split,
             };
             let json = serde_json::to_string(&pair).unwrap();

@@ -150,6 +150,63 @@ test("load a pair, run H-Net, paint, undo, reload with labels kept, export the d
   await page.close();
 });
 
+test("labels you can build on: one painted view is not complete, an empty view is marked, an estimate label says so in manifest.csv", async () => {
+  const { page, errors } = await openPage(context, server.url);
+  await waitForModel(page);
+  const ids = () => page.locator("#pairs li[data-id]").evaluateAll((items) => items.map((li) => li.dataset.id));
+  const before = await ids();
+  await page.setInputFiles("#file-pair", [join(files, "frame_a.png"), join(files, "frame_b.png")]);
+  await page.waitForFunction((n) => document.querySelectorAll("#pairs li[data-id]").length === n + 1, before.length);
+  const id = (await ids()).find((i) => !before.includes(i));
+  await page.waitForSelector("#force-verdict", { timeout: 120_000 });
+
+  // View A painted, view B not: the masks are not a label yet.
+  await page.click("#tool-brush");
+  await paint(page, "a", [0.2, 0.5], [0.8, 0.5]);
+  assert.ok((await labelPixels(page, "a")) > 50);
+  assert.equal(await labelPixels(page, "b"), 0);
+  const masksFlag = `#pairs li[data-id="${id}"] .flag[title="masks"]`;
+  assert.equal(await page.getAttribute(masksFlag, "class"), "flag");
+  // H-Net's estimate as the label: saved, and said to be an estimate, not a measurement.
+  await page.click("#label-from-estimate");
+  await page.waitForSelector(`#pairs li[data-id="${id}"] .flag.done[title="force"]`);
+  assert.match(await page.textContent("#label-origin"), /estimate of .*: not measured/);
+
+  const exportZip = async (name) => {
+    const [download] = await Promise.all([page.waitForEvent("download"), page.click("#export")]);
+    const path = join(files, name);
+    await download.saveAs(path);
+    return readStoredZip(await readFile(path));
+  };
+  // Earlier tests left a complete pair: the export holds it and names this one as left out.
+  const first = await exportZip("one-view.zip");
+  const manifest = () => first.get("hnet-studio-labels/manifest.csv").toString();
+  assert.ok(!manifest().includes(`${id},`), manifest());
+  assert.match(await page.textContent("#notice"), new RegExp(`left out: .*${id} \\(view B's mask is empty`));
+
+  // View B marked as showing no catheter: complete, and exported with its label's origin.
+  await page.check("#no-catheter-b");
+  await page.waitForSelector(`${masksFlag}.done`);
+  const second = await exportZip("marked.zip");
+  const rows = second.get("hnet-studio-labels/manifest.csv").toString().trim().split("\n");
+  const header = rows[0].split(",");
+  const row = rows.find((r) => r.startsWith(`${id},`))?.split(",");
+  assert.ok(row, rows.join("\n"));
+  assert.equal(row[header.indexOf("label_origin")], "estimate");
+  assert.equal(row[header.indexOf("label_estimator")], "H-Net");
+  assert.notEqual(row[header.indexOf("label_weights")], "");
+  const record = JSON.parse(second.get(`hnet-studio-labels/samples/${id}.json`).toString());
+  assert.deepEqual(record.record.no_catheter, { a: false, b: true });
+
+  // The mark survives a reload.
+  await page.reload();
+  await waitForModel(page);
+  await page.click(`#pairs li[data-id="${id}"] button.pair`);
+  await page.waitForFunction(() => document.querySelector("#no-catheter-b")?.checked === true);
+  assert.deepEqual(errors, []);
+  await page.close();
+});
+
 test("bad input gets a clear message and loses nothing", async () => {
   const { page } = await openPage(context, server.url);
   await waitForModel(page);

@@ -15,6 +15,7 @@ use crate::force_reading::{
 };
 use crate::studio::{CatheterReading, ModelState, Studio};
 use crate::workspace::{implausible_label, parse_force_labels, parse_newtons};
+use hnet_twin::label_origin::LabelOrigin;
 use hnet_units::force_magnitude as magnitude;
 
 /// Full scale of the magnitude gauge, newtons.
@@ -88,17 +89,40 @@ pub fn ForcePanel() -> impl IntoView {
     };
     Effect::new(move |_| show(shown_label.get().1));
 
-    let set_label = move |force: Option<[f32; 3]>| {
+    let set_label = move |label: Option<([f32; 3], LabelOrigin)>| {
         let Some(id) = studio.labeled_pair_id() else {
             return;
         };
-        studio.edit(|ws| ws.set_force(&id, force).then_some(id.clone()));
+        let force = label.as_ref().map(|(f, _)| *f);
+        studio.edit(|ws| ws.set_force(&id, label).then_some(id.clone()));
         // Also when the label was already this value, the fields drop what was being typed.
         show(force);
     };
+    // H-Net's estimate as the label, marked as a model's estimate with the weights that made it
+    // (the export says so, and `hnet train` leaves it out unless asked).
+    let estimate_label = move || {
+        let force = estimate()?;
+        let weights = studio.model.with(|m| match m {
+            ModelState::Ready(e) => Some(e.weights_name.clone()),
+            _ => None,
+        })?;
+        Some((
+            force,
+            LabelOrigin::Estimate {
+                weights,
+                estimator: "H-Net".into(),
+            },
+        ))
+    };
+    let origin = move || {
+        studio.with_shown(|p| {
+            p.filter(|p| p.force_n.is_some())
+                .map(|p| p.force_origin.describe())
+        })
+    };
     let save = move |force: [f32; 3]| {
         implausible.set(None);
-        set_label(Some(force));
+        set_label(Some((force, LabelOrigin::Typed)));
         studio.info(format!(
             "force label saved: ({:+.3}, {:+.3}, {:+.3}) N",
             force[0], force[1], force[2]
@@ -132,7 +156,7 @@ pub fn ForcePanel() -> impl IntoView {
                     studio
                         .workspace
                         .update(|ws| result = ws.apply_force_labels(&labels));
-                    let ids: Vec<String> = labels.iter().map(|(id, _)| id.clone()).collect();
+                    let ids: Vec<String> = labels.iter().map(|(id, ..)| id.clone()).collect();
                     studio.persist_metadata(&ids);
                     let (applied, unknown) = result;
                     if unknown.is_empty() {
@@ -273,10 +297,11 @@ pub fn ForcePanel() -> impl IntoView {
                     </div>
                 })}
                 <div class="actions">
-                    <button id="label-from-estimate" disabled=move || estimate().is_none()
-                        on:click=move |_| set_label(estimate())>"Use H-Net's estimate"</button>
+                    <button id="label-from-estimate" disabled=move || estimate_label().is_none()
+                        title="Saved as H-Net's estimate, not a measurement: the export marks it, and hnet train leaves it out unless asked"
+                        on:click=move |_| set_label(estimate_label())>"Use H-Net's estimate"</button>
                     <button id="label-from-truth" disabled=move || truth().is_none()
-                        on:click=move |_| set_label(truth())>"Use the true force"</button>
+                        on:click=move |_| set_label(truth().map(|f| (f, LabelOrigin::Simulated)))>"Use the true force"</button>
                     <button id="label-clear" disabled=move || label().is_none()
                         on:click=move |_| set_label(None)>"Clear"</button>
                     <label class="file-button">"Import CSV…"
@@ -284,12 +309,13 @@ pub fn ForcePanel() -> impl IntoView {
                     </label>
                 </div>
                 <p class="hint">
-                    "CSV: a header with id, fx, fy, fz (newtons); other columns are ignored, so a "
-                    "dataset's manifest.csv works. "
-                    {move || match label() {
-                        Some(_) => "This pair has a force label.",
-                        None => "This pair has no force label yet.",
-                    }}
+                    "CSV: a header with id, fx, fy, fz (newtons) and, optionally, label_origin "
+                    "(a sensor's log writes measured; without it the labels count as imported); "
+                    "other columns are ignored, so a dataset's manifest.csv works. "
+                    <span id="label-origin">{move || match origin() {
+                        Some(origin) => format!("This pair has a force label: {origin}."),
+                        None => "This pair has no force label yet.".to_string(),
+                    }}</span>
                 </p>
             </fieldset>
         </section>

@@ -23,7 +23,7 @@ pub fn PairList() -> impl IntoView {
                         i,
                         p.id.clone(),
                         matches!(p.source, PairSource::Twin { .. }),
-                        p.masks_labeled,
+                        p.masks_complete(),
                         p.force_n.is_some(),
                         ws.current == Some(i) && !studio.showing_draft(),
                     )
@@ -121,7 +121,7 @@ pub fn PairList() -> impl IntoView {
     view! {
         <section class="pair-list" aria-labelledby="pairs-title">
             <h2 id="pairs-title">"Labeled pairs"</h2>
-            <p class="hint">"Kept in this browser; masks ✓ and force ✓ make a pair complete."</p>
+            <p class="hint">"Kept in this browser; masks ✓ (a catheter in both, or a view marked as showing none) and force ✓ make a pair complete."</p>
             <ol id="pairs">
                 <For each=rows key=|r| r.clone() let:r>
                     <li class:current=r.5 data-id=r.1.clone()>

@@ -527,6 +527,18 @@ fn ViewCanvas(view: View) -> impl IntoView {
                     let z = transform.get().scale / ViewTransform::default().scale;
                     (z > 1.001).then(|| format!(" · {z:.1}×"))
                 }}
+                // An empty mask is a label only when the view shows no catheter on purpose.
+                <label class="no-catheter">
+                    <input id=format!("no-catheter-{}", view.letter().to_lowercase()) type="checkbox"
+                        disabled=move || studio.shown_id().is_none()
+                        prop:checked=move || studio.with_shown(|p| p.is_some_and(|p| p.marked_no_catheter(view)))
+                        on:change=move |ev| {
+                            let none = event_target_checked(&ev);
+                            let Some(id) = studio.labeled_pair_id() else { return };
+                            studio.edit(|ws| ws.mark_no_catheter(&id, view, none).then_some(id.clone()));
+                        }/>
+                    " No catheter in this view"
+                </label>
             </figcaption>
         </figure>
     }

@@ -1,9 +1,10 @@
 //! `hnet calibrate`: a catheter's bending stiffness from a few pairs labelled with a measured tip
 //! force (a bench with a force sensor, as the paper had), for the blind force estimate.
 //!
-//! Each pair's catheter is read blind from its label masks ([`PhysicsSetup::blind`]: the
-//! catalogue catheter, the base fitted from its nominal pose, the C-arms from the pair's recorded
-//! geometry), and one stiffness scale is fitted to the measured forces
+//! Pairs whose force label was copied from a model's estimate are left out (not a measurement).
+//! Each pair's catheter is read blind from its label masks (or, with `--weights`, a network's)
+//! ([`PhysicsSetup::blind`]: the catalogue catheter, the base fitted from its nominal pose, the
+//! C-arms from the pair's recorded geometry), and one stiffness scale is fitted to the measured forces
 //! ([`hnet_twin::catalogue::calibrate_stiffness`]; why one scale is all images leave open is in
 //! that module). The result is a catheter file that `hnet eval --catheter` reads.
 
@@ -18,8 +19,11 @@ use hnet_twin::physics_force::{PhysicsSetup, physics_estimate};
 use hnet_twin::simulate::{blind_cameras, nominal_base, read_pair_carms};
 use rayon::prelude::*;
 
-use crate::evaluation::parse_split;
+use crate::backend::BackendChoice;
+use crate::data::StereoItem;
+use crate::evaluation::{load_weights, parse_split, predict};
 use hnet_twin::dataset::Split;
+use hnet_units::ImageSize;
 
 #[derive(clap::Args, Debug)]
 pub struct CalibrateArgs {
@@ -39,6 +43,13 @@ pub struct CalibrateArgs {
     /// The calibrated catheter file to write (JSON).
     #[arg(long)]
     out: PathBuf,
+    /// Read each pair's catheter from these weights' masks instead of its label masks (for
+    /// pairs labelled with a force only).
+    #[arg(long)]
+    weights: Option<PathBuf>,
+    /// Where to compute the masks (with `--weights`).
+    #[arg(long, value_enum, default_value = "flex")]
+    backend: BackendChoice,
 }
 
 /// A pair's measured force and its blind estimate, N.
@@ -47,28 +58,77 @@ type ForcePair = ([f64; 3], [f64; 3]);
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let catheter = CatalogueCatheter::find(&args.catheter)?;
     let dataset = Dataset::open(&args.data)?;
+    // A model's estimate is no measurement: calibrating on it would fit the model to itself.
+    let estimates = dataset
+        .rows
+        .iter()
+        .filter(|row| row.label_origin().is_ok_and(|o| o.is_estimate()))
+        .count();
     let rows: Vec<_> = dataset
         .rows
         .iter()
         .filter(|row| args.split.is_none_or(|split| row.split == split))
+        .filter(|row| !row.label_origin().is_ok_and(|o| o.is_estimate()))
         .take(args.pairs.unwrap_or(usize::MAX))
         .collect();
+    if estimates > 0 {
+        eprintln!(
+            "{estimates} pair(s) of {} are left out: their force labels were copied from a \
+             model's estimate, not measured",
+            args.data.display()
+        );
+    }
     anyhow::ensure!(
         !rows.is_empty(),
-        "{}: no pairs to calibrate on",
-        args.data.display()
+        "{}: no pairs to calibrate on{}",
+        args.data.display(),
+        if estimates > 0 {
+            " (only labels copied from a model's estimate, which are not measurements)"
+        } else {
+            ""
+        }
     );
     let base = nominal_base(&dataset);
-    let size = dataset.header.image_size;
+    // Each pair's masks (view A, view B) and their size: the labels, or the network's.
+    let (size, masks): (ImageSize, Vec<[Vec<f32>; 2]>) = match &args.weights {
+        None => {
+            let loaded = rows
+                .par_iter()
+                .map(|row| dataset.load_pair(row, None).map(|p| [p.mask_a, p.mask_b]))
+                .collect::<Result<_, _>>()?;
+            (dataset.header.image_size, loaded)
+        }
+        Some(weights) => {
+            let device = args.backend.device()?;
+            let model = load_weights(weights, None, &device)?;
+            anyhow::ensure!(
+                model.spec.heads().0,
+                "weights file '{}' holds a `{}` network, which gives no masks",
+                weights.display(),
+                model.spec.name()
+            );
+            let items = rows
+                .iter()
+                .map(|row| {
+                    let pair = dataset.load_pair(row, Some(model.image_size))?;
+                    Ok(StereoItem::new(pair, row.force_n, true, row.id.clone()))
+                })
+                .collect::<anyhow::Result<Vec<_>>>()?;
+            let mut masks = Vec::with_capacity(items.len());
+            predict(&model, &items, 16, &device, |_, m, _| {
+                masks.push(m.unwrap_or_default())
+            })?;
+            (model.image_size, masks)
+        }
+    };
     // Per pair: (measured force, blind estimate) in newtons, or why it gave none.
     let read: Vec<Result<ForcePair, String>> = rows
         .par_iter()
-        .map(|row| {
+        .zip(&masks)
+        .map(|(row, [a, b])| {
             let carms = read_pair_carms(&dataset, &row.id).map_err(|e| e.to_string())?;
-            let pair = dataset.load_pair(row, None).map_err(|e| e.to_string())?;
             let setup = PhysicsSetup::blind(blind_cameras(&carms, size), &catheter, &base);
-            let masks =
-                [&pair.mask_a, &pair.mask_b].map(|m| Mask::soft(size.width, size.height, m));
+            let masks = [a, b].map(|m| Mask::soft(size.width, size.height, m));
             let estimate =
                 physics_estimate(masks, &setup).map_err(|e| format!("pair {}: {e}", row.id))?;
             Ok((row.force_n, estimate.fit.force_n.0))

@@ -8,6 +8,7 @@ use anyhow::{Context, anyhow, bail};
 use hnet_model::HNetLossConfig;
 use hnet_model::architectures::ModelSpec;
 use hnet_model::weights::ConfigProblem;
+use hnet_twin::label_origin::LabelFilter;
 use hnet_units::ImageSize;
 use serde::{Deserialize, Serialize};
 
@@ -100,6 +101,24 @@ pub struct TrainingConfig {
     /// it). `hnet train --init FILE` sets it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub init_weights: Option<PathBuf>,
+    /// The force labels the force head learns from, by where they came from
+    /// ([`hnet_twin::label_origin`]): `all`, or origins separated by commas (`measured,typed`).
+    /// Every origin but a model's estimates when absent, so that a network never learns its
+    /// own guesses unless asked to. A pair whose label is left out still trains the masks.
+    /// `hnet train --labels` sets it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub force_labels: Option<String>,
+}
+
+impl TrainingConfig {
+    /// The force labels to learn from ([`TrainingConfig::force_labels`]).
+    pub fn label_filter(&self) -> anyhow::Result<LabelFilter> {
+        match &self.force_labels {
+            None => Ok(LabelFilter::not_estimates()),
+            Some(text) => LabelFilter::parse(text)
+                .map_err(|e| anyhow!("`force_labels` = `{text}`: {e}, or `all`")),
+        }
+    }
 }
 
 /// The training split's memory budget when a config sets none, MiB.
@@ -110,6 +129,7 @@ impl TrainingConfig {
     /// every layer count and size within bounds (so that nothing absurd is ever allocated),
     /// the image size one the network can halve.
     pub fn check(&self) -> anyhow::Result<()> {
+        self.label_filter()?;
         // The baselines: the same bounds as a weights file's settings.
         self.model
             .check_layer_counts()

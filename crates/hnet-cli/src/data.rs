@@ -16,6 +16,7 @@ use burn::data::dataset::{Dataset as BurnDataset, DatasetError};
 use burn::tensor::{Device, Tensor, TensorData};
 use hnet_model::inference::push_planar;
 use hnet_twin::dataset::{Dataset, LoadedPair, ManifestRow, Split, SquareSymmetry};
+use hnet_twin::label_origin::LabelFilter;
 use hnet_units::ImageSize;
 use rayon::prelude::*;
 
@@ -68,6 +69,7 @@ pub struct DiskSplit {
     dataset: Arc<Dataset>,
     rows: Vec<ManifestRow>,
     size: ImageSize,
+    labels: LabelFilter,
 }
 
 impl DiskSplit {
@@ -81,8 +83,21 @@ impl DiskSplit {
                 .collect(),
             dataset: Arc::new(dataset.clone()),
             size,
+            labels: LabelFilter::all(),
         }
     }
+
+    /// Only force labels `labels` admits teach the force head; the other pairs train their
+    /// masks alone.
+    pub fn with_labels(self, labels: LabelFilter) -> Self {
+        Self { labels, ..self }
+    }
+}
+
+/// Whether `row`'s force label may train the force head under `labels`.
+pub fn force_label_admitted(row: &ManifestRow, labels: &LabelFilter) -> bool {
+    // The manifest's reader refused unknown origins already.
+    labels.admits(&row.label_origin().unwrap_or_default())
 }
 
 impl BurnDataset<StereoItem> for DiskSplit {
@@ -97,7 +112,8 @@ impl BurnDataset<StereoItem> for DiskSplit {
             .dataset
             .load_pair(row, Some(self.size))
             .map_err(DatasetError::new)?;
-        Ok(StereoItem::new(pair, row.force_n, true, row.id.clone()))
+        let known = force_label_admitted(row, &self.labels);
+        Ok(StereoItem::new(pair, row.force_n, known, row.id.clone()))
     }
 
     fn len(&self) -> usize {
@@ -158,6 +174,24 @@ impl StereoSplit {
                 )
             })?;
         Ok(Self { items })
+    }
+
+    /// Keeps only the force labels `labels` admits as labels to learn from (the others' pairs
+    /// train their masks alone); returns how many were left out.
+    pub fn admit_force_labels(&mut self, dataset: &Dataset, labels: &LabelFilter) -> usize {
+        let admitted: std::collections::HashMap<&str, bool> = dataset
+            .rows
+            .iter()
+            .map(|row| (row.id.as_str(), force_label_admitted(row, labels)))
+            .collect();
+        let mut left_out = 0;
+        for item in &mut self.items {
+            if item.force_known && !admitted.get(&*item.id).copied().unwrap_or(true) {
+                item.force_known = false;
+                left_out += 1;
+            }
+        }
+        left_out
     }
 }
 

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::bail;
 use hnet_twin::import::{ImportOptions, MaskThreshold, import_recordings};
+use hnet_twin::label_origin::LabelOrigin;
 
 use crate::progress;
 
@@ -47,6 +48,22 @@ pub struct ImportArgs {
     /// Seed of the 80/10/10 train/val/test split.
     #[arg(long, default_value_t = 0)]
     pub(crate) seed: u64,
+    /// Where the forces came from, for rows whose table has no `label_origin` column:
+    /// `measured` (a force sensor's log), `typed` or `imported` (not known). Written to the
+    /// manifest; `hnet train --labels` and `hnet calibrate` read it.
+    #[arg(long, default_value = "imported", value_parser = parse_origin)]
+    pub(crate) label_origin: LabelOrigin,
+}
+
+fn parse_origin(text: &str) -> Result<LabelOrigin, String> {
+    match text {
+        "measured" => Ok(LabelOrigin::Measured),
+        "typed" => Ok(LabelOrigin::Typed),
+        "imported" => Ok(LabelOrigin::Imported),
+        _ => Err(format!(
+            "`{text}` is not measured, typed or imported (a model's estimate is not imported as a label)"
+        )),
+    }
 }
 
 fn parse_threshold(text: &str) -> Result<MaskThreshold, String> {
@@ -75,6 +92,7 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<()> {
         size: args.size,
         skip_bad: args.skip_bad,
         seed: args.seed,
+        label_origin: args.label_origin.clone(),
     };
     let bar = progress::bar(0, "importing");
     let report = import_recordings(&options, &|done, total| {

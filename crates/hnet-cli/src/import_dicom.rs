@@ -15,7 +15,7 @@ use hnet_twin::dataset::{
     sample_files,
 };
 use hnet_twin::force_table::{ForceRow, read_force_table};
-use hnet_twin::import::recording_mask;
+use hnet_twin::import::{recording_mask, row_origin};
 use hnet_units::ImageSize;
 use serde_json::json;
 
@@ -151,10 +151,13 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<()> {
             id: id.clone(),
             split,
             force_n: row.force_n,
-            extra: vec![
+            extra: [
                 ("frame".into(), (frame + 1).to_string()),
                 ("time_s".into(), time),
-            ],
+            ]
+            .into_iter()
+            .chain(row_origin(row, &args.label_origin).columns())
+            .collect(),
         };
         let record = json!({
             "frame": frame + 1,

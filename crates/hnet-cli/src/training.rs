@@ -43,7 +43,9 @@ use self::trainee::StereoTrainee;
 use crate::backend::BackendChoice;
 use crate::config::{DEFAULT_MAX_MEMORY_MIB, LearningRateSchedule, TrainingConfig, builtin_config};
 use crate::data::twin_stream::{EpochCounting, TwinStream};
-use crate::data::{DiskSplit, StereoBatch, StereoBatcher, StereoSplit, pair_bytes};
+use crate::data::{
+    DiskSplit, StereoBatch, StereoBatcher, StereoSplit, force_label_admitted, pair_bytes,
+};
 use crate::run_dir::{LOSS_METRIC, RunDir, RunInfo, log_name};
 
 /// What `hnet train` was asked to do.
@@ -129,7 +131,20 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
         }
         Ok(pairs)
     };
-    let valid_split = load(Split::Val, config.max_valid_samples)?;
+    let labels = config.label_filter()?;
+    // Force labels the config leaves out (a model's estimates, by default) train masks only.
+    let admit = |split: &mut StereoSplit, name: &str| {
+        let left_out = split.admit_force_labels(&dataset, &labels);
+        if left_out > 0 {
+            eprintln!(
+                "{left_out} {name} pair(s) train their masks only: their force labels are not \
+                 among the origins learnt from ({}; `--labels all` learns them all)",
+                labels.words()
+            );
+        }
+    };
+    let mut valid_split = load(Split::Val, config.max_valid_samples)?;
+    admit(&mut valid_split, "validation");
     if let Some(path) = &config.init_weights
         && !request.resume
     {
@@ -185,10 +200,12 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
                      MiB decoded would exceed max_memory_mib {budget_mib})",
                     config.image_size
                 );
-                let split = DiskSplit::new(&dataset, Split::Train, config.image_size, limit);
+                let split = DiskSplit::new(&dataset, Split::Train, config.image_size, limit)
+                    .with_labels(labels.clone());
                 (builder.build(split), pairs)
             } else {
-                let train_split = load(Split::Train, limit)?;
+                let mut train_split = load(Split::Train, limit)?;
+                admit(&mut train_split, "training");
                 let pairs = train_split.items.len();
                 eprintln!("loaded {pairs} training pairs at {}", config.image_size);
                 (builder.build(train_split), pairs)
@@ -339,6 +356,7 @@ fn with_force_statistics(
     mut config: TrainingConfig,
     data: &Path,
 ) -> anyhow::Result<TrainingConfig> {
+    let labels = config.label_filter()?;
     let ModelSpec::Hnet(network) = &mut config.model else {
         return Ok(config);
     };
@@ -355,14 +373,19 @@ fn with_force_statistics(
         return Ok(config);
     }
     let dataset = Dataset::open(data)?;
-    let scale =
-        ForceScale::of(dataset.split(Split::Train).map(|row| row.force_n)).with_context(|| {
-            format!(
-                "standardise_force: the train split of {} needs at least two pairs and forces \
-                 that vary on every axis",
-                data.display()
-            )
-        })?;
+    // Of the labels the head learns from only.
+    let learnt = dataset
+        .split(Split::Train)
+        .filter(|row| force_label_admitted(row, &labels))
+        .map(|row| row.force_n);
+    let scale = ForceScale::of(learnt).with_context(|| {
+        format!(
+            "standardise_force: the train split of {} needs at least two pairs whose force \
+             labels are learnt from ({}), with forces that vary on every axis",
+            data.display(),
+            labels.words()
+        )
+    })?;
     network.force_scale = Some(scale);
     config.loss.force_std_n = Some(scale.std_n);
     Ok(config)
@@ -540,6 +563,12 @@ pub struct TrainArgs {
     /// `12m`, `1h30m`), keeping the best checkpoint; `--resume` continues such a run.
     #[arg(long, value_parser = parse_duration)]
     time_budget: Option<Duration>,
+    /// The force labels the force head learns from, by origin (the manifest's `label_origin`):
+    /// `all`, or a comma-separated list of measured, typed, imported, simulated, estimate and
+    /// unrecorded. Default: all but `estimate` (labels copied from a model's estimate). Pairs
+    /// left out still train the masks.
+    #[arg(long)]
+    labels: Option<String>,
 }
 
 pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
@@ -585,6 +614,9 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
     }
     if let Some(init) = &args.init {
         config.init_weights = Some(init.clone());
+    }
+    if let Some(labels) = &args.labels {
+        config.force_labels = Some(labels.clone());
     }
     let data = args
         .data

@@ -1198,6 +1198,22 @@ fn a_stiffer_catheter_is_calibrated_from_ten_labelled_pairs() {
     assert!((scale - 1.3).abs() < 0.05, "{catheter}");
     assert_eq!(catheter["calibration"]["pairs"], 10);
     std::fs::remove_file(&out).unwrap();
+    // From a network's masks instead of the labels (pairs labelled with a force only): the
+    // bundled weights read these 128 px pairs at their 224 px. Whatever scale they give, it is
+    // a calibration of the same catheter, or a refusal saying why.
+    let weights = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/hnet-cpu.bpk");
+    let output = calibrate(&["--pairs", "10", "--weights", weights.to_str().unwrap()])
+        .output()
+        .unwrap();
+    if output.status.success() {
+        let catheter: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+        assert_eq!(catheter["name"], "twin-bench-7f");
+        std::fs::remove_file(&out).unwrap();
+    } else {
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(stderr.contains("cannot calibrate catheter"), "{stderr}");
+    }
 
     let stderr = fails(&mut calibrate(&["--pairs", "2"]));
     assert!(stderr.contains("at least 3 are needed"), "{stderr}");

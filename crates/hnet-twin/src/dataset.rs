@@ -4,6 +4,7 @@
 //! ```text
 //! DIR/dataset.json            header: format, version, image size, where the data came from
 //! DIR/manifest.csv            one row per stereo pair: id,split,fx,fy,fz[,parameters...]
+//!                             (label_origin and its estimate's weights: crate::label_origin)
 //! DIR/samples/<id>_view_a.png view A image (8-bit grey or RGB)
 //! DIR/samples/<id>_view_b.png view B image
 //! DIR/samples/<id>_mask_a.png view A catheter mask (8-bit, 255 = catheter; soft edges allowed)
@@ -26,6 +27,8 @@ use std::path::{Path, PathBuf};
 
 use hnet_units::ImageSize;
 use serde::{Deserialize, Serialize};
+
+use crate::label_origin::{LabelOrigin, UnknownOrigin};
 
 /// `format` field of `dataset.json`.
 pub const FORMAT: &str = "hnet-dataset";
@@ -172,6 +175,22 @@ pub struct ManifestRow {
     pub extra: Vec<(String, String)>,
 }
 
+impl ManifestRow {
+    /// The value of the further column `name`, when the manifest has it.
+    pub fn column(&self, name: &str) -> Option<&str> {
+        self.extra
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v.as_str())
+    }
+
+    /// Where its force label came from: [`LabelOrigin::Unrecorded`] when the manifest has no
+    /// [`label_origin::ORIGIN_COLUMN`](crate::label_origin::ORIGIN_COLUMN) (older datasets).
+    pub fn label_origin(&self) -> Result<LabelOrigin, UnknownOrigin> {
+        LabelOrigin::from_columns(|name| self.column(name))
+    }
+}
+
 /// `dataset.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DatasetHeader {
@@ -250,14 +269,20 @@ pub fn is_valid_id(id: &str) -> bool {
             .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
 }
 
-/// The manifest as CSV bytes. All rows must have the same extra columns.
+/// The manifest as CSV bytes. Its further columns are every row's, in the order they are first
+/// met; a row without one of them leaves it empty (an export mixing twin pairs and uploads has
+/// rows with different columns).
 pub fn manifest_csv(rows: &[ManifestRow]) -> Vec<u8> {
-    let mut out = String::from("id,split,fx,fy,fz");
-    if let Some(first) = rows.first() {
-        for (name, _) in &first.extra {
-            out.push(',');
-            out.push_str(&csv_field(name));
+    let mut columns: Vec<&str> = Vec::new();
+    for (name, _) in rows.iter().flat_map(|row| &row.extra) {
+        if !columns.contains(&name.as_str()) {
+            columns.push(name);
         }
+    }
+    let mut out = String::from("id,split,fx,fy,fz");
+    for name in &columns {
+        out.push(',');
+        out.push_str(&csv_field(name));
     }
     out.push('\n');
     for row in rows {
@@ -268,9 +293,9 @@ pub fn manifest_csv(rows: &[ManifestRow]) -> Vec<u8> {
             out.push(',');
             out.push_str(&f.to_string());
         }
-        for (_, value) in &row.extra {
+        for name in &columns {
             out.push(',');
-            out.push_str(&csv_field(value));
+            out.push_str(&csv_field(row.column(name).unwrap_or_default()));
         }
         out.push('\n');
     }
@@ -356,12 +381,16 @@ pub fn parse_manifest(bytes: &[u8], path: &Path) -> Result<Vec<ManifestRow>, Dat
                 )
             })
             .collect();
-        rows.push(ManifestRow {
+        let row = ManifestRow {
             id: row_id,
             split,
             force_n,
             extra,
-        });
+        };
+        if let Err(e) = row.label_origin() {
+            return Err(DatasetError::new(path, format!("line {line}: {e}")));
+        }
+        rows.push(row);
     }
     Ok(rows)
 }
@@ -968,6 +997,34 @@ mod tests {
         let bytes = manifest_csv(&rows);
         let back = parse_manifest(&bytes, Path::new("m.csv")).unwrap();
         assert_eq!(back, rows);
+    }
+
+    #[test]
+    fn rows_with_other_columns_share_one_manifest() {
+        // An export of a twin pair and an upload: the upload's columns are empty for the twin.
+        let twin = ManifestRow {
+            extra: vec![("source".into(), "twin".into())],
+            ..row("a", Split::Train)
+        };
+        let upload = ManifestRow {
+            extra: vec![
+                ("source".into(), "upload".into()),
+                ("view_a_file".into(), "x.png".into()),
+            ],
+            ..row("b", Split::Val)
+        };
+        let bytes = manifest_csv(&[twin, upload.clone()]);
+        let back = parse_manifest(&bytes, Path::new("m.csv")).unwrap();
+        assert_eq!(back[0].column("source"), Some("twin"));
+        assert_eq!(back[0].column("view_a_file"), Some(""));
+        assert_eq!(back[1], upload);
+        // An unknown label origin names its line.
+        let bad = b"id,split,fx,fy,fz,label_origin\np1,train,0,0,0,guess\n";
+        let err = parse_manifest(bad, Path::new("m.csv")).unwrap_err();
+        assert!(
+            err.to_string().contains("line 2: label_origin `guess`"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -1,9 +1,12 @@
 //! Tables of tip forces in CSV, as people write them: a header naming a key column (a pair's id,
 //! or an image's name) and the columns `fx`, `fy`, `fz` in newtons, in any order and case, with
-//! other columns ignored. The one reader behind `hnet import`'s forces file and the page's force
-//! labels (the dataset's own `manifest.csv` has its own, stricter reader in [`crate::dataset`]).
+//! other columns ignored but `label_origin` ([`crate::label_origin`]). The one reader behind
+//! `hnet import`'s forces file and the page's force labels (the dataset's own `manifest.csv` has
+//! its own, stricter reader in [`crate::dataset`]).
 
 use std::sync::Arc;
+
+use crate::label_origin::LabelOrigin;
 
 /// The force columns, in the order of the force's components.
 pub const FORCE_COLUMNS: [&str; 3] = ["fx", "fy", "fz"];
@@ -17,6 +20,9 @@ pub struct ForceRow {
     pub key: String,
     /// Tip force `(Fx, Fy, Fz)`, newtons.
     pub force_n: [f64; 3],
+    /// Where it came from, when the table says ([`crate::label_origin::ORIGIN_COLUMN`]);
+    /// [`LabelOrigin::Unrecorded`] otherwise.
+    pub origin: LabelOrigin,
 }
 
 /// What is wrong with a force table: the line when one line is at fault, and the problem. The
@@ -112,10 +118,15 @@ pub fn read_force_table(
                         )
                     })?;
                 }
+                let origin = LabelOrigin::from_columns(|name| {
+                    column(name).map(|c| record.get(c).unwrap_or_default())
+                })
+                .map_err(|e| error(Some(line), format!("the label of `{key}`: {e}")))?;
                 Ok(ForceRow {
                     line,
                     key: key.to_string(),
                     force_n,
+                    origin,
                 })
             });
         rows.push(row);
@@ -153,7 +164,22 @@ mod tests {
                 line: 2,
                 key: "a.png".into(),
                 force_n: [0.1, -0.2, 0.3],
+                origin: LabelOrigin::Unrecorded,
             }]
+        );
+        // A table that says where its labels came from (a sensor's log, or an export's manifest).
+        let rows =
+            read_force_table(b"id,fx,fy,fz,Label_Origin\np1,0.1,0,0,measured\n", &["id"]).unwrap();
+        assert_eq!(rows[0].as_ref().unwrap().origin, LabelOrigin::Measured);
+        let rows =
+            read_force_table(b"id,fx,fy,fz,label_origin\np1,0.1,0,0,guess\n", &["id"]).unwrap();
+        assert!(
+            rows[0]
+                .as_ref()
+                .unwrap_err()
+                .to_string()
+                .starts_with("line 2: the label of `p1`: label_origin `guess` is not one of"),
+            "{rows:?}"
         );
     }
 

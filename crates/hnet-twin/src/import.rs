@@ -16,6 +16,7 @@ use crate::dataset::{
     image_size_of, is_valid_id, resized, sample_files,
 };
 use crate::force_table::{ForceRow, ForceTableError, read_force_table};
+use crate::label_origin::LabelOrigin;
 use crate::scene::{luma, otsu_threshold, threshold_mask};
 
 /// How masks are made from the recorded images.
@@ -59,6 +60,17 @@ pub struct ImportOptions {
     pub skip_bad: bool,
     /// Seed of the 80/10/10 split.
     pub seed: u64,
+    /// Where the forces came from, for rows whose table does not say (its `label_origin`
+    /// column, [`crate::label_origin`]).
+    pub label_origin: LabelOrigin,
+}
+
+/// A force row's origin: the table's own, else `default`.
+pub fn row_origin(row: &ForceRow, default: &LabelOrigin) -> LabelOrigin {
+    match row.origin {
+        LabelOrigin::Unrecorded => default.clone(),
+        ref origin => origin.clone(),
+    }
 }
 
 /// What an import did.
@@ -294,10 +306,13 @@ pub fn import_recordings(
                 id: id.clone(),
                 split,
                 force_n: row.force_n,
-                extra: vec![
+                extra: [
                     ("source_a".into(), a.path.display().to_string()),
                     ("source_b".into(), b.path.display().to_string()),
-                ],
+                ]
+                .into_iter()
+                .chain(row_origin(&row, &options.label_origin).columns())
+                .collect(),
             };
             let record = json!({ "csv_line": row.line, "image": row.key });
             let files = sample_files(

@@ -14,7 +14,8 @@
 //! - [`catalogue`]: the named catheters a blind force estimate assumes, and their calibration
 //!   from pairs with a measured force;
 //! - [`dataset`]: the on-disk format; [`force_table`]: force tables in CSV (imports and the page's
-//!   labels); natively also [`simulate`], [`import`] and [`files`] (atomic writes).
+//!   labels); [`label_origin`]: where each force label came from; natively also [`simulate`],
+//!   [`import`] and [`files`] (atomic writes).
 //!
 //! Units: millimetres, newtons, degrees for angles. World frame: `x` towards the patient's left,
 //! `y` anterior, `z` cranial, origin at the C-arm's isocentre.
@@ -33,6 +34,7 @@ pub mod files;
 pub mod force_table;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod import;
+pub mod label_origin;
 pub mod noise;
 pub mod off_bench;
 pub mod phantom;
