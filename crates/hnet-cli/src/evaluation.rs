@@ -113,6 +113,10 @@ pub struct EvalArgs {
     /// this many millimetres. Blind only.
     #[arg(long, default_value_t = 0.0, conflicts_with = "oracle")]
     carm_distance_error: f64,
+    /// Read plane B's isocentre as plane A's while it is off by up to this many millimetres
+    /// along each axis (the two planes' isocentres apart). Blind only.
+    #[arg(long, default_value_t = 0.0, conflicts_with = "oracle")]
+    carm_isocentre_error: f64,
 }
 
 fn parse_entry(text: &str) -> Result<EntrySetting, String> {
@@ -1000,8 +1004,11 @@ pub fn markdown(e: &Evaluation) -> String {
                 String::new()
             } else {
                 format!(
-                    "; each C-arm's angles read off by up to {}° and its distances by up to {} mm",
-                    e.header_error.angle_deg, e.header_error.distance_mm
+                    "; each C-arm's angles read off by up to {}° and its distances by up to {} mm, \
+                     plane B's isocentre off by up to {} mm per axis",
+                    e.header_error.angle_deg,
+                    e.header_error.distance_mm,
+                    e.header_error.isocentre_mm
                 )
             }
         );
@@ -1031,6 +1038,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     for (flag, value) in [
         ("--carm-angle-error", args.carm_angle_error),
         ("--carm-distance-error", args.carm_distance_error),
+        ("--carm-isocentre-error", args.carm_isocentre_error),
     ] {
         anyhow::ensure!(
             value.is_finite() && value >= 0.0,
@@ -1073,6 +1081,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
             header_error: HeaderError {
                 angle_deg: args.carm_angle_error,
                 distance_mm: args.carm_distance_error,
+                isocentre_mm: args.carm_isocentre_error,
             },
         },
     )?;

@@ -9,10 +9,11 @@
 //! how often the combined 90 % interval covers the true force.
 //!
 //! The suite covers the catheter off its catalogue values, the base anywhere within the page's
-//! ranges, C-arm header errors and real radiograph backgrounds. Not yet simulated (the twin has
-//! no model of them): a stiffer tip-electrode segment, a base held in a sheath, friction at the
-//! contact, imaging effects (low-dose noise, detector blur, scatter and glare, motion between
-//! the planes) and isocentres apart; docs/results.md lists them as open.
+//! ranges, C-arm header errors (angles, distances, the two planes' isocentres apart), motion
+//! between the two planes' exposures, imaging (low-dose noise, blur, scatter and veiling glare,
+//! the display's grey curve) and real radiograph backgrounds. Not yet simulated (the twin has no
+//! model of them): a stiffer tip-electrode segment, a base held in a sheath, friction at the
+//! contact, and a catheter foreshortened towards one source; docs/results.md lists them as open.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -23,6 +24,7 @@ use hnet_model::metrics::ForceMetrics;
 use hnet_twin::carm::HeaderError;
 use hnet_twin::catalogue::{BENCH_CATHETER, CatalogueCatheter};
 use hnet_twin::dataset::Split;
+use hnet_twin::render::XRayDetector;
 use hnet_twin::scene::{Modality, SceneSampling};
 use serde::Serialize;
 
@@ -65,6 +67,8 @@ struct MismatchSet {
     scenes: SceneSampling,
     header_error: HeaderError,
     chest: bool,
+    /// The X-ray detector the set is imaged with (the twin's default otherwise).
+    detector: Option<XRayDetector>,
 }
 
 /// The suite: each set departs from the bench in one way.
@@ -80,7 +84,13 @@ fn suite() -> Vec<MismatchSet> {
         scenes,
         header_error: HeaderError::default(),
         chest: false,
+        detector: None,
     };
+    let imaged = |name, why, detector: XRayDetector| MismatchSet {
+        detector: Some(detector),
+        ..set(name, why, bench())
+    };
+    let detector = XRayDetector::default;
     vec![
         set("nominal", "the bench as the estimators assume it", bench()),
         set(
@@ -123,7 +133,7 @@ fn suite() -> Vec<MismatchSet> {
         MismatchSet {
             header_error: HeaderError {
                 angle_deg: 2.0,
-                distance_mm: 0.0,
+                ..HeaderError::default()
             },
             ..set(
                 "carm-angles-2deg",
@@ -134,8 +144,8 @@ fn suite() -> Vec<MismatchSet> {
         },
         MismatchSet {
             header_error: HeaderError {
-                angle_deg: 0.0,
                 distance_mm: 20.0,
+                ..HeaderError::default()
             },
             ..set(
                 "carm-distances-20mm",
@@ -152,6 +162,65 @@ fn suite() -> Vec<MismatchSet> {
                 bench(),
             )
         },
+        MismatchSet {
+            header_error: HeaderError {
+                isocentre_mm: 2.0,
+                ..HeaderError::default()
+            },
+            ..set(
+                "isocentres-2mm",
+                "plane B's isocentre up to 2 mm from plane A's along each axis, where the headers \
+                 put both at one point: biplane isocentres are calibrated to meet within 1-2 mm \
+                 and drift with wear",
+                bench(),
+            )
+        },
+        set(
+            "exposure-motion",
+            "the catheter moved by up to 1 mm along each axis between the two planes' \
+             exposures: biplane planes expose in turn, about 30 ms apart at 15 frames per second, \
+             while the heart carries the catheter at tens of mm/s",
+            SceneSampling {
+                exposure_motion_mm: 1.0,
+                ..bench()
+            },
+        ),
+        imaged(
+            "low-dose",
+            "a fifth of the twin's dose (500 photons per pixel for 2,500): quantum noise 2.2 \
+             times stronger, as in low-dose pulsed fluoroscopy",
+            XRayDetector {
+                photons_per_pixel: 500.0,
+                ..detector()
+            },
+        ),
+        imaged(
+            "blur",
+            "detector and focal-spot blur of 1.5 px (σ) for 0.6: a larger focal spot at higher \
+             magnification, or an older image intensifier",
+            XRayDetector {
+                blur_px: 1.5,
+                ..detector()
+            },
+        ),
+        imaged(
+            "scatter-glare",
+            "30 % of the signal scatter and veiling glare, spread over the frame: scatter-to-\
+             primary ratios behind an anti-scatter grid are 0.2-0.5 in cardiac imaging",
+            XRayDetector {
+                scatter_fraction: 0.3,
+                ..detector()
+            },
+        ),
+        imaged(
+            "contrast",
+            "the display's grey curve lifted (γ 0.6): another system's look-up table or a \
+             window set brighter",
+            XRayDetector {
+                display_gamma: 0.6,
+                ..detector()
+            },
+        ),
     ]
 }
 
@@ -254,10 +323,13 @@ pub fn run(args: &MismatchArgs) -> anyhow::Result<()> {
     let device: Device = args.backend.device()?;
     let model = load_weights(&args.weights, None, &device)?;
     let catheter = CatalogueCatheter::find(BENCH_CATHETER)?;
-    let suite: Vec<MismatchSet> = suite()
+    // Each set's seed is the first plus its place in the whole suite, so that a set gives the
+    // same pairs whether it runs alone or with the others.
+    let suite: Vec<(usize, MismatchSet)> = suite()
         .into_iter()
-        .filter(|set| args.sets.is_empty() || args.sets.iter().any(|name| name == set.name))
-        .filter(|set| !set.chest || !args.backgrounds.is_empty())
+        .enumerate()
+        .filter(|(_, set)| args.sets.is_empty() || args.sets.iter().any(|name| name == set.name))
+        .filter(|(_, set)| !set.chest || !args.backgrounds.is_empty())
         .collect();
     anyhow::ensure!(
         !suite.is_empty(),
@@ -267,13 +339,13 @@ pub fn run(args: &MismatchArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create '{}'", args.out.display()))?;
     let mut rows = Vec::new();
-    for (index, set) in suite.iter().enumerate() {
+    for (index, set) in &suite {
         let data = args.out.join(set.name);
         crate::simulate::run(&SimulateArgs {
             modality: Modality::Xray2,
             samples: args.samples,
             size: model.image_size.width,
-            seed: args.seed + index as u64,
+            seed: args.seed + *index as u64,
             out: data.clone(),
             backgrounds: if set.chest {
                 args.backgrounds.clone()
@@ -283,6 +355,8 @@ pub fn run(args: &MismatchArgs) -> anyhow::Result<()> {
             mask: hnet_twin::scene::MaskSource::Geometry,
             scenes: Scenes::Preset(set.scenes.clone()),
             scene_sampling: None,
+            detector: set.detector,
+            shard: None,
         })
         .with_context(|| format!("simulating the `{}` set", set.name))?;
         let (evaluation, _) = evaluate(

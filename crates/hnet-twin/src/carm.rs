@@ -41,12 +41,32 @@ pub struct HeaderError {
     pub angle_deg: f64,
     /// Bound on the error of each distance (source to isocentre, source to detector), mm.
     pub distance_mm: f64,
+    /// Bound on how far plane B's isocentre is from plane A's along each world axis, mm, where
+    /// the headers put both at one point (a biplane's two isocentres are calibrated to meet
+    /// within a millimetre or two, and drift apart with wear).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub isocentre_mm: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 impl HeaderError {
     /// Whether it changes anything.
     pub fn is_none(&self) -> bool {
-        self.angle_deg == 0.0 && self.distance_mm == 0.0
+        self.angle_deg == 0.0 && self.distance_mm == 0.0 && self.isocentre_mm == 0.0
+    }
+
+    /// `camera` of plane B as the headers would give it when its true isocentre sits at
+    /// `offset_mm` from plane A's (world frame): the camera of a C-arm centred at the origin
+    /// reading a world shifted by `offset_mm`, `P' = P·T(offset)`.
+    pub fn with_isocentre_offset(camera: CameraMatrix, offset_mm: [f64; 3]) -> CameraMatrix {
+        let mut moved = camera;
+        for row in &mut moved {
+            row[3] += row[0] * offset_mm[0] + row[1] * offset_mm[1] + row[2] * offset_mm[2];
+        }
+        moved
     }
 
     /// `carm` as a header off by this error would record it; `unit` draws in `[0, 1)`.
@@ -276,6 +296,28 @@ pub fn triangulate(p_a: &CameraMatrix, uv_a: [f64; 2], p_b: &CameraMatrix, uv_b:
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_isocentre_offset_reads_a_shifted_world() {
+        let carm = CArm::cardiac(90.0, 0.0, 128);
+        let offset = [1.5, -2.0, 0.5];
+        let moved = HeaderError::with_isocentre_offset(carm.camera_matrix(), offset);
+        let p = Vec3::new(3.0, -4.0, 10.0);
+        let shifted = carm.project(p + Vec3(offset));
+        let h = |m: &CameraMatrix, q: Vec3| {
+            let row = |r: &[f64; 4]| r[0] * q.0[0] + r[1] * q.0[1] + r[2] * q.0[2] + r[3];
+            [row(&m[0]) / row(&m[2]), row(&m[1]) / row(&m[2])]
+        };
+        let [u, v] = h(&moved, p);
+        assert!((u - shifted.u).abs() < 1e-9 && (v - shifted.v).abs() < 1e-9);
+        assert!(
+            !HeaderError {
+                isocentre_mm: 2.0,
+                ..HeaderError::default()
+            }
+            .is_none()
+        );
+    }
 
     #[test]
     fn the_isocentre_projects_to_the_image_centre() {

@@ -149,14 +149,33 @@ pub fn rasterize_catheter(
     raster
 }
 
-/// Detector physics of the X-ray renderer.
+/// Detector physics of the X-ray renderer. Fields left out of a JSON file take their defaults
+/// (`hnet simulate --detector FILE`).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct XRayDetector {
     /// Photons per pixel reaching the detector where nothing attenuates; quantum noise has a
     /// relative standard deviation of `1/sqrt(photons · transmission)`.
     pub photons_per_pixel: f64,
     /// Standard deviation of the detector's Gaussian blur, pixels.
     pub blur_px: f64,
+    /// Share of the detected signal that is scatter and veiling glare, 0-1: spread over the
+    /// frame as a broad blur (σ an eighth of the image's width), it lowers the catheter's
+    /// contrast without moving it. 0 (none) by default.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub scatter_fraction: f64,
+    /// Exponent of the display's grey curve, `grey = T^γ`: below 1 lifts the dark end (a
+    /// brighter, flatter picture), above 1 deepens it. 1 (linear) by default.
+    #[serde(skip_serializing_if = "is_one")]
+    pub display_gamma: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
+fn is_one(v: &f64) -> bool {
+    *v == 1.0
 }
 
 impl Default for XRayDetector {
@@ -164,7 +183,51 @@ impl Default for XRayDetector {
         Self {
             photons_per_pixel: 2500.0,
             blur_px: 0.6,
+            scatter_fraction: 0.0,
+            display_gamma: 1.0,
         }
+    }
+}
+
+impl XRayDetector {
+    /// Why these settings cannot make an image, naming the field.
+    pub fn check(&self) -> Result<(), String> {
+        let finite = |name: &str, v: f64| {
+            if v.is_finite() {
+                Ok(())
+            } else {
+                Err(format!("`{name}` = {v} is not a finite number"))
+            }
+        };
+        finite("photons_per_pixel", self.photons_per_pixel)?;
+        finite("blur_px", self.blur_px)?;
+        finite("scatter_fraction", self.scatter_fraction)?;
+        finite("display_gamma", self.display_gamma)?;
+        if self.photons_per_pixel <= 0.0 {
+            return Err(format!(
+                "`photons_per_pixel` = {} must be above 0",
+                self.photons_per_pixel
+            ));
+        }
+        if !(0.0..=10.0).contains(&self.blur_px) {
+            return Err(format!(
+                "`blur_px` = {} is outside 0-10 pixels",
+                self.blur_px
+            ));
+        }
+        if !(0.0..1.0).contains(&self.scatter_fraction) {
+            return Err(format!(
+                "`scatter_fraction` = {} is outside [0, 1)",
+                self.scatter_fraction
+            ));
+        }
+        if !(0.1..=10.0).contains(&self.display_gamma) {
+            return Err(format!(
+                "`display_gamma` = {} is outside 0.1-10",
+                self.display_gamma
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -172,7 +235,8 @@ impl Default for XRayDetector {
 /// transmitted intensity, so the catheter shows dark on the background's transmission map.
 ///
 /// `T = T_background · exp(-μL)` (Beer-Lambert), then Poisson quantum noise (Gaussian
-/// approximation), then the detector blur.
+/// approximation), then the detector blur; then, when the detector has them, scatter and veiling
+/// glare (`(1 - s)·T + s·blur(T)`) and the display's grey curve (`T^γ`).
 pub fn render_xray(
     background_transmission: &GreyImage,
     tube: &TubeRaster,
@@ -190,12 +254,27 @@ pub fn render_xray(
             (t + (t.max(0.0) * inverse_photons).sqrt() * noise.normal()).clamp(0.0, 1.0)
         })
         .collect();
-    GreyImage {
+    let mut frame = GreyImage {
         width: tube.width,
         height: tube.height,
         data,
     }
-    .blurred(detector.blur_px)
+    .blurred(detector.blur_px);
+    let scatter = detector.scatter_fraction as f32;
+    if scatter > 0.0 {
+        let veil = frame.blurred(tube.width.max(tube.height) as f64 / 8.0);
+        for (t, v) in frame.data.iter_mut().zip(&veil.data) {
+            *t = (1.0 - scatter) * *t + scatter * v;
+        }
+    }
+    if detector.display_gamma != 1.0 {
+        let gamma = detector.display_gamma as f32;
+        frame
+            .data
+            .iter_mut()
+            .for_each(|t| *t = t.clamp(0.0, 1.0).powf(gamma));
+    }
+    frame
 }
 
 /// The bench's background: a matte board under a soft light with a faint 10 mm grid, as the

@@ -193,6 +193,14 @@ pub struct RodShape {
 }
 
 impl RodShape {
+    /// The same shape moved by `offset_mm` (world frame), as a catheter carried by the heart.
+    pub fn translated(&self, offset_mm: Vec3) -> Self {
+        Self {
+            points_mm: self.points_mm.iter().map(|&p| p + offset_mm).collect(),
+            ..self.clone()
+        }
+    }
+
     /// The tip position in mm.
     pub fn tip_mm(&self) -> Vec3 {
         *self

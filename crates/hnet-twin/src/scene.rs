@@ -87,6 +87,16 @@ pub struct SceneSampling {
     /// Range of the rotation of the section about the base axis (the pre-curve's plane),
     /// degrees.
     pub base_roll_deg: [f64; 2],
+    /// Largest shift of the catheter along each axis between the two planes' exposures, mm:
+    /// view B sees it moved by a uniform draw within ± this (biplane planes expose in turn,
+    /// tens of milliseconds apart, while the heart and breathing move the catheter). 0 (both
+    /// views at one instant) unless set; the record keeps view A's instant.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub exposure_motion_mm: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 impl Default for SceneSampling {
@@ -108,6 +118,7 @@ impl SceneSampling {
             base_jitter_mm: 1.0,
             base_tilt_deg: 2.0,
             base_roll_deg: [90.0, 90.0],
+            exposure_motion_mm: 0.0,
         }
     }
 
@@ -252,6 +263,10 @@ impl SceneSampling {
             ),
             ("length_mm", self.length_mm[0] > 0.0),
             ("base_jitter_mm", self.base_jitter_mm >= 0.0),
+            (
+                "exposure_motion_mm",
+                (0.0..=20.0).contains(&self.exposure_motion_mm),
+            ),
             ("base_tilt_deg", (0.0..=90.0).contains(&self.base_tilt_deg)),
             (
                 "force_cone_deg",
@@ -704,6 +719,14 @@ pub fn generate(
         let (rod_config, base) = params.rod(&config.rod);
         match rod::solve(&rod_config, &base, params.tip_force_n) {
             Ok(shape) => {
+                // View B's exposure may come after the catheter moved (drawn only then, so
+                // that sets without motion are unchanged).
+                let motion = config.scene.exposure_motion_mm;
+                let moved = (motion > 0.0).then(|| {
+                    let mut shift = || motion * (2.0 * rng.random::<f64>() - 1.0);
+                    shape.translated(Vec3::new(shift(), shift(), shift()))
+                });
+                let shapes = [&shape, moved.as_ref().unwrap_or(&shape)];
                 let views = [(&config.views.a, 0usize, 'A'), (&config.views.b, 1, 'B')].map(
                     |(view, i, name)| -> Result<ViewSample, TwinError> {
                         let background = if config.modality.is_xray() {
@@ -722,7 +745,7 @@ pub fn generate(
                         } else {
                             None
                         };
-                        Ok(render_view(config, &shape, view, background, &mut rng))
+                        Ok(render_view(config, shapes[i], view, background, &mut rng))
                     },
                 );
                 let [a, b] = views;
@@ -746,6 +769,60 @@ pub fn generate(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn motion_between_exposures_moves_the_catheter_in_view_b_only() {
+        let mut config = TwinConfig::new(Modality::Xray2, 64);
+        let backgrounds = Backgrounds::phantom(&config.views);
+        let still = generate(&config, &backgrounds, 7, 3).unwrap();
+        config.scene.exposure_motion_mm = 1.0;
+        let moved = generate(&config, &backgrounds, 7, 3).unwrap();
+        assert_eq!(still.params, moved.params);
+        assert_eq!(still.views[0].mask, moved.views[0].mask);
+        assert_ne!(still.views[1].mask, moved.views[1].mask);
+        config.scene.exposure_motion_mm = -1.0;
+        assert!(
+            config
+                .scene
+                .check()
+                .unwrap_err()
+                .contains("exposure_motion_mm")
+        );
+    }
+
+    #[test]
+    fn scatter_lowers_the_catheters_contrast_and_leaves_its_mask() {
+        let mut config = TwinConfig::new(Modality::Xray2, 64);
+        let backgrounds = Backgrounds::phantom(&config.views);
+        let plain = generate(&config, &backgrounds, 7, 3).unwrap();
+        config.detector.scatter_fraction = 0.3;
+        let veiled = generate(&config, &backgrounds, 7, 3).unwrap();
+        // Mean grey of the background minus that of the catheter, view A.
+        let contrast = |s: &StereoSample| {
+            let ViewPixels::Grey(grey) = &s.views[0].pixels else {
+                panic!("an X-ray view is grey")
+            };
+            let (mut sums, mut counts) = ([0.0f64; 2], [0usize; 2]);
+            for (&g, &m) in grey.iter().zip(&s.views[0].mask) {
+                let i = usize::from(m >= 128);
+                sums[i] += f64::from(g);
+                counts[i] += 1;
+            }
+            sums[0] / counts[0] as f64 - sums[1] / counts[1] as f64
+        };
+        assert_eq!(plain.views[0].mask, veiled.views[0].mask);
+        assert!(
+            contrast(&veiled) < 0.9 * contrast(&plain),
+            "{} vs {}",
+            contrast(&veiled),
+            contrast(&plain)
+        );
+        let refused = XRayDetector {
+            scatter_fraction: 1.0,
+            ..XRayDetector::default()
+        };
+        assert!(refused.check().unwrap_err().contains("scatter_fraction"));
+    }
 
     #[test]
     fn the_same_seed_and_index_give_the_same_sample() {
