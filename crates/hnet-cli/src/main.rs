@@ -42,6 +42,8 @@ enum Command {
     Info(info::InfoArgs),
     /// Generate a stereo dataset with the catheter digital twin.
     Simulate(simulate::SimulateArgs),
+    /// Join the parts of a sharded simulation (`hnet simulate --shard K/N`) into one dataset.
+    Merge(simulate::MergeArgs),
     /// Turn real recordings (two image folders, or a biplane DICOM cine, and a forces CSV) into
     /// a dataset.
     Import(import::ImportArgs),
@@ -70,6 +72,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Info(args) => info::run(&args),
         Command::Simulate(args) => simulate::run(&args),
+        Command::Merge(args) => simulate::merge(&args),
         Command::Import(args) => import::run(&args),
         Command::Train(args) => training::run(&args),
         Command::Eval(args) => evaluation::run(&args),

@@ -7,8 +7,10 @@ use anyhow::{Context, bail};
 use hnet_twin::import::is_image_file;
 use hnet_twin::off_bench::OffBench;
 use hnet_twin::raster::GreyImage;
+use hnet_twin::render::XRayDetector;
 use hnet_twin::scene::{Backgrounds, MaskSource, Modality, SceneSampling, TwinConfig};
-use hnet_twin::simulate::{OFF_BENCH_VIEWS, simulate_dataset, simulate_off_bench_dataset};
+use hnet_twin::shard::{Shard, merge_shards};
+use hnet_twin::simulate::{OFF_BENCH_VIEWS, simulate_dataset_part, simulate_off_bench_dataset};
 use hnet_twin::synthetic_xray::BackgroundSource;
 
 use crate::progress;
@@ -48,6 +50,49 @@ pub struct SimulateArgs {
     /// off-bench`, those scenes seen off the bench.
     #[arg(long)]
     pub scene_sampling: Option<PathBuf>,
+    /// The X-ray detector from this JSON file (`photons_per_pixel`, `blur_px`,
+    /// `scatter_fraction`, `display_gamma`; fields left out keep the twin's defaults, docs/twin.md)
+    /// instead of the twin's: low-dose noise, blur, scatter and veiling glare, a display curve.
+    #[arg(long, value_parser = read_detector)]
+    pub detector: Option<XRayDetector>,
+    /// Write only part K of N of the pairs (`K/N`, K from 0: a Slurm array task's or a
+    /// Kubernetes completion index), each part on its own machine; `hnet merge` joins the N
+    /// parts into the dataset one run would write, byte for byte.
+    #[arg(long, value_parser = Shard::parse)]
+    pub shard: Option<Shard>,
+}
+
+/// `hnet merge`.
+#[derive(clap::Args, Debug)]
+pub struct MergeArgs {
+    /// The parts (`hnet simulate --shard K/N` folders), in any order.
+    #[arg(required = true)]
+    parts: Vec<PathBuf>,
+    /// The dataset folder to write.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+/// Joins a sharded simulation's parts into one dataset.
+pub fn merge(args: &MergeArgs) -> anyhow::Result<()> {
+    let report = merge_shards(&args.parts, &args.out)?;
+    eprintln!(
+        "{} stereo pairs from {} parts in {}",
+        report.samples,
+        report.parts,
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// The X-ray detector in the JSON file at `path`, checked.
+fn read_detector(path: &str) -> Result<XRayDetector, String> {
+    let bytes =
+        std::fs::read(path).map_err(|e| format!("cannot read detector file '{path}': {e}"))?;
+    let detector: XRayDetector = serde_json::from_slice(&bytes)
+        .map_err(|e| format!("'{path}' is not an X-ray detector: {e}"))?;
+    detector.check().map_err(|why| format!("'{path}': {why}"))?;
+    Ok(detector)
 }
 
 /// The scene sampling in the JSON file at `path`, checked.
@@ -193,24 +238,36 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     }
     let mut config = TwinConfig::new(args.modality, args.size);
     config.mask = args.mask;
+    if let Some(detector) = args.detector {
+        if !config.modality.is_xray() {
+            bail!("--detector is for the X-ray modalities (xray1, xray2)");
+        }
+        detector
+            .check()
+            .map_err(|why| anyhow::anyhow!("--detector: {why}"))?;
+        config.detector = detector;
+    }
     let sampling = args
         .scene_sampling
         .as_deref()
         .map(read_scene_sampling)
         .transpose()?;
-    let bar = progress::bar(args.samples as u64, "simulating");
+    let shard = args.shard.unwrap_or(Shard::WHOLE);
+    let range = shard.range(args.samples);
+    let bar = progress::bar(range.end - range.start, "simulating");
     let progress = |done: usize| bar.set_position(done as u64);
     let start = Instant::now();
     let report = match &args.scenes {
         Scenes::Preset(scenes) => {
             config.scene = sampling.unwrap_or_else(|| scenes.clone());
             let (backgrounds, names) = backgrounds(&config, &args.backgrounds)?;
-            simulate_dataset(
+            simulate_dataset_part(
                 &config,
                 &backgrounds,
                 &names,
                 args.samples,
                 args.seed,
+                shard,
                 &args.out,
                 &progress,
             )?
@@ -240,6 +297,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
                 &names,
                 args.samples,
                 args.seed,
+                shard,
                 &args.out,
                 &progress,
             )?

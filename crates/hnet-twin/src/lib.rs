@@ -14,8 +14,8 @@
 //! - [`catalogue`]: the named catheters a blind force estimate assumes, and their calibration
 //!   from pairs with a measured force;
 //! - [`dataset`]: the on-disk format; [`force_table`]: force tables in CSV (imports and the page's
-//!   labels); [`label_origin`]: where each force label came from; natively also [`simulate`],
-//!   [`import`] and [`files`] (atomic writes).
+//!   labels); [`label_origin`]: where each force label came from; natively also [`simulate`]
+//!   (and [`shard`], a simulation in parts), [`import`] and [`files`] (atomic writes).
 //!
 //! Units: millimetres, newtons, degrees for angles. World frame: `x` towards the patient's left,
 //! `y` anterior, `z` cranial, origin at the C-arm's isocentre.
@@ -45,6 +45,8 @@ pub mod render;
 pub mod rod;
 pub mod rod_fit;
 pub mod scene;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod shard;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod simulate;
 pub mod synthetic_xray;

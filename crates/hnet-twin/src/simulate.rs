@@ -22,6 +22,7 @@ use crate::scene::{
     Backgrounds, NominalBase, SceneParams, SceneSampling, StereoSample, TwinConfig, generate,
     sample_rng,
 };
+use crate::shard::Shard;
 use crate::synthetic_xray::PatchLayout;
 use crate::vec3::Vec3;
 
@@ -163,7 +164,13 @@ impl SampleRecord {
             .views
             .each_ref()
             .map(|view| error.misread(&view.carm, || rng.random::<f64>()));
-        PhysicsSetup::blind(blind_cameras(&carms, size), catheter, nominal_base)
+        let mut cameras = blind_cameras(&carms, size);
+        if error.isocentre_mm > 0.0 {
+            let mut off = || error.isocentre_mm * (2.0 * rng.random::<f64>() - 1.0);
+            let offset = [off(), off(), off()];
+            cameras[1] = HeaderError::with_isocentre_offset(cameras[1], offset);
+        }
+        PhysicsSetup::blind(cameras, catheter, nominal_base)
     }
 
     /// The tip of the solved centreline, mm.
@@ -295,8 +302,38 @@ pub fn simulate_dataset(
     out: &Path,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<SimulationReport, SimulationError> {
+    simulate_dataset_part(
+        config,
+        backgrounds,
+        background_names,
+        samples,
+        seed,
+        Shard::WHOLE,
+        out,
+        progress,
+    )
+}
+
+/// [`simulate_dataset`]'s part `shard` of its `samples` pairs ([`crate::shard`]: the parts'
+/// union, merged, is byte for byte the whole dataset).
+#[allow(clippy::too_many_arguments)]
+pub fn simulate_dataset_part(
+    config: &TwinConfig,
+    backgrounds: &Backgrounds,
+    background_names: &[String],
+    samples: usize,
+    seed: u64,
+    shard: Shard,
+    out: &Path,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<SimulationReport, SimulationError> {
     let source = header_source(config, background_names, seed, None);
-    write_samples(config, source, samples, seed, out, progress, &|index| {
+    let part = Part {
+        samples,
+        seed,
+        shard,
+    };
+    write_samples(config, source, part, out, progress, &|index| {
         Ok((config.clone(), generate(config, backgrounds, seed, index)?))
     })
 }
@@ -305,19 +342,34 @@ pub fn simulate_dataset(
 /// page's C-arm angle ranges, phantom or radiographs) into `out`, each pair's record holding its
 /// own views. The header marks the dataset `"views": "off-bench"`: its `twin` settings give the
 /// look, not the views.
+#[allow(clippy::too_many_arguments)]
 pub fn simulate_off_bench_dataset(
     off_bench: &OffBench,
     base: &TwinConfig,
     background_names: &[String],
     samples: usize,
     seed: u64,
+    shard: Shard,
     out: &Path,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<SimulationReport, SimulationError> {
     let source = header_source(base, background_names, seed, Some(OFF_BENCH_VIEWS));
-    write_samples(base, source, samples, seed, out, progress, &|index| {
+    let part = Part {
+        samples,
+        seed,
+        shard,
+    };
+    write_samples(base, source, part, out, progress, &|index| {
         Ok(off_bench.generate(seed, index)?)
     })
+}
+
+/// Which pairs a run writes: part `shard` of `samples` pairs seeded `seed`.
+#[derive(Debug, Clone, Copy)]
+struct Part {
+    samples: usize,
+    seed: u64,
+    shard: Shard,
 }
 
 /// What a simulated dataset's header records of its making (`source` in `dataset.json`):
@@ -349,19 +401,23 @@ pub const OFF_BENCH_VIEWS: &str = "off-bench";
 fn write_samples(
     config: &TwinConfig,
     source: serde_json::Value,
-    samples: usize,
-    seed: u64,
+    part: Part,
     out: &Path,
     progress: &(dyn Fn(usize) + Sync),
     make: &(dyn Fn(u64) -> Result<(TwinConfig, StereoSample), SimulationError> + Sync),
 ) -> Result<SimulationReport, SimulationError> {
-    let header = DatasetHeader::new(ImageSize::square(config.image_size), samples, source);
+    let whole = DatasetHeader::new(ImageSize::square(config.image_size), part.samples, source);
+    let header = part.shard.header(&whole);
     let writer = DatasetWriter::create_or_resume(out, &header)?;
-    let splits = assign_splits(samples, seed);
-    let pending: Vec<u64> = (0..samples as u64)
+    // Splits are drawn over every pair of the whole simulation, so that each part's pairs get
+    // the splits they have in it.
+    let splits = assign_splits(part.samples, part.seed);
+    let range = part.shard.range(part.samples);
+    let pending: Vec<u64> = range
+        .clone()
         .filter(|&i| !writer.has_sample(&sample_id(i)))
         .collect();
-    let resumed = samples - pending.len();
+    let resumed = (range.end - range.start) as usize - pending.len();
     let done = AtomicUsize::new(resumed);
     progress(resumed);
     pending.par_iter().try_for_each(|&index| {

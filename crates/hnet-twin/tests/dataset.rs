@@ -10,8 +10,10 @@ use hnet_twin::import::{ImportOptions, MaskThreshold, import_recordings};
 use hnet_twin::off_bench::OffBench;
 use hnet_twin::raster::GreyImage;
 use hnet_twin::scene::{Backgrounds, Modality, TwinConfig};
+use hnet_twin::shard::{Shard, merge_shards};
 use hnet_twin::simulate::{
-    OFF_BENCH_VIEWS, read_sample_record, simulate_dataset, simulate_off_bench_dataset,
+    OFF_BENCH_VIEWS, read_sample_record, simulate_dataset, simulate_dataset_part,
+    simulate_off_bench_dataset,
 };
 use hnet_twin::synthetic_xray::BackgroundSource;
 
@@ -98,6 +100,54 @@ fn a_killed_generation_resumes_to_the_same_result() {
 }
 
 #[test]
+fn a_simulation_in_four_parts_merges_into_the_same_bytes() {
+    // The size: 2,000 pairs, at a size that keeps the test to seconds.
+    let (config, samples, seed) = (TwinConfig::new(Modality::Rgb, 16), 2000, 5);
+    let whole = scratch("shard-whole");
+    simulate(&config, samples, seed, &whole);
+    let backgrounds = Backgrounds::phantom(&config.views);
+    let parts: Vec<PathBuf> = (0..4).map(|k| scratch(&format!("shard-{k}"))).collect();
+    // Made in any order, each on its own (as four machines would).
+    for k in [2, 0, 3, 1] {
+        let shard = Shard { index: k, count: 4 };
+        let report = simulate_dataset_part(
+            &config,
+            &backgrounds,
+            &[],
+            samples,
+            seed,
+            shard,
+            &parts[k],
+            &|_| {},
+        )
+        .unwrap();
+        assert_eq!(report.generated, 500);
+    }
+    // A part alone, or a part given twice, is refused naming the folder.
+    let merged = scratch("shard-merged");
+    let err = merge_shards(&parts[..3], &merged).unwrap_err();
+    assert!(err.to_string().contains("part 3/4 is missing"), "{err}");
+    let twice = [
+        parts[0].clone(),
+        parts[0].clone(),
+        parts[1].clone(),
+        parts[2].clone(),
+    ];
+    let err = merge_shards(&twice, &merged).unwrap_err();
+    assert!(err.to_string().contains("given twice"), "{err}");
+    let err = merge_shards(std::slice::from_ref(&whole), &merged).unwrap_err();
+    assert!(err.to_string().contains("not a part"), "{err}");
+    assert!(!merged.exists(), "nothing is written for a refused merge");
+
+    let report = merge_shards(&parts, &merged).unwrap();
+    assert_eq!((report.samples, report.parts), (samples, 4));
+    assert_same_tree(&merged, &whole);
+    for dir in parts.into_iter().chain([whole, merged]) {
+        fs::remove_dir_all(dir).ok();
+    }
+}
+
+#[test]
 fn other_settings_or_foreign_folders_are_refused() {
     let config = TwinConfig::new(Modality::Xray1, 32);
     let out = scratch("refuse");
@@ -168,7 +218,17 @@ fn an_off_bench_dataset_records_each_pairs_own_views() {
     let off_bench = OffBench::new(config.clone(), vec![flat], 1.0);
     let out = scratch("off-bench");
     let names = ["phantom:off-bench".to_string()];
-    simulate_off_bench_dataset(&off_bench, &config, &names, 4, 9, &out, &|_| {}).unwrap();
+    simulate_off_bench_dataset(
+        &off_bench,
+        &config,
+        &names,
+        4,
+        9,
+        Shard::WHOLE,
+        &out,
+        &|_| {},
+    )
+    .unwrap();
     let dataset = Dataset::open(&out).unwrap();
     assert_eq!(dataset.header.source["views"], OFF_BENCH_VIEWS);
     let views: Vec<_> = dataset
@@ -214,6 +274,7 @@ fn import_options(a: PathBuf, b: PathBuf, forces: PathBuf, out: PathBuf) -> Impo
         size: None,
         skip_bad: false,
         seed: 1,
+        label_origin: hnet_twin::label_origin::LabelOrigin::Measured,
     }
 }
 
@@ -231,6 +292,11 @@ fn recordings_import_into_the_same_format_with_thresholded_masks() {
     );
     let row = dataset.rows.iter().find(|r| r.id == "frame_03").unwrap();
     assert_eq!(row.force_n, [0.3, -0.1, 0.2]);
+    // The forces table does not say where its labels came from: the import's option does.
+    assert_eq!(
+        row.label_origin(),
+        Ok(hnet_twin::label_origin::LabelOrigin::Measured)
+    );
     let pair = dataset.load_pair(row, None).unwrap();
     // The dark bar is the mask.
     assert_eq!(pair.mask_a[5 * 40 + 19], 1.0);
