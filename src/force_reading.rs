@@ -134,6 +134,8 @@ impl TrainingDomain {
                 network_error_n: [0.0743, 0.0749, 0.0689],
                 physics_sd_scale: 2.26,
                 pairs: 600,
+                // Calibrated before intervals were measured: a normal's 1.645 standard errors.
+                interval_90_sd: [hnet_twin::physics_force::INTERVAL_90_Z as f32; 3],
             },
             modality: Modality::Xray2,
             scenes: SceneSampling::bench(),

@@ -229,10 +229,13 @@ pub struct PairPrediction {
     /// calibrated.
     #[serde(default)]
     pub combined: Option<[f32; 3]>,
-    /// The combined estimate's standard error per axis, N (its nominal 90 % interval is 1.645
-    /// of them either side).
+    /// The combined estimate's standard error per axis, N.
     #[serde(default)]
     pub combined_sd: Option<[f32; 3]>,
+    /// Half the width of its 90 % interval per axis, N (split-conformal, calibrated with the
+    /// combination: [`hnet_twin::physics_force::ForceCombination::interval_90_n`]).
+    #[serde(default)]
+    pub combined_90: Option<[f32; 3]>,
     /// Catheter IoU of the pair's predicted masks in views A and B, when the network segments
     /// (each mask thresholded as the set's IoU is; 1 where neither mask shows the catheter).
     #[serde(default)]
@@ -241,13 +244,15 @@ pub struct PairPrediction {
 
 /// The predictions file: one line per pair, its true force, the network's, the physics estimate
 /// from the network's masks with its fit's standard error, and the two combined with its
-/// standard error (empty where there is none), N; then the catheter IoU of its masks in views A
-/// and B (empty without masks), and the physics estimator (`blind` or `oracle`).
+/// standard error and the half-width of its 90 % interval (empty where there is none), N; then
+/// the catheter IoU of its masks in views A and B (empty without masks), and the physics
+/// estimator (`blind` or `oracle`).
 pub fn predictions_csv(predictions: &[PairPrediction], estimator: &str) -> String {
     let mut csv = String::from(
         "id,fx,fy,fz,fx_pred,fy_pred,fz_pred,fx_physics,fy_physics,fz_physics,\
          fx_physics_sd,fy_physics_sd,fz_physics_sd,fx_combined,fy_combined,fz_combined,\
-         fx_combined_sd,fy_combined_sd,fz_combined_sd,catheter_iou_a,catheter_iou_b,estimator\n",
+         fx_combined_sd,fy_combined_sd,fz_combined_sd,fx_combined_90,fy_combined_90,\
+         fz_combined_90,catheter_iou_a,catheter_iou_b,estimator\n",
     );
     let triple = |v: Option<[f32; 3]>| {
         v.map_or_else(|| ",,".to_string(), |[x, y, z]| format!("{x},{y},{z}"))
@@ -256,13 +261,14 @@ pub fn predictions_csv(predictions: &[PairPrediction], estimator: &str) -> Strin
         let [tx, ty, tz] = p.truth;
         let _ = writeln!(
             csv,
-            "{},{tx},{ty},{tz},{},{},{},{},{},{},{estimator}",
+            "{},{tx},{ty},{tz},{},{},{},{},{},{},{},{estimator}",
             p.id,
             triple(p.predicted),
             triple(p.physics),
             triple(p.physics_sd),
             triple(p.combined),
             triple(p.combined_sd),
+            triple(p.combined_90),
             p.catheter_iou
                 .map_or_else(|| ",".to_string(), |[a, b]| format!("{a:.4},{b:.4}"))
         );
@@ -668,6 +674,7 @@ pub fn evaluate(
                 physics_sd: None,
                 combined: None,
                 combined_sd: None,
+                combined_90: None,
                 catheter_iou,
             });
         },
@@ -727,9 +734,13 @@ pub fn evaluate(
             let combined = physics
                 .zip(from_network.combination)
                 .zip(prediction.predicted)
-                .map(|((p, c), network)| c.combine_with_sd(network, p.force_n, p.sd_n));
-            prediction.combined = combined.map(|(force, _)| force);
-            prediction.combined_sd = combined.map(|(_, sd)| sd);
+                .map(|((p, c), network)| {
+                    let (force, sd) = c.combine_with_sd(network, p.force_n, p.sd_n);
+                    (force, sd, c.interval_90_n(sd))
+                });
+            prediction.combined = combined.map(|(force, ..)| force);
+            prediction.combined_sd = combined.map(|(_, sd, _)| sd);
+            prediction.combined_90 = combined.map(|(.., half)| half);
         }
     }
     Ok((

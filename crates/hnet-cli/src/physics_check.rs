@@ -17,9 +17,7 @@ use hnet_twin::carm::HeaderError;
 use hnet_twin::catalogue::CatalogueCatheter;
 use hnet_twin::centreline::Mask;
 use hnet_twin::dataset::Dataset;
-use hnet_twin::physics_force::{
-    CalibrationPair, ForceCombination, INTERVAL_90_Z, PhysicsSetup, physics_estimate,
-};
+use hnet_twin::physics_force::{CalibrationPair, ForceCombination, PhysicsSetup, physics_estimate};
 use hnet_twin::render::PROXIMAL_SHAFT_MM;
 use hnet_twin::rod;
 use hnet_twin::rod_fit::distances_to_rod;
@@ -142,7 +140,7 @@ pub struct PhysicsEvaluation {
     #[serde(default)]
     pub combined_force: Option<ForceMetrics>,
     /// Share of pairs per axis whose true force lies within the combined estimate's nominal
-    /// 90 % interval ([`ForceCombination::combine_with_sd`]).
+    /// 90 % interval ([`ForceCombination::interval_90_n`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub combined_coverage_90: Option<[f64; 3]>,
     /// The calibration the combined force used (measured on other pairs than these).
@@ -292,10 +290,10 @@ pub fn check(
                         if let Some(c) = combination {
                             let (force, sd) = c.combine_with_sd(n, force_n, fitted.sd_n);
                             combined.push(force, pair.truth_n);
+                            let half = c.interval_90_n(sd);
                             for axis in 0..3 {
-                                let off = f64::from((force[axis] - pair.truth_n[axis]).abs());
-                                covered[axis] +=
-                                    usize::from(off <= INTERVAL_90_Z * f64::from(sd[axis]));
+                                let off = (force[axis] - pair.truth_n[axis]).abs();
+                                covered[axis] += usize::from(off <= half[axis]);
                             }
                         }
                         let truth = f64::from(pair.truth_n[2]);
@@ -463,6 +461,7 @@ mod tests {
             network_error_n: [0.05; 3],
             physics_sd_scale: 3.0,
             pairs: 10,
+            interval_90_sd: [1.645; 3],
         };
         let network = check(
             MaskOrigin::Predicted,

@@ -161,13 +161,14 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
         Some(
             "id,fx,fy,fz,fx_pred,fy_pred,fz_pred,fx_physics,fy_physics,fz_physics,\
              fx_physics_sd,fy_physics_sd,fz_physics_sd,fx_combined,fy_combined,fz_combined,\
-             fx_combined_sd,fy_combined_sd,fz_combined_sd,catheter_iou_a,catheter_iou_b,estimator"
+             fx_combined_sd,fy_combined_sd,fz_combined_sd,fx_combined_90,fy_combined_90,\
+             fz_combined_90,catheter_iou_a,catheter_iou_b,estimator"
         )
     );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 40);
-    assert!(rows.iter().all(|r| r.len() == 22 && r[21] == "blind"));
-    assert!(rows.iter().all(|r| r[19..21].iter().all(|v| {
+    assert!(rows.iter().all(|r| r.len() == 25 && r[24] == "blind"));
+    assert!(rows.iter().all(|r| r[22..24].iter().all(|v| {
         let iou: f64 = v.parse().unwrap();
         (0.0..=1.0).contains(&iou)
     })));
@@ -175,7 +176,7 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
     // count the same IoU (white found, blue missed, red spurious).
     assert_eq!(std::fs::read_dir(&masks).unwrap().count(), 40 * 4);
     for row in &rows {
-        for (view, iou) in ["a", "b"].iter().zip(&row[19..21]) {
+        for (view, iou) in ["a", "b"].iter().zip(&row[22..24]) {
             let mask =
                 image::open(masks.join(format!("{}_predicted_mask_{view}.png", row[0]))).unwrap();
             assert_eq!((mask.width(), mask.height()), (48, 32));
