@@ -260,7 +260,8 @@ mod tests {
                 "force-128-off-bench-long",
                 "force-224-any-pose",
                 "force-224-sideways",
-                "force-224-turned"
+                "force-224-turned",
+                "imaging-224"
             ]
         );
         let names = names_in(&dir);

@@ -231,6 +231,61 @@ impl XRayDetector {
     }
 }
 
+/// Ranges of X-ray detectors to draw from, one per pair (a training stream's imaging
+/// randomisation): each setting uniform within its `[low, high]`, the dose on a log scale.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct DetectorRanges {
+    /// Photons per pixel, drawn log-uniformly.
+    pub photons_per_pixel: [f64; 2],
+    /// Blur σ, pixels.
+    pub blur_px: [f64; 2],
+    /// Scatter and veiling glare, share of the signal.
+    pub scatter_fraction: [f64; 2],
+    /// The display curve's exponent.
+    pub display_gamma: [f64; 2],
+}
+
+impl DetectorRanges {
+    /// Why these ranges cannot be drawn from, naming the field: reversed or not finite, or
+    /// an end no detector may have ([`XRayDetector::check`]).
+    pub fn check(&self) -> Result<(), String> {
+        for (name, [lo, hi]) in [
+            ("photons_per_pixel", self.photons_per_pixel),
+            ("blur_px", self.blur_px),
+            ("scatter_fraction", self.scatter_fraction),
+            ("display_gamma", self.display_gamma),
+        ] {
+            if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+                return Err(format!(
+                    "`{name}` must be a range [low, high] of finite numbers, low ≤ high"
+                ));
+            }
+        }
+        for end in [0, 1] {
+            XRayDetector {
+                photons_per_pixel: self.photons_per_pixel[end],
+                blur_px: self.blur_px[end],
+                scatter_fraction: self.scatter_fraction[end],
+                display_gamma: self.display_gamma[end],
+            }
+            .check()?;
+        }
+        Ok(())
+    }
+
+    /// One detector drawn from the ranges.
+    pub fn draw(&self, rng: &mut impl Rng) -> XRayDetector {
+        let mut uniform = |[lo, hi]: [f64; 2]| lo + (hi - lo) * rng.random::<f64>();
+        let [lo, hi] = self.photons_per_pixel;
+        XRayDetector {
+            photons_per_pixel: uniform([lo.ln(), hi.ln()]).exp(),
+            blur_px: uniform(self.blur_px),
+            scatter_fraction: uniform(self.scatter_fraction),
+            display_gamma: uniform(self.display_gamma),
+        }
+    }
+}
+
 /// An X-ray frame in the fluoroscopy display convention: the grey value is the relative
 /// transmitted intensity, so the catheter shows dark on the background's transmission map.
 ///

@@ -23,6 +23,7 @@ use burn::data::dataset::{Dataset as BurnDataset, DatasetError};
 use burn::tensor::Device;
 use hnet_twin::dataset::{Dataset, LoadedPair, SquareSymmetry};
 use hnet_twin::off_bench::OffBench;
+use hnet_twin::render::DetectorRanges;
 use hnet_twin::scene::{Backgrounds, SceneSampling, TwinConfig, generate, sample_rng};
 use hnet_twin::simulate::OFF_BENCH_VIEWS;
 use hnet_units::ImageSize;
@@ -43,6 +44,20 @@ pub struct TwinStreamConfig {
     /// Pairs drawn off the bench, for the masks (none when absent).
     #[serde(default)]
     pub off_bench: Option<OffBenchConfig>,
+    /// Bench pairs imaged by other X-ray detectors (dose, blur, scatter and glare, display
+    /// curve), for masks and force that hold up on other systems (none when absent).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub imaging: Option<ImagingConfig>,
+}
+
+/// The share of bench pairs imaged by a detector drawn per pair, and the detectors' ranges.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ImagingConfig {
+    /// Fraction of bench pairs imaged by a drawn detector, in `[0, 1]` (the others by the
+    /// dataset's).
+    pub fraction: f64,
+    /// The detectors drawn from.
+    pub detectors: DetectorRanges,
 }
 
 /// The share and the look of off-bench pairs.
@@ -91,6 +106,15 @@ impl TwinStreamConfig {
                 .check()
                 .map_err(|why| anyhow::anyhow!("stream.off_bench.scenes: {why}"))?;
         }
+        if let Some(imaging) = &self.imaging {
+            if !(0.0..=1.0).contains(&imaging.fraction) {
+                bail!("stream.imaging.fraction must lie in [0, 1]");
+            }
+            imaging
+                .detectors
+                .check()
+                .map_err(|why| anyhow::anyhow!("stream.imaging.detectors: {why}"))?;
+        }
         Ok(())
     }
 }
@@ -100,6 +124,9 @@ const MIX_SALT: u64 = 0x6D69_785F_7061_6972;
 
 /// Keeps the symmetries of an off-bench pair's views independent of the pair's own draws.
 const SYMMETRY_SALT: u64 = 0x7475_726E_5F76_6965;
+
+/// Keeps a bench pair's drawn detector independent of the pair's own draws.
+const IMAGING_SALT: u64 = 0x696D_6167_696E_6721;
 
 /// The twin's training pairs for the epoch in progress (a Burn dataset).
 pub struct TwinStream {
@@ -247,7 +274,23 @@ impl TwinStream {
         });
         let sample = match self.off_bench.as_ref().filter(|_| off_bench) {
             Some(off) => off.generate(self.config.seed, index)?.1,
-            None => generate(&self.twin, &self.bench_backgrounds, self.config.seed, index)?,
+            None => {
+                let mut rng = sample_rng(self.config.seed ^ IMAGING_SALT, index);
+                match self
+                    .config
+                    .imaging
+                    .filter(|i| rng.random::<f64>() < i.fraction)
+                {
+                    Some(imaging) => {
+                        let twin = TwinConfig {
+                            detector: imaging.detectors.draw(&mut rng),
+                            ..self.twin.clone()
+                        };
+                        generate(&twin, &self.bench_backgrounds, self.config.seed, index)?
+                    }
+                    None => generate(&self.twin, &self.bench_backgrounds, self.config.seed, index)?,
+                }
+            }
         };
         let mut pair = LoadedPair::from_sample(&sample, self.twin.image_size, self.size);
         if off_bench
@@ -388,7 +431,24 @@ mod tests {
                 scenes: None,
                 turned_views: false,
             }),
+            imaging: None,
         };
+        // Detectors no X-ray system has are refused, naming the field.
+        let mut foggy = config.clone();
+        foggy.imaging = Some(ImagingConfig {
+            fraction: 0.5,
+            detectors: DetectorRanges {
+                photons_per_pixel: [300.0, 3000.0],
+                blur_px: [0.4, 2.0],
+                scatter_fraction: [0.0, 1.5],
+                display_gamma: [0.5, 1.6],
+            },
+        });
+        let error = foggy.check().unwrap_err();
+        assert!(
+            format!("{error:#}").contains("scatter_fraction"),
+            "{error:#}"
+        );
         // Off-bench scenes that cannot be drawn are refused with the config's field named.
         let mut reversed = config.clone();
         if let Some(off) = &mut reversed.off_bench {
