@@ -8,10 +8,13 @@
 //! - **Views.** A twin pair carries the C-arms it was rendered with (at
 //!   [`crate::imaging::WORK_SIZE`]); an uploaded pair is read with the page's default views, the
 //!   biplane the twin tab starts with (frontal and left lateral), as its force arrows are.
-//! - **Catheter.** A twin pair's own settings (stiffness, length, pre-curve and its exact base
-//!   pose); for an uploaded pair, the catheter set on the twin tab's sliders, clamped at the
-//!   twin's nominal base, whose position and orientation are then fitted too (a real pair's base
-//!   is not known exactly).
+//! - **Catheter.** A twin pair is read blind, as `hnet eval` reads one by default: the
+//!   catalogue's bench catheter (not the pair's own stiffness, length and pre-curve) and the
+//!   bench fixture's nominal base, whose position and orientation are fitted with the force
+//!   within the fixture's tolerance ([`PhysicsSetup::blind`]); nothing of the pair's own record.
+//!   For an uploaded pair or a DICOM frame, the catheter set on the twin tab's sliders, clamped
+//!   at the twin's nominal base, whose position and orientation are then fitted too (a real
+//!   pair's base is not known exactly).
 //! - **Masks.** The label masks when the pair has them (the twin's exact masks, H-Net's masks
 //!   accepted as labels, or the user's strokes), else H-Net's predicted masks (soft, as they come
 //!   out of the network); or H-Net's masks also where there are labels, when the user asks
@@ -25,6 +28,7 @@
 //! [`crate::orbit_camera`].
 
 use hnet_twin::carm::{Biplane, CArm, CameraMatrix};
+use hnet_twin::catalogue::{BENCH_CATHETER, CatalogueCatheter, catalogue};
 use hnet_twin::centreline::{CentrelineError, Mask};
 use hnet_twin::physics_force::{
     ForceCombination, MAX_FIT_RMS_MM, PhysicsError, PhysicsEstimate, PhysicsSetup, physics_estimate,
@@ -32,7 +36,7 @@ use hnet_twin::physics_force::{
 use hnet_twin::reconstruction::{EpipolarGeometry, ReconstructionError, clip_line};
 use hnet_twin::rod::{RodBase, RodConfig};
 use hnet_twin::rod_fit::RodFitError;
-use hnet_twin::scene::SceneParams;
+use hnet_twin::scene::{NominalBase, SceneParams, SceneSampling};
 
 use crate::imaging::WORK_SIZE;
 use crate::twin_live::TwinControls;
@@ -139,8 +143,11 @@ pub struct PairGeometry {
     pub rod: RodConfig,
     /// Where it is clamped.
     pub base: RodBase,
-    /// Whether the base pose is exact (twin pairs); if not, the fit moves and turns it.
+    /// Whether the base pose is exact; if not, the fit moves and turns it.
     pub base_known: bool,
+    /// The catalogue catheter and nominal base a blind reading assumes (twin pairs), in place
+    /// of [`Self::rod`] and [`Self::base`].
+    pub blind: Option<(CatalogueCatheter, NominalBase)>,
     /// Whether the views are the page's default biplane, assumed for an uploaded pair rather
     /// than known: the reconstruction's reprojection error then only reflects that assumption.
     pub views_assumed: bool,
@@ -168,14 +175,21 @@ impl PairGeometry {
             PairSource::Twin {
                 views, settings, ..
             } => {
+                // The settings must still read (a record from another version is named), though
+                // a blind reading uses none of them.
                 let scene: SceneParams = serde_json::from_value(settings["scene"].clone())
                     .map_err(Catheter3dError::TwinSettings)?;
                 let (rod, base) = scene.rod(&template);
+                let catheter = catalogue()
+                    .into_iter()
+                    .find(|c| c.name == BENCH_CATHETER)
+                    .expect("the bench catheter is in the catalogue");
                 Ok(Self {
                     views: *views,
                     rod,
                     base,
-                    base_known: true,
+                    base_known: false,
+                    blind: Some((catheter, SceneSampling::bench().nominal_base())),
                     views_assumed: false,
                 })
             }
@@ -186,6 +200,7 @@ impl PairGeometry {
                     rod,
                     base,
                     base_known: false,
+                    blind: None,
                     views_assumed: matches!(pair.source, PairSource::Upload { .. }),
                 })
             }
@@ -238,8 +253,10 @@ pub struct Catheter3d {
     pub rms_mm: f64,
     /// The fitted rod's centreline, mm, from its base to its tip.
     pub rod_mm: Vec<[f64; 3]>,
-    /// Whether the base pose was fitted too (uploaded pairs).
+    /// Whether the base pose was fitted too.
     pub base_fitted: bool,
+    /// The catalogue catheter a blind reading assumed (twin pairs).
+    pub blind_catheter: Option<String>,
     /// Whether the views were assumed (the page's default biplane for an upload), so that the
     /// reprojection error checks nothing and is not shown.
     pub views_assumed: bool,
@@ -254,8 +271,8 @@ impl Catheter3d {
     /// The tip force combined from H-Net's estimate `hnet_n` and this physics estimate, each
     /// axis weighted by the inverse of its error variance as `combination` calibrated them for
     /// these weights ([`ForceCombination::combine`]), when the rod was fitted to H-Net's own
-    /// masks, the case the combination is for (measured on twin bench pairs with the exact base
-    /// and catheter: docs/results.md, "The combined estimate"). From label masks there is none:
+    /// masks, the case the combination is for (measured on twin bench pairs read blind:
+    /// docs/results.md, "Force without the twin's answers"). From label masks there is none:
     /// from the twin's exact masks the physics estimate is far better than H-Net on every axis,
     /// and for drawn or accepted masks nothing was measured.
     pub fn combined_with(
@@ -301,10 +318,13 @@ impl Catheter3d {
             f[1],
             f[2],
             self.rms_mm,
-            if self.base_fitted {
-                " (its base pose fitted too)"
-            } else {
-                ""
+            match (&self.blind_catheter, self.base_fitted) {
+                (Some(name), _) => format!(
+                    " (read blind: the catalogue's {name}, its base pose fitted near the bench \
+                     fixture's)"
+                ),
+                (None, true) => " (its base pose fitted too)".to_string(),
+                (None, false) => String::new(),
             },
         )
     }
@@ -359,10 +379,17 @@ pub fn reconstruct_pair(
     geometry: &PairGeometry,
     masks: &PairMasks<'_>,
 ) -> Result<Catheter3d, Catheter3dError> {
-    let mut setup = PhysicsSetup::new(geometry.cameras(), geometry.rod.clone(), geometry.base);
-    setup.fit.fit_base_position = !geometry.base_known;
-    setup.fit.fit_base_rotation = !geometry.base_known;
-    setup.max_fit_rms_mm = Some(MAX_FIT_RMS_MM);
+    let setup = match &geometry.blind {
+        Some((catheter, nominal)) => PhysicsSetup::blind(geometry.cameras(), catheter, nominal),
+        None => {
+            let mut setup =
+                PhysicsSetup::new(geometry.cameras(), geometry.rod.clone(), geometry.base);
+            setup.fit.fit_base_position = !geometry.base_known;
+            setup.fit.fit_base_rotation = !geometry.base_known;
+            setup.max_fit_rms_mm = Some(MAX_FIT_RMS_MM);
+            setup
+        }
+    };
     let PhysicsEstimate {
         reconstruction,
         fit,
@@ -388,6 +415,7 @@ pub fn reconstruct_pair(
         rms_mm: fit.rms_mm,
         rod_mm: fit.shape.points_mm.iter().map(|p| p.0).collect(),
         base_fitted: !geometry.base_known,
+        blind_catheter: geometry.blind.as_ref().map(|(c, _)| c.name.clone()),
         views_assumed: geometry.views_assumed,
     })
 }
@@ -502,7 +530,9 @@ mod tests {
             assert!(error < 0.03, "{:?} N vs {force:?} N", c.force_n);
             assert!(c.tip_seen && c.length_mm > 30.0, "{}", c.summary());
             assert_eq!(c.masks, MaskSource::Labels);
-            assert!(!c.base_fitted);
+            // Read blind: the catalogue catheter, the base fitted.
+            assert!(c.base_fitted);
+            assert!(c.summary().contains("read blind"), "{}", c.summary());
             // The reconstructed tip is the twin's.
             let PairSource::Twin { tip_mm, .. } = &pair.source else {
                 unreachable!()
@@ -675,6 +705,8 @@ mod tests {
         // A catheter far too stiff to bend this way within the largest force considered.
         let stiff = PairGeometry {
             rod: geometry.rod.clone().with_bending_stiffness(1e9),
+            base_known: true,
+            blind: None,
             ..geometry.clone()
         };
         let err = reconstruct_pair(&stiff, &masks).unwrap_err();
@@ -697,7 +729,11 @@ mod tests {
             "{text}"
         );
         // A rod that cannot be solved at all.
-        let mut broken = geometry.clone();
+        let mut broken = PairGeometry {
+            base_known: true,
+            blind: None,
+            ..geometry.clone()
+        };
         broken.rod.length_mm = 0.0;
         let err = reconstruct_pair(&broken, &masks).unwrap_err();
         assert!(
