@@ -4,13 +4,14 @@
 //! Every H-Net trained here saw catheters that come up from the bottom edge of both views (the
 //! bench, and the twin's scenes at the page's C-arm angles), and one with position channels loses
 //! the shaft of a catheter that enters through another edge (catheter IoU about 0.2; see
-//! docs/results.md, "Turned at evaluation"). Turning a view by quarter turns so that its catheter
+//! docs/log/2026-12-01-training-on-the-twins-stream.md, "Turned at evaluation"). Turning a view by quarter turns so that its catheter
 //! enters from the bottom, and the masks back, reads such a view without retraining.
 //!
 //! When the edge is not known, [`EntrySetting::Search`] runs the four turns of both views and
 //! keeps, per view, the turn whose mask has the most catheter pixels: the shaft a turned view
 //! loses is most of the catheter (on 2,400 twin views the bundled model's upright turn had the
-//! most for all but 2; docs/results.md, "Where the catheter enters").
+//! most for all but 2; docs/log/2026-12-01-training-on-the-twins-stream.md, "Where the catheter
+//! enters").
 //!
 //! The force head learned the bench with both views as they are, so its force is kept only when
 //! both views were read untouched ([`EntryReading::force`]).
