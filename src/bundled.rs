@@ -23,7 +23,7 @@ pub const BUNDLED_FORCE_CAVEAT: &str = "The bundled weights were trained on the 
     closer across the catheter (R² 0.74 and 0.81 on x and y on the bench) but not along it (Fz: \
     R² 0.18). The Combined row (each axis weighted by the inverse of its measured error; shown \
     when the rod was fitted to these masks: on a twin pair, choose H-Net's masks in the 3D \
-    panel) is the closest on twin bench pairs: R² 0.87 / 0.88 / 0.69, RMSE 0.047 N per axis, its \
+    panel) is the closest on twin bench pairs: R² 0.87 / 0.88 / 0.68, RMSE 0.047 N per axis, its \
     90 % interval holding 89-92 % of true forces; the verdict reads it where it is shown. For \
     uploads the catheter is the twin tab's and nothing was measured.";
 

@@ -378,21 +378,10 @@ mod tests {
     #[test]
     fn a_pair_with_one_view_painted_is_not_exported_as_complete() {
         use crate::workspace::{Tool, View};
-        let rgb = vec![0u8; WORK_SIZE * WORK_SIZE * 3];
-        let mut ws = Workspace::default();
-        for _ in 0..2 {
-            let source = PairSource::Upload {
-                view_a: "a.png".into(),
-                view_b: "b.png".into(),
-            };
-            ws.add(LabeledPair::new(
-                ws.next_id(),
-                source,
-                rgb.clone(),
-                rgb.clone(),
-            ));
-            let id = ws.current().unwrap().id.clone();
-            ws.set_force(&id, Some(([0.1, 0.0, 0.0], LabelOrigin::Typed)));
+        let mut ws = crate::workspace::tests::workspace(2);
+        for id in ["pair-0001", "pair-0002"] {
+            ws.select(ws.pairs.iter().position(|p| p.id == id).unwrap());
+            ws.set_force(id, Some(([0.1, 0.0, 0.0], LabelOrigin::Typed)));
             ws.begin_stroke(View::A);
             ws.stroke_to([10.0, 10.0], [100.0, 10.0], 3.0, Tool::Brush);
             ws.end_stroke();

@@ -126,7 +126,8 @@ impl TrainingDomain {
     /// [`BUNDLED_COMBINED_FORCE_MSE_N2`], 0.081 N. Their combination with the blind physics
     /// estimate was calibrated on the 598 fitted pairs of the val split of their training data
     /// (`hnet eval --weights assets/hnet-cpu.bpk --data data/xray2-bench-224-s7`, blind, the
-    /// default; its 90 % intervals covered 89 / 90 / 92 % of 480 fresh bench pairs).
+    /// default; its 90 % intervals covered 89 / 90 / 92 % of the 475 of 480 fresh bench pairs that
+    /// got a physics estimate).
     pub fn bundled() -> Self {
         Self {
             force_error_n: error_length_n(BUNDLED_FORCE_MSE_N2),
@@ -299,8 +300,9 @@ impl Verdict {
 
 /// Root-mean-square length of the physics estimate's error vector on twin pairs read blind from
 /// their exact masks, newtons: 0.032 N over 480 fresh bench pairs (R² 0.97; `hnet eval` on
-/// `data/xray2-bench-224-s33`, the check from true masks). Read with the pair's own catheter and
-/// base it was 0.013 N: the fixture's play, fitted, is most of the difference.
+/// `data/xray2-bench-224-s33`, the check from true masks). The figure before the page read twin
+/// pairs blind, 0.013 N, was measured with each pair's own catheter and exact base, on 30 pairs
+/// of the twin tab.
 pub const PHYSICS_FORCE_ERROR_N: f32 = 0.032;
 
 /// The physics estimate's per-axis mean square errors (x, y, z), N², read blind with the rod

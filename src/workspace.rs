@@ -691,11 +691,12 @@ pub fn parse_force_labels(file: &str, bytes: &[u8]) -> Result<Vec<ForceLabelRow>
 
 // Native tests (`cargo test`); the browser tests are in tests/web.rs.
 #[cfg(all(test, not(target_arch = "wasm32")))]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    /// A workspace of `n` black uploaded pairs, `pair-0001` to `pair-000n`.
-    fn workspace(n: usize) -> Workspace {
+    /// A workspace of `n` black uploaded pairs, `pair-0001` to `pair-000n` (also the export's
+    /// tests).
+    pub(crate) fn workspace(n: usize) -> Workspace {
         let mut ws = Workspace::default();
         let rgb = vec![0u8; WORK_SIZE * WORK_SIZE * 3];
         for _ in 0..n {

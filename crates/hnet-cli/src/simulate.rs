@@ -10,7 +10,9 @@ use hnet_twin::raster::GreyImage;
 use hnet_twin::render::XRayDetector;
 use hnet_twin::scene::{Backgrounds, MaskSource, Modality, SceneSampling, TwinConfig};
 use hnet_twin::shard::{Shard, merge_shards};
-use hnet_twin::simulate::{OFF_BENCH_VIEWS, simulate_dataset_part, simulate_off_bench_dataset};
+use hnet_twin::simulate::{
+    OFF_BENCH_VIEWS, Part, simulate_dataset_part, simulate_off_bench_dataset,
+};
 use hnet_twin::synthetic_xray::BackgroundSource;
 
 use crate::progress;
@@ -252,8 +254,12 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         .as_deref()
         .map(read_scene_sampling)
         .transpose()?;
-    let shard = args.shard.unwrap_or(Shard::WHOLE);
-    let range = shard.range(args.samples);
+    let part = Part {
+        samples: args.samples,
+        seed: args.seed,
+        shard: args.shard.unwrap_or(Shard::WHOLE),
+    };
+    let range = part.shard.range(args.samples);
     let bar = progress::bar(range.end - range.start, "simulating");
     let progress = |done: usize| bar.set_position(done as u64);
     let start = Instant::now();
@@ -261,16 +267,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         Scenes::Preset(scenes) => {
             config.scene = sampling.unwrap_or_else(|| scenes.clone());
             let (backgrounds, names) = backgrounds(&config, &args.backgrounds)?;
-            simulate_dataset_part(
-                &config,
-                &backgrounds,
-                &names,
-                args.samples,
-                args.seed,
-                shard,
-                &args.out,
-                &progress,
-            )?
+            simulate_dataset_part(&config, &backgrounds, &names, part, &args.out, &progress)?
         }
         Scenes::OffBench => {
             if !config.modality.is_xray() {
@@ -291,16 +288,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
                 }
                 None => off_bench,
             };
-            simulate_off_bench_dataset(
-                &off_bench,
-                &config,
-                &names,
-                args.samples,
-                args.seed,
-                shard,
-                &args.out,
-                &progress,
-            )?
+            simulate_off_bench_dataset(&off_bench, &config, &names, part, &args.out, &progress)?
         }
     };
     bar.finish_and_clear();

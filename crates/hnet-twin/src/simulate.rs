@@ -302,74 +302,67 @@ pub fn simulate_dataset(
     out: &Path,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<SimulationReport, SimulationError> {
-    simulate_dataset_part(
-        config,
-        backgrounds,
-        background_names,
-        samples,
-        seed,
-        Shard::WHOLE,
-        out,
-        progress,
-    )
+    let part = Part::whole(samples, seed);
+    simulate_dataset_part(config, backgrounds, background_names, part, out, progress)
 }
 
-/// [`simulate_dataset`]'s part `shard` of its `samples` pairs ([`crate::shard`]: the parts'
-/// union, merged, is byte for byte the whole dataset).
-#[allow(clippy::too_many_arguments)]
+/// Which pairs a run writes: part `shard` of a simulation of `samples` pairs seeded `seed`
+/// ([`crate::shard`]: the parts' union, merged, is byte for byte the whole dataset).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Part {
+    /// Pairs of the whole simulation.
+    pub samples: usize,
+    /// Its seed.
+    pub seed: u64,
+    /// Which part this run writes.
+    pub shard: Shard,
+}
+
+impl Part {
+    /// The whole simulation.
+    pub fn whole(samples: usize, seed: u64) -> Self {
+        Self {
+            samples,
+            seed,
+            shard: Shard::WHOLE,
+        }
+    }
+}
+
+/// [`simulate_dataset`]'s `part` of its pairs.
 pub fn simulate_dataset_part(
     config: &TwinConfig,
     backgrounds: &Backgrounds,
     background_names: &[String],
-    samples: usize,
-    seed: u64,
-    shard: Shard,
+    part: Part,
     out: &Path,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<SimulationReport, SimulationError> {
-    let source = header_source(config, background_names, seed, None);
-    let part = Part {
-        samples,
-        seed,
-        shard,
-    };
+    let source = header_source(config, background_names, part.seed, None);
     write_samples(config, source, part, out, progress, &|index| {
-        Ok((config.clone(), generate(config, backgrounds, seed, index)?))
+        Ok((
+            config.clone(),
+            generate(config, backgrounds, part.seed, index)?,
+        ))
     })
 }
 
-/// Generates `samples` pairs off the bench ([`OffBench`]: varied catheters and poses, the
-/// page's C-arm angle ranges, phantom or radiographs) into `out`, each pair's record holding its
-/// own views. The header marks the dataset `"views": "off-bench"`: its `twin` settings give the
-/// look, not the views.
-#[allow(clippy::too_many_arguments)]
+/// Generates `part` of a simulation off the bench ([`OffBench`]: varied catheters and poses,
+/// the page's C-arm angle ranges, phantom or radiographs) into `out`, each pair's record holding
+/// its own views. The header marks the dataset `"views": "off-bench"`: its `twin` settings give
+/// the look, not the views.
 pub fn simulate_off_bench_dataset(
     off_bench: &OffBench,
     base: &TwinConfig,
     background_names: &[String],
-    samples: usize,
-    seed: u64,
-    shard: Shard,
+    part: Part,
     out: &Path,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<SimulationReport, SimulationError> {
-    let source = header_source(base, background_names, seed, Some(OFF_BENCH_VIEWS));
-    let part = Part {
-        samples,
-        seed,
-        shard,
-    };
+    let source = header_source(base, background_names, part.seed, Some(OFF_BENCH_VIEWS));
     write_samples(base, source, part, out, progress, &|index| {
-        Ok(off_bench.generate(seed, index)?)
+        Ok(off_bench.generate(part.seed, index)?)
     })
-}
-
-/// Which pairs a run writes: part `shard` of `samples` pairs seeded `seed`.
-#[derive(Debug, Clone, Copy)]
-struct Part {
-    samples: usize,
-    seed: u64,
-    shard: Shard,
 }
 
 /// What a simulated dataset's header records of its making (`source` in `dataset.json`):

@@ -12,7 +12,7 @@ use hnet_twin::raster::GreyImage;
 use hnet_twin::scene::{Backgrounds, Modality, TwinConfig};
 use hnet_twin::shard::{Shard, merge_shards};
 use hnet_twin::simulate::{
-    OFF_BENCH_VIEWS, read_sample_record, simulate_dataset, simulate_dataset_part,
+    OFF_BENCH_VIEWS, Part, read_sample_record, simulate_dataset, simulate_dataset_part,
     simulate_off_bench_dataset,
 };
 use hnet_twin::synthetic_xray::BackgroundSource;
@@ -109,18 +109,13 @@ fn a_simulation_in_four_parts_merges_into_the_same_bytes() {
     let parts: Vec<PathBuf> = (0..4).map(|k| scratch(&format!("shard-{k}"))).collect();
     // Made in any order, each on its own (as four machines would).
     for k in [2, 0, 3, 1] {
-        let shard = Shard { index: k, count: 4 };
-        let report = simulate_dataset_part(
-            &config,
-            &backgrounds,
-            &[],
+        let part = Part {
             samples,
             seed,
-            shard,
-            &parts[k],
-            &|_| {},
-        )
-        .unwrap();
+            shard: Shard { index: k, count: 4 },
+        };
+        let report =
+            simulate_dataset_part(&config, &backgrounds, &[], part, &parts[k], &|_| {}).unwrap();
         assert_eq!(report.generated, 500);
     }
     // A part alone, or a part given twice, is refused naming the folder.
@@ -222,9 +217,7 @@ fn an_off_bench_dataset_records_each_pairs_own_views() {
         &off_bench,
         &config,
         &names,
-        4,
-        9,
-        Shard::WHOLE,
+        Part::whole(4, 9),
         &out,
         &|_| {},
     )
