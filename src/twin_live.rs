@@ -83,6 +83,7 @@ impl TwinControls {
             base_tilt_deg: 0.0,
             base_azimuth_deg: 0.0,
             base_roll_deg: 90.0,
+            plate: None,
         }
     }
 

@@ -352,7 +352,7 @@ pub fn run(args: &MismatchArgs) -> anyhow::Result<()> {
             } else {
                 Vec::new()
             },
-            mask: hnet_twin::scene::MaskSource::Geometry,
+            mask: None,
             scenes: Scenes::Preset(set.scenes.clone()),
             scene_sampling: None,
             detector: set.detector,

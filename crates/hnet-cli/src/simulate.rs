@@ -8,7 +8,7 @@ use hnet_twin::import::is_image_file;
 use hnet_twin::off_bench::OffBench;
 use hnet_twin::raster::GreyImage;
 use hnet_twin::render::XRayDetector;
-use hnet_twin::scene::{Backgrounds, MaskSource, Modality, SceneSampling, TwinConfig};
+use hnet_twin::scene::{Backgrounds, MaskSource, Modality, PAPER_BENCH, SceneSampling, TwinConfig};
 use hnet_twin::shard::{Shard, merge_shards};
 use hnet_twin::simulate::{
     OFF_BENCH_VIEWS, Part, simulate_dataset_part, simulate_off_bench_dataset,
@@ -38,11 +38,15 @@ pub struct SimulateArgs {
     /// the built-in thorax phantom when none is given.
     #[arg(long = "background")]
     pub backgrounds: Vec<PathBuf>,
-    /// How masks are made: `geometry` (exact), `otsu`, or a grey level 0-255 to threshold at.
-    #[arg(long, default_value = "geometry", value_parser = parse_mask)]
-    pub mask: MaskSource,
-    /// How scenes are drawn: `bench` (the paper's bench: one catheter on a fixed base, a random
-    /// tip force), `varied` (random catheters and base poses too; see docs/twin.md) or
+    /// How masks are made: `geometry` (exact), `otsu`, a grey level 0-255 to threshold at, or
+    /// `cutout` (the bench photograph thresholded against the empty bench, the paper's way).
+    /// Default: `geometry`, `cutout` for `--scenes paper-bench`.
+    #[arg(long, value_parser = parse_mask)]
+    pub mask: Option<MaskSource>,
+    /// How scenes are drawn: `bench` (the twin's bench seen by the C-arm: one catheter on a
+    /// fixed base, a random tip force), `varied` (random catheters and base poses too; see
+    /// docs/twin.md), `paper-bench` (the paper's bench as its cameras saw it: close up, the tip
+    /// pressed against an actuated sensor plate, the X-ray sets made the paper's way) or
     /// `off-bench` (varied scenes seen from random C-arm angles within the page's ranges, on the
     /// phantom rendered from there, or on the `--background` radiographs when given).
     #[arg(long, default_value = "bench", value_parser = parse_scenes)]
@@ -124,7 +128,12 @@ fn parse_scenes(text: &str) -> Result<Scenes, String> {
     }
     SceneSampling::preset(text)
         .map(Scenes::Preset)
-        .ok_or_else(|| format!("`{text}` is not bench, varied or {OFF_BENCH_VIEWS}"))
+        .ok_or_else(|| {
+            format!(
+                "`{text}` is not {} or {OFF_BENCH_VIEWS}",
+                SceneSampling::PRESETS.join(", ")
+            )
+        })
 }
 
 pub fn parse_modality(text: &str) -> Result<Modality, String> {
@@ -135,6 +144,7 @@ fn parse_mask(text: &str) -> Result<MaskSource, String> {
     match text {
         "geometry" => Ok(MaskSource::Geometry),
         "otsu" => Ok(MaskSource::Otsu),
+        "cutout" => Ok(MaskSource::Cutout),
         level => level
             .parse::<u8>()
             .map(MaskSource::Threshold)
@@ -238,8 +248,15 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     if args.size < 16 {
         bail!("--size must be at least 16 pixels");
     }
-    let mut config = TwinConfig::new(args.modality, args.size);
-    config.mask = args.mask;
+    let paper_bench = matches!(&args.scenes, Scenes::Preset(s) if s.plate.is_some());
+    let mut config = if paper_bench {
+        TwinConfig::paper_bench(args.modality, args.size)
+    } else {
+        TwinConfig::new(args.modality, args.size)
+    };
+    if let Some(mask) = args.mask {
+        config.mask = mask;
+    }
     if let Some(detector) = args.detector {
         if !config.modality.is_xray() {
             bail!("--detector is for the X-ray modalities (xray1, xray2)");
@@ -266,6 +283,12 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     let report = match &args.scenes {
         Scenes::Preset(scenes) => {
             config.scene = sampling.unwrap_or_else(|| scenes.clone());
+            if config.scene.plate.is_some() && !paper_bench {
+                bail!(
+                    "a scene sampling with a plate needs the paper's bench views: add \
+                     --scenes {PAPER_BENCH}"
+                );
+            }
             let (backgrounds, names) = backgrounds(&config, &args.backgrounds)?;
             simulate_dataset_part(&config, &backgrounds, &names, part, &args.out, &progress)?
         }
@@ -305,5 +328,12 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
         },
         report.resumed
     );
+    if report.dropped_draws > 0 {
+        eprintln!(
+            "{} scene draws dropped: their rod or contact could not be solved (or the force was \
+             beyond the sensor's range); each of those pairs was drawn again",
+            report.dropped_draws
+        );
+    }
     Ok(())
 }

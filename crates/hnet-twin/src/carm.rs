@@ -113,10 +113,21 @@ impl CArm {
 
     /// A bench camera looking at the isocentre from 300 mm away, framing about 90 mm there.
     pub fn bench_camera(primary_deg: f64, secondary_deg: f64, size_px: usize) -> Self {
+        Self::bench_camera_at(primary_deg, secondary_deg, 300.0, size_px)
+    }
+
+    /// A bench camera (12 mm lens, 3.6 mm sensor) looking at the isocentre from `distance_mm`,
+    /// framing `0.3 · distance_mm` there.
+    pub fn bench_camera_at(
+        primary_deg: f64,
+        secondary_deg: f64,
+        distance_mm: f64,
+        size_px: usize,
+    ) -> Self {
         Self {
             primary_deg,
             secondary_deg,
-            source_to_isocentre_mm: 300.0,
+            source_to_isocentre_mm: distance_mm,
             // A 12 mm focal length on a sensor 3.6 mm wide.
             source_to_detector_mm: 12.0,
             pixel_pitch_mm: 3.6 / size_px as f64,
@@ -239,6 +250,15 @@ impl Biplane {
         Self {
             a: CArm::bench_camera(0.0, 0.0, size_px),
             b: CArm::bench_camera(90.0, 0.0, size_px),
+        }
+    }
+
+    /// The paper's bench as its cameras saw it: two cameras 90° apart, 200 mm from the
+    /// catheter, framing 60 mm there, so that the 50 mm flexible section fills most of the frame.
+    pub fn paper_bench(size_px: usize) -> Self {
+        Self {
+            a: CArm::bench_camera_at(0.0, 0.0, 200.0, size_px),
+            b: CArm::bench_camera_at(90.0, 0.0, 200.0, size_px),
         }
     }
 

@@ -5,7 +5,8 @@
 //! - [`carm`]: two perspective views (a biplane C-arm, or the bench's two cameras);
 //! - [`render`]: the catheter's exact anti-aliased mask, X-ray attenuation and camera look;
 //! - [`phantom`] and [`synthetic_xray`]: chest radiograph backgrounds cut into shuffled patches;
-//! - [`scene`]: random scenes and complete stereo samples; [`off_bench`]: pairs off the bench
+//! - [`scene`]: random scenes and complete stereo samples; [`sensor_plate`]: the paper's bench
+//!   contact (the tip pressed against an actuated plate); [`off_bench`]: pairs off the bench
 //!   (any catheter and pose, any C-arm angle the page offers, phantom or radiograph);
 //! - [`centreline`], [`reconstruction`] and [`rod_fit`]: the catheter in 3D from its two masks
 //!   (sub-pixel centrelines, epipolar matching and triangulation) and the tip force of the rod
@@ -45,6 +46,7 @@ pub mod render;
 pub mod rod;
 pub mod rod_fit;
 pub mod scene;
+pub mod sensor_plate;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod shard;
 #[cfg(not(target_arch = "wasm32"))]

@@ -440,6 +440,49 @@ pub fn render_bench(
     photo
 }
 
+/// How far a photograph's pixel must differ from the empty bench's, in any channel (linear RGB,
+/// 0-1), to be catheter: eight times the sensor's noise, below the darkest shading of the shaft
+/// and of the electrodes against the board.
+pub const CUTOUT_LEVEL: f32 = 0.10;
+
+/// The catheter of a bench photograph, thresholded against the empty bench `board` (a reference
+/// frame, as a bench records before the catheter goes in): 255 where a channel differs by more
+/// than [`CUTOUT_LEVEL`], else 0.
+pub fn bench_cutout(photo: &RgbImage, board: &RgbImage) -> Vec<u8> {
+    photo
+        .data
+        .chunks_exact(3)
+        .zip(board.data.chunks_exact(3))
+        .map(|(p, b)| {
+            let differs = p.iter().zip(b).any(|(p, b)| (p - b).abs() > CUTOUT_LEVEL);
+            if differs { 255 } else { 0 }
+        })
+        .collect()
+}
+
+/// The paper's synthetic X-ray frame: `transmission` (the patch shuffle) with the `cutout`
+/// pixels of `photo` pasted over it as grey (BT.601 luma), nothing else done to the frame.
+pub fn paste_cutout(transmission: &GreyImage, photo: &RgbImage, cutout: &[u8]) -> GreyImage {
+    let data = transmission
+        .data
+        .iter()
+        .zip(photo.data.chunks_exact(3))
+        .zip(cutout)
+        .map(|((&t, p), &cut)| {
+            if cut == 0 {
+                t
+            } else {
+                0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2]
+            }
+        })
+        .collect();
+    GreyImage {
+        width: transmission.width,
+        height: transmission.height,
+        data,
+    }
+}
+
 /// Centre of mass of a mask in pixel coordinates, or `None` if it is empty.
 pub fn mask_centroid(coverage: &[f32], width: usize) -> Option<[f64; 2]> {
     let (mut sx, mut sy, mut total) = (0.0, 0.0, 0.0);

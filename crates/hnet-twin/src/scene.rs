@@ -11,10 +11,11 @@ use serde::{Deserialize, Serialize};
 
 use crate::carm::{Biplane, CArm, CameraMatrix};
 use crate::catheter::CatheterDesign;
-use crate::raster::GreyImage;
+use crate::raster::{GreyImage, RgbImage};
 use crate::render::{self, TubeRaster, XRayDetector};
 use crate::rod::{self, RodBase, RodConfig, RodError, RodShape};
 use crate::rod_fit::{BasePrior, PRIOR_CORRELATED_POINTS};
+use crate::sensor_plate::{self, ContactError, PlateContact, SensorPlate};
 use crate::synthetic_xray::{self, Anatomy, BackgroundSource, PatchLayout, PatchRule};
 use crate::vec3::{Mat3, Vec3};
 
@@ -53,7 +54,7 @@ impl Modality {
     }
 }
 
-/// How scenes are drawn: the tip force, the catheter and its base pose. Two presets:
+/// How scenes are drawn: the tip force, the catheter and its base pose. Three presets:
 ///
 /// - [`SceneSampling::bench`] (the default): the paper's bench. One catheter (7 Fr, EI 0.6 x
 ///   10⁻³ N·m², 50 mm flexible, pre-curved to a 60 mm radius), its base clamped 35 mm caudal of
@@ -66,6 +67,11 @@ impl Modality {
 ///
 /// In both, tip forces are of clinical size: uniform in magnitude up to 0.4 N, pointing back
 /// against the catheter within 80° of its base axis (a contact force).
+///
+/// - [`SceneSampling::paper_bench`]: the bench as the paper recorded it, framed close up
+///   ([`TwinConfig::paper_bench`]): the same catheter and fixture, its tip pressed against a
+///   sensor plate moved by two actuators ([`crate::sensor_plate`]). The force is not drawn: it
+///   is read from the rod solved with its tip held by the plate.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SceneSampling {
     /// Range of the tip force magnitude, N.
@@ -93,6 +99,12 @@ pub struct SceneSampling {
     /// views at one instant) unless set; the record keeps view A's instant.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub exposure_motion_mm: f64,
+    /// The sensor plate the tip is pressed against, when the force comes from a contact (the
+    /// paper's bench): then `force_magnitude_n` and `force_cone_deg` only say what range of
+    /// forces the actuators' travel produces (for [`Self::departures`]), nothing is drawn from
+    /// them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plate: Option<SensorPlate>,
 }
 
 fn is_zero(v: &f64) -> bool {
@@ -119,6 +131,21 @@ impl SceneSampling {
             base_tilt_deg: 2.0,
             base_roll_deg: [90.0, 90.0],
             exposure_motion_mm: 0.0,
+            plate: None,
+        }
+    }
+
+    /// The paper's bench: the bench's catheter and fixture, placed so that the flexible section
+    /// is centred in the close-up cameras' frame, its tip pressed against the sensor plate
+    /// ([`SensorPlate::bench`]). The actuators' travel gives tip forces up to about 0.6 N
+    /// (docs/twin.md, "The paper's bench").
+    pub fn paper_bench() -> Self {
+        Self {
+            force_magnitude_n: [0.0, 0.6],
+            force_cone_deg: 180.0,
+            base_position_mm: Vec3::new(-10.0, 0.0, -22.0),
+            plate: Some(SensorPlate::bench()),
+            ..Self::bench()
         }
     }
 
@@ -142,16 +169,7 @@ impl SceneSampling {
     /// A blind estimate starts its base fit here and keeps near it unless the shape says
     /// otherwise.
     pub fn nominal_base(&self) -> NominalBase {
-        let nominal = SceneParams {
-            tip_force_n: Vec3::ZERO,
-            bending_stiffness_n_m2: self.bending_stiffness_n_m2[0],
-            length_mm: self.length_mm[0],
-            precurvature_per_mm: self.precurvature_per_mm[0],
-            base_position_mm: self.base_position_mm,
-            base_tilt_deg: 0.0,
-            base_azimuth_deg: 0.0,
-            base_roll_deg: 0.5 * (self.base_roll_deg[0] + self.base_roll_deg[1]),
-        };
+        let nominal = self.nominal_scene();
         // A uniform draw within ±j has a standard deviation of j/√3; a tilt uniform over a cap
         // of half-angle t about t/√2 per component. Floors keep a fixed fixture from pinning
         // the fit (its play is never zero). The roll is left free: `base_frame` turns the
@@ -171,15 +189,39 @@ impl SceneSampling {
         }
     }
 
-    /// A preset by name: `bench` or `varied`.
+    /// The unloaded scene at the nominal pose: the lower end of each catheter range, the nominal
+    /// base pointing cranially, the roll at the middle of its range (see [`Self::nominal_base`]).
+    pub fn nominal_scene(&self) -> SceneParams {
+        SceneParams {
+            tip_force_n: Vec3::ZERO,
+            bending_stiffness_n_m2: self.bending_stiffness_n_m2[0],
+            length_mm: self.length_mm[0],
+            precurvature_per_mm: self.precurvature_per_mm[0],
+            base_position_mm: self.base_position_mm,
+            base_tilt_deg: 0.0,
+            base_azimuth_deg: 0.0,
+            base_roll_deg: 0.5 * (self.base_roll_deg[0] + self.base_roll_deg[1]),
+            plate: None,
+        }
+    }
+
+    /// The names [`Self::preset`] takes.
+    pub const PRESETS: [&'static str; 3] = ["bench", "varied", PAPER_BENCH];
+
+    /// A preset by name: `bench`, `varied` or `paper-bench`.
     pub fn preset(name: &str) -> Option<Self> {
         match name {
             "bench" => Some(Self::bench()),
             "varied" => Some(Self::varied()),
+            PAPER_BENCH => Some(Self::paper_bench()),
             _ => None,
         }
     }
 }
+
+/// The name of the paper's bench preset (scenes, views and X-ray recipe together:
+/// [`TwinConfig::paper_bench`]).
+pub const PAPER_BENCH: &str = "paper-bench";
 
 /// Where a catheter's base is expected before its images are read, and how far off it may be.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -209,6 +251,10 @@ pub struct SceneParams {
     pub base_azimuth_deg: f64,
     /// Rotation of the section about the base axis (sets the pre-curve's plane), degrees.
     pub base_roll_deg: f64,
+    /// The sensor plate's actuator positions and the contact they made, when the force comes
+    /// from pressing the tip against it (the paper's bench).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plate: Option<PlateContact>,
 }
 
 impl SceneParams {
@@ -273,10 +319,15 @@ impl SceneSampling {
                 (0.0..=180.0).contains(&self.force_cone_deg),
             ),
         ];
-        match in_range.into_iter().find(|(_, ok)| !ok) {
-            Some((name, _)) => Err(format!("{name} is out of range")),
-            None if self.base_position_mm.0.iter().all(|v| v.is_finite()) => Ok(()),
-            None => Err("base_position_mm must be finite".into()),
+        if let Some((name, _)) = in_range.into_iter().find(|(_, ok)| !ok) {
+            return Err(format!("{name} is out of range"));
+        }
+        if !self.base_position_mm.0.iter().all(|v| v.is_finite()) {
+            return Err("base_position_mm must be finite".into());
+        }
+        match &self.plate {
+            Some(plate) => plate.check(self.length_mm[0]),
+            None => Ok(()),
         }
     }
 
@@ -361,7 +412,12 @@ impl SceneSampling {
                 scene.base_tilt_deg, self.base_tilt_deg
             ));
         }
-        let roll = scene.base_roll_deg.rem_euclid(360.0);
+        let roll = if self.plate.is_some() {
+            scene.base_roll_deg + scene.base_azimuth_deg
+        } else {
+            scene.base_roll_deg
+        }
+        .rem_euclid(360.0);
         if self.base_roll_deg[1] - self.base_roll_deg[0] < 360.0
             && outside(roll, self.base_roll_deg)
         {
@@ -397,7 +453,16 @@ impl SceneSampling {
             base_tilt_deg,
             base_azimuth_deg,
             base_roll_deg,
+            plate: None,
         };
+        // Pressed against a plate: the actuators are drawn, the force is solved for later.
+        // The fixture holds the pre-curve's plane where the bench put it: the roll is counted
+        // from the tilt's azimuth (`base_frame` turns the section by both).
+        if let Some(plate) = &self.plate {
+            params.base_roll_deg -= base_azimuth_deg;
+            params.plate = Some(plate.draw(rng));
+            return params;
+        }
         // The force: uniform direction within the cone around -axis, uniform magnitude.
         let axis = params.base_frame().column(2);
         let cos_cone = self.force_cone_deg.to_radians().cos();
@@ -422,6 +487,24 @@ pub enum MaskSource {
     Threshold(u8),
     /// Threshold at Otsu's level of each image.
     Otsu,
+    /// The bench photograph's catheter, thresholded against the empty bench
+    /// ([`render::bench_cutout`]): the paper's masks, and on the paper's bench the very pixels
+    /// its X-ray recipe pastes onto the patches. The exact geometry's where there is no bench
+    /// photograph (C-arm X-ray sets).
+    Cutout,
+}
+
+/// How an X-ray set's frames are made.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum XRayRecipe {
+    /// The catheter's attenuation over the patch background, through the detector's physics
+    /// (noise, blur, scatter, display curve): the clinical C-arm sets.
+    #[default]
+    Detector,
+    /// The paper's recipe: the bench photograph's catheter, thresholded, pasted (as grey) onto
+    /// the shuffled patches, with nothing else done to the frame.
+    Pasted,
 }
 
 /// Everything that defines the twin's output, saved with a dataset.
@@ -447,6 +530,9 @@ pub struct TwinConfig {
     pub anatomies: Vec<Anatomy>,
     /// How masks are made.
     pub mask: MaskSource,
+    /// How X-ray frames are made (X-ray modalities).
+    #[serde(default)]
+    pub xray_recipe: XRayRecipe,
 }
 
 impl TwinConfig {
@@ -472,6 +558,21 @@ impl TwinConfig {
             },
             anatomies: Anatomy::ALL.to_vec(),
             mask: MaskSource::Geometry,
+            xray_recipe: XRayRecipe::Detector,
+        }
+    }
+
+    /// The paper's bench for a modality at an image size ([`SceneSampling::paper_bench`]): two
+    /// close-up cameras 90° apart ([`Biplane::paper_bench`]), masks thresholded from the bench
+    /// photographs, and for `xray1`/`xray2` those thresholded catheters pasted onto the patch
+    /// shuffle ([`XRayRecipe::Pasted`]).
+    pub fn paper_bench(modality: Modality, image_size: usize) -> Self {
+        Self {
+            scene: SceneSampling::paper_bench(),
+            views: Biplane::paper_bench(image_size),
+            mask: MaskSource::Cutout,
+            xray_recipe: XRayRecipe::Pasted,
+            ..Self::new(modality, image_size)
         }
     }
 }
@@ -552,6 +653,9 @@ pub struct StereoSample {
     pub shape: RodShape,
     /// View A and view B.
     pub views: [ViewSample; 2],
+    /// Scenes drawn before this one whose solve failed (the rod or the contact did not
+    /// converge) and were dropped.
+    pub dropped_draws: usize,
 }
 
 /// Why a sample could not be made.
@@ -566,6 +670,16 @@ pub enum TwinError {
         attempts: usize,
         /// The last solver error.
         last: RodError,
+    },
+    /// No drawn actuator setting gave a contact that could be solved.
+    #[error("sample {index}: {attempts} actuator settings drawn, no contact solved: {last}")]
+    NoContact {
+        /// The sample.
+        index: u64,
+        /// Draws tried.
+        attempts: usize,
+        /// The last contact error.
+        last: ContactError,
     },
     /// An X-ray modality without a background for a view.
     #[error("no background radiograph for view {0}")]
@@ -642,29 +756,45 @@ pub fn render_view(
     let tube: TubeRaster =
         render::rasterize_catheter(shape, config.rod.diameter_mm, &config.catheter, view);
     let ImageSize { width, height } = view.image_size;
-    let (pixels, background) = match background {
+    let (pixels, background, cutout) = match background {
         Some((source, layout)) => {
             let transmission =
                 synthetic_xray::compose(source, &layout, &config.patches, width, height);
-            let frame = render::render_xray(&transmission, &tube, &config.detector, rng);
+            let (frame, cutout) = match config.xray_recipe {
+                XRayRecipe::Detector => (
+                    render::render_xray(&transmission, &tube, &config.detector, rng),
+                    None,
+                ),
+                XRayRecipe::Pasted => {
+                    let (photo, cutout) = bench_photograph(config, view, &tube, rng);
+                    (
+                        render::paste_cutout(&transmission, &photo, &cutout),
+                        Some(cutout),
+                    )
+                }
+            };
             (
                 ViewPixels::Grey(frame.to_u8()),
                 Some((source.name.clone(), layout)),
+                cutout,
             )
         }
         None => {
-            let board = render::bench_background(view, rng);
-            let photo = render::render_bench(&board, &tube, &config.catheter, rng);
-            (ViewPixels::Rgb(photo.to_u8()), None)
+            let (photo, cutout) = bench_photograph(config, view, &tube, rng);
+            (ViewPixels::Rgb(photo.to_u8()), None, Some(cutout))
         }
     };
-    let mask = match config.mask {
-        MaskSource::Geometry => GreyImage {
+    let geometry = || {
+        GreyImage {
             width,
             height,
-            data: tube.coverage,
+            data: tube.coverage.clone(),
         }
-        .to_u8(),
+        .to_u8()
+    };
+    let mask = match config.mask {
+        MaskSource::Geometry => geometry(),
+        MaskSource::Cutout => cutout.unwrap_or_else(geometry),
         MaskSource::Threshold(level) => threshold_mask(&grey_of(&pixels), level),
         MaskSource::Otsu => {
             let grey = grey_of(&pixels);
@@ -695,6 +825,19 @@ pub fn render_empty_xray_view(
     render::render_xray(&transmission, &empty, &config.detector, rng).to_u8()
 }
 
+/// A bench camera's photograph of `tube` and its catheter thresholded against the empty bench.
+fn bench_photograph(
+    config: &TwinConfig,
+    view: &CArm,
+    tube: &TubeRaster,
+    rng: &mut impl Rng,
+) -> (RgbImage, Vec<u8>) {
+    let board = render::bench_background(view, rng);
+    let photo = render::render_bench(&board, tube, &config.catheter, rng);
+    let cutout = render::bench_cutout(&photo, &board);
+    (photo, cutout)
+}
+
 fn grey_of(pixels: &ViewPixels) -> Vec<u8> {
     match pixels {
         ViewPixels::Grey(g) => g.clone(),
@@ -714,10 +857,35 @@ pub fn generate(
 ) -> Result<StereoSample, TwinError> {
     let mut rng = sample_rng(seed, index);
     let mut last = None;
-    for _ in 0..MAX_DRAWS {
-        let params = config.scene.sample(&mut rng);
+    // The plate is fixed on the bench: placed from the unloaded catheter on the nominal base.
+    let plate = match &config.scene.plate {
+        Some(plate) => {
+            let (rod_config, base) = config.scene.nominal_scene().rod(&config.rod);
+            let rest =
+                rod::solve(&rod_config, &base, Vec3::ZERO).map_err(|e| TwinError::NoContact {
+                    index,
+                    attempts: 0,
+                    last: e.into(),
+                })?;
+            Some((plate, base, rest))
+        }
+        None => None,
+    };
+    for dropped_draws in 0..MAX_DRAWS {
+        let mut params = config.scene.sample(&mut rng);
         let (rod_config, base) = params.rod(&config.rod);
-        match rod::solve(&rod_config, &base, params.tip_force_n) {
+        let solved = match (&plate, params.plate.as_mut()) {
+            (Some((plate, nominal_base, nominal_rest)), Some(contact)) => {
+                let pose = plate.pose(nominal_base, nominal_rest, contact);
+                sensor_plate::solve(&rod_config, &base, plate, &pose, contact).map(|solution| {
+                    contact.state = solution.state;
+                    params.tip_force_n = solution.tip_force_n;
+                    solution.shape
+                })
+            }
+            _ => rod::solve(&rod_config, &base, params.tip_force_n).map_err(ContactError::from),
+        };
+        match solved {
             Ok(shape) => {
                 // View B's exposure may come after the catheter moved (drawn only then, so
                 // that sets without motion are unchanged).
@@ -754,15 +922,24 @@ pub fn generate(
                     params,
                     shape,
                     views: [a?, b?],
+                    dropped_draws,
                 });
             }
             Err(e) => last = Some(e),
         }
     }
-    Err(TwinError::Unsolvable {
-        index,
-        attempts: MAX_DRAWS,
-        last: last.expect("at least one draw"),
+    let last = last.expect("at least one draw");
+    Err(match last {
+        ContactError::Rod(last) if plate.is_none() => TwinError::Unsolvable {
+            index,
+            attempts: MAX_DRAWS,
+            last,
+        },
+        last => TwinError::NoContact {
+            index,
+            attempts: MAX_DRAWS,
+            last,
+        },
     })
 }
 

@@ -62,7 +62,25 @@ pub fn manifest_row(sample: &StereoSample, split: Split) -> ManifestRow {
             ("base_roll_deg".into(), number(p.base_roll_deg)),
             ("background_a".into(), background(0)),
             ("background_b".into(), background(1)),
-        ],
+        ]
+        .into_iter()
+        .chain(p.plate.iter().flat_map(|contact| {
+            [
+                ("plate_tilt_deg".into(), number(contact.tilt_deg)),
+                (
+                    "plate_tilt_azimuth_deg".into(),
+                    number(contact.tilt_azimuth_deg),
+                ),
+                ("plate_press_mm".into(), number(contact.press_mm)),
+                ("plate_slide_mm".into(), number(contact.slide_mm)),
+                (
+                    "plate_slide_azimuth_deg".into(),
+                    number(contact.slide_azimuth_deg),
+                ),
+                ("contact".into(), contact.state.name().to_string()),
+            ]
+        }))
+        .collect(),
     }
 }
 
@@ -278,6 +296,9 @@ pub struct SimulationReport {
     pub generated: usize,
     /// Samples found complete from an earlier run.
     pub resumed: usize,
+    /// Scene draws of this run dropped because their rod or contact could not be solved (each
+    /// pair was drawn again, from its own generator, so that the dataset stays complete).
+    pub dropped_draws: usize,
 }
 
 /// Why a generation stopped.
@@ -412,9 +433,11 @@ fn write_samples(
         .collect();
     let resumed = (range.end - range.start) as usize - pending.len();
     let done = AtomicUsize::new(resumed);
+    let dropped = AtomicUsize::new(0);
     progress(resumed);
     pending.par_iter().try_for_each(|&index| {
         let (twin, sample) = make(index)?;
+        dropped.fetch_add(sample.dropped_draws, Ordering::Relaxed);
         let files = simulated_sample_files(&twin, &sample, splits[index as usize]);
         writer.write_sample(&sample_id(index), &files)?;
         progress(done.fetch_add(1, Ordering::Relaxed) + 1);
@@ -424,5 +447,6 @@ fn write_samples(
     Ok(SimulationReport {
         generated: pending.len(),
         resumed,
+        dropped_draws: dropped.into_inner(),
     })
 }

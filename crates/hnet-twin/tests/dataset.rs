@@ -553,6 +553,7 @@ mod properties {
                     base_tilt_deg: tilt,
                     base_azimuth_deg: azimuth,
                     base_roll_deg: roll,
+                    plate: None,
                 },
             );
         (
