@@ -4,10 +4,11 @@
 # scripts/gpu-build.sh prepared here and the device tool carried: gpu/hnet.gz (`hnet` with the
 # wgpu backend) and, for a machine without a Vulkan loader, the packages in .gl/:
 #
-#   scripts/gpu-run.sh                      # XRay-2, wgpu, 8 minutes of training
+#   scripts/gpu-run.sh                      # paper's bench, XRay-2, wgpu, 8 minutes of training
 #
 # Environment (defaults in brackets):
-#   HNET_BIN [./gpu/hnet]  OUT [./gpu-out]  MODALITY [xray2]  SAMPLES [19500]  SIZE [224]
+#   HNET_BIN [./gpu/hnet]  OUT [./gpu-out]  SCENES [paper-bench]  MODALITY [xray2]
+#   SAMPLES [19500]  SIZE [224]
 #   CONFIG [paper]  BACKEND [wgpu]  TRAIN_BUDGET [8m]  SEED [42]  BENCH_BATCH [32]
 # A dry run here with a tiny budget, on Mesa's software Vulkan (apt: mesa-vulkan-drivers), checks
 # the script and the wgpu build, not the GPU (docs/results.md says what it gave):
@@ -21,6 +22,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 HNET_BIN=${HNET_BIN:-./gpu/hnet}
 OUT=${OUT:-./gpu-out}
+SCENES=${SCENES:-paper-bench}
 MODALITY=${MODALITY:-xray2}
 SAMPLES=${SAMPLES:-19500}
 SIZE=${SIZE:-224}
@@ -58,9 +60,9 @@ say "bench: H-Net at ${SIZE}px, batch $BENCH_BATCH, on $BACKEND"
 
 # 2. The dataset, on every core (the simulation is seeded and byte-identical for a seed).
 data=$(mktemp -d)/"$MODALITY"
-say "simulating $SAMPLES $MODALITY pairs at ${SIZE}px into $data"
-"$HNET_BIN" simulate --modality "$MODALITY" --samples "$SAMPLES" --size "$SIZE" --seed "$SEED" \
-  --out "$data"
+say "simulating $SAMPLES $SCENES $MODALITY pairs at ${SIZE}px into $data"
+"$HNET_BIN" simulate --scenes "$SCENES" --modality "$MODALITY" --samples "$SAMPLES" \
+  --size "$SIZE" --seed "$SEED" --out "$data"
 
 # 3. Training, stopped cleanly at the budget with the best checkpoint exported.
 run=$(mktemp -d)/run

@@ -161,6 +161,15 @@ pub fn pair_views(pair: &LabeledPair) -> Biplane {
     }
 }
 
+/// The preset a twin pair's `settings` were rendered with: the paper's bench when they say so,
+/// else the twin's C-arm bench.
+fn twin_preset(settings: &serde_json::Value) -> SceneSampling {
+    settings["preset"]
+        .as_str()
+        .and_then(SceneSampling::preset)
+        .unwrap_or_else(SceneSampling::bench)
+}
+
 /// The page's default views: the biplane the twin tab starts with, at [`WORK_SIZE`].
 pub fn default_views() -> Biplane {
     TwinControls::default().views()
@@ -189,7 +198,7 @@ impl PairGeometry {
                     rod,
                     base,
                     base_known: false,
-                    blind: Some((catheter, SceneSampling::bench().nominal_base())),
+                    blind: Some((catheter, twin_preset(settings).nominal_base())),
                     views_assumed: false,
                 })
             }

@@ -4,8 +4,11 @@
 
 use hnet_twin::carm::{Biplane, CArm};
 use hnet_twin::raster::{GreyImage, Rect};
-use hnet_twin::rod::{self, RodError};
-use hnet_twin::scene::{Modality, SceneParams, TwinConfig, ViewPixels, render_view};
+use hnet_twin::rod;
+use hnet_twin::scene::{
+    Modality, PAPER_BENCH, SceneParams, SceneSampling, TwinConfig, ViewPixels, render_view,
+};
+use hnet_twin::sensor_plate::{self, ContactError, ContactState, PlateContact};
 use hnet_twin::synthetic_xray::{Anatomy, BackgroundSource, PatchLayout, PatchRule, compose};
 use hnet_twin::vec3::Vec3;
 use rand::SeedableRng;
@@ -34,7 +37,21 @@ pub struct TwinControls {
     pub view_b_deg: [f64; 2],
     /// Seed of the image noise.
     pub noise_seed: u64,
+    /// The paper's bench instead of the C-arm: the close-up cameras, and the tip pressed against
+    /// the sensor plate set by these actuators (the force is then read from the contact, not
+    /// set by `force_n`).
+    pub paper_bench: Option<PlateContact>,
 }
+
+/// The plate's actuators when the page switches to the paper's bench: a 2 mm press slid 1 mm.
+pub const DEFAULT_PLATE: PlateContact = PlateContact {
+    tilt_deg: 10.0,
+    tilt_azimuth_deg: 0.0,
+    press_mm: 2.0,
+    slide_mm: 1.0,
+    slide_azimuth_deg: 45.0,
+    state: ContactState::Free,
+};
 
 impl Default for TwinControls {
     fn default() -> Self {
@@ -47,6 +64,7 @@ impl Default for TwinControls {
             view_a_deg: [0.0, 0.0],
             view_b_deg: [90.0, 0.0],
             noise_seed: 1,
+            paper_bench: None,
         }
     }
 }
@@ -55,6 +73,9 @@ impl TwinControls {
     /// The two views at the working size: a biplane cardiac C-arm for X-ray, the bench cameras
     /// for RGB.
     pub fn views(&self) -> Biplane {
+        if self.paper_bench.is_some() {
+            return Biplane::paper_bench(WORK_SIZE);
+        }
         let make = |deg: [f64; 2]| -> CArm {
             if self.modality.is_xray() {
                 CArm::cardiac(deg[0], deg[1], WORK_SIZE)
@@ -79,23 +100,54 @@ impl TwinControls {
             } else {
                 0.0
             },
-            base_position_mm: Vec3::new(0.0, 0.0, -35.0),
+            base_position_mm: self.sampling().base_position_mm,
             base_tilt_deg: 0.0,
             base_azimuth_deg: 0.0,
             base_roll_deg: 90.0,
-            plate: None,
+            plate: self.paper_bench,
+        }
+    }
+
+    /// The preset these controls are a scene of: the twin's C-arm bench or the paper's bench.
+    pub fn sampling(&self) -> SceneSampling {
+        if self.paper_bench.is_some() {
+            SceneSampling::paper_bench()
+        } else {
+            SceneSampling::bench()
         }
     }
 
     /// Solves the rod and renders both views (X-ray modalities on `background`), with the
     /// twin's exact masks and the true force as the labels.
-    pub fn render(&self, id: String, background: &XrayBackground) -> Result<LabeledPair, RodError> {
-        let mut config = TwinConfig::new(self.modality, WORK_SIZE);
+    ///
+    /// On the paper's bench the plate's actuators set the contact and the force is read from it
+    /// (the fixture at its nominal pose, the plate placed from it, as `hnet simulate --scenes
+    /// paper-bench` does).
+    pub fn render(
+        &self,
+        id: String,
+        background: &XrayBackground,
+    ) -> Result<LabeledPair, ContactError> {
+        let mut config = match self.paper_bench {
+            Some(_) => TwinConfig::paper_bench(self.modality, WORK_SIZE),
+            None => TwinConfig::new(self.modality, WORK_SIZE),
+        };
         config.views = self.views();
         config.patches = background.rule();
-        let scene = self.scene();
+        let mut scene = self.scene();
         let (rod_config, base) = scene.rod(&config.rod);
-        let shape = rod::solve(&rod_config, &base, scene.tip_force_n)?;
+        let shape = match (&config.scene.plate, scene.plate.as_mut()) {
+            (Some(plate), Some(contact)) => {
+                let rest = rod::solve(&rod_config, &base, Vec3::ZERO)?;
+                let pose = plate.pose(&base, &rest, contact);
+                let solved = sensor_plate::solve(&rod_config, &base, plate, &pose, contact)?;
+                contact.state = solved.state;
+                scene.tip_force_n = solved.tip_force_n;
+                solved.shape
+            }
+            _ => rod::solve(&rod_config, &base, scene.tip_force_n)?,
+        };
+        let force_n = scene.tip_force_n.0.map(|f| f as f32);
         let mut rng = ChaCha8Rng::seed_from_u64(self.noise_seed);
         let layouts = background.layouts();
         let mut views = Vec::with_capacity(2);
@@ -110,7 +162,7 @@ impl TwinControls {
             ViewPixels::Grey(g) => g.iter().flat_map(|&v| [v, v, v]).collect(),
             ViewPixels::Rgb(c) => c.clone(),
         };
-        let settings = serde_json::json!({
+        let mut settings = serde_json::json!({
             "modality": self.modality.name(),
             "scene": scene,
             "background": self.modality.is_xray().then(|| serde_json::json!({
@@ -121,10 +173,13 @@ impl TwinControls {
             })),
             "noise_seed": self.noise_seed,
         });
+        if self.paper_bench.is_some() {
+            settings["preset"] = PAPER_BENCH.into();
+        }
         let mut pair = LabeledPair::new(
             id,
             PairSource::Twin {
-                true_force_n: self.force_n.map(|f| f as f32),
+                true_force_n: force_n,
                 tip_mm: shape.tip_mm().0,
                 views: config.views,
                 settings,
@@ -137,7 +192,7 @@ impl TwinControls {
         pair.mask_a = binary(&views[0].mask);
         pair.mask_b = binary(&views[1].mask);
         pair.masks_labeled = true;
-        pair.force_n = Some(self.force_n.map(|f| f as f32));
+        pair.force_n = Some(force_n);
         pair.force_origin = hnet_twin::label_origin::LabelOrigin::Simulated;
         Ok(pair)
     }
@@ -304,6 +359,33 @@ mod tests {
         .render("pair-0001".into(), &background)
         .unwrap();
         assert_ne!(pushed.mask_a, pair.mask_a);
+    }
+
+    #[test]
+    fn on_the_papers_bench_the_force_is_read_from_the_plate() {
+        let controls = TwinControls {
+            paper_bench: Some(DEFAULT_PLATE),
+            ..TwinControls::default()
+        };
+        let pair = controls
+            .render("bench".into(), &XrayBackground::phantom())
+            .unwrap();
+        let PairSource::Twin {
+            true_force_n,
+            views,
+            settings,
+            ..
+        } = &pair.source
+        else {
+            panic!("a twin pair")
+        };
+        assert_eq!(*views, Biplane::paper_bench(WORK_SIZE));
+        assert_eq!(settings["preset"], PAPER_BENCH);
+        assert_ne!(settings["scene"]["plate"]["state"], "free");
+        // Not the force sliders' value: the contact's.
+        assert_ne!(true_force_n.map(f64::from), controls.force_n);
+        assert!(true_force_n.iter().any(|f| f.abs() > 0.01));
+        assert_eq!(pair.force_n, Some(*true_force_n));
     }
 
     #[test]

@@ -8,7 +8,7 @@
 //! summation orders: about 10⁻⁵ on masks and forces here) and far below what a wrong kernel or
 //! stale buffer gives.
 
-use hnet_twin::rod::RodError;
+use hnet_twin::sensor_plate::ContactError;
 
 use crate::twin_live::{TwinControls, XrayBackground};
 use crate::workspace::LabeledPair;
@@ -25,7 +25,7 @@ pub const TOLERANCE_SCALE_PARAMETER: &str = "webgpu-tolerance-scale";
 
 /// The pair both backends run on: the twin tab's first pair (default sliders, phantom
 /// background), the same on every machine.
-pub fn check_pair() -> Result<LabeledPair, RodError> {
+pub fn check_pair() -> Result<LabeledPair, ContactError> {
     TwinControls::default().render("webgpu-check".into(), &XrayBackground::phantom())
 }
 

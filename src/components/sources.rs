@@ -4,6 +4,7 @@
 
 use hnet_twin::carm::{SECONDARY_DEG, VIEW_A_PRIMARY_DEG, VIEW_B_PRIMARY_DEG};
 use hnet_twin::scene::Modality;
+use hnet_twin::sensor_plate::PlateContact;
 use leptos::prelude::*;
 
 use crate::browser::{PickedFileError, files, read_file_with, take_picked_file, take_picked_files};
@@ -14,7 +15,7 @@ use crate::error_text::with_causes;
 use crate::imaging::{ImageError, WORK_SIZE, decode_to_rgb};
 use crate::keymap::{self, Command, Scope};
 use crate::studio::{SourceTab, Studio};
-use crate::twin_live::TwinControls;
+use crate::twin_live::{DEFAULT_PLATE, TwinControls};
 use crate::workspace::{LabeledPair, PairSource};
 
 /// The source tabs: which, the tab's element id, its label.
@@ -245,7 +246,7 @@ fn slider(
     label: &'static str,
     unit: &'static str,
     range: [f64; 3],
-    get: fn(&TwinControls) -> f64,
+    get: impl Fn(&TwinControls) -> f64 + Copy + Send + Sync + 'static,
     set: fn(&mut TwinControls, f64),
 ) -> impl IntoView {
     let twin = studio.twin;
@@ -281,25 +282,75 @@ fn TwinSliders() -> impl IntoView {
         studio.render_twin();
         studio.run_model();
     };
+    let scene = move |ev: leptos::ev::Event| {
+        twin.update(|t| {
+            t.paper_bench = (event_target_value(&ev) == "paper-bench").then_some(DEFAULT_PLATE);
+        });
+        studio.render_twin();
+        studio.run_model();
+    };
+    let on_bench = move || twin.with(|t| t.paper_bench.is_some());
+    // The plate's actuators (only shown on the paper's bench, where they exist).
+    let plate = |get: fn(&PlateContact) -> f64| {
+        move |t: &TwinControls| t.paper_bench.as_ref().map_or(0.0, get)
+    };
+    // The force the contact gave, from the draft the sliders rendered.
+    let read_force = move || {
+        studio.draft.with(|d| {
+            let pair = d.as_ref()?;
+            let f = pair.force_n?;
+            let PairSource::Twin { settings, .. } = &pair.source else {
+                return None;
+            };
+            let state = settings["scene"]["plate"]["state"]
+                .as_str()
+                .unwrap_or("free");
+            Some(format!(
+                "Fx {:.3} N, Fy {:.3} N, Fz {:.3} N, read from the contact ({state})",
+                f[0], f[1], f[2]
+            ))
+        })
+    };
     view! {
         <div class="twin">
             <p class="hint">
                 "A Kirchhoff rod under a tip force, seen by two C-arm views (world frame: x patient "
-                "left, y anterior, z cranial). The twin's masks and force are exact labels."
+                "left, y anterior, z cranial), or the paper's bench: two close-up cameras and the "
+                "tip pressed against a sensor plate. The twin's masks and force are exact labels."
             </p>
-            <fieldset>
-                <legend>"Tip force"</legend>
-                {slider(studio, "twin-fx", "Fx", "N", [-0.4, 0.4, 0.01], |t| t.force_n[0], |t, v| t.force_n[0] = v)}
-                {slider(studio, "twin-fy", "Fy", "N", [-0.4, 0.4, 0.01], |t| t.force_n[1], |t, v| t.force_n[1] = v)}
-                {slider(studio, "twin-fz", "Fz", "N", [-0.4, 0.4, 0.01], |t| t.force_n[2], |t, v| t.force_n[2] = v)}
-            </fieldset>
+            <label class="slider">
+                <span>"Scene"</span>
+                <select id="twin-scene" on:change=scene>
+                    <option value="c-arm" selected=move || !on_bench()>"C-arm (clinical framing, a free force)"</option>
+                    <option value="paper-bench" selected=on_bench>"The paper's bench (actuated contact)"</option>
+                </select>
+            </label>
+            <Show when=move || !on_bench()>
+                <fieldset>
+                    <legend>"Tip force"</legend>
+                    {slider(studio, "twin-fx", "Fx", "N", [-0.4, 0.4, 0.01], |t| t.force_n[0], |t, v| t.force_n[0] = v)}
+                    {slider(studio, "twin-fy", "Fy", "N", [-0.4, 0.4, 0.01], |t| t.force_n[1], |t, v| t.force_n[1] = v)}
+                    {slider(studio, "twin-fz", "Fz", "N", [-0.4, 0.4, 0.01], |t| t.force_n[2], |t, v| t.force_n[2] = v)}
+                </fieldset>
+            </Show>
+            <Show when=on_bench>
+                <fieldset>
+                    <legend>"Sensor plate"</legend>
+                    {slider(studio, "plate-press", "Press", "mm", [0.0, 3.5, 0.05], plate(|c| c.press_mm), |t, v| if let Some(c) = t.paper_bench.as_mut() { c.press_mm = v })}
+                    {slider(studio, "plate-slide", "Slide", "mm", [-3.0, 3.0, 0.05], plate(|c| c.slide_mm), |t, v| if let Some(c) = t.paper_bench.as_mut() { c.slide_mm = v })}
+                    {slider(studio, "plate-slide-direction", "Slide direction", "°", [0.0, 180.0, 1.0], plate(|c| c.slide_azimuth_deg), |t, v| if let Some(c) = t.paper_bench.as_mut() { c.slide_azimuth_deg = v })}
+                    {slider(studio, "plate-tilt", "Plate tilt", "°", [0.0, 30.0, 1.0], plate(|c| c.tilt_deg), |t, v| if let Some(c) = t.paper_bench.as_mut() { c.tilt_deg = v })}
+                    {slider(studio, "plate-tilt-direction", "Tilt direction", "°", [0.0, 360.0, 1.0], plate(|c| c.tilt_azimuth_deg), |t, v| if let Some(c) = t.paper_bench.as_mut() { c.tilt_azimuth_deg = v })}
+                    <p id="plate-force" class="hint">{read_force}</p>
+                </fieldset>
+            </Show>
             <fieldset>
                 <legend>"Catheter"</legend>
                 {slider(studio, "twin-stiffness", "Stiffness EI", "mN·m²", [0.3, 1.2, 0.05], |t| t.stiffness_mn_m2, |t, v| t.stiffness_mn_m2 = v)}
                 {slider(studio, "twin-length", "Flexible length", "mm", [30.0, 70.0, 1.0], |t| t.length_mm, |t, v| t.length_mm = v)}
                 {slider(studio, "twin-precurve", "Pre-curve radius (0: straight)", "mm", [0.0, 150.0, 5.0], |t| t.precurve_radius_mm, |t, v| t.precurve_radius_mm = v)}
             </fieldset>
-            <fieldset>
+            <fieldset disabled=on_bench>
                 <legend>"C-arm"</legend>
                 {slider(studio, "twin-a-primary", "View A LAO/RAO", "°", with_step(VIEW_A_PRIMARY_DEG), |t| t.view_a_deg[0], |t, v| t.view_a_deg[0] = v)}
                 {slider(studio, "twin-a-secondary", "View A cranial/caudal", "°", with_step(SECONDARY_DEG), |t| t.view_a_deg[1], |t, v| t.view_a_deg[1] = v)}

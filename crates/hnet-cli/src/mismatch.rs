@@ -353,7 +353,7 @@ pub fn run(args: &MismatchArgs) -> anyhow::Result<()> {
                 Vec::new()
             },
             mask: None,
-            scenes: Scenes::Preset(set.scenes.clone()),
+            scenes: Scenes::Preset(Box::new(set.scenes.clone())),
             scene_sampling: None,
             detector: set.detector,
             shard: None,

@@ -117,7 +117,7 @@ fn read_scene_sampling(path: &Path) -> anyhow::Result<SceneSampling> {
 #[derive(Debug, Clone)]
 pub enum Scenes {
     /// A preset of scene sampling, the twin's default views.
-    Preset(SceneSampling),
+    Preset(Box<SceneSampling>),
     /// Off-bench pairs ([`OffBench`]).
     OffBench,
 }
@@ -127,7 +127,7 @@ fn parse_scenes(text: &str) -> Result<Scenes, String> {
         return Ok(Scenes::OffBench);
     }
     SceneSampling::preset(text)
-        .map(Scenes::Preset)
+        .map(|s| Scenes::Preset(Box::new(s)))
         .ok_or_else(|| {
             format!(
                 "`{text}` is not {} or {OFF_BENCH_VIEWS}",
@@ -282,7 +282,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     let start = Instant::now();
     let report = match &args.scenes {
         Scenes::Preset(scenes) => {
-            config.scene = sampling.unwrap_or_else(|| scenes.clone());
+            config.scene = sampling.unwrap_or_else(|| (**scenes).clone());
             if config.scene.plate.is_some() && !paper_bench {
                 bail!(
                     "a scene sampling with a plate needs the paper's bench views: add \

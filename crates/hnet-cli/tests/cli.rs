@@ -550,6 +550,38 @@ fn bad_input_gets_a_clear_error_naming_the_file() {
     let header: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.join("sideways/dataset.json")).unwrap()).unwrap();
     assert_eq!(header["source"]["twin"]["scene"]["base_tilt_deg"], 70.0);
+    // The paper's bench: a plate that starts through the unloaded tip is refused, naming the
+    // setting, before anything is written; its own preset simulates, the contact in the manifest.
+    let mut bench = serde_json::to_value(hnet_twin::scene::SceneSampling::paper_bench()).unwrap();
+    bench["plate"]["standoff_mm"] = (-1.0).into();
+    let through = dir.join("through.json");
+    std::fs::write(&through, bench.to_string()).unwrap();
+    let paper_bench = |sampling: Option<&Path>, out: &Path| {
+        let mut command = hnet();
+        command.args([
+            "simulate",
+            "--samples",
+            "3",
+            "--size",
+            "32",
+            "--scenes",
+            "paper-bench",
+        ]);
+        if let Some(sampling) = sampling {
+            command.arg("--scene-sampling").arg(sampling);
+        }
+        command.arg("--out").arg(out);
+        command
+    };
+    let err = fails(&mut paper_bench(Some(&through), &dir.join("through")));
+    assert!(err.contains("plate.standoff_mm"), "{err}");
+    assert!(!dir.join("through").exists());
+    succeeds(&mut paper_bench(None, &dir.join("paper-bench")));
+    let manifest = std::fs::read_to_string(dir.join("paper-bench/manifest.csv")).unwrap();
+    assert!(
+        manifest.lines().next().unwrap().ends_with(",contact"),
+        "{manifest}"
+    );
     std::fs::remove_dir_all(dir).ok();
 }
 

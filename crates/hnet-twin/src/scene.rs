@@ -1002,6 +1002,41 @@ mod tests {
     }
 
     #[test]
+    fn the_papers_bench_frames_the_section_close_up_and_pastes_its_thresholded_catheter() {
+        let mut config = TwinConfig::paper_bench(Modality::Xray2, 96);
+        let backgrounds = Backgrounds::phantom(&config.views);
+        let pasted = generate(&config, &backgrounds, 5, 1).unwrap();
+        let contact = pasted.params.plate.expect("the force comes from the plate");
+        assert_ne!(contact.state, sensor_plate::ContactState::Free);
+        assert!(pasted.params.tip_force_n.norm() > 0.0);
+        config.mask = MaskSource::Geometry;
+        let exact = generate(&config, &backgrounds, 5, 1).unwrap();
+        assert_eq!(pasted.params, exact.params);
+        for (cut, view) in pasted.views.iter().zip(&exact.views) {
+            // The thresholded catheter is the exact one, give or take its edges and highlights.
+            let inside = |m: &[u8], i: usize| m[i] >= 128;
+            let (mut both, mut either) = (0, 0);
+            for i in 0..cut.mask.len() {
+                both += usize::from(inside(&cut.mask, i) && inside(&view.mask, i));
+                either += usize::from(inside(&cut.mask, i) || inside(&view.mask, i));
+            }
+            let iou = both as f64 / either as f64;
+            assert!(iou > 0.8, "IoU {iou}");
+            // The same frame either way: the mask is a label, not part of the recipe.
+            assert_eq!(cut.pixels, view.pixels);
+        }
+        // Close up: the section spans most of view A's height.
+        let rows: Vec<usize> = (0..96)
+            .filter(|&r| {
+                exact.views[0].mask[r * 96..(r + 1) * 96]
+                    .iter()
+                    .any(|&m| m >= 128)
+            })
+            .collect();
+        assert!(rows.len() > 96 * 6 / 10, "{} rows", rows.len());
+    }
+
+    #[test]
     fn the_same_seed_and_index_give_the_same_sample() {
         let config = TwinConfig::new(Modality::Xray2, 64);
         let backgrounds = Backgrounds::phantom(&config.views);

@@ -424,23 +424,18 @@ fn contact_step(
     let force_of = |x: Vec3| n * x.x() + direction(x.y()) * (friction * x.x());
     let tip_under = |force: Vec3| rod::solve(config, base, force).map(|s| s.tip_mm());
     let tip = tip_under(at.force)?;
-    let compliance = compliance(&tip_under, at.force, tip)?;
+    let model = TipModel {
+        compliance: compliance(&tip_under, at.force, tip)?,
+        tip,
+        force: at.force,
+    };
     // The tip slides against the tangential force sticking would have taken: look near its
     // direction when the stick solve gave one.
     let around = stick.ok().map(|held| {
         let t = held.parameters - n * held.parameters.dot(n);
         t.dot(e2).atan2(t.dot(e1))
     });
-    let guess = slip_guess(
-        &compliance,
-        tip,
-        at.force,
-        anchor,
-        n,
-        &direction,
-        friction,
-        around,
-    );
+    let guess = slip_guess(&model, anchor, pose, friction, around);
     let held = rod::solve_held(
         config,
         base,
@@ -474,6 +469,16 @@ fn to_na(v: Vec3) -> Vector3<f64> {
     Vector3::new(v.0[0], v.0[1], v.0[2])
 }
 
+/// The tip's position to first order about a force: `tip + compliance·(F - force)`.
+struct TipModel {
+    /// `∂tip/∂F` there, mm/N.
+    compliance: Matrix3<f64>,
+    /// The tip there, mm.
+    tip: Vec3,
+    /// The force, N.
+    force: Vec3,
+}
+
 /// The tip's compliance at `force` (where the tip is at `tip`): `∂tip/∂F`, mm/N, by forward
 /// differences.
 fn compliance(
@@ -496,24 +501,28 @@ fn compliance(
 /// carry the tip, to first order, to the plate; the direction that fits best (within ±45° of
 /// `around` when given).
 fn slip_guess(
-    compliance: &Matrix3<f64>,
-    tip: Vec3,
-    force: Vec3,
+    model: &TipModel,
     anchor: Vec3,
-    n: Vec3,
-    direction: &dyn Fn(f64) -> Vec3,
+    pose: &PlatePose,
     friction: f64,
     around: Option<f64>,
 ) -> Vec3 {
     // tip + C·(F_n·(n + μu) - force) = anchor - λ·u, linear in (F_n, λ) for a given u.
-    let rhs = to_na(anchor - tip) + compliance * to_na(force);
+    let TipModel {
+        compliance,
+        tip,
+        force,
+    } = model;
+    let n = pose.normal;
+    let [e1, e2] = pose.axes;
+    let rhs = to_na(anchor - *tip) + compliance * to_na(*force);
     let mut best = (f64::INFINITY, Vec3::new(1e-3, 0.0, 0.0));
     for k in 0..72 {
         let psi = match around {
             Some(centre) => centre + (k as f64 - 36.0).to_radians() * 1.25,
             None => (k as f64 * 5.0).to_radians(),
         };
-        let u = direction(psi);
+        let u = e1 * psi.cos() + e2 * psi.sin();
         let a =
             nalgebra::Matrix3x2::from_columns(&[compliance * to_na(n + u * friction), to_na(u)]);
         let Some(x) = (a.transpose() * a).lu().solve(&(a.transpose() * rhs)) else {
