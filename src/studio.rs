@@ -22,6 +22,7 @@ use crate::gpu_worker::GpuWorker;
 use crate::orbit_camera::OrbitCamera;
 use crate::storage;
 use crate::twin_live::{TwinControls, XrayBackground};
+use hnet_twin::sensor_plate::ContactError;
 use crate::webgpu_check;
 use crate::workspace::{LabeledPair, RemovedPair, Tool, View, Workspace};
 use hnet_model::catheter_entry::EntrySetting;
@@ -560,6 +561,13 @@ impl Studio {
         let result = self.background.with_untracked(|bg| controls.render(id, bg));
         match result {
             Ok(pair) => self.replace_draft(Some(pair)),
+            Err(ContactError::BeyondSensorRange {
+                force_n,
+                max_force_n,
+            }) => self.error(format!(
+                "this press gives {force_n:.2} N, beyond the bench sensor's {max_force_n} N \
+                 range: press less or tilt the plate less"
+            )),
             Err(e) => self.error(format!(
                 "the catheter does not settle under this load ({}); try a smaller force or a \
                  stiffer catheter",

@@ -339,6 +339,17 @@ test("the live twin bends the catheter with the sliders and composes X-ray backg
   assert.match(await page.textContent("#force-verdict"), /no verdict: .*\|F\| 0\.69 N \(trained on 0\.00-0\.40 N\)/);
   assert.match(await page.textContent("#force-truth-verdict"), /True \|F\| = 0\.693 N: above the 0\.1–0\.3 N ablation band/);
   await page.click("#twin-reset");
+  // The paper's bench: the plate's actuators set the contact and the force is read from it.
+  await page.selectOption("#twin-scene", "paper-bench");
+  const contact = /Fx -?\d\.\d{3} N, Fy -?\d\.\d{3} N, Fz -?\d\.\d{3} N, read from the contact \((stick|slip)\)/;
+  await page.waitForFunction((c) => new RegExp(c).test(document.querySelector("#plate-force")?.textContent ?? ""), contact.source);
+  const light = await page.textContent("#plate-force");
+  await page.focus("#plate-press");
+  await page.keyboard.press("ArrowRight");
+  await page.waitForFunction((l) => document.querySelector("#plate-force")?.textContent !== l, light);
+  assert.match(await page.textContent("#plate-force"), contact);
+  await page.selectOption("#twin-scene", "c-arm");
+  await page.waitForSelector("#twin-fx");
 
   // "Fastest available" passes over headless Chromium's software WebGPU adapter and says why.
   assert.match(await page.textContent("#backend"), /CPU/);
