@@ -22,12 +22,12 @@ use crate::gpu_worker::GpuWorker;
 use crate::orbit_camera::OrbitCamera;
 use crate::storage;
 use crate::twin_live::{TwinControls, XrayBackground};
-use hnet_twin::sensor_plate::ContactError;
 use crate::webgpu_check;
 use crate::workspace::{LabeledPair, RemovedPair, Tool, View, Workspace};
 use hnet_model::catheter_entry::EntrySetting;
 use hnet_twin::carm::Biplane;
 use hnet_twin::physics_force::ForceCombination;
+use hnet_twin::sensor_plate::ContactError;
 
 /// The model's state.
 #[derive(Clone)]

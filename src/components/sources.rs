@@ -336,7 +336,7 @@ fn TwinSliders() -> impl IntoView {
             <Show when=on_bench>
                 <fieldset>
                     <legend>"Sensor plate"</legend>
-                    {slider(studio, "plate-press", "Press", "mm", [0.0, 3.5, 0.05], plate(|c| c.press_mm), |t, v| if let Some(c) = t.paper_bench.as_mut() { c.press_mm = v })}
+                    {slider(studio, "plate-press", "Press", "mm", [0.0, 4.0, 0.05], plate(|c| c.press_mm), |t, v| if let Some(c) = t.paper_bench.as_mut() { c.press_mm = v })}
                     {slider(studio, "plate-slide", "Slide", "mm", [-3.0, 3.0, 0.05], plate(|c| c.slide_mm), |t, v| if let Some(c) = t.paper_bench.as_mut() { c.slide_mm = v })}
                     {slider(studio, "plate-slide-direction", "Slide direction", "°", [0.0, 180.0, 1.0], plate(|c| c.slide_azimuth_deg), |t, v| if let Some(c) = t.paper_bench.as_mut() { c.slide_azimuth_deg = v })}
                     {slider(studio, "plate-tilt", "Plate tilt", "°", [0.0, 30.0, 1.0], plate(|c| c.tilt_deg), |t, v| if let Some(c) = t.paper_bench.as_mut() { c.tilt_deg = v })}

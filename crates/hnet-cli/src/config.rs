@@ -274,7 +274,8 @@ mod tests {
                 "force-128-masks",
                 "force-128-off-bench",
                 "force-224",
-                "paper"
+                "paper",
+                "paper-bench-128"
             ]
         );
     }

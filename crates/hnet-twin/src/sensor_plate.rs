@@ -57,9 +57,10 @@ pub struct SensorPlate {
 }
 
 impl SensorPlate {
-    /// The bench's plate: 0.5 mm from the unloaded tip, tilted up to 35° from square to the
-    /// fixture in any direction, pressed 0.8-3.5 mm (0.3-3 mm into the catheter), slid ±3 mm in
-    /// any direction of its plane, friction 0.3 (a polymer tip on an anodised plate).
+    /// The bench's plate: 0.5 mm from the unloaded tip, tilted up to 30° from square to the
+    /// fixture in any direction, pressed 0.8-4.0 mm (0.3-3.5 mm into the catheter), slid ±3 mm
+    /// in any direction of its plane, friction 0.3 (a polymer tip on an anodised plate), a
+    /// 0.6 N sensor (docs/twin.md, "The paper's bench").
     pub fn bench() -> Self {
         Self {
             standoff_mm: 0.5,
