@@ -21,7 +21,8 @@ use rayon::prelude::*;
 
 use crate::backend::BackendChoice;
 use crate::data::StereoItem;
-use crate::evaluation::{load_weights, parse_split, predict};
+use crate::evaluation::parse_split;
+use crate::network::{load_weights, predict};
 use hnet_twin::dataset::Split;
 use hnet_units::ImageSize;
 

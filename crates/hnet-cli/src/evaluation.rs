@@ -1,37 +1,33 @@
 //! `hnet eval`: the paper's Table I (force) and Table II (segmentation) for a trained run on a
 //! dataset split, as JSON and markdown, with the per-pair predictions kept for `hnet report`.
 
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 
 use anyhow::Context;
 use burn::module::Module;
 use burn::tensor::Device;
-use hnet_model::architectures::{ModelSpec, StereoModel};
-use hnet_model::catheter_entry::{
-    CatheterEntry, EntrySetting, TurnError, TurnedOutput, read_turned, turn_clockwise,
-};
-use hnet_model::inference::host_values;
+use hnet_model::catheter_entry::EntrySetting;
 use hnet_model::metrics::{
-    AXES, AxisMetrics, ForceAccumulator, ForceMetrics, MASK_THRESHOLD, PixelOutcome,
-    SegmentationAccumulator, SegmentationMetrics,
+    ForceAccumulator, ForceMetrics, SegmentationAccumulator, SegmentationMetrics,
 };
-use hnet_twin::dataset::{Dataset, ImageRef, Split, SquareSymmetry, encode_png};
+use hnet_model::predictor::{PairOutput, Predictor};
+use hnet_twin::dataset::{Dataset, Split, SquareSymmetry};
 use hnet_units::ImageSize;
 use serde::{Deserialize, Serialize};
 
+mod files;
+mod physics;
+pub use files::{PairPrediction, markdown, predictions_csv, write_predicted_masks};
+use physics::{calibrate_combination, physics_checks};
+
 use crate::backend::BackendChoice;
-use crate::data::{StereoBatcher, StereoItem, StereoSplit};
-use crate::physics_check::{
-    self, BlindEstimator, Estimator, MaskOrigin, PairToCheck, PhysicsEvaluation,
-};
+use crate::data::StereoSplit;
+use crate::network::{load_run, load_weights, predict_entry};
+use crate::physics_check::{self, BlindEstimator, Estimator, MaskOrigin, PhysicsEvaluation};
 use crate::run_dir::RunDir;
 use hnet_twin::carm::HeaderError;
 use hnet_twin::catalogue::{BENCH_CATHETER, CatalogueCatheter};
-use hnet_twin::centreline::Mask;
-use hnet_twin::physics_force::{ForceCombination, MIN_CALIBRATION_PAIRS};
-use hnet_twin::simulate::{SampleRecord, nominal_base};
+use hnet_twin::simulate::nominal_base;
 
 #[derive(clap::Args, Debug)]
 #[command(group(clap::ArgGroup::new("model").required(true).args(["run", "weights"])))]
@@ -198,271 +194,6 @@ fn is_zero(turns: &u8) -> bool {
     *turns == 0
 }
 
-/// `n` quarter turns in words.
-fn quarter_turns(n: u8) -> String {
-    match n {
-        1 => "a quarter turn".into(),
-        2 => "a half turn".into(),
-        n => format!("{n} quarter turns"),
-    }
-}
-
-/// What the network made of one pair: its force and how well its masks fit, for `hnet report`
-/// and the predictions file.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct PairPrediction {
-    /// The pair's id.
-    pub id: String,
-    /// True force (N).
-    pub truth: [f32; 3],
-    /// Predicted force (N), when the network estimates it.
-    pub predicted: Option<[f32; 3]>,
-    /// The physics estimate from the network's own masks (the twin's rod fitted to the catheter
-    /// they show, N), when the physics check ran and the pair could be fitted.
-    #[serde(default)]
-    pub physics: Option<[f32; 3]>,
-    /// Its fit's standard error per axis, N (a relative measure; see
-    /// `hnet_twin::rod_fit::RodFit::force_sd_n`).
-    #[serde(default)]
-    pub physics_sd: Option<[f32; 3]>,
-    /// The network's force combined with the physics estimate, N, when a combination was
-    /// calibrated.
-    #[serde(default)]
-    pub combined: Option<[f32; 3]>,
-    /// The combined estimate's standard error per axis, N.
-    #[serde(default)]
-    pub combined_sd: Option<[f32; 3]>,
-    /// Half the width of its 90 % interval per axis, N (split-conformal, calibrated with the
-    /// combination: [`hnet_twin::physics_force::ForceCombination::interval_90_n`]).
-    #[serde(default)]
-    pub combined_90: Option<[f32; 3]>,
-    /// Catheter IoU of the pair's predicted masks in views A and B, when the network segments
-    /// (each mask thresholded as the set's IoU is; 1 where neither mask shows the catheter).
-    #[serde(default)]
-    pub catheter_iou: Option<[f64; 2]>,
-}
-
-/// The predictions file: one line per pair, its true force, the network's, the physics estimate
-/// from the network's masks with its fit's standard error, and the two combined with its
-/// standard error and the half-width of its 90 % interval (empty where there is none), N; then
-/// the catheter IoU of its masks in views A and B (empty without masks), and the physics
-/// estimator (`blind` or `oracle`).
-pub fn predictions_csv(predictions: &[PairPrediction], estimator: &str) -> String {
-    let mut csv = String::from(
-        "id,fx,fy,fz,fx_pred,fy_pred,fz_pred,fx_physics,fy_physics,fz_physics,\
-         fx_physics_sd,fy_physics_sd,fz_physics_sd,fx_combined,fy_combined,fz_combined,\
-         fx_combined_sd,fy_combined_sd,fz_combined_sd,fx_combined_90,fy_combined_90,\
-         fz_combined_90,catheter_iou_a,catheter_iou_b,estimator\n",
-    );
-    let triple = |v: Option<[f32; 3]>| {
-        v.map_or_else(|| ",,".to_string(), |[x, y, z]| format!("{x},{y},{z}"))
-    };
-    for p in predictions {
-        let [tx, ty, tz] = p.truth;
-        let _ = writeln!(
-            csv,
-            "{},{tx},{ty},{tz},{},{},{},{},{},{},{},{estimator}",
-            p.id,
-            triple(p.predicted),
-            triple(p.physics),
-            triple(p.physics_sd),
-            triple(p.combined),
-            triple(p.combined_sd),
-            triple(p.combined_90),
-            p.catheter_iou
-                .map_or_else(|| ",".to_string(), |[a, b]| format!("{a:.4},{b:.4}"))
-        );
-    }
-    csv
-}
-
-/// A trained model loaded from a run folder.
-pub struct TrainedModel {
-    /// The network.
-    pub net: StereoModel,
-    /// Its settings.
-    pub spec: ModelSpec,
-    /// Input size (pixels) it was trained at.
-    pub image_size: ImageSize,
-}
-
-/// Loads a run's `model.bpk` (and its training config for the input size).
-pub fn load_run(run: &RunDir, device: &Device) -> anyhow::Result<TrainedModel> {
-    let path = run.model_file();
-    let (net, spec) = read_weights(&path, device).with_context(|| {
-        format!(
-            "run folder '{}' (has `hnet train` finished?)",
-            run.root().display()
-        )
-    })?;
-    let config = run.read_config()?;
-    Ok(TrainedModel {
-        net,
-        spec,
-        image_size: config.image_size,
-    })
-}
-
-/// Runs `model` on `items` in batches; calls `visit` with each pair and its outputs.
-pub fn predict(
-    model: &TrainedModel,
-    items: &[StereoItem],
-    batch_size: usize,
-    device: &Device,
-    mut visit: impl FnMut(&StereoItem, Option<[Vec<f32>; 2]>, Option<[f32; 3]>),
-) -> anyhow::Result<()> {
-    use burn::data::dataloader::batcher::Batcher;
-    let batcher = StereoBatcher {
-        size: model.image_size,
-    };
-    let pixels = model.image_size.pixels();
-    for chunk in items.chunks(batch_size.max(1)) {
-        let batch = batcher.batch(chunk.to_vec(), device);
-        let out = model
-            .net
-            .forward([batch.view_a, batch.view_b], [batch.mask_a, batch.mask_b]);
-        let masks = match out.mask_logits {
-            Some([a, b]) => Some([
-                host_values(burn::tensor::activation::sigmoid(a))?,
-                host_values(burn::tensor::activation::sigmoid(b))?,
-            ]),
-            None => None,
-        };
-        let forces = out.force.map(host_values).transpose()?;
-        for (i, item) in chunk.iter().enumerate() {
-            let item_masks = masks.as_ref().map(|[a, b]| {
-                [
-                    a[i * pixels..(i + 1) * pixels].to_vec(),
-                    b[i * pixels..(i + 1) * pixels].to_vec(),
-                ]
-            });
-            let force = forces
-                .as_ref()
-                .map(|f| [f[i * 3], f[i * 3 + 1], f[i * 3 + 2]]);
-            visit(item, item_masks, force);
-        }
-    }
-    Ok(())
-}
-
-/// [`predict`] with each pair's views read under `entry` ([`hnet_model::catheter_entry`]): each
-/// view turned for every candidate edge, the masks of the kept edge turned back, and the force
-/// only for pairs whose views were both read as they are. Returns how many views A and B were
-/// read turned.
-pub fn predict_entry(
-    model: &TrainedModel,
-    items: &[StereoItem],
-    batch_size: usize,
-    device: &Device,
-    entry: EntrySetting,
-    mut visit: impl FnMut(&StereoItem, Option<[Vec<f32>; 2]>, Option<[f32; 3]>),
-) -> anyhow::Result<[usize; 2]> {
-    if !entry.turns_views() {
-        predict(model, items, batch_size, device, visit)?;
-        return Ok([0, 0]);
-    }
-    let size = model.image_size;
-    anyhow::ensure!(
-        model.spec.heads().0,
-        "--catheter-entry reads masks; a `{}` network gives none",
-        model.spec.name()
-    );
-    anyhow::ensure!(
-        size.width == size.height,
-        "--catheter-entry needs a square network; this one takes {size} images"
-    );
-    let mut read_turned_views = [0, 0];
-    for chunk in items.chunks(batch_size.max(1)) {
-        let mut outputs: Vec<Vec<TurnedOutput>> = vec![Vec::new(); chunk.len()];
-        for candidate in entry.candidates() {
-            let turned = chunk
-                .iter()
-                .map(|item| -> Result<StereoItem, TurnError> {
-                    let turn = |view: &[u8], edge: CatheterEntry| {
-                        turn_clockwise(view, size, 3, edge.quarter_turns()).map(Arc::from)
-                    };
-                    Ok(StereoItem {
-                        view_a: turn(&item.view_a, candidate[0])?,
-                        view_b: turn(&item.view_b, candidate[1])?,
-                        ..item.clone()
-                    })
-                })
-                .collect::<Result<Vec<_>, _>>()?;
-            let mut index = 0;
-            predict(model, &turned, batch_size, device, |_, masks, force| {
-                if let Some(masks) = masks {
-                    outputs[index].push(TurnedOutput {
-                        entry: candidate,
-                        masks,
-                        force,
-                    });
-                }
-                index += 1;
-            })?;
-        }
-        for (item, outputs) in chunk.iter().zip(outputs) {
-            let reading = read_turned(outputs, size)
-                .with_context(|| format!("pair {}: reading its turned views", item.id))?;
-            for (count, edge) in read_turned_views.iter_mut().zip(reading.entry) {
-                *count += usize::from(edge != CatheterEntry::Bottom);
-            }
-            visit(item, Some(reading.masks), reading.force);
-        }
-    }
-    Ok(read_turned_views)
-}
-
-/// Reads a weights file and rebuilds its network; errors name the file.
-fn read_weights(path: &Path, device: &Device) -> anyhow::Result<(StereoModel, ModelSpec)> {
-    let bytes = std::fs::read(path)
-        .with_context(|| format!("cannot read weights file '{}'", path.display()))?;
-    let (net, spec, _) =
-        StereoModel::from_weights_bytes(&bytes, device, &path.display().to_string())?;
-    Ok((net, spec))
-}
-
-/// Loads a weights file on its own. H-Net's weights record their input size; a baseline's come
-/// at `size` (square, pixels).
-pub fn load_weights(
-    path: &Path,
-    size: Option<usize>,
-    device: &Device,
-) -> anyhow::Result<TrainedModel> {
-    let (net, spec) = read_weights(path, device)?;
-    let image_size = match (&spec, size) {
-        (ModelSpec::Hnet(config), None) => config.image_size,
-        (ModelSpec::Hnet(config), Some(size)) if ImageSize::square(size) != config.image_size => {
-            anyhow::bail!(
-                "weights file '{}': this H-Net takes {} images, not {size}×{size} (leave \
-                 --size out)",
-                path.display(),
-                config.image_size,
-            )
-        }
-        (_, Some(size)) => ImageSize::square(size),
-        (spec, None) => anyhow::bail!(
-            "weights file '{}' holds a `{}` network, whose input size is not recorded: give \
-             --size",
-            path.display(),
-            spec.name()
-        ),
-    };
-    let multiple = spec.size_multiple();
-    anyhow::ensure!(
-        [image_size.width, image_size.height]
-            .iter()
-            .all(|s| *s > 0 && s % multiple == 0),
-        "weights file '{}': --size must be a positive multiple of {multiple} for `{}`",
-        path.display(),
-        spec.name()
-    );
-    Ok(TrainedModel {
-        net,
-        spec,
-        image_size,
-    })
-}
-
 /// What [`evaluate`] checks and writes besides the network's own tables.
 #[derive(Debug, Clone, Default)]
 pub struct EvalOptions {
@@ -485,53 +216,6 @@ pub struct EvalOptions {
     pub header_error: HeaderError,
 }
 
-/// Colour of each pixel of an error map, RGB.
-fn error_rgb(outcome: PixelOutcome) -> [u8; 3] {
-    match outcome {
-        PixelOutcome::Found => [255, 255, 255],
-        PixelOutcome::Missed => [64, 128, 255],
-        PixelOutcome::Spurious => [255, 64, 64],
-        PixelOutcome::Background => [0, 0, 0],
-    }
-}
-
-/// Writes pair `id`'s predicted masks (catheter probabilities of views A and B, thresholded at
-/// [`MASK_THRESHOLD`]) into `folder` as `<id>_predicted_mask_a.png` and `_b`, at the network's
-/// input size (`size`), beside error maps against the label masks `targets` (catheter
-/// probabilities, the same size) as `<id>_errors_a.png` and `_b`: white the catheter found, blue
-/// missed, red spurious.
-pub fn write_predicted_masks(
-    folder: &Path,
-    id: &str,
-    size: ImageSize,
-    predicted: &[Vec<f32>; 2],
-    targets: &[Vec<f32>; 2],
-) -> anyhow::Result<()> {
-    for ((view, predicted), target) in ["a", "b"].iter().zip(predicted).zip(targets) {
-        let mask: Vec<u8> = predicted
-            .iter()
-            .map(|&p| if p >= MASK_THRESHOLD { 255 } else { 0 })
-            .collect();
-        let errors: Vec<u8> = predicted
-            .iter()
-            .zip(target)
-            .flat_map(|(&p, &t)| error_rgb(PixelOutcome::of(p, t)))
-            .collect();
-        for (kind, pixels, channels) in [("predicted_mask", &mask, 1), ("errors", &errors, 3)] {
-            let path = folder.join(format!("{id}_{kind}_{view}.png"));
-            let png = encode_png(ImageRef {
-                width: size.width,
-                height: size.height,
-                channels,
-                pixels,
-            });
-            std::fs::write(&path, png)
-                .with_context(|| format!("cannot write '{}'", path.display()))?;
-        }
-    }
-    Ok(())
-}
-
 /// Evaluates a trained model on a split; returns the tables and the per-pair forces. With
 /// `options.physics_check`, simulated pairs also get the physics check, and a network that
 /// segments and estimates a force the combined estimate, calibrated on other pairs
@@ -539,7 +223,7 @@ pub fn write_predicted_masks(
 /// are written there ([`write_predicted_masks`]); after an error the folder keeps what was
 /// written before it.
 pub fn evaluate(
-    model: &TrainedModel,
+    model: &Predictor,
     data: &Path,
     split: Split,
     device: &Device,
@@ -613,7 +297,7 @@ pub fn evaluate(
             .with_context(|| format!("cannot create the masks folder '{}'", folder.display()))?;
     }
     // Per pair, what the physics check reads: the predicted masks and force.
-    let mut predicted: Vec<NetworkOutput> = Vec::new();
+    let mut predicted: Vec<PairOutput> = Vec::new();
     let views_read_turned = predict_entry(
         model,
         &pairs.items,
@@ -622,7 +306,7 @@ pub fn evaluate(
         options.entry,
         |item, masks, force| {
             if records.is_some() {
-                predicted.push(NetworkOutput {
+                predicted.push(PairOutput {
                     masks: masks.clone(),
                     force,
                 });
@@ -778,7 +462,7 @@ pub fn evaluate(
 }
 
 /// Whether the network both segments and estimates a force (what the combined estimate needs).
-fn force_head_and_masks(model: &TrainedModel) -> bool {
+fn force_head_and_masks(model: &Predictor) -> bool {
     model.spec.heads() == (true, true)
 }
 
@@ -789,260 +473,6 @@ pub fn calibration_split(evaluated: Split) -> Split {
         Split::Val => Split::Test,
         Split::Train | Split::Test => Split::Val,
     }
-}
-
-/// Calibrates the combination of the network's force and the physics estimate from its own masks
-/// ([`ForceCombination::calibrate`]) on `split` of `dataset`; `None` (with a note) where that
-/// split has too few simulated pairs.
-fn calibrate_combination(
-    model: &TrainedModel,
-    dataset: &Dataset,
-    split: Split,
-    device: &Device,
-    batch_size: usize,
-    estimator: &Estimator,
-) -> anyhow::Result<Option<(Split, ForceCombination)>> {
-    let pairs = StereoSplit::load(dataset, split, model.image_size, None)?;
-    let ids: Vec<&str> = pairs.items.iter().map(|item| &*item.id).collect();
-    let records = match physics_check::read_records(dataset, &ids) {
-        Some(records) if !records.is_empty() => records,
-        _ => {
-            eprintln!(
-                "no combined force: the {} split of {} has no simulated pairs to calibrate it on",
-                split.name(),
-                dataset.root.display()
-            );
-            return Ok(None);
-        }
-    };
-    let mut predicted = Vec::with_capacity(pairs.items.len());
-    predict(
-        model,
-        &pairs.items,
-        batch_size,
-        device,
-        |_, masks, force| {
-            predicted.push(NetworkOutput { masks, force });
-        },
-    )?;
-    let to_check = network_pairs(model, &pairs.items, &predicted);
-    let check = physics_check::check(
-        MaskOrigin::Predicted,
-        model.image_size,
-        &to_check,
-        &records,
-        estimator,
-        None,
-    );
-    let combination = ForceCombination::calibrate(&check.calibration_pairs(&to_check));
-    if combination.is_none() {
-        eprintln!(
-            "no combined force: {} of the {} pairs of the {} split of {} were fitted, at least {} \
-             needed to calibrate it",
-            check.fitted,
-            check.pairs,
-            split.name(),
-            dataset.root.display(),
-            MIN_CALIBRATION_PAIRS
-        );
-    }
-    Ok(combination.map(|c| (split, c)))
-}
-
-/// The pairs to check from the network's own masks (every item has them: the network segments).
-fn network_pairs<'a>(
-    model: &TrainedModel,
-    items: &[StereoItem],
-    predicted: &'a [NetworkOutput],
-) -> Vec<PairToCheck<'a>> {
-    let net = model.image_size;
-    predicted
-        .iter()
-        .zip(items)
-        .filter_map(|(p, item)| {
-            let [a, b] = p.masks.as_ref()?;
-            Some(PairToCheck {
-                truth_n: item.force_n,
-                network_n: p.force,
-                masks: [a, b].map(|m| Mask::soft(net.width, net.height, m)),
-            })
-        })
-        .collect()
-}
-
-/// What the network said about one pair: its masks' probabilities and its force (N), for the
-/// networks that have them.
-struct NetworkOutput {
-    masks: Option<[Vec<f32>; 2]>,
-    force: Option<[f32; 3]>,
-}
-
-/// The physics check of every pair: from the dataset's own masks at its own size, and from the
-/// network's masks (at its input size) when it segments.
-fn physics_checks(
-    dataset: &Dataset,
-    split: Split,
-    model: &TrainedModel,
-    items: &[StereoItem],
-    predicted: &[NetworkOutput],
-    records: &[SampleRecord],
-    (estimator, combination): (&Estimator, Option<&ForceCombination>),
-) -> anyhow::Result<Vec<PhysicsEvaluation>> {
-    use rayon::prelude::*;
-    let rows: Vec<_> = dataset.split(split).collect();
-    let true_masks = rows
-        .par_iter()
-        .map(|row| dataset.load_pair(row, None))
-        .collect::<Result<Vec<_>, _>>()?;
-    let size = dataset.header.image_size;
-    fn pair<'a>(
-        items: &[StereoItem],
-        predicted: &[NetworkOutput],
-        i: usize,
-        masks: [Mask<'a>; 2],
-    ) -> PairToCheck<'a> {
-        PairToCheck {
-            truth_n: items[i].force_n,
-            network_n: predicted[i].force,
-            masks,
-        }
-    }
-    let from_truth: Vec<_> = true_masks
-        .iter()
-        .enumerate()
-        .map(|(i, p)| {
-            pair(
-                items,
-                predicted,
-                i,
-                [&p.mask_a, &p.mask_b].map(|m| Mask::soft(size.width, size.height, m)),
-            )
-        })
-        .collect();
-    let mut checks = vec![physics_check::check(
-        MaskOrigin::True,
-        size,
-        &from_truth,
-        records,
-        estimator,
-        None,
-    )];
-    if predicted.iter().all(|p| p.masks.is_some()) {
-        checks.push(physics_check::check(
-            MaskOrigin::Predicted,
-            model.image_size,
-            &network_pairs(model, items, predicted),
-            records,
-            estimator,
-            combination,
-        ));
-    }
-    Ok(checks)
-}
-
-fn number(v: Option<f64>) -> String {
-    v.map_or_else(|| "n/a".to_string(), |v| format!("{v:.4}"))
-}
-
-/// The two tables as markdown.
-pub fn markdown(e: &Evaluation) -> String {
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        "{} on the {} split of {} ({}, {} parameters){}\n",
-        e.architecture,
-        e.split,
-        e.data.display(),
-        e.image_size,
-        e.params,
-        match e.view_turns {
-            0 => String::new(),
-            n => format!(", both views turned {} clockwise", quarter_turns(n)),
-        }
-    );
-    if let Some(entry) = &e.catheter_entry {
-        let [a, b] = entry.views_read_turned;
-        let _ = writeln!(
-            s,
-            "Catheter entry `{}`: of {} pairs, {a} views A and {b} views B read turned (the \
-             force head's estimate left out for their pairs)\n",
-            entry.setting, entry.pairs
-        );
-    }
-    if let Some(f) = &e.force {
-        let _ = writeln!(s, "Table I: tip force, {} pairs (N, N², N)\n", f.samples);
-        let _ = writeln!(s, "| axis | MAE | MSE | RMSE | R² | R/M | RMSE/range |");
-        let _ = writeln!(s, "| --- | --- | --- | --- | --- | --- | --- |");
-        let row = |s: &mut String, name: &str, m: &AxisMetrics| {
-            let _ = writeln!(
-                s,
-                "| {name} | {:.4} | {:.5} | {:.4} | {} | {} | {} |",
-                m.mae,
-                m.mse,
-                m.rmse,
-                number(m.r2),
-                number(m.r_over_m),
-                number(m.r_over_range)
-            );
-        };
-        for (axis, m) in AXES.iter().zip(&f.axes) {
-            row(&mut s, &format!("F{axis}"), m);
-        }
-        row(&mut s, "mean", &f.overall);
-        s.push('\n');
-    }
-    if let (Some(heads), Some(mean)) = (&e.segmentation, &e.segmentation_mean) {
-        let _ = writeln!(s, "Table II: segmentation\n");
-        let _ = writeln!(
-            s,
-            "| head | params | accuracy | mIoU | mDice | IoU catheter | Dice catheter |"
-        );
-        let _ = writeln!(s, "| --- | --- | --- | --- | --- | --- | --- |");
-        for (name, m) in [("view A", &heads[0]), ("view B", &heads[1]), ("mean", mean)] {
-            let _ = writeln!(
-                s,
-                "| {name} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} |",
-                e.params, m.accuracy, m.miou, m.mdice, m.catheter.iou, m.catheter.dice
-            );
-        }
-    }
-    if !e.physics.is_empty() {
-        let _ = write!(
-            s,
-            "\nPhysics estimate: {}{}.\n",
-            physics_check::estimator_caption(e.catheter.as_ref()),
-            if e.header_error.is_none() {
-                String::new()
-            } else {
-                format!(
-                    "; each C-arm's angles read off by up to {}° and its distances by up to {} mm, \
-                     plane B's isocentre off by up to {} mm per axis",
-                    e.header_error.angle_deg,
-                    e.header_error.distance_mm,
-                    e.header_error.isocentre_mm
-                )
-            }
-        );
-    }
-    s.push_str(&physics_check::markdown(&e.physics));
-    if let (Some(split), Some(c)) = (
-        &e.calibration_split,
-        e.physics.iter().find_map(|check| check.combination),
-    ) {
-        let [x, y, z] = c.network_error_n;
-        let _ = writeln!(
-            s,
-            "\nCombined: each axis weighted by the inverse of its error variance, calibrated on {} \
-             pairs of the {split} split{} (network error {x:.4} / {y:.4} / {z:.4} N, the fit's \
-             standard error times {:.2}).",
-            c.pairs,
-            e.calibration_data
-                .as_ref()
-                .map_or_else(String::new, |d| format!(" of {}", d.display())),
-            c.physics_sd_scale
-        );
-    }
-    s
 }
 
 pub fn run(args: &EvalArgs) -> anyhow::Result<()> {

@@ -17,6 +17,7 @@ mod import;
 mod import_dicom;
 mod info;
 mod mismatch;
+mod network;
 mod no_catheter;
 mod physics_check;
 mod progress;

@@ -29,7 +29,8 @@ use hnet_twin::scene::{Modality, SceneSampling};
 use serde::Serialize;
 
 use crate::backend::BackendChoice;
-use crate::evaluation::{EvalOptions, Evaluation, evaluate, load_weights};
+use crate::evaluation::{EvalOptions, Evaluation, evaluate};
+use crate::network::load_weights;
 use crate::physics_check::MaskOrigin;
 use crate::simulate::{Scenes, SimulateArgs};
 

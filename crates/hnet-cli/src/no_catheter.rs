@@ -24,7 +24,7 @@ use rand::RngExt;
 
 use crate::backend::BackendChoice;
 use crate::data::{StereoItem, StereoSplit};
-use crate::evaluation::{load_weights, predict};
+use crate::network::{load_weights, predict};
 use crate::simulate::background_files;
 
 /// `hnet study no-catheter`.

@@ -20,9 +20,11 @@ use plotters::prelude::*;
 
 use crate::backend::BackendChoice;
 use crate::data::StereoSplit;
-use crate::evaluation::{EvalOptions, TrainedModel, evaluate, load_run, predict};
+use crate::evaluation::{EvalOptions, evaluate};
+use crate::network::{load_run, predict};
 use crate::run_dir::{EpochRow, LOSS_METRIC, RunDir};
 use crate::training::metrics::Quantity;
+use hnet_model::predictor::Predictor;
 
 #[derive(clap::Args, Debug)]
 pub struct ReportArgs {
@@ -299,7 +301,7 @@ fn curve<DB: PlotBackend>(
 
 /// Fig. 3: rows of (view A, view B, view A with its predicted mask, view B with its mask).
 fn sample_sheet(
-    model: &TrainedModel,
+    model: &Predictor,
     data: &Path,
     out: &Path,
     device: &Device,

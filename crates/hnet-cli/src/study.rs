@@ -513,7 +513,7 @@ fn pooled_features(
 /// `hnet study features`: the force in a trained H-Net's pooled features.
 fn study_features(args: &FeaturesArgs) -> anyhow::Result<()> {
     let device = burn::tensor::Device::flex();
-    let model = crate::evaluation::load_weights(&args.weights, None, &device)?;
+    let model = crate::network::load_weights(&args.weights, None, &device)?;
     let StereoModel::Hnet(net) = &model.net else {
         bail!(
             "weights file '{}' holds a `{}` network: only H-Net has pooled features",

@@ -12,7 +12,7 @@ use hnet_twin::dataset::LoadedPair;
 use crate::backend::BackendChoice;
 use crate::cine::{grey_pair, open_cine};
 use crate::data::StereoItem;
-use crate::evaluation::{load_weights, predict};
+use crate::network::{load_weights, predict};
 use crate::progress;
 
 #[derive(clap::Args, Debug)]

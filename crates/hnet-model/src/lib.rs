@@ -13,6 +13,8 @@
 //!   they need no backend;
 //! - [`inference`]: turning RGB pixel buffers into input tensors and outputs into masks and a
 //!   tip force;
+//! - [`predictor`]: any network of the registry loaded from its weights file and run on pairs,
+//!   with turned-view reading: the one inference API of the command-line tool;
 //! - [`catheter_entry`]: reading a view whose catheter enters through another edge than the
 //!   bottom, as every training scene had it, by turning it;
 //! - [`weights`]: saving and loading trained weights as a single self-describing burnpack file;
@@ -37,6 +39,7 @@ pub mod inference;
 pub mod loss;
 pub mod metrics;
 pub mod model;
+pub mod predictor;
 pub mod weights;
 
 pub use loss::{HNetLoss, HNetLossConfig, LossTerms};

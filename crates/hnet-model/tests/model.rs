@@ -4,8 +4,10 @@ use burn::module::{Module, ModuleVisitor, Param};
 use burn::optim::{GradientsParams, RmsPropConfig};
 use burn::tensor::Gradients;
 use burn::tensor::{Device, Distribution, Tensor, Tolerance};
+use hnet_model::catheter_entry::{CatheterEntry, EntrySetting};
 use hnet_model::inference::{StereoPair, StereoPrediction, host_values, stereo_batch};
 use hnet_model::model::ForceScale;
+use hnet_model::predictor::{PairInput, Predictor};
 use hnet_model::{HNet, HNetConfig, HNetLossConfig};
 use hnet_units::ImageSize;
 
@@ -49,7 +51,8 @@ fn outputs_have_the_documented_shapes() {
 fn predict_gives_each_pair_its_masks_and_force() {
     let device = Device::flex();
     let size = ImageSize::new(32, 16);
-    let model = small_config().with_image_size(size).init(&device).unwrap();
+    let config = small_config().with_image_size(size);
+    let model = config.init(&device).unwrap();
     let image = |seed: u8| -> Vec<u8> {
         (0..size.pixels() * 3)
             .map(|i| (i as u8).wrapping_mul(seed))
@@ -94,6 +97,49 @@ fn predict_gives_each_pair_its_masks_and_force() {
             None
         );
     }
+    // The registry's predictor, loaded from the weights file's bytes, reads the same pairs the
+    // same way, turned or not; it refuses another size by name.
+    let bytes = model
+        .to_weights_bytes(&config, &Default::default())
+        .unwrap();
+    let predictor = Predictor::from_weights_bytes(&bytes, None, &device, "small.bpk").unwrap();
+    assert_eq!(predictor.image_size, size);
+    let inputs: Vec<PairInput<'_>> = pairs
+        .iter()
+        .map(|p| PairInput {
+            view_a: p.view_a,
+            view_b: p.view_b,
+            masks: None,
+        })
+        .collect();
+    let outputs = predictor.predict(&inputs, &device).unwrap();
+    for (p, o) in predictions.iter().zip(&outputs) {
+        let [a, b] = o.masks.as_ref().unwrap();
+        assert!(close(a, &p.mask_a) && close(b, &p.mask_b));
+        assert!(close(&o.force.unwrap(), &p.force));
+    }
+    let known = EntrySetting::Known([CatheterEntry::Bottom; 2]);
+    let read = predictor.predict_entry(&inputs, &device, known).unwrap();
+    assert_eq!(
+        read.iter().map(|r| &r.output).collect::<Vec<_>>(),
+        outputs.iter().collect::<Vec<_>>()
+    );
+    let turned = predictor
+        .predict_entry(
+            &inputs,
+            &device,
+            EntrySetting::Known([CatheterEntry::Top; 2]),
+        )
+        .unwrap_err();
+    assert!(turned.to_string().contains("square network"), "{turned}");
+    let other =
+        Predictor::from_weights_bytes(&bytes, Some(ImageSize::square(16)), &device, "small.bpk")
+            .err()
+            .unwrap();
+    assert!(
+        other.to_string().contains("takes 32×16 images, not 16×16"),
+        "{other}"
+    );
     // An image of another size is refused by name.
     let short = [StereoPair {
         view_a: &views[0][3..],

@@ -1,0 +1,127 @@
+//! The network a command reads pairs with: loaded from a weights file or a run folder, and run
+//! over a dataset's pairs in batches. The inference itself is
+//! [`hnet_model::predictor::Predictor`]'s; this module only reads files and names the command's
+//! flags in its errors.
+
+use std::path::Path;
+
+use anyhow::Context;
+use burn::tensor::Device;
+use hnet_model::catheter_entry::{CatheterEntry, EntrySetting};
+use hnet_model::predictor::{EntryError, LoadError, PairInput, Predictor};
+use hnet_units::ImageSize;
+
+use crate::data::StereoItem;
+use crate::run_dir::RunDir;
+
+/// Loads a weights file on its own. H-Net's weights record their input size; a baseline's come
+/// at `size` (square, pixels: the command's `--size`).
+pub fn load_weights(
+    path: &Path,
+    size: Option<usize>,
+    device: &Device,
+) -> anyhow::Result<Predictor> {
+    let bytes = std::fs::read(path)
+        .with_context(|| format!("cannot read weights file '{}'", path.display()))?;
+    let source = path.display().to_string();
+    Predictor::from_weights_bytes(&bytes, size.map(ImageSize::square), device, &source).map_err(
+        |error| {
+            let hint = match &error {
+                LoadError::OtherSize { .. } => " (leave --size out)",
+                LoadError::SizeUnknown { .. } | LoadError::BadSize { .. } => " (--size)",
+                LoadError::Weights(_) => "",
+            };
+            anyhow::Error::new(error).context(format!("loading the network{hint}"))
+        },
+    )
+}
+
+/// Loads a run folder's `model.bpk`: H-Net at the size its weights record, a baseline at the
+/// size its training config gives.
+pub fn load_run(run: &RunDir, device: &Device) -> anyhow::Result<Predictor> {
+    let path = run.model_file();
+    let source = path.display().to_string();
+    let loaded = std::fs::read(&path)
+        .with_context(|| format!("cannot read weights file '{source}'"))
+        .and_then(
+            |bytes| match Predictor::from_weights_bytes(&bytes, None, device, &source) {
+                Err(LoadError::SizeUnknown { .. }) => {
+                    let size = run.read_config()?.image_size;
+                    Ok(Predictor::from_weights_bytes(
+                        &bytes,
+                        Some(size),
+                        device,
+                        &source,
+                    )?)
+                }
+                loaded => Ok(loaded?),
+            },
+        );
+    loaded.with_context(|| {
+        format!(
+            "run folder '{}' (has `hnet train` finished?)",
+            run.root().display()
+        )
+    })
+}
+
+/// A dataset pair as the network reads it.
+fn input(item: &StereoItem) -> PairInput<'_> {
+    PairInput {
+        view_a: &item.view_a,
+        view_b: &item.view_b,
+        masks: Some([&item.mask_a, &item.mask_b]),
+    }
+}
+
+/// Runs `model` on `items` in batches of `batch_size`; calls `visit` with each pair, its masks
+/// (catheter probabilities of views A and B) and its force (newtons).
+pub fn predict(
+    model: &Predictor,
+    items: &[StereoItem],
+    batch_size: usize,
+    device: &Device,
+    mut visit: impl FnMut(&StereoItem, Option<[Vec<f32>; 2]>, Option<[f32; 3]>),
+) -> anyhow::Result<()> {
+    for chunk in items.chunks(batch_size.max(1)) {
+        let inputs: Vec<PairInput<'_>> = chunk.iter().map(input).collect();
+        for (item, output) in chunk.iter().zip(model.predict(&inputs, device)?) {
+            visit(item, output.masks, output.force);
+        }
+    }
+    Ok(())
+}
+
+/// [`predict`] with each pair's views read under `entry` (the command's `--catheter-entry`):
+/// see [`Predictor::predict_entry`]. Returns how many views A and B were read turned.
+pub fn predict_entry(
+    model: &Predictor,
+    items: &[StereoItem],
+    batch_size: usize,
+    device: &Device,
+    entry: EntrySetting,
+    mut visit: impl FnMut(&StereoItem, Option<[Vec<f32>; 2]>, Option<[f32; 3]>),
+) -> anyhow::Result<[usize; 2]> {
+    let mut read_turned_views = [0, 0];
+    for chunk in items.chunks(batch_size.max(1)) {
+        let inputs: Vec<PairInput<'_>> = chunk.iter().map(input).collect();
+        let outputs = model
+            .predict_entry(&inputs, device, entry)
+            .map_err(|error| match error {
+                EntryError::NoMasks(name) => {
+                    anyhow::anyhow!("--catheter-entry reads masks; a `{name}` network gives none")
+                }
+                EntryError::NotSquare(size) => anyhow::anyhow!(
+                    "--catheter-entry needs a square network; this one takes {size} images"
+                ),
+                EntryError::Predict(error) => anyhow::Error::new(error),
+            })?;
+        for (item, read) in chunk.iter().zip(outputs) {
+            for (count, edge) in read_turned_views.iter_mut().zip(read.entry) {
+                *count += usize::from(edge != CatheterEntry::Bottom);
+            }
+            visit(item, read.output.masks, read.output.force);
+        }
+    }
+    Ok(read_turned_views)
+}
