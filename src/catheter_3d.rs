@@ -31,7 +31,7 @@ use hnet_twin::carm::{Biplane, CArm, CameraMatrix};
 use hnet_twin::catalogue::{BENCH_CATHETER, CatalogueCatheter, catalogue};
 use hnet_twin::centreline::{CentrelineError, Mask};
 use hnet_twin::physics_force::{
-    ForceCombination, MAX_FIT_RMS_MM, PhysicsError, PhysicsEstimate, PhysicsSetup, physics_estimate,
+    MAX_FIT_RMS_MM, PhysicsError, PhysicsEstimate, PhysicsSetup, physics_estimate,
 };
 use hnet_twin::reconstruction::{EpipolarGeometry, ReconstructionError, clip_line};
 use hnet_twin::rod::{RodBase, RodConfig};
@@ -277,21 +277,16 @@ impl Catheter3d {
         self.force_n.map(|f| f as f32)
     }
 
-    /// The tip force combined from H-Net's estimate `hnet_n` and this physics estimate, each
-    /// axis weighted by the inverse of its error variance as `combination` calibrated them for
-    /// these weights ([`ForceCombination::combine`]), when the rod was fitted to H-Net's own
-    /// masks, the case the combination is for (measured on twin bench pairs read blind:
-    /// docs/results.md, "Force without the twin's answers"). From label masks there is none:
-    /// from the twin's exact masks the physics estimate is far better than H-Net on every axis,
-    /// and for drawn or accepted masks nothing was measured.
-    pub fn combined_with(
-        &self,
-        hnet_n: [f32; 3],
-        combination: &ForceCombination,
-    ) -> Option<[f32; 3]> {
+    /// This physics estimate (its force and its fit's standard error, N) as the combination
+    /// with H-Net's force reads it ([`crate::force_reading::TrainingDomain::estimate`]), when the
+    /// rod was fitted to H-Net's own masks, the case the combination is for (measured on twin
+    /// bench pairs read blind: docs/results.md, "Force without the twin's answers"). From label
+    /// masks there is none: from the twin's exact masks the physics estimate is far better than
+    /// H-Net on every axis, and for drawn or accepted masks nothing was measured.
+    pub fn for_combination(&self) -> Option<([f32; 3], Option<[f32; 3]>)> {
         (self.masks == MaskSource::Predicted).then(|| {
             let sd = self.force_sd_n.map(|sd| sd.map(|v| v as f32));
-            combination.combine(hnet_n, self.force_f32(), sd)
+            (self.force_f32(), sd)
         })
     }
 
@@ -494,7 +489,6 @@ pub fn scene_points(catheter: &Catheter3d, views: &Biplane) -> Vec<[f64; 3]> {
 mod tests {
     use super::*;
     use crate::error_text::with_causes;
-    use crate::force_reading::TrainingDomain;
     use crate::twin_live::XrayBackground;
     use crate::workspace::PairSource;
     use hnet_twin::vec3::Vec3;
@@ -572,12 +566,19 @@ mod tests {
         // Only a rod fitted to H-Net's masks is combined with H-Net's force, with the fit's
         // standard error.
         let hnet = [0.3, 0.2, -0.3];
-        let combination = TrainingDomain::bundled().force_combination;
         let sd = c.force_sd_n.expect("a fitted rod has a standard error");
-        let expected = combination.combine(hnet, c.force_f32(), Some(sd.map(|v| v as f32)));
-        assert_eq!(c.combined_with(hnet, &combination), Some(expected));
+        assert_eq!(
+            c.for_combination(),
+            Some((c.force_f32(), Some(sd.map(|v| v as f32))))
+        );
+        let combined =
+            crate::force_reading::tests::bench_domain().estimate(hnet, c.for_combination());
+        assert_eq!(
+            combined.kind,
+            hnet_twin::physics_force::EstimateKind::Combined
+        );
         let labeled = run(&twin(TwinControls::default())).unwrap();
-        assert_eq!(labeled.combined_with(hnet, &combination), None);
+        assert_eq!(labeled.for_combination(), None);
         // Asked for, H-Net's masks are used also where the pair has labels; without them there
         // is nothing to fit.
         pair.masks_labeled = true;

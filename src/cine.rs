@@ -12,6 +12,7 @@ use hnet_dicom::{
     read_cine_file, trace_csv, twin_push_cine, write_xa,
 };
 use hnet_twin::carm::Biplane;
+use hnet_twin::physics_force::TipForceEstimate;
 use hnet_twin::scene::TwinError;
 use hnet_units::ImageSize;
 
@@ -128,8 +129,10 @@ pub struct CinePlayer {
     pub windows: [WindowLevel; 2],
     /// The frame on screen, 0-based.
     pub frame: usize,
-    /// H-Net's tip force of each frame, newtons, once estimated.
-    pub forces_n: Vec<Option<[f32; 3]>>,
+    /// Each frame's tip-force estimate (the verdict's: combined where the rod was fitted to
+    /// H-Net's masks, else H-Net's force head; with its 90 % intervals where the weights carry
+    /// their calibration), once traced.
+    pub estimates: Vec<Option<TipForceEstimate>>,
     /// What the user should know: geometry the headers lacked, how frames were paired.
     pub notes: Vec<String>,
 }
@@ -165,7 +168,7 @@ impl CinePlayer {
             },
             windows: Plane::BOTH.map(|plane| cine.series(plane).initial_window(0)),
             frame: 0,
-            forces_n: vec![None; cine.frame_count()],
+            estimates: vec![None; cine.frame_count()],
             notes: cine.notes(),
             cine,
         }
@@ -275,28 +278,28 @@ impl CinePlayer {
         self.windows = Plane::BOTH.map(|plane| self.cine.series(plane).initial_window(self.frame));
     }
 
-    /// Records H-Net's tip force of frame `frame`, newtons.
-    pub fn record_force(&mut self, frame: usize, force_n: [f32; 3]) {
-        if let Some(slot) = self.forces_n.get_mut(frame) {
-            *slot = Some(force_n);
+    /// Records frame `frame`'s tip-force estimate.
+    pub fn record_estimate(&mut self, frame: usize, estimate: TipForceEstimate) {
+        if let Some(slot) = self.estimates.get_mut(frame) {
+            *slot = Some(estimate);
         }
     }
 
-    /// Forgets every frame's force.
+    /// Forgets every frame's estimate.
     pub fn clear_trace(&mut self) {
-        self.forces_n.iter_mut().for_each(|f| *f = None);
+        self.estimates.iter_mut().for_each(|f| *f = None);
     }
 
-    /// The frames with a force, in order.
+    /// The frames with an estimate, in order.
     pub fn trace(&self) -> Vec<TracePoint> {
-        self.forces_n
+        self.estimates
             .iter()
             .enumerate()
-            .filter_map(|(frame, force)| {
-                force.map(|force_n| TracePoint {
+            .filter_map(|(frame, estimate)| {
+                estimate.map(|estimate| TracePoint {
                     frame,
                     time_s: self.time_s(frame),
-                    force_n: Ok(force_n),
+                    estimate: Ok(estimate),
                 })
             })
             .collect()
@@ -312,7 +315,7 @@ impl CinePlayer {
         let count = self.frame_count();
         (0..count)
             .map(|i| (from + i) % count)
-            .find(|&frame| self.forces_n[frame].is_none())
+            .find(|&frame| self.estimates[frame].is_none())
     }
 }
 
@@ -385,14 +388,15 @@ mod tests {
         let [a, b] = small_cine(3);
         let mut player = CinePlayer::read(vec![a], vec![b]).unwrap();
         assert_eq!(player.next_untraced(1), Some(1));
-        player.record_force(1, [0.1, 0.0, 0.0]);
-        player.record_force(0, [0.0, 0.0, 0.2]);
+        player.record_estimate(1, TipForceEstimate::uncalibrated([0.1, 0.0, 0.0]));
+        let combination = crate::force_reading::tests::bench_domain().combination;
+        player.record_estimate(0, combination.estimate([0.0, 0.0, 0.2], None));
         assert_eq!(player.next_untraced(1), Some(2));
         assert_eq!(
             player.trace_csv(),
-            "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,estimator,note\n\
-             1,0.0000,0.0000,0.0000,0.2000,0.2000,H-Net force head,\n\
-             2,0.0667,0.1000,0.0000,0.0000,0.1000,H-Net force head,\n"
+            "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,fx_90_n,fy_90_n,fz_90_n,estimator,note\n\
+             1,0.0000,0.0000,0.0000,0.2000,0.2000,0.1217,0.1230,0.1133,H-Net force head,\n\
+             2,0.0667,0.1000,0.0000,0.0000,0.1000,,,,H-Net force head,\n"
         );
         player.step(-1);
         assert_eq!(player.frame, 2);
@@ -440,7 +444,7 @@ mod tests {
         assert_eq!(views["a"]["missing_geometry"], serde_json::json!([]));
         assert!(!record.to_string().contains("a.dcm"), "{record}");
         // Its force reading names what differs from the bundled weights' data.
-        let departures = crate::force_reading::TrainingDomain::bundled().departures(&ws.pairs[0]);
+        let departures = crate::force_reading::tests::bench_domain().departures(&ws.pairs[0]);
         assert!(departures[0].contains("not the twin's"), "{departures:?}");
         assert!(
             departures

@@ -17,8 +17,10 @@ use hnet_units::ImageSize;
 
 use crate::browser::{now_ms, yield_to_browser};
 use crate::compute::Backend;
+use crate::force_reading::TrainingDomain;
 use crate::gpu_worker::{GpuNetwork, GpuWorker, GpuWorkerError};
 use crate::imaging::{WORK_SIZE, rescale_mask, rescale_rgb};
+use hnet_twin::model_facts::ModelFacts;
 
 /// Input size of the untrained network the page falls back to when it ships no weights, pixels.
 pub const FALLBACK_INPUT: usize = 64;
@@ -62,6 +64,9 @@ pub struct Engine {
     pub weights: Rc<[u8]>,
     /// What the WebGPU result check found, on WebGPU ([`crate::webgpu_check`]).
     pub check: Option<String>,
+    /// What the weights' force was trained on and how far off it is there, when their file
+    /// records it ([`hnet_twin::model_facts`]); `None`: their accuracy is unknown.
+    pub domain: Option<TrainingDomain>,
 }
 
 /// What H-Net says about one pair, at [`WORK_SIZE`].
@@ -173,10 +178,16 @@ impl Engine {
                 size: config.image_size,
             });
         }
+        // Facts that cannot be read leave the accuracy unknown; the network still runs.
+        let domain = ModelFacts::read(&header.provenance)
+            .ok()
+            .as_ref()
+            .and_then(TrainingDomain::of_facts);
         Ok(Self {
             weights_name: name.to_string(),
             origin,
             header: Some(header),
+            domain,
             ..Self::without_file(model, config.image_size, bytes, reason)
         })
     }
@@ -193,6 +204,7 @@ impl Engine {
             header: None,
             weights,
             check: None,
+            domain: None,
         }
     }
 
@@ -245,6 +257,7 @@ impl Engine {
             header: self.header.clone(),
             weights: self.weights.clone(),
             check: None,
+            domain: self.domain.clone(),
         })
     }
 

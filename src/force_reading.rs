@@ -5,8 +5,9 @@
 
 use hnet_twin::carm::Biplane;
 use hnet_twin::centreline::{CentrelineSettings, Mask, catheter_seen};
-use hnet_twin::physics_force::ForceCombination;
-use hnet_twin::scene::{Modality, SceneParams, SceneSampling};
+use hnet_twin::model_facts::{ForceDomain, ModelFacts};
+use hnet_twin::physics_force::{ForceCombination, TipForceEstimate};
+use hnet_twin::scene::{Modality, SceneParams};
 
 use crate::workspace::{LabeledPair, PairSource};
 use hnet_units::force_magnitude as magnitude;
@@ -61,96 +62,43 @@ impl BandPosition {
     }
 }
 
-/// Which of the page's tip-force estimates a verdict reads.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Estimator {
-    /// H-Net's force head.
-    Hnet,
-    /// H-Net's force combined with the physics estimate from H-Net's own masks
-    /// ([`TrainingDomain::force_combination`]).
-    Combined,
-}
-
-impl Estimator {
-    /// Its name on the page (the force table's row).
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Hnet => "H-Net",
-            Self::Combined => "Combined",
-        }
-    }
-}
-
-/// What a set of weights was trained on, and how far its force estimates are off there.
+/// What a set of weights' force was trained on, and how far off it is there: read from the
+/// facts the weights file carries ([`ModelFacts`], written by `hnet train` and `hnet eval
+/// --record`), never from constants of the page.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TrainingDomain {
-    /// Root-mean-square length of the force error vector on held-out pairs, newtons: a bound on
-    /// the RMS error of the estimated magnitude |F|.
-    pub force_error_n: f32,
-    /// How these weights' force and the physics estimate from their masks are combined: each
-    /// one's error, measured on calibration pairs.
-    pub force_combination: ForceCombination,
-    /// [`Self::force_error_n`] of that combined estimate, newtons.
-    pub combined_force_error_n: f32,
-    /// The images' look.
-    pub modality: Modality,
-    /// How the training scenes were drawn.
-    pub scenes: SceneSampling,
-    /// Each view's C-arm angles (primary, secondary), degrees.
-    pub views_deg: [[f64; 2]; 2],
-    /// Whether every X-ray background was cut from the built-in thorax phantom.
-    pub phantom_backgrounds: bool,
-}
-
-/// The bundled weights' force head's per-axis mean square errors (x, y, z), N², on 480 fresh
-/// bench pairs (`hnet eval` on `data/xray2-bench-224-s33`, assets/MODEL.md).
-pub const BUNDLED_FORCE_MSE_N2: [f32; 3] = [0.00480, 0.00514, 0.00370];
-
-/// Their combined estimate's ([`TrainingDomain::force_combination`]) on the 475 of those pairs
-/// read blind whose masks gave a physics estimate, N² (docs/results.md, "Force without the
-/// twin's answers"; `hnet eval --weights assets/hnet-cpu.bpk --data data/xray2-bench-224-s33
-/// --split train --calibration data/xray2-bench-224-s7`).
-pub const BUNDLED_COMBINED_FORCE_MSE_N2: [f32; 3] = [0.00205, 0.00203, 0.00244];
-
-/// The root-mean-square length of an error vector whose per-axis mean square errors are
-/// `mse_n2` (N²), newtons: a bound on the RMS error of the magnitude |F|.
-fn error_length_n(mse_n2: [f32; 3]) -> f32 {
-    mse_n2.iter().sum::<f32>().sqrt()
+    /// The twin data the force head learned from.
+    pub domain: ForceDomain,
+    /// How the weights' force and the physics estimate from their masks are combined, with both
+    /// estimates' 90 % intervals, measured on calibration pairs.
+    pub combination: ForceCombination,
+    /// Root-mean-square length of the force head's error vector on held-out pairs, N.
+    pub head_error_n: f32,
+    /// The same for the combined estimate, N, when measured.
+    pub combined_error_n: Option<f32>,
 }
 
 impl TrainingDomain {
-    /// The bundled weights (`assets/MODEL.md`): their force was trained on XRay-2 bench scenes
-    /// on phantom backgrounds, the default biplane (0°/0° and 90°/0°); other catheters, poses,
-    /// angles and radiograph backgrounds taught their masks only. Their force error is √(ΣMSE)
-    /// of [`BUNDLED_FORCE_MSE_N2`], 0.117 N; their combined estimate's, read blind, of
-    /// [`BUNDLED_COMBINED_FORCE_MSE_N2`], 0.081 N. Their combination with the blind physics
-    /// estimate was calibrated on the 598 fitted pairs of the val split of their training data
-    /// (`hnet eval --weights assets/hnet-cpu.bpk --data data/xray2-bench-224-s7`, blind, the
-    /// default; its 90 % intervals covered 89 / 90 / 92 % of the 475 of 480 fresh bench pairs that
-    /// got a physics estimate).
-    pub fn bundled() -> Self {
-        Self {
-            force_error_n: error_length_n(BUNDLED_FORCE_MSE_N2),
-            combined_force_error_n: error_length_n(BUNDLED_COMBINED_FORCE_MSE_N2),
-            force_combination: ForceCombination {
-                network_error_n: [0.0740, 0.0748, 0.0689],
-                physics_sd_scale: 2.154,
-                pairs: 598,
-                interval_90_sd: [2.129, 2.189, 1.924],
-            },
-            modality: Modality::Xray2,
-            scenes: SceneSampling::bench(),
-            views_deg: [[0.0, 0.0], [90.0, 0.0]],
-            phantom_backgrounds: true,
-        }
+    /// The domain of weights whose `facts` record both the data their force was trained on and
+    /// a calibrated combination; `None` otherwise (their accuracy is then unknown to the page).
+    pub fn of_facts(facts: &ModelFacts) -> Option<Self> {
+        Some(Self {
+            domain: facts.force_domain.clone()?,
+            combination: *facts.combination()?,
+            head_error_n: facts.head_error_n()?,
+            combined_error_n: facts.combined_error_n(),
+        })
     }
 
-    /// The force error of `estimator`'s estimates, newtons.
-    pub fn force_error_of(&self, estimator: Estimator) -> f32 {
-        match estimator {
-            Estimator::Hnet => self.force_error_n,
-            Estimator::Combined => self.combined_force_error_n,
-        }
+    /// The estimate of a pair from H-Net's force `hnet_n` and, where the rod was fitted to
+    /// H-Net's own masks, the physics estimate (its force and its fit's standard error, N):
+    /// [`ForceCombination::estimate`], the rule `hnet eval` and `hnet trace` follow.
+    pub fn estimate(
+        &self,
+        hnet_n: [f32; 3],
+        physics: Option<([f32; 3], Option<[f32; 3]>)>,
+    ) -> TipForceEstimate {
+        self.combination.estimate(hnet_n, physics)
     }
 
     /// How a pair lies outside this domain, one phrase each (empty for twin pairs inside it).
@@ -162,7 +110,7 @@ impl TrainingDomain {
             format!(
                 "images that are not the twin's (the error of these weights was measured on twin \
                  {} images)",
-                self.modality.name()
+                self.domain.modality.name()
             )
         };
         let (views, settings) = match &pair.source {
@@ -180,20 +128,20 @@ impl TrainingDomain {
         let Some(modality) = settings["modality"].as_str().and_then(Modality::parse) else {
             return vec!["the pair's twin settings cannot be read".into()];
         };
-        if modality != self.modality {
+        if modality != self.domain.modality {
             departures.push(format!(
                 "{} images (trained on {} only)",
                 modality.name(),
-                self.modality.name()
+                self.domain.modality.name()
             ));
         }
         match serde_json::from_value::<SceneParams>(settings["scene"].clone()) {
-            Ok(scene) => departures.extend(self.scenes.departures(&scene)),
+            Ok(scene) => departures.extend(self.domain.scenes.departures(&scene)),
             Err(_) => departures.push("the pair's twin settings cannot be read".into()),
         }
         departures.extend(self.view_departures(views));
         let source = settings["background"]["source"].as_str();
-        if self.phantom_backgrounds
+        if self.domain.phantom_backgrounds
             && modality.is_xray()
             && !source.is_some_and(|s| s.starts_with("phantom:"))
         {
@@ -210,7 +158,7 @@ impl TrainingDomain {
         let mut departures = Vec::new();
         for (letter, (view, trained)) in ["A", "B"]
             .iter()
-            .zip([views.a, views.b].iter().zip(self.views_deg))
+            .zip([views.a, views.b].iter().zip(self.domain.views_deg))
         {
             let angles = [view.primary_deg, view.secondary_deg];
             if (angles[0] - trained[0]).abs() > 0.5 || (angles[1] - trained[1]).abs() > 0.5 {
@@ -227,30 +175,30 @@ impl TrainingDomain {
 /// What the page says about an estimated magnitude.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Verdict {
-    /// The estimate and its error lie on one side of the band's edges.
+    /// The magnitude's whole range within the estimate's 90 % intervals lies on one side of the
+    /// band's edges.
     Clear {
         /// Where.
         position: BandPosition,
-        /// The force error of the estimate read (the weights', or their combined estimate's), N.
-        error_n: f32,
+        /// The range of |F| over the intervals, N ([`TipForceEstimate::magnitude_range_n`]).
+        range_n: (f32, f32),
     },
-    /// Within its error, the estimate could lie on either side of an edge of the band.
+    /// Within its intervals, the estimate could lie on either side of an edge of the band.
     Unclear {
-        /// The force error of the estimate read (the weights', or their combined estimate's), N.
-        error_n: f32,
+        /// The range of |F| over the intervals, N.
+        range_n: (f32, f32),
     },
-    /// Weights whose accuracy is not known (loaded by the user, or untrained).
+    /// Weights whose accuracy is not known (no facts recorded in their file).
     UnknownAccuracy,
     /// A pair outside what the weights were trained on (uploads included).
     OutsideTraining(Vec<String>),
 }
 
 impl Verdict {
-    /// The verdict on `estimator`'s estimate `force_n` of `pair` from weights trained on
-    /// `domain` (`None`: unknown weights).
+    /// The verdict on `estimate` of `pair` from weights trained on `domain` (`None`: weights
+    /// whose accuracy is unknown).
     pub fn of(
-        force_n: [f32; 3],
-        estimator: Estimator,
+        estimate: &TipForceEstimate,
         domain: Option<&TrainingDomain>,
         pair: &LabeledPair,
     ) -> Self {
@@ -261,33 +209,38 @@ impl Verdict {
         if !departures.is_empty() {
             return Self::OutsideTraining(departures);
         }
-        let m = magnitude(force_n);
-        let error_n = domain.force_error_of(estimator);
-        let (low, high) = (BandPosition::of(m - error_n), BandPosition::of(m + error_n));
+        let Some(range_n) = estimate.magnitude_range_n() else {
+            return Self::UnknownAccuracy;
+        };
+        let (low, high) = (BandPosition::of(range_n.0), BandPosition::of(range_n.1));
         if low == high {
             Self::Clear {
                 position: low,
-                error_n,
+                range_n,
             }
         } else {
-            Self::Unclear { error_n }
+            Self::Unclear { range_n }
         }
     }
 
-    /// The sentence shown under the gauge, for estimate `force_n`.
-    pub fn text(&self, force_n: [f32; 3]) -> String {
-        let m = magnitude(force_n);
+    /// The sentence shown under the gauge, for `estimate`.
+    pub fn text(&self, estimate: &TipForceEstimate) -> String {
+        let m = magnitude(estimate.force_n);
+        let range = |(low, high): (f32, f32)| {
+            format!("|F| = {m:.3} N, {low:.3}–{high:.3} N within its 90 % intervals")
+        };
         match self {
-            Self::Clear { position, error_n } => {
-                format!("|F| = {m:.3} ± {error_n:.3} N: {}", position.phrase())
+            Self::Clear { position, range_n } => {
+                format!("{}: {}", range(*range_n), position.phrase())
             }
-            Self::Unclear { error_n } => format!(
-                "|F| = {m:.3} ± {error_n:.3} N: too uncertain to place against the 0.1–0.3 N \
-                 ablation band (the error spans an edge of the band)"
+            Self::Unclear { range_n } => format!(
+                "{}: too uncertain to place against the 0.1–0.3 N ablation band (the range spans \
+                 an edge of the band)",
+                range(*range_n)
             ),
             Self::UnknownAccuracy => format!(
                 "|F| = {m:.3} N: no verdict against the 0.1–0.3 N ablation band (the accuracy \
-                 of these weights is not known)"
+                 of these weights is not known: their file records no measured error)"
             ),
             Self::OutsideTraining(departures) => format!(
                 "|F| = {m:.3} N: no verdict: this pair lies outside what the weights were \
@@ -315,7 +268,8 @@ pub const PHYSICS_FORCE_MSE_FROM_HNET_MASKS_N2: [f32; 3] = [0.00400, 0.00307, 0.
 
 /// H-Net's and the physics estimate are said to disagree when their difference |ΔF| exceeds
 /// this, newtons. If both err as measured, independently and normally (H-Net: the bundled
-/// weights' [`BUNDLED_FORCE_MSE_N2`]; the blind physics estimate fitted to H-Net's own masks:
+/// weights' per-axis mean square errors 0.00480, 0.00514 and 0.00370 N² on fresh bench pairs,
+/// assets/MODEL.md; the blind physics estimate fitted to H-Net's own masks:
 /// [`PHYSICS_FORCE_MSE_FROM_HNET_MASKS_N2`]), |ΔF| stays below 0.27 N on 95.6 % of pairs; from
 /// exact masks ([`PHYSICS_FORCE_ERROR_N`]) on 99.8 % (the test below integrates both; `cargo
 /// test -p hnet-studio --lib the_tolerance -- --nocapture` prints them). Beyond 0.27 N, one of
@@ -363,9 +317,10 @@ impl Disagreement {
 }
 
 #[cfg(all(test, not(target_arch = "wasm32")))]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::twin_live::{TwinControls, XrayBackground};
+    use hnet_twin::physics_force::EstimateKind;
 
     fn twin(controls: TwinControls) -> LabeledPair {
         controls
@@ -373,65 +328,99 @@ mod tests {
             .unwrap()
     }
 
+    /// Weights whose facts are the bundled ones' (assets/MODEL.md: their force head's and
+    /// combined estimate's errors on 480 fresh bench pairs, the combination calibrated on 598
+    /// pairs of their training data's val split, trained on XRay-2 bench scenes on the phantom).
+    pub(crate) fn bench_domain() -> TrainingDomain {
+        TrainingDomain {
+            domain: ForceDomain {
+                data: "xray2-bench-224-s7".into(),
+                modality: Modality::Xray2,
+                scenes: hnet_twin::scene::SceneSampling::bench(),
+                views_deg: [[0.0, 0.0], [90.0, 0.0]],
+                phantom_backgrounds: true,
+            },
+            combination: ForceCombination {
+                network_error_n: [0.0740, 0.0748, 0.0689],
+                physics_sd_scale: 2.154,
+                pairs: 598,
+                interval_90_sd: [2.129, 2.189, 1.924],
+                network_interval_90_n: None,
+            },
+            head_error_n: 0.117,
+            combined_error_n: Some(0.081),
+        }
+    }
+
     #[test]
-    fn a_verdict_never_claims_more_than_the_error_allows() {
-        let domain = TrainingDomain::bundled();
+    fn a_verdict_never_claims_more_than_the_intervals_allow() {
+        let domain = bench_domain();
         let pair = twin(TwinControls::default());
         assert_eq!(domain.departures(&pair), Vec::<String>::new());
-        // The errors the page states for the bundled weights.
-        assert!((domain.force_error_n - 0.117).abs() < 5e-4);
-        assert!((domain.combined_force_error_n - 0.081).abs() < 5e-4);
-        // 0.18 N ± 0.117 N spans the band's lower edge: no verdict.
-        let unclear = Verdict::of([0.18, 0.0, 0.0], Estimator::Hnet, Some(&domain), &pair);
-        assert_eq!(
-            unclear,
-            Verdict::Unclear {
-                error_n: domain.force_error_n
-            }
-        );
-        assert!(unclear.text([0.18, 0.0, 0.0]).contains("too uncertain"));
+        // H-Net's 0.18 N with its own intervals (about ±0.12 N per axis) spans the band's lower
+        // edge: no verdict.
+        let head = domain.estimate([0.18, 0.0, 0.0], None);
+        assert_eq!(head.kind, EstimateKind::Head);
+        let unclear = Verdict::of(&head, Some(&domain), &pair);
+        assert!(matches!(unclear, Verdict::Unclear { .. }), "{unclear:?}");
+        assert!(unclear.text(&head).contains("too uncertain"));
         // Precise weights may place it.
         let precise = TrainingDomain {
-            force_error_n: 0.01,
+            combination: ForceCombination {
+                network_interval_90_n: Some([0.01; 3]),
+                ..domain.combination
+            },
             ..domain.clone()
         };
+        let sharp = precise.estimate([0.18, 0.0, 0.0], None);
         assert_eq!(
-            Verdict::of([0.18, 0.0, 0.0], Estimator::Hnet, Some(&precise), &pair)
-                .text([0.18, 0.0, 0.0]),
-            "|F| = 0.180 ± 0.010 N: within the 0.1–0.3 N ablation band"
+            Verdict::of(&sharp, Some(&precise), &pair).text(&sharp),
+            "|F| = 0.180 N, 0.170–0.191 N within its 90 % intervals: within the 0.1–0.3 N \
+             ablation band"
         );
+        assert_eq!(Verdict::of(&head, None, &pair), Verdict::UnknownAccuracy);
+        let uncalibrated = TipForceEstimate::uncalibrated([0.18, 0.0, 0.0]);
         assert_eq!(
-            Verdict::of([0.18, 0.0, 0.0], Estimator::Hnet, None, &pair),
+            Verdict::of(&uncalibrated, Some(&domain), &pair),
             Verdict::UnknownAccuracy
         );
-        // The combined estimate, 1.45 times closer, places a magnitude H-Net's error cannot:
-        // 0.20 N (± 0.117 N spans the lower edge).
-        assert_eq!(
-            Verdict::of([0.2, 0.0, 0.0], Estimator::Hnet, Some(&domain), &pair),
-            Verdict::Unclear {
-                error_n: domain.force_error_n
-            }
-        );
-        let combined = Verdict::of([0.2, 0.0, 0.0], Estimator::Combined, Some(&domain), &pair);
-        assert_eq!(
-            combined,
+        // The combined estimate, with a physics estimate that says much, places 0.20 N where
+        // H-Net's intervals cannot.
+        assert!(matches!(
+            Verdict::of(
+                &domain.estimate([0.2, 0.0, 0.0], None),
+                Some(&domain),
+                &pair
+            ),
+            Verdict::Unclear { .. }
+        ));
+        let combined = domain.estimate([0.2, 0.0, 0.0], Some(([0.2, 0.0, 0.0], Some([0.005; 3]))));
+        assert_eq!(combined.kind, EstimateKind::Combined);
+        assert!(matches!(
+            Verdict::of(&combined, Some(&domain), &pair),
             Verdict::Clear {
                 position: BandPosition::Within,
-                error_n: domain.combined_force_error_n,
+                ..
             }
-        );
+        ));
+    }
+
+    #[test]
+    fn weights_without_recorded_facts_have_no_domain() {
+        assert_eq!(TrainingDomain::of_facts(&ModelFacts::default()), None);
     }
 
     #[test]
     fn twin_settings_outside_the_training_data_get_no_verdict() {
-        let domain = TrainingDomain::bundled();
+        let domain = bench_domain();
         // The issue's case: |F| 0.69 N pushing cranially (Fz > 0).
         let pair = twin(TwinControls {
             force_n: [0.4, 0.4, 0.4],
             view_a_deg: [30.0, 0.0],
             ..TwinControls::default()
         });
-        let verdict = Verdict::of([0.1, 0.1, 0.1], Estimator::Hnet, Some(&domain), &pair);
+        let estimate = domain.estimate([0.1, 0.1, 0.1], None);
+        let verdict = Verdict::of(&estimate, Some(&domain), &pair);
         let Verdict::OutsideTraining(departures) = &verdict else {
             panic!("{verdict:?}");
         };
@@ -442,7 +431,7 @@ mod tests {
                 .iter()
                 .any(|d| d.starts_with("view A at +30°/+0°"))
         );
-        assert!(verdict.text([0.1, 0.1, 0.1]).contains("no verdict"));
+        assert!(verdict.text(&estimate).contains("no verdict"));
 
         let rgb = twin(TwinControls {
             modality: Modality::Rgb,
@@ -463,15 +452,12 @@ mod tests {
             Vec::new(),
             Vec::new(),
         );
-        let verdict = Verdict::of(
-            [0.5, 0.0, 0.0],
-            Estimator::Combined,
-            Some(&TrainingDomain::bundled()),
-            &upload,
-        );
+        let domain = bench_domain();
+        let estimate = domain.estimate([0.5, 0.0, 0.0], None);
+        let verdict = Verdict::of(&estimate, Some(&domain), &upload);
         assert!(
             verdict
-                .text([0.5, 0.0, 0.0])
+                .text(&estimate)
                 .contains("images that are not the twin's"),
             "{verdict:?}"
         );
@@ -483,7 +469,7 @@ mod tests {
     fn the_tolerance_is_what_the_measured_errors_explain() {
         // The bundled weights' per-axis mean square errors, N² (assets/MODEL.md), whose root
         // sum is the domain's error.
-        let hnet = BUNDLED_FORCE_MSE_N2.map(f64::from);
+        let hnet = [0.00480f64, 0.00514, 0.00370];
         let within = |tolerance: f64, physics: [f64; 3]| {
             let sd: Vec<f64> = (0..3).map(|i| (hnet[i] + physics[i]).sqrt()).collect();
             let steps = 90;

@@ -319,8 +319,10 @@ test("the live twin bends the catheter with the sliders and composes X-ray backg
   assert.match(caption, /C-arm \+0° \/ \+0°/);
   // Inside the training data, the verdict says no more than the error allows.
   await page.waitForSelector("#force-verdict", { timeout: 120_000 });
-  // (The error is the bundled weights' √ΣMSE, `TrainingDomain::bundled` in src/force_reading.rs.)
-  assert.match(await page.textContent("#force-verdict"), /\|F\| = \d\.\d{3} ± 0\.1\d{2} N: /);
+  // (The intervals are the bundled weights' own, recorded in their file by `hnet eval --record`.)
+  assert.match(await page.textContent("#force-verdict"), /\|F\| = \d\.\d{3} N, \d\.\d{3}–\d\.\d{3} N within its 90 % intervals: /);
+  // The gauge draws that range, not a bare marker.
+  assert.ok(await page.$("#force-gauge #force-range"));
   // Push the tip sideways with the keyboard on the Fx slider: the catheter's silhouette changes.
   const before = await page.evaluate(() => document.querySelector("#view-a").toDataURL());
   await page.focus("#twin-fx");
@@ -473,19 +475,21 @@ test("a twin pair in 3D: the catheter, the physics force beside H-Net's, the epi
   // Fitted to the twin's exact label masks, the physics estimate stands alone: no Combined row
   // (that is for a rod fitted to H-Net's masks; src/catheter_3d.rs tests it).
   assert.equal(await page.$("#force-table tr.combined"), null);
-  assert.equal(await page.getAttribute("#force-verdict", "data-estimator"), "H-Net");
+  assert.equal(await page.getAttribute("#force-verdict", "data-estimator"), "H-Net force head");
   // Fitted to H-Net's masks instead (as a real pair would be), the Combined row appears, the
-  // bundled weights' calibration applied, and the verdict reads it with its smaller error
-  // (`combined_force_error_n`, src/force_reading.rs).
+  // bundled weights' calibration applied, and the verdict reads it with its own intervals
+  // (`TrainingDomain::estimate`, src/force_reading.rs).
   await page.selectOption("#fit-masks", "hnet");
   await page.waitForSelector("#force-table tr.combined", { timeout: 60_000 });
   assert.match(await page.textContent("#catheter-summary"), /reconstructed from H-Net's masks/);
   assert.equal(await page.getAttribute("#force-verdict", "data-estimator"), "Combined");
   assert.equal(await page.textContent("#force-table tr.error th"), "Error (Combined)");
-  assert.match(await page.textContent("#force-verdict"), /^Combined: \|F\| = \d\.\d{3} ± 0\.0\d{2} N: /);
+  assert.match(await page.textContent("#force-verdict"), /^Combined: \|F\| = \d\.\d{3} N, \d\.\d{3}–\d\.\d{3} N within its 90 % intervals: /);
+  // Each axis of the Combined row carries its interval.
+  assert.match(await page.textContent("#force-table tr.combined td"), /^[+-]\d\.\d{3} ± \d\.\d{3}$/);
   // Each axis a weighted mean of the two: between H-Net's and the physics estimate (how close
   // it comes to the truth is measured over many pairs by `hnet eval`, not on one).
-  const row = (name) => page.$$eval(`#force-table tr.${name} td`, (tds) => tds.map((td) => Number(td.textContent)));
+  const row = (name) => page.$$eval(`#force-table tr.${name} td`, (tds) => tds.map((td) => parseFloat(td.textContent)));
   const [hnet, fitted, combined] = [await row("estimate"), await row("physics"), await row("combined")];
   for (let axis = 0; axis < 3; axis++) {
     const [low, high] = [Math.min(hnet[axis], fitted[axis]), Math.max(hnet[axis], fitted[axis])];
@@ -587,9 +591,15 @@ test("a DICOM cine: sample, step, scrub, play, window/level, trace with cancel, 
   assert.equal(csv.suggestedFilename(), "hnet-force-trace.csv");
   await csv.saveAs(join(files, "trace.csv"));
   const lines = (await readFile(join(files, "trace.csv"), "utf8")).trim().split("\n");
-  assert.equal(lines[0], "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,estimator,note");
+  assert.equal(lines[0], "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,fx_90_n,fy_90_n,fz_90_n,estimator,note");
   assert.equal(lines.length, 25);
-  assert.match(lines[2], /^2,0\.0667,-?\d\.\d{4},-?\d\.\d{4},-?\d\.\d{4},\d\.\d{4},H-Net force head,$/);
+  // Each frame as the verdict reads it, with its 90 % intervals (the bundled weights carry their
+  // calibration): combined where the rod was fitted to H-Net's masks, else the force head.
+  assert.match(lines[2], /^2,0\.0667,(-?\d\.\d{4},){3}\d\.\d{4},(\d\.\d{4},){3}(H-Net force head|Combined),$/);
+  const combinedFrames = lines.filter((l) => l.includes(",Combined,")).length;
+  console.log(`# cine trace: ${combinedFrames} of 24 frames combined with the physics estimate`);
+  assert.equal(await page.getAttribute("#force-trace", "data-combined"), String(combinedFrames));
+  assert.notEqual(await page.getAttribute("#trace-range", "d"), "");
 
   // A click on the plot moves the cine there; keep that frame as a labeled pair.
   const plot = await page.locator("#force-trace").boundingBox();

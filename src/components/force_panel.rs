@@ -10,12 +10,11 @@ use crate::browser::{read_file_with, take_picked_file};
 use crate::bundled::BUNDLED_FORCE_CAVEAT;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
-use crate::force_reading::{
-    ABLATION_BAND_N, BandPosition, Disagreement, Estimator, TrainingDomain, Verdict,
-};
+use crate::force_reading::{ABLATION_BAND_N, BandPosition, Disagreement, Verdict};
 use crate::studio::{CatheterReading, ModelState, Studio};
 use crate::workspace::{implausible_label, parse_force_labels, parse_newtons};
 use hnet_twin::label_origin::LabelOrigin;
+use hnet_twin::physics_force::{EstimateKind, TipForceEstimate};
 use hnet_units::force_magnitude as magnitude;
 
 /// Full scale of the magnitude gauge, newtons.
@@ -47,29 +46,31 @@ pub fn ForcePanel() -> impl IntoView {
     let truth = move || studio.with_shown(|p| p.and_then(|p| p.true_force()));
     // The physics estimate of the pair on screen, if its catheter was reconstructed.
     let physics = move || shown_reading(studio, |r| Some(r.result.as_ref().ok()?.force_f32()));
-    // What the loaded weights were trained on, when the page knows (the bundled ones).
+    // What the loaded weights' force was trained on and how far off it is, when their file
+    // records it (hnet_twin::model_facts).
     let domain = move || {
         studio.model.with(|m| match m {
-            ModelState::Ready(e) if e.origin == WeightsOrigin::Bundled => {
-                Some(TrainingDomain::bundled())
-            }
+            ModelState::Ready(e) => e.domain.clone(),
             _ => None,
         })
     };
-    // H-Net's and the physics estimate combined, where the rod was fitted to H-Net's masks and
-    // the combination was calibrated for the weights (the bundled ones).
-    let combined = move || {
+    let bundled = move || {
+        studio
+            .model
+            .with(|m| matches!(m, ModelState::Ready(e) if e.origin == WeightsOrigin::Bundled))
+    };
+    // The estimate the gauge and the verdict read, with its 90 % intervals: H-Net's force
+    // combined with the physics estimate where the rod was fitted to H-Net's masks, else H-Net's
+    // alone; without recorded facts, H-Net's with no interval.
+    let reading = move || -> Option<TipForceEstimate> {
         let e = estimate()?;
-        let combination = domain()?.force_combination;
-        shown_reading(studio, |r| r.combined_with(e, &combination))
+        Some(match domain() {
+            Some(d) => d.estimate(e, shown_reading(studio, |r| r.physics_for(e))),
+            None => TipForceEstimate::uncalibrated(e),
+        })
     };
-    // The estimate the gauge and the verdict read: the combined one where there is one (it is
-    // the closer), else H-Net's.
-    let reading = move || {
-        combined()
-            .map(|c| (c, Estimator::Combined))
-            .or_else(|| estimate().map(|e| (e, Estimator::Hnet)))
-    };
+    // H-Net's own interval, for its row of the table.
+    let head_interval = move || Some(domain()?.combination.head_interval_90_n());
     let label = move || studio.with_shown(|p| p.and_then(|p| p.force_n));
     // The label being typed, per axis, exactly as typed. The fields show the pair's label when
     // another pair is shown or its label changes, and are never rewritten while typing (a
@@ -174,22 +175,29 @@ pub fn ForcePanel() -> impl IntoView {
         });
     };
 
-    // The verdict says no more than the weights' accuracy and training data support.
-    let verdict_text = move |estimate: [f32; 3], estimator: Estimator| {
+    // The verdict says no more than the estimate's intervals and the training data support.
+    let verdict_text = move |estimate: TipForceEstimate| {
         let domain = domain();
         studio.with_shown(|pair| {
             pair.map(|pair| {
-                let verdict = Verdict::of(estimate, estimator, domain.as_ref(), pair);
-                format!("{}: {}", estimator.name(), verdict.text(estimate))
+                let verdict = Verdict::of(&estimate, domain.as_ref(), pair);
+                format!("{}: {}", estimate.kind.name(), verdict.text(&estimate))
             })
         })
     };
-    let row = move |name: String, values: Option<[f32; 3]>, class: &'static str| {
+    let cell = |v: f32, interval: Option<f32>| match interval {
+        Some(h) => format!("{v:+.3} ± {h:.3}"),
+        None => format!("{v:+.3}"),
+    };
+    let row = move |name: String,
+                    values: Option<[f32; 3]>,
+                    interval: Option<[f32; 3]>,
+                    class: &'static str| {
         view! {
             <tr class=class>
                 <th scope="row">{name}</th>
                 {(0..3).map(|i| view! {
-                    <td>{values.map(|v| format!("{:+.3}", v[i])).unwrap_or_else(|| "–".into())}</td>
+                    <td>{values.map(|v| cell(v[i], interval.map(|h| h[i]))).unwrap_or_else(|| "–".into())}</td>
                 }).collect_view()}
                 <td>{values.map(|v| format!("{:.3}", magnitude(v))).unwrap_or_else(|| "–".into())}</td>
             </tr>
@@ -202,18 +210,21 @@ pub fn ForcePanel() -> impl IntoView {
             <table id="force-table">
                 <thead><tr><th></th><th>"Fx (N)"</th><th>"Fy (N)"</th><th>"Fz (N)"</th><th>"|F| (N)"</th></tr></thead>
                 <tbody>
-                    {move || row(Estimator::Hnet.name().into(), estimate(), "estimate")}
-                    {move || row("Physics (rod fit)".into(), physics(), "physics")}
+                    {move || row(EstimateKind::Head.name().into(), estimate(), head_interval(), "estimate")}
+                    {move || row("Physics (rod fit)".into(), physics(), None, "physics")}
                     // Each axis of H-Net's and the physics estimate fitted to its masks, weighted
                     // by the inverse of its error variance (docs/app.md, "The catheter in 3D and
                     // the physics estimate").
-                    {move || combined().map(|c| row(Estimator::Combined.name().into(), Some(c), "combined"))}
-                    {move || truth().map(|t| row("True (twin)".into(), Some(t), "truth"))}
+                    {move || reading().filter(|r| r.kind == EstimateKind::Combined).map(|r| {
+                        row(EstimateKind::Combined.name().into(), Some(r.force_n), r.interval_90_n, "combined")
+                    })}
+                    {move || truth().map(|t| row("True (twin)".into(), Some(t), None, "truth"))}
                     // The error of the estimate the gauge and the verdict read.
                     {move || match (reading(), truth()) {
-                        (Some((e, estimator)), Some(t)) => Some(row(
-                            format!("Error ({})", estimator.name()),
-                            Some([e[0] - t[0], e[1] - t[1], e[2] - t[2]]),
+                        (Some(r), Some(t)) => Some(row(
+                            format!("Error ({})", r.kind.name()),
+                            Some([0, 1, 2].map(|i| r.force_n[i] - t[i])),
+                            None,
                             "error",
                         )),
                         _ => None,
@@ -237,21 +248,34 @@ pub fn ForcePanel() -> impl IntoView {
                 _ => None,
             }}
             {move || {
-                domain().map(|_| view! { <p class="caveat" id="force-caveat">{BUNDLED_FORCE_CAVEAT}</p> })
+                bundled().then(|| view! { <p class="caveat" id="force-caveat">{BUNDLED_FORCE_CAVEAT}</p> })
             }}
-            {move || reading().map(|(e, estimator)| {
-                let m = magnitude(e);
+            {move || reading().map(|r| {
+                let m = magnitude(r.force_n);
                 let pct = |v: f32| format!("{:.1}%", (v / GAUGE_MAX_N).clamp(0.0, 1.0) * 100.0);
+                let range = r.magnitude_range_n();
+                let label = match range {
+                    Some((low, high)) => format!(
+                        "{} estimate {m:.3} N, {low:.3} to {high:.3} N within its 90 % intervals, on a 0 to {GAUGE_MAX_N} N scale",
+                        r.kind.name()
+                    ),
+                    None => format!("{} estimate {m:.3} N on a 0 to {GAUGE_MAX_N} N scale", r.kind.name()),
+                };
                 view! {
-                    <div class="gauge" id="force-gauge" role="img"
-                        aria-label=format!("{} estimate {m:.3} N on a 0 to {GAUGE_MAX_N} N scale", estimator.name())>
+                    <div class="gauge" id="force-gauge" role="img" aria-label=label>
                         <div class="band" style:left=pct(ABLATION_BAND_N[0])
                             style:width=pct(ABLATION_BAND_N[1] - ABLATION_BAND_N[0])></div>
+                        // The range of |F| within the estimate's 90 % intervals: a marker in the
+                        // band's zone says nothing while its range crosses an edge.
+                        {range.map(|(low, high)| view! {
+                            <div class="range" id="force-range" style:left=pct(low)
+                                style:width=pct(high - low)></div>
+                        })}
                         <div class="marker" style:left=pct(m)></div>
                         {truth().map(|t| view! { <div class="marker truth" style:left=pct(magnitude(t))></div> })}
                     </div>
-                    <p class="verdict" id="force-verdict" data-estimator=estimator.name()>
-                        {verdict_text(e, estimator)}
+                    <p class="verdict" id="force-verdict" data-estimator=r.kind.name()>
+                        {verdict_text(r)}
                     </p>
                     {truth().map(|t| {
                         let m = magnitude(t);

@@ -1,6 +1,7 @@
 //! The force trace of the loaded cine: Fx, Fy, Fz and |F| over its frames (newtons, the twin's
-//! world frame), the ablation band (0.1-0.3 N) behind |F|, and the frame on screen as a cursor;
-//! a click moves the cine to that frame.
+//! world frame) as the verdict reads them (combined where the rod was fitted, else H-Net's force
+//! head), the range of |F| within each frame's 90 % intervals, the ablation band (0.1-0.3 N)
+//! behind |F|, and the frame on screen as a cursor; a click moves the cine to that frame.
 
 use leptos::prelude::*;
 use wasm_bindgen::JsCast;
@@ -8,6 +9,7 @@ use wasm_bindgen::JsCast;
 use crate::cine::CinePlayer;
 use crate::force_reading::ABLATION_BAND_N;
 use crate::studio::Studio;
+use hnet_twin::physics_force::EstimateKind;
 use hnet_units::force_magnitude;
 
 /// The plot's size in SVG units, and its margins (left, right, top, bottom).
@@ -31,6 +33,11 @@ const SERIES: [(&str, &str, Component); 4] = [
 struct Plot {
     /// The SVG path of each series.
     paths: [String; 4],
+    /// The range of |F| within each frame's 90 % intervals, as closed SVG shapes (one per run of
+    /// frames that have it).
+    range_path: String,
+    /// Frames whose estimate is the combined one.
+    combined: usize,
     /// The top of the force axis, newtons (the axis runs from minus this to this).
     top_n: f64,
     /// Frames in the cine.
@@ -56,18 +63,28 @@ fn y_of(force_n: f64, top_n: f64) -> f64 {
 impl Plot {
     fn of(cine: &CinePlayer) -> Self {
         let frames = cine.frame_count();
-        let largest = cine
-            .forces_n
+        let forces: Vec<Option<[f32; 3]>> = cine
+            .estimates
+            .iter()
+            .map(|e| e.map(|e| e.force_n))
+            .collect();
+        let ranges: Vec<Option<(f32, f32)>> = cine
+            .estimates
+            .iter()
+            .map(|e| e.and_then(|e| e.magnitude_range_n()))
+            .collect();
+        let largest = forces
             .iter()
             .flatten()
             .flat_map(|f| SERIES.map(|s| f64::from(s.2(*f)).abs()))
+            .chain(ranges.iter().flatten().map(|r| f64::from(r.1)))
             .fold(0.0, f64::max);
         // Whole tenths of a newton, at least the ablation band's top and a margin.
         let top_n = ((largest.max(0.35) * 10.0).ceil() + 0.5).round() / 10.0;
         let paths = SERIES.map(|(_, _, value)| {
             let mut path = String::new();
             let mut pen_down = false;
-            for (frame, force) in cine.forces_n.iter().enumerate() {
+            for (frame, force) in forces.iter().enumerate() {
                 match force {
                     Some(f) => {
                         let (x, y) = (x_of(frame, frames), y_of(f64::from(value(*f)), top_n));
@@ -82,12 +99,46 @@ impl Plot {
             }
             path
         });
+        // Each run of frames with a range: along its top edge, back along its bottom edge.
+        let mut range_path = String::new();
+        let mut run: Vec<(usize, (f32, f32))> = Vec::new();
+        let mut close = |run: &mut Vec<(usize, (f32, f32))>| {
+            let point = |frame: usize, f: f32| {
+                format!(
+                    "{:.1},{:.1}",
+                    x_of(frame, frames),
+                    y_of(f64::from(f), top_n)
+                )
+            };
+            let top = run.iter().map(|&(frame, r)| point(frame, r.1));
+            let bottom = run.iter().rev().map(|&(frame, r)| point(frame, r.0));
+            let points: Vec<String> = top.chain(bottom).collect();
+            if !points.is_empty() {
+                range_path.push_str(&format!("M{}Z ", points.join(" L")));
+            }
+            run.clear();
+        };
+        for (frame, range) in ranges.iter().enumerate() {
+            match range {
+                Some(r) => run.push((frame, *r)),
+                None => close(&mut run),
+            }
+        }
+        close(&mut run);
+        let combined = cine
+            .estimates
+            .iter()
+            .flatten()
+            .filter(|e| e.kind == EstimateKind::Combined)
+            .count();
         Self {
             paths,
+            range_path,
+            combined,
             top_n,
             frames,
             frame: cine.frame,
-            traced: cine.forces_n.iter().flatten().count(),
+            traced: forces.iter().flatten().count(),
             end_s: cine.time_s(frames.saturating_sub(1)),
         }
     }
@@ -125,11 +176,13 @@ pub fn ForceTracePlot() -> impl IntoView {
             view! {
                 <figure class="force-trace">
                     <svg id="force-trace" node_ref=svg viewBox=format!("0 0 {WIDTH} {HEIGHT}")
-                        role="img" data-traced=p.traced data-frame=p.frame
+                        role="img" data-traced=p.traced data-frame=p.frame data-combined=p.combined
                         aria-label=format!(
-                            "Force trace: Fx, Fy, Fz and |F| in newtons over {} frames, {} traced; \
-                             the ablation band 0.1-0.3 N shaded; frame {} marked",
-                            p.frames, p.traced, p.frame + 1)
+                            "Force trace: Fx, Fy, Fz and |F| in newtons over {} frames, {} traced \
+                             ({} combined with the physics estimate, the rest H-Net's force head); \
+                             the range of |F| within the 90 % intervals and the ablation band \
+                             0.1-0.3 N shaded; frame {} marked",
+                            p.frames, p.traced, p.combined, p.frame + 1)
                         on:click=on_click>
                         <rect class="band" x=MARGIN[0] width=WIDTH - MARGIN[0] - MARGIN[1]
                             y=band[0] height=band[1] - band[0]></rect>
@@ -143,6 +196,7 @@ pub fn ForceTracePlot() -> impl IntoView {
                         }).collect_view()}
                         <text class="tick" x=MARGIN[0] y=HEIGHT - 6.0>"0"</text>
                         <text class="tick" x=WIDTH - MARGIN[1] y=HEIGHT - 6.0 text-anchor="end">{axis_end}</text>
+                        <path class="range" id="trace-range" d=p.range_path.clone()></path>
                         {SERIES.iter().zip(p.paths.clone()).map(|((name, colour, _), d)| view! {
                             <path class="series" data-series=*name d=d stroke=*colour
                                 stroke-width=if *name == "|F|" { "2" } else { "1.3" }></path>
@@ -155,6 +209,10 @@ pub fn ForceTracePlot() -> impl IntoView {
                             <span class="key"><span class="swatch" style:background=*colour></span>{*name}</span>
                         }).collect_view()}
                         <span class="key"><span class="swatch band"></span>"ablation band 0.1-0.3 N"</span>
+                        <span class="key"><span class="swatch range"></span>"|F| within the 90 % intervals"</span>
+                        {(p.traced > 0).then(|| format!(
+                            " · {} of {} frames combined with the physics estimate, the rest H-Net's force head",
+                            p.combined, p.traced))}
                         {(p.traced == 0).then_some(" · no force traced yet")}
                     </figcaption>
                 </figure>

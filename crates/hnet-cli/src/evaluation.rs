@@ -27,6 +27,7 @@ use crate::physics_check::{self, BlindEstimator, Estimator, MaskOrigin, PhysicsE
 use crate::run_dir::RunDir;
 use hnet_twin::carm::HeaderError;
 use hnet_twin::catalogue::{BENCH_CATHETER, CatalogueCatheter};
+use hnet_twin::model_facts::{ForceDomain, MeasuredCombination, MeasuredForce, ModelFacts};
 use hnet_twin::simulate::nominal_base;
 
 #[derive(clap::Args, Debug)]
@@ -113,6 +114,16 @@ pub struct EvalArgs {
     /// along each axis (the two planes' isocentres apart). Blind only.
     #[arg(long, default_value_t = 0.0, conflicts_with = "oracle")]
     carm_isocentre_error: f64,
+    /// Record the measured force error, and the combination's calibration with its 90 %
+    /// intervals, in the weights file evaluated (the run's `model.bpk`, or `--weights`): the
+    /// facts the page and `hnet trace` read (`hnet_twin::model_facts`). The file is rewritten
+    /// atomically with the same parameters.
+    #[arg(long, conflicts_with_all = ["turn_views", "carm_angle_error", "carm_distance_error", "carm_isocentre_error"])]
+    record: bool,
+    /// With `--record`: also record this twin dataset's ranges as the data the weights' force
+    /// was trained on (for weights written before `hnet train` recorded it).
+    #[arg(long, requires = "record")]
+    trained_on: Option<PathBuf>,
 }
 
 fn parse_entry(text: &str) -> Result<EntrySetting, String> {
@@ -544,6 +555,14 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
             predictions_csv(&predictions, &evaluation.estimator).as_bytes(),
         )?;
     }
+    if args.record {
+        let path = match (&run, &args.weights) {
+            (Some(run), _) => run.model_file(),
+            (None, Some(weights)) => weights.clone(),
+            (None, None) => unreachable!("a model was loaded"),
+        };
+        record_facts(&model, &evaluation, args, &path)?;
+    }
     if let Some(path) = &args.predictions {
         std::fs::write(path, predictions_csv(&predictions, &evaluation.estimator))
             .with_context(|| format!("cannot write '{}'", path.display()))?;
@@ -553,5 +572,95 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     } else {
         print!("{}", markdown(&evaluation));
     }
+    Ok(())
+}
+
+/// The name a dataset folder is recorded by in a weights file's facts: its last component.
+fn data_name(path: &Path) -> String {
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    )
+}
+
+/// Writes what `evaluation` measured into the facts of the weights file at `path` (and, with
+/// `--trained-on`, the data its force was trained on), rewriting it atomically.
+fn record_facts(
+    model: &Predictor,
+    evaluation: &Evaluation,
+    args: &EvalArgs,
+    path: &Path,
+) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        evaluation.catheter_entry.is_none(),
+        "--record measures the force of views read as they are: leave --catheter-entry out"
+    );
+    let force = evaluation.force.with_context(|| {
+        format!(
+            "--record: a `{}` network estimates no force to record",
+            model.spec.name()
+        )
+    })?;
+    let mut facts = ModelFacts::read(&model.header.provenance)
+        .with_context(|| format!("weights file '{}'", path.display()))?;
+    let mse = |m: &ForceMetrics| m.axes.map(|a| a.mse as f32);
+    let combined = evaluation
+        .physics
+        .iter()
+        .find(|p| p.masks == MaskOrigin::Predicted)
+        .and_then(|p| {
+            Some((
+                p.combination?,
+                p.combined_force.as_ref()?,
+                p.combined_coverage_90,
+            ))
+        })
+        .map(|(combination, metrics, coverage)| MeasuredCombination {
+            combination,
+            calibration_data: format!(
+                "{} ({})",
+                data_name(
+                    evaluation
+                        .calibration_data
+                        .as_deref()
+                        .unwrap_or(&evaluation.data)
+                ),
+                evaluation.calibration_split.as_deref().unwrap_or("val")
+            ),
+            pairs: metrics.samples as usize,
+            mse_n2: mse(metrics),
+            coverage_90: coverage.map(|c| c.map(|v| v as f32)),
+        });
+    facts.measured = Some(MeasuredForce {
+        data: data_name(&evaluation.data),
+        split: evaluation.split.clone(),
+        pairs: force.samples as usize,
+        estimator: evaluation.estimator.clone(),
+        head_mse_n2: mse(&force),
+        combined,
+        command: crate::command_line(),
+    });
+    if let Some(trained_on) = &args.trained_on {
+        let dataset = Dataset::open(trained_on)?;
+        facts.force_domain = Some(
+            ForceDomain::of_twin_source(&data_name(trained_on), &dataset.header.source)
+                .with_context(|| {
+                    format!(
+                        "--trained-on '{}': not a dataset of the twin (its header names no twin \
+                         settings)",
+                        trained_on.display()
+                    )
+                })?,
+        );
+    }
+    let mut provenance = model.header.provenance.clone();
+    facts.write(&mut provenance);
+    let bytes = model
+        .net
+        .to_weights_bytes(&model.spec, &provenance)
+        .with_context(|| format!("weights file '{}'", path.display()))?;
+    hnet_twin::files::write_atomically(path, &bytes)
+        .with_context(|| format!("cannot write '{}'", path.display()))?;
+    eprintln!("facts recorded in {}", path.display());
     Ok(())
 }

@@ -94,3 +94,12 @@ fn main() -> ExitCode {
         }
     }
 }
+
+/// The command as typed, its program named `hnet`: what provenance records (weights files, run
+/// folders) keep, without the install path of the machine that ran it.
+pub(crate) fn command_line() -> String {
+    std::iter::once("hnet".to_string())
+        .chain(std::env::args().skip(1))
+        .collect::<Vec<_>>()
+        .join(" ")
+}

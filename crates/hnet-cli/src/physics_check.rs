@@ -462,6 +462,7 @@ mod tests {
             physics_sd_scale: 3.0,
             pairs: 10,
             interval_90_sd: [1.645; 3],
+            network_interval_90_n: None,
         };
         let network = check(
             MaskOrigin::Predicted,

@@ -1,13 +1,25 @@
 //! `hnet trace`: a trained model over every frame pair of a biplane DICOM cine, written as a
-//! force trace CSV ([`hnet_dicom::trace_csv`], the page's format too). The trace holds no header
-//! value besides the frame times, so no patient identifier.
+//! force trace CSV ([`hnet_dicom::trace_csv`], the page's format too). Each frame's estimate
+//! follows the page's verdict ([`ForceCombination::estimate`]): combined with the blind physics
+//! estimate from the network's own masks where the rod could be fitted (the C-arms from the
+//! headers, a catalogue catheter, the fixture's nominal base fitted), else the force head alone;
+//! each with its 90 % interval when the weights carry their calibration
+//! ([`hnet_twin::model_facts`], `hnet eval --record`). The trace holds no header value besides
+//! the frame times, so no patient identifier.
 
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use hnet_dicom::{TracePoint, trace_csv};
+use hnet_dicom::{Plane, TracePoint, trace_csv};
+use hnet_twin::carm::Biplane;
+use hnet_twin::catalogue::{BENCH_CATHETER, CatalogueCatheter};
 use hnet_twin::centreline::{CentrelineSettings, Mask, catheter_seen};
 use hnet_twin::dataset::LoadedPair;
+use hnet_twin::model_facts::ModelFacts;
+use hnet_twin::physics_force::{
+    EstimateKind, ForceCombination, PhysicsSetup, TipForceEstimate, physics_estimate,
+};
+use hnet_twin::scene::SceneSampling;
 
 use crate::backend::BackendChoice;
 use crate::cine::{grey_pair, open_cine};
@@ -36,12 +48,40 @@ pub struct TraceArgs {
     /// Frame pairs per batch.
     #[arg(long, default_value_t = 16)]
     batch_size: usize,
+    /// The catheter the blind physics estimate assumes: a catalogue name or a catheter file
+    /// (`hnet calibrate`'s output).
+    #[arg(long, default_value = BENCH_CATHETER)]
+    catheter: String,
 }
 
 pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
     let device = args.backend.device()?;
     let model = load_weights(&args.weights, None, &device)?;
+    let facts = ModelFacts::read(&model.header.provenance)
+        .with_context(|| format!("weights file '{}'", args.weights.display()))?;
+    let combination = facts.combination().copied();
+    let catheter = CatalogueCatheter::find(&args.catheter)?;
     let cine = open_cine(&args.dicom_a, &args.dicom_b)?;
+    let size = model.image_size;
+    // The blind physics estimate needs the C-arms' geometry from the headers and a
+    // calibrated combination; without either, the force head alone.
+    let geometry_notes = cine.notes();
+    let missing_geometry = cine
+        .planes
+        .iter()
+        .any(|series| !series.geometry.missing.is_empty());
+    let setup = (!missing_geometry && combination.is_some()).then(|| {
+        let carm = |plane| cine.series(plane).geometry.carm.with_image_size(size);
+        let views = Biplane {
+            a: carm(Plane::A),
+            b: carm(Plane::B),
+        };
+        PhysicsSetup::blind(
+            [views.a.camera_matrix(), views.b.camera_matrix()],
+            &catheter,
+            &SceneSampling::bench().nominal_base(),
+        )
+    });
     let pairs = &cine.pairing.pairs;
     let bar = progress::bar(pairs.len() as u64, "tracing");
     let mut trace = Vec::with_capacity(pairs.len());
@@ -52,44 +92,43 @@ pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
                 let [a, b] = grey_pair(&cine, pair.frame);
                 let empty = image::GrayImage::new(a.width(), a.height());
                 let images = [a, b, empty.clone(), empty].map(image::DynamicImage::ImageLuma8);
-                let loaded = LoadedPair::of_images(images, model.image_size);
+                let loaded = LoadedPair::of_images(images, size);
                 StereoItem::new(loaded, [0.0; 3], false, (pair.frame + 1).to_string())
             })
             .collect();
-        let mut forces = Vec::with_capacity(chunk.len());
-        let size = model.image_size;
+        let mut outputs = Vec::with_capacity(chunk.len());
         predict(
             &model,
             &items,
             args.batch_size,
             &device,
-            |_, masks, force| {
-                // A frame whose masks show no catheter in a view gets no force, and says why.
-                let no_catheter = masks.as_ref().and_then(|[a, b]| {
-                    let settings = CentrelineSettings::default();
-                    [(a, "A"), (b, "B")].into_iter().find_map(|(mask, view)| {
-                        catheter_seen(&Mask::soft(size.width, size.height, mask), view, &settings)
-                            .err()
-                    })
-                });
-                forces.push((force, no_catheter))
-            },
+            |_, masks, force| outputs.push((masks, force)),
         )?;
-        for (pair, (force, no_catheter)) in chunk.iter().zip(forces) {
-            let Some(f) = force else {
-                bail!(
-                    "weights file '{}' holds a `{}` network, which estimates no force",
-                    args.weights.display(),
-                    model.spec.name()
-                );
-            };
+        use rayon::prelude::*;
+        let estimates: Vec<anyhow::Result<Result<TipForceEstimate, String>>> = outputs
+            .into_par_iter()
+            .map(|(masks, force)| {
+                let Some(head_n) = force else {
+                    bail!(
+                        "weights file '{}' holds a `{}` network, which estimates no force",
+                        args.weights.display(),
+                        model.spec.name()
+                    );
+                };
+                Ok(frame_estimate(
+                    head_n,
+                    masks.as_ref(),
+                    size,
+                    combination.as_ref(),
+                    setup.as_ref(),
+                ))
+            })
+            .collect();
+        for (pair, estimate) in chunk.iter().zip(estimates) {
             trace.push(TracePoint {
                 frame: pair.frame,
                 time_s: pair.time_s,
-                force_n: match no_catheter {
-                    Some(why) => Err(hnet_units::with_causes(&why)),
-                    None => Ok(f),
-                },
+                estimate: estimate?,
             });
         }
         bar.inc(chunk.len() as u64);
@@ -97,17 +136,61 @@ pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
     bar.finish_and_clear();
     hnet_twin::files::write_atomically(&args.out, trace_csv(&trace).as_bytes())
         .with_context(|| format!("cannot write {}", args.out.display()))?;
-    let without = trace.iter().filter(|p| p.force_n.is_err()).count();
+    let count = |kind| {
+        trace
+            .iter()
+            .filter(|p| p.estimate.as_ref().is_ok_and(|e| e.kind == kind))
+            .count()
+    };
+    let (combined, head) = (count(EstimateKind::Combined), count(EstimateKind::Head));
+    let without = trace.len() - combined - head;
     eprintln!(
-        "force trace of {} frame pairs ({}) written to {}{}",
+        "force trace of {} frame pairs written to {}: {combined} combined, {head} from the force \
+         head alone, {without} without a force (a view shows no catheter){}",
         pairs.len(),
-        hnet_dicom::TRACE_ESTIMATOR,
         args.out.display(),
-        if without > 0 {
-            format!("; {without} frame(s) without a force: a view shows no catheter")
-        } else {
-            String::new()
+        match (&combination, missing_geometry) {
+            (None, _) => format!(
+                "; no intervals and no combined estimate: '{}' carries no calibration (record \
+                 one with `hnet eval --record`)",
+                args.weights.display()
+            ),
+            (Some(_), true) => format!("; no combined estimate: {}", geometry_notes.join("; ")),
+            (Some(_), false) => String::new(),
         }
     );
     Ok(())
+}
+
+/// One frame's estimate from the network's force `head_n` (N) and masks (catheter probabilities
+/// at `size`): none where a view shows no catheter; combined where the rod could be fitted to
+/// the masks with `setup` and the weights carry a `combination`; else the head alone.
+fn frame_estimate(
+    head_n: [f32; 3],
+    masks: Option<&[Vec<f32>; 2]>,
+    size: hnet_units::ImageSize,
+    combination: Option<&ForceCombination>,
+    setup: Option<&PhysicsSetup>,
+) -> Result<TipForceEstimate, String> {
+    let masks = masks.map(|[a, b]| [a, b].map(|m| Mask::soft(size.width, size.height, m)));
+    if let Some(masks) = &masks {
+        let settings = CentrelineSettings::default();
+        for (mask, view) in masks.iter().zip(["A", "B"]) {
+            catheter_seen(mask, view, &settings).map_err(|why| hnet_units::with_causes(&why))?;
+        }
+    }
+    let Some(combination) = combination else {
+        return Ok(TipForceEstimate::uncalibrated(head_n));
+    };
+    let physics = masks
+        .zip(setup)
+        .and_then(|(masks, setup)| physics_estimate(masks, setup).ok())
+        .map(|estimate| {
+            let fit = estimate.fit;
+            (
+                fit.force_n.0.map(|f| f as f32),
+                fit.force_sd_n.map(|sd| sd.0.map(|v| v as f32)),
+            )
+        });
+    Ok(combination.estimate(head_n, physics))
 }

@@ -34,6 +34,7 @@ use hnet_model::HNet;
 use hnet_model::architectures::{ModelSpec, StereoModel};
 use hnet_model::model::ForceScale;
 use hnet_twin::dataset::{Dataset, Split};
+use hnet_twin::model_facts::{ForceDomain, ModelFacts};
 
 use self::checkpoints::{RunCheckpointer, WriteFailure};
 use self::metric_log::RunMetricLogger;
@@ -487,7 +488,7 @@ fn export_best(
     let trainee = StereoTrainee::new(net, &config.model, config.loss.clone())
         .try_load_record(record)
         .map_err(|e| anyhow::anyhow!("checkpoint '{}': {e}", checkpoint.display()))?;
-    let provenance = BTreeMap::from([
+    let mut provenance = BTreeMap::from([
         ("command".to_string(), request.command.clone()),
         ("data".to_string(), request.data.display().to_string()),
         ("config".to_string(), config.name.clone()),
@@ -500,6 +501,18 @@ fn export_best(
             format!("{:.0}", started.elapsed().as_secs_f64()),
         ),
     ]);
+    // The data the force head learned from (a stream's bench pairs come from the dataset's own
+    // twin settings; its off-bench pairs teach masks only): what the page's verdict compares a
+    // pair with (hnet_twin::model_facts).
+    let force_domain = Dataset::open(&request.data).ok().and_then(|dataset| {
+        let name = request.data.file_name()?.to_string_lossy().into_owned();
+        ForceDomain::of_twin_source(&name, &dataset.header.source)
+    });
+    ModelFacts {
+        force_domain,
+        measured: None,
+    }
+    .write(&mut provenance);
     let bytes = trainee
         .net
         .to_weights_bytes(&config.model, &provenance)
@@ -572,7 +585,7 @@ pub struct TrainArgs {
 }
 
 pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
-    let command = std::env::args().collect::<Vec<_>>().join(" ");
+    let command = crate::command_line();
     if args.resume {
         let run = RunDir::new(&args.out);
         let config = run

@@ -131,6 +131,21 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
     assert!(eval["force"]["axes"][2]["rmse"].as_f64().unwrap() >= 0.0);
     assert!(eval["segmentation"][1]["mdice"].as_f64().unwrap() > 0.0);
     assert!(runs.join("eval-test.md").is_file());
+    // The run's weights name the twin data their force learned from, and `--record` adds what
+    // was measured, parameters unchanged (the tables below read the same).
+    let facts = |path: &Path| String::from_utf8_lossy(&std::fs::read(path).unwrap()).into_owned();
+    let model = runs.join("model.bpk");
+    assert!(facts(&model).contains(r#""force_domain":{"data":"#));
+    assert!(!facts(&model).contains(r#""measured""#));
+    run(&[
+        "eval",
+        "--run",
+        runs.to_str().unwrap(),
+        "--no-physics",
+        "--record",
+    ]);
+    assert!(facts(&model).contains(r#""measured":{"data":"#));
+    assert!(facts(&model).contains(r#""force_domain""#));
 
     // Any weights file on any data: the same tables from the weights alone.
     let weights = runs.join("model.bpk");
@@ -1111,6 +1126,11 @@ fn a_biplane_dicom_cine_imports_and_traces_without_patient_identifiers() {
 
     let trace = dir.join("trace.csv");
     let weights = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/hnet-cpu.bpk");
+    // The bundled weights carry their facts: the data their force learned from and the
+    // calibration of both estimates' intervals (`hnet eval --record`, assets/MODEL.md).
+    let bundled = String::from_utf8_lossy(&std::fs::read(&weights).unwrap()).into_owned();
+    assert!(bundled.contains(r#""force_domain":{"data":"xray2-bench-224-s7""#));
+    assert!(bundled.contains(r#""network_interval_90_n":["#));
     let traced = |out: &Path, plane_b: &Path| {
         let mut command = hnet();
         command
@@ -1130,7 +1150,7 @@ fn a_biplane_dicom_cine_imports_and_traces_without_patient_identifiers() {
     let lines: Vec<&str> = text.lines().collect();
     assert_eq!(
         lines[0],
-        "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,estimator,note"
+        "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,fx_90_n,fy_90_n,fz_90_n,estimator,note"
     );
     assert_eq!(lines.len(), 5);
     // Every frame is in the trace, with its time. These 32 px frames, blown up to the model's
@@ -1138,7 +1158,7 @@ fn a_biplane_dicom_cine_imports_and_traces_without_patient_identifiers() {
     for (i, line) in lines[1..].iter().enumerate() {
         assert!(line.starts_with(&format!("{},", i + 1)), "{line}");
         assert!(
-            line.contains(",,,,,H-Net force head,\"view A: no catheter found"),
+            line.contains(",,,,,,,,,\"view A: no catheter found"),
             "{line}"
         );
     }

@@ -51,7 +51,7 @@ pub use open::{open_cine_file, open_series};
 pub use pairing::{FramePair, Pairing, PairingError, PairingWarning, pair_frames};
 pub use series::PlaneSeries;
 pub use timing::{FrameTiming, parse_date_time};
-pub use trace::{TRACE_COLUMNS, TRACE_ESTIMATOR, TracePoint, trace_csv};
+pub use trace::{TRACE_COLUMNS, TracePoint, trace_csv};
 pub use twin_cine::{FRAME_TIME_MS, TwinCine, cine_views, twin_cine, twin_push_cine};
 pub use window::WindowLevel;
 pub use writer::{PatientIdentity, XaCine, write_xa, xa_object};

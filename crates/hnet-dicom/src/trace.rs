@@ -1,20 +1,20 @@
 //! A force trace over a cine: one tip-force estimate per frame pair, written as CSV
-//! (`frame,time_s,fx_n,fy_n,fz_n,magnitude_n,estimator,note`: frames from 1, time in seconds
-//! after plane A's first frame, empty when the headers give no frame time, forces in newtons in
-//! the twin's world frame to 0.1 mN, the estimator that gave them, and for a frame without a
-//! force why, its force columns empty). The one format of `hnet trace` and the page's trace
-//! export; it holds no header value besides the frame times, so no patient identifier.
+//! (`frame,time_s,fx_n,fy_n,fz_n,magnitude_n,fx_90_n,fy_90_n,fz_90_n,estimator,note`: frames
+//! from 1, time in seconds after plane A's first frame, empty when the headers give no frame
+//! time, forces in newtons in the twin's world frame to 0.1 mN, half the width of each axis's
+//! 90 % interval (empty for weights that carry no calibration), the estimate it is (H-Net's
+//! force head, or combined with the physics estimate), and for a frame without a force why, its
+//! force columns empty). The one format of `hnet trace` and the page's trace export; it holds
+//! no header value besides the frame times, so no patient identifier.
 
 use std::fmt::Write as _;
 
+use hnet_twin::physics_force::TipForceEstimate;
 use hnet_units::force_magnitude;
 
 /// The trace's header line.
-pub const TRACE_COLUMNS: &str = "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,estimator,note";
-
-/// The estimator both traces plot: H-Net's force head (not the combined estimate the page's
-/// verdict reads, which needs a rod fit per frame).
-pub const TRACE_ESTIMATOR: &str = "H-Net force head";
+pub const TRACE_COLUMNS: &str =
+    "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,fx_90_n,fy_90_n,fz_90_n,estimator,note";
 
 /// One frame pair's estimate.
 #[derive(Debug, Clone, PartialEq)]
@@ -23,8 +23,8 @@ pub struct TracePoint {
     pub frame: usize,
     /// Time after plane A's first frame, seconds, when the headers give it.
     pub time_s: Option<f64>,
-    /// Tip force `(Fx, Fy, Fz)`, newtons, or why the frame has none.
-    pub force_n: Result<[f32; 3], String>,
+    /// The tip-force estimate, or why the frame has none.
+    pub estimate: Result<TipForceEstimate, String>,
 }
 
 /// The CSV of `points`, header line first, one line per point in the given order.
@@ -33,19 +33,27 @@ pub fn trace_csv<'a>(points: impl IntoIterator<Item = &'a TracePoint>) -> String
     for point in points {
         let time = point.time_s.map(|t| format!("{t:.4}")).unwrap_or_default();
         let frame = point.frame + 1;
-        match &point.force_n {
-            Ok(f) => writeln!(
-                csv,
-                "{frame},{time},{:.4},{:.4},{:.4},{:.4},{TRACE_ESTIMATOR},",
-                f[0],
-                f[1],
-                f[2],
-                force_magnitude(*f)
-            ),
+        match &point.estimate {
+            Ok(estimate) => {
+                let f = estimate.force_n;
+                let interval = estimate
+                    .interval_90_n
+                    .map(|h| format!("{:.4},{:.4},{:.4}", h[0], h[1], h[2]))
+                    .unwrap_or_else(|| ",,".into());
+                writeln!(
+                    csv,
+                    "{frame},{time},{:.4},{:.4},{:.4},{:.4},{interval},{},",
+                    f[0],
+                    f[1],
+                    f[2],
+                    force_magnitude(f),
+                    estimate.kind.name()
+                )
+            }
             // Commas and quotes cannot break the row: the note is quoted, quotes doubled.
             Err(why) => writeln!(
                 csv,
-                "{frame},{time},,,,,{TRACE_ESTIMATOR},\"{}\"",
+                "{frame},{time},,,,,,,,,\"{}\"",
                 why.replace('"', "\"\"")
             ),
         }
@@ -57,6 +65,7 @@ pub fn trace_csv<'a>(points: impl IntoIterator<Item = &'a TracePoint>) -> String
 #[cfg(test)]
 mod tests {
     use super::*;
+    use hnet_twin::physics_force::EstimateKind;
 
     #[test]
     fn frames_count_from_one_and_missing_times_stay_empty() {
@@ -64,25 +73,29 @@ mod tests {
             TracePoint {
                 frame: 0,
                 time_s: Some(0.0667),
-                force_n: Ok([0.3, 0.0, -0.4]),
+                estimate: Ok(TipForceEstimate {
+                    force_n: [0.3, 0.0, -0.4],
+                    interval_90_n: Some([0.05, 0.06, 0.07]),
+                    kind: EstimateKind::Combined,
+                }),
             },
             TracePoint {
                 frame: 1,
                 time_s: None,
-                force_n: Ok([0.0; 3]),
+                estimate: Ok(TipForceEstimate::uncalibrated([0.0; 3])),
             },
             TracePoint {
                 frame: 2,
                 time_s: Some(0.1333),
-                force_n: Err("view A: no catheter found, \"as said\"".into()),
+                estimate: Err("view A: no catheter found, \"as said\"".into()),
             },
         ];
         assert_eq!(
             trace_csv(&points),
-            "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,estimator,note\n\
-             1,0.0667,0.3000,0.0000,-0.4000,0.5000,H-Net force head,\n\
-             2,,0.0000,0.0000,0.0000,0.0000,H-Net force head,\n\
-             3,0.1333,,,,,H-Net force head,\"view A: no catheter found, \"\"as said\"\"\"\n"
+            "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,fx_90_n,fy_90_n,fz_90_n,estimator,note\n\
+             1,0.0667,0.3000,0.0000,-0.4000,0.5000,0.0500,0.0600,0.0700,Combined,\n\
+             2,,0.0000,0.0000,0.0000,0.0000,,,,H-Net force head,\n\
+             3,0.1333,,,,,,,,,\"view A: no catheter found, \"\"as said\"\"\"\n"
         );
     }
 }

@@ -15,7 +15,8 @@
 //! - [`catalogue`]: the named catheters a blind force estimate assumes, and their calibration
 //!   from pairs with a measured force;
 //! - [`dataset`]: the on-disk format; [`force_table`]: force tables in CSV (imports and the page's
-//!   labels); [`label_origin`]: where each force label came from; natively also [`simulate`]
+//!   labels); [`label_origin`]: where each force label came from; [`model_facts`]: what a
+//!   weights file says about the data its force was trained on and its measured error; natively also [`simulate`]
 //!   (and [`shard`], a simulation in parts), [`import`] and [`files`] (atomic writes).
 //!
 //! Units: millimetres, newtons, degrees for angles. World frame: `x` towards the patient's left,
@@ -36,6 +37,7 @@ pub mod force_table;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod import;
 pub mod label_origin;
+pub mod model_facts;
 pub mod noise;
 pub mod off_bench;
 pub mod phantom;

@@ -250,6 +250,79 @@ pub struct ForceCombination {
     /// before it was measured.
     #[serde(default = "normal_interval_90")]
     pub interval_90_sd: [f32; 3],
+    /// Half the width of the network's own 90 % interval per axis, N, for a pair without a
+    /// physics estimate: split-conformal, the `⌈0.9·(n + 1)⌉`-th smallest `|network − true|` of
+    /// the calibration pairs. `None` for combinations stored before it was measured, which
+    /// read [`INTERVAL_90_Z`] times [`Self::network_error_n`] instead
+    /// ([`Self::head_interval_90_n`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub network_interval_90_n: Option<[f32; 3]>,
+}
+
+/// Which of the product's tip-force estimates a figure is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EstimateKind {
+    /// The network's force head alone.
+    Head,
+    /// The network's force combined with the physics estimate from its own masks
+    /// ([`ForceCombination::combine_with_sd`]).
+    Combined,
+}
+
+impl EstimateKind {
+    /// Its name in tables, traces and on the page.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Head => "H-Net force head",
+            Self::Combined => "Combined",
+        }
+    }
+}
+
+/// A tip-force estimate with its 90 % interval.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TipForceEstimate {
+    /// `(Fx, Fy, Fz)`, N.
+    pub force_n: [f32; 3],
+    /// Half the width of the 90 % interval per axis, N: the true force lies within
+    /// `force_n ± interval_90_n` on each axis for 90 % of pairs like the calibration pairs.
+    /// `None` for weights that carry no calibration ([`TipForceEstimate::uncalibrated`]).
+    pub interval_90_n: Option<[f32; 3]>,
+    /// Which estimate it is.
+    pub kind: EstimateKind,
+}
+
+impl TipForceEstimate {
+    /// The network's force `force_n` (N) from weights that carry no calibration: no interval.
+    pub fn uncalibrated(force_n: [f32; 3]) -> Self {
+        Self {
+            force_n,
+            interval_90_n: None,
+            kind: EstimateKind::Head,
+        }
+    }
+
+    /// The range of the magnitude |F| over the box of the per-axis intervals, N: `(lowest,
+    /// highest)`, when there is an interval. (Each axis holds the true force 90 % of the time,
+    /// so the box holds it less often than that, and the range of |F| is wider than a 90 %
+    /// interval of |F| would be.)
+    pub fn magnitude_range_n(&self) -> Option<(f32, f32)> {
+        let interval = self.interval_90_n?;
+        let mut low = 0.0f32;
+        let mut high = 0.0f32;
+        for (f, h) in self.force_n.iter().zip(interval) {
+            let (a, b) = (f - h, f + h);
+            let nearest = if a <= 0.0 && b >= 0.0 {
+                0.0
+            } else {
+                a.abs().min(b.abs())
+            };
+            low += nearest * nearest;
+            high += a.abs().max(b.abs()).powi(2);
+        }
+        Some((low.sqrt(), high.sqrt()))
+    }
 }
 
 fn normal_interval_90() -> [f32; 3] {
@@ -306,7 +379,20 @@ impl ForceCombination {
             physics_sd_scale: (*median / NORMAL_MEDIAN_ABS) as f32,
             pairs: pairs.len(),
             interval_90_sd: normal_interval_90(),
+            network_interval_90_n: None,
         };
+        let mut head_scores: [Vec<f64>; 3] = std::array::from_fn(|axis| {
+            pairs
+                .iter()
+                .map(|p| f64::from((p.network_n[axis] - p.truth_n[axis]).abs()))
+                .filter(|s| s.is_finite())
+                .collect()
+        });
+        let head: Option<Vec<f32>> = head_scores
+            .iter_mut()
+            .map(|scores| conformal_quantile(scores, 0.9).map(|q| q as f32))
+            .collect();
+        combination.network_interval_90_n = head.map(|h| [h[0], h[1], h[2]]);
         // Split-conformal: the calibration pairs' normalised errors of the combined estimate.
         let scores: [Vec<f64>; 3] = std::array::from_fn(|axis| {
             pairs
@@ -326,6 +412,39 @@ impl ForceCombination {
             }
         }
         Some(combination)
+    }
+
+    /// Half the width of the network's own 90 % interval per axis, N
+    /// ([`Self::network_interval_90_n`], or a normal's from its error where that was not
+    /// measured).
+    pub fn head_interval_90_n(&self) -> [f32; 3] {
+        self.network_interval_90_n
+            .unwrap_or(self.network_error_n.map(|e| e * INTERVAL_90_Z as f32))
+    }
+
+    /// The estimate of a pair: combined with the physics estimate `physics` (its force and its
+    /// fit's standard error, N) where there is one, else the network's `network_n` alone; each
+    /// with its 90 % interval. The one rule of `hnet eval`, `hnet trace` and the page.
+    pub fn estimate(
+        &self,
+        network_n: [f32; 3],
+        physics: Option<([f32; 3], Option<[f32; 3]>)>,
+    ) -> TipForceEstimate {
+        match physics {
+            Some((physics_n, physics_sd_n)) => {
+                let (force_n, sd) = self.combine_with_sd(network_n, physics_n, physics_sd_n);
+                TipForceEstimate {
+                    force_n,
+                    interval_90_n: Some(self.interval_90_n(sd)),
+                    kind: EstimateKind::Combined,
+                }
+            }
+            None => TipForceEstimate {
+                force_n: network_n,
+                interval_90_n: Some(self.head_interval_90_n()),
+                kind: EstimateKind::Head,
+            },
+        }
     }
 
     /// Half the width of the 90 % interval per axis, N, for the combined standard error `sd_n`.
@@ -438,6 +557,17 @@ mod tests {
                 .count() as f64
                 / tests.len() as f64;
             assert!((0.85..=0.95).contains(&covered), "axis {axis}: {covered}");
+            // The network's own interval, for pairs without a physics estimate, too.
+            let head = c.head_interval_90_n()[axis];
+            let covered = tests
+                .iter()
+                .filter(|p| (p.network_n[axis] - p.truth_n[axis]).abs() <= head)
+                .count() as f64
+                / tests.len() as f64;
+            assert!(
+                (0.85..=0.95).contains(&covered),
+                "head, axis {axis}: {covered}"
+            );
         }
     }
 
@@ -474,6 +604,35 @@ mod tests {
         // Without a standard error, both weigh the same.
         assert_eq!(c.combine([0.1; 3], [0.0; 3], None), [0.05; 3]);
         assert_eq!(ForceCombination::calibrate(&pairs[..9]), None);
+        // Without a physics estimate, the network's force with its own interval; with one, the
+        // combination with the combined interval.
+        let alone = c.estimate([0.3, 0.0, 0.0], None);
+        assert_eq!(alone.kind, EstimateKind::Head);
+        assert_eq!(alone.force_n, [0.3, 0.0, 0.0]);
+        let head = alone.interval_90_n.unwrap();
+        assert!(head.iter().all(|h| (h - 0.06).abs() < 1e-6));
+        let both = c.estimate([0.1; 3], Some(([0.0; 3], Some([0.01; 3]))));
+        assert_eq!(both.kind, EstimateKind::Combined);
+        assert!(both.interval_90_n.unwrap()[0] < head[0]);
+        // An older combination without the network's measured interval reads a normal's.
+        let older = ForceCombination {
+            network_interval_90_n: None,
+            ..c
+        };
+        assert!((older.head_interval_90_n()[0] - 0.06 * 1.644_853_6).abs() < 1e-6);
+        // |F| over the box of the intervals.
+        let estimate = TipForceEstimate {
+            force_n: [0.3, 0.0, 0.0],
+            interval_90_n: Some([0.1; 3]),
+            kind: EstimateKind::Head,
+        };
+        let (low, high) = estimate.magnitude_range_n().unwrap();
+        assert!((low - 0.2).abs() < 1e-6, "{low}");
+        assert!((high - (0.16f32 + 0.02).sqrt()).abs() < 1e-6, "{high}");
+        assert_eq!(
+            TipForceEstimate::uncalibrated([0.1; 3]).magnitude_range_n(),
+            None
+        );
     }
 
     #[test]

@@ -1,0 +1,291 @@
+//! The cine on the page's state: loading, playback, window/level, and the force trace over its
+//! frames (each frame's estimate made as the force panel's verdict makes it).
+
+use leptos::prelude::*;
+
+use super::{ModelState, Studio};
+use crate::browser::{download, now_ms};
+use crate::catheter_3d::{FitMasks, PairGeometry, PairMasks, reconstruct_pair};
+use crate::cine::CinePlayer;
+use crate::engine::{Engine, Prediction};
+use crate::error_text::with_causes;
+use crate::workspace::View;
+use hnet_twin::physics_force::TipForceEstimate;
+
+impl Studio {
+    /// Loads a cine in place of the previous one: playback and any trace stop, its first frame
+    /// is shown and H-Net runs on it.
+    pub fn load_cine(&self, player: CinePlayer) {
+        self.stop_playback();
+        self.trace_cancelled.set(true);
+        self.cine_serial.update(|s| *s += 1);
+        let frames = player.frame_count();
+        let notes = player.notes.clone();
+        self.cine.set(Some(player));
+        self.show_cine_frame();
+        self.run_model();
+        let mut text = format!("cine loaded: {frames} frame pairs");
+        if !notes.is_empty() {
+            text = format!("{text}. {}", notes.join("; "));
+        }
+        self.info(text);
+    }
+
+    /// Shows the cine's current frame as the draft (with a new id: its pixels follow the
+    /// window), without running H-Net.
+    pub fn show_cine_frame(&self) {
+        let serial = self.draft_serial.get_untracked() + 1;
+        self.draft_serial.set(serial);
+        let pair = self.cine.with_untracked(|cine| {
+            cine.as_ref()
+                .and_then(|c| c.pair(c.frame, format!("cine-{serial}")))
+        });
+        if pair.is_some() {
+            self.replace_draft(pair);
+        }
+    }
+
+    /// Whether a cine is loaded.
+    pub fn has_cine(&self) -> bool {
+        self.cine.with(Option::is_some)
+    }
+
+    /// Moves the cine `delta` frames (pausing it), shows that frame and runs H-Net on it.
+    pub fn step_cine(&self, delta: isize) {
+        self.move_cine(|c| c.step(delta));
+    }
+
+    /// Shows cine frame `frame` (pausing the cine) and runs H-Net on it.
+    pub fn seek_cine(&self, frame: usize) {
+        self.move_cine(|c| c.seek(frame));
+    }
+
+    /// Pauses the cine, moves it with `to`, shows the frame and runs H-Net on it.
+    fn move_cine(&self, to: impl FnOnce(&mut CinePlayer)) {
+        if !self.cine.with_untracked(Option::is_some) {
+            return;
+        }
+        self.stop_playback();
+        self.cine.update(|c| {
+            if let Some(c) = c {
+                to(c);
+            }
+        });
+        self.show_cine_frame();
+        self.run_model();
+    }
+
+    /// Plays the cine at its frame rate, looping, or pauses it (and runs H-Net on the frame it
+    /// stops at). H-Net does not run on every frame while it plays: trace the force for that.
+    pub fn toggle_play(&self) {
+        if self.playback.with_value(Option::is_some) {
+            self.stop_playback();
+            self.run_model();
+            return;
+        }
+        let Some(interval_ms) = self
+            .cine
+            .with_untracked(|c| c.as_ref().map(CinePlayer::frame_interval_ms))
+        else {
+            return;
+        };
+        let studio = *self;
+        let handle = set_interval_with_handle(
+            move || {
+                studio.cine.update(|c| c.iter_mut().for_each(|c| c.step(1)));
+                studio.show_cine_frame();
+            },
+            std::time::Duration::from_micros((interval_ms * 1000.0) as u64),
+        );
+        match handle {
+            Ok(handle) => {
+                self.playback.set_value(Some(handle));
+                self.playing.set(true);
+            }
+            Err(e) => self.error(format!("the cine cannot play: {e:?}")),
+        }
+    }
+
+    /// Pauses the cine.
+    pub fn stop_playback(&self) {
+        if let Some(handle) = self.playback.try_update_value(Option::take).flatten() {
+            handle.clear();
+            self.playing.set(false);
+        }
+    }
+
+    /// Changes a plane's window as a drag on its view does (fractions of the view's side) and
+    /// shows the frame again; H-Net runs when the drag ends.
+    pub fn drag_window(&self, view: View, right: f64, down: f64) {
+        self.cine
+            .update(|c| c.iter_mut().for_each(|c| c.drag_window(view, right, down)));
+        self.show_cine_frame();
+    }
+
+    /// Both planes' windows back to the headers' and H-Net on the frame.
+    pub fn reset_windows(&self) {
+        self.cine
+            .update(|c| c.iter_mut().for_each(CinePlayer::reset_windows));
+        self.show_cine_frame();
+        self.run_model();
+    }
+
+    /// Runs H-Net over every frame of the cine, under the current windows, into its force
+    /// trace, one frame at a time, each frame's estimate made as the verdict makes it
+    /// ([`Studio::frame_estimate`]): the page stays responsive (each inference yields to the
+    /// browser first), the progress shows in [`Studio::trace_progress`], and
+    /// [`Studio::cancel_trace`] stops it after the frame in progress (what was traced stays).
+    pub fn trace_cine(&self) {
+        let ModelState::Ready(engine) = self.model.get_untracked() else {
+            self.error("H-Net is not loaded yet: trace the force once it is");
+            return;
+        };
+        let Some(total) = self
+            .cine
+            .with_untracked(|c| c.as_ref().map(CinePlayer::frame_count))
+        else {
+            return;
+        };
+        if self.trace_progress.get_untracked().is_some() || self.busy.get_untracked().is_some() {
+            self.error("H-Net is busy: trace the force when it is done");
+            return;
+        }
+        let entry = self.catheter_entry.get_untracked();
+        if !entry.can_read_force() {
+            self.error(format!(
+                "no tip force to trace with \"Catheter enters from\" set to {}: H-Net's force is \
+                 not read for a view read turned (its force head learned catheters that come up \
+                 from the bottom). Set it to the bottom, or to find it",
+                entry.text()
+            ));
+            return;
+        }
+        self.stop_playback();
+        let serial = self.cine_serial.get_untracked();
+        self.cine
+            .update(|c| c.iter_mut().for_each(CinePlayer::clear_trace));
+        self.trace_cancelled.set(false);
+        self.trace_progress.set(Some((0, total)));
+        self.busy
+            .set(Some(format!("Tracing the tip force over {total} frames…")));
+        let studio = *self;
+        leptos::task::spawn_local(async move {
+            let start = now_ms();
+            let same_cine = || studio.cine_serial.get_untracked() == serial;
+            let mut done = 0;
+            // Frames with a force of H-Net's: under a search, a frame with a view read turned
+            // has none.
+            let mut traced = 0;
+            let mut failure = None;
+            for frame in 0..total {
+                if studio.trace_cancelled.get_untracked() || !same_cine() {
+                    break;
+                }
+                let views = studio.cine.with_untracked(|c| {
+                    let c = c.as_ref()?;
+                    Some((c.rgb(View::A, frame)?, c.rgb(View::B, frame)?))
+                });
+                let Some((a, b)) = views else { break };
+                match engine.infer(&a, &b, entry).await {
+                    // A frame read turned has no force of H-Net's to trace.
+                    Ok(prediction) if same_cine() => {
+                        if let Some(estimate) = studio.frame_estimate(&engine, frame, &prediction) {
+                            studio.cine.update(|c| {
+                                c.iter_mut()
+                                    .for_each(|c| c.record_estimate(frame, estimate))
+                            });
+                            traced += 1;
+                        }
+                    }
+                    Ok(_) => break,
+                    Err(e) => {
+                        failure = Some(format!(
+                            "H-Net failed on frame {}: {}",
+                            frame + 1,
+                            with_causes(&e)
+                        ));
+                        studio.leave_webgpu_after(&engine, &e);
+                        break;
+                    }
+                }
+                done += 1;
+                studio.trace_progress.set(Some((done, total)));
+            }
+            studio.trace_progress.set(None);
+            studio.busy.set(None);
+            let seconds = (now_ms() - start) / 1000.0;
+            match failure {
+                Some(text) => studio.error(format!("{text}; {done} of {total} frames traced")),
+                None if !same_cine() => {}
+                None if done < total => studio.info(format!(
+                    "trace stopped: {done} of {total} frames traced in {seconds:.1} s"
+                )),
+                None if traced < total => studio.info(format!(
+                    "tip force traced over {traced} of {total} frames in {seconds:.1} s: the \
+                     other {} had a view read turned, which H-Net's force is not read for",
+                    total - traced
+                )),
+                None => studio.info(format!(
+                    "tip force traced over {total} frames in {seconds:.1} s ({:.0} ms per frame)",
+                    seconds * 1000.0 / total.max(1) as f64
+                )),
+            }
+            if studio.rerun.get_untracked() {
+                studio.rerun.set(false);
+                studio.run_model();
+            }
+        });
+    }
+
+    /// Stops the trace after the frame in progress.
+    pub fn cancel_trace(&self) {
+        self.trace_cancelled.set(true);
+    }
+
+    /// Offers the cine's force trace as a CSV download (`hnet trace`'s format).
+    pub fn export_trace(&self) {
+        let Some(csv) = self
+            .cine
+            .with_untracked(|c| c.as_ref().map(CinePlayer::trace_csv))
+        else {
+            return;
+        };
+        match download(crate::cine::TRACE_FILE, csv.as_bytes(), "text/csv") {
+            Ok(()) => self.info(format!("force trace saved as {}", crate::cine::TRACE_FILE)),
+            Err(e) => self.error(with_causes(&e)),
+        }
+    }
+
+    /// Frame `frame`'s tip-force estimate from H-Net's `prediction` of it, as the force panel's
+    /// verdict reads a pair: combined with the physics estimate where the rod could be fitted to
+    /// H-Net's masks with the frame's C-arms (the twin tab's catheter, the base fitted) and the
+    /// weights carry their calibration, else H-Net's force head with its interval (none for
+    /// weights without recorded facts). `None` where H-Net's force is not read (a view shows no
+    /// catheter, or was read turned).
+    fn frame_estimate(
+        &self,
+        engine: &Engine,
+        frame: usize,
+        prediction: &Prediction,
+    ) -> Option<TipForceEstimate> {
+        let force = prediction.force_n?;
+        let Some(domain) = &engine.domain else {
+            return Some(TipForceEstimate::uncalibrated(force));
+        };
+        let pair = self
+            .cine
+            .with_untracked(|c| c.as_ref()?.pair(frame, format!("trace-{frame}")))?;
+        let controls = self.twin.get_untracked();
+        let physics = PairGeometry::of(&pair, &controls)
+            .and_then(|geometry| {
+                let predicted = [&prediction.mask_a[..], &prediction.mask_b[..]];
+                reconstruct_pair(
+                    &geometry,
+                    &PairMasks::of(&pair, Some(predicted), FitMasks::Hnet)?,
+                )
+            })
+            .ok()
+            .and_then(|catheter| catheter.for_combination());
+        Some(domain.estimate(force, physics))
+    }
+}
