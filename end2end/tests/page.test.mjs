@@ -46,6 +46,8 @@ test("the page loads H-Net, says where it runs, and asks for nothing outside", a
   assert.match(await page.textContent("#params"), /^\d+$/);
   // The bundled weights load (a build without them would say "untrained").
   assert.match(await page.textContent("#weights"), /hnet-cpu\.bpk/);
+  // What the bundled weights file records about its force, read from the file (hnet eval --record).
+  assert.match(await page.textContent("#force-facts"), /^±0\.121 \/ ±0\.131 \/ ±0\.109 N \(90 %, force head; trained on xray2-bench-224-s7\)$/);
   const origin = new URL(server.url).origin;
   const foreign = requests.filter((u) => !u.startsWith(origin) && !u.startsWith("data:") && !u.startsWith("blob:"));
   assert.deepEqual(foreign, []);

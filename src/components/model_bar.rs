@@ -12,6 +12,7 @@ use crate::compute::BackendChoice;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
 use crate::studio::{ModelState, Studio, load_model};
+use hnet_twin::model_facts::FACTS_KEY;
 
 /// The model bar.
 #[component]
@@ -78,7 +79,7 @@ pub fn ModelBar() -> impl IntoView {
                         }
                         _ => engine.header.as_ref().map(|h| {
                             h.provenance.iter()
-                                .filter(|(k, _)| k.as_str() != "command")
+                                .filter(|(k, _)| k.as_str() != "command" && k.as_str() != FACTS_KEY)
                                 .map(|(k, v)| format!("{k}: {v}"))
                                 .collect::<Vec<_>>()
                                 .join(" · ")
@@ -104,6 +105,21 @@ pub fn ModelBar() -> impl IntoView {
                             <div>
                                 <dt>"Weights"</dt>
                                 <dd id="weights" title=provenance>{engine.weights_name.clone()}</dd>
+                            </div>
+                            <div>
+                                <dt>"Force error"</dt>
+                                <dd id="force-facts" title="What the weights file records about its force \
+                                    (hnet eval --record): where it was measured and the 90 % \
+                                    intervals the verdict reads">{match &engine.domain {
+                                    Some(d) => {
+                                        let [x, y, z] = d.combination.head_interval_90_n();
+                                        format!(
+                                            "±{x:.3} / ±{y:.3} / ±{z:.3} N (90 %, force head; trained on {})",
+                                            d.domain.data
+                                        )
+                                    }
+                                    None => "not recorded in these weights: no verdict".to_string(),
+                                }}</dd>
                             </div>
                             <div>
                                 <dt>"Last inference"</dt>
