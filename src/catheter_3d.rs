@@ -157,7 +157,7 @@ pub struct PairGeometry {
 pub fn pair_views(pair: &LabeledPair) -> Biplane {
     match &pair.source {
         PairSource::Twin { views, .. } | PairSource::Dicom { views, .. } => *views,
-        PairSource::Upload { .. } => default_views(),
+        PairSource::Upload { views, .. } => views.unwrap_or_else(default_views),
     }
 }
 
@@ -210,7 +210,7 @@ impl PairGeometry {
                     base,
                     base_known: false,
                     blind: None,
-                    views_assumed: matches!(pair.source, PairSource::Upload { .. }),
+                    views_assumed: matches!(pair.source, PairSource::Upload { views: None, .. }),
                 })
             }
         }
@@ -601,6 +601,7 @@ mod tests {
             PairSource::Upload {
                 view_a: "a.png".into(),
                 view_b: "b.png".into(),
+                views: None,
             },
             twin_pair.view_a.clone(),
             twin_pair.view_b.clone(),
@@ -626,6 +627,46 @@ mod tests {
             c.summary()
         );
         assert!(!c.summary().contains("px mean reprojection error"));
+
+        // Stated, its C-arms are read as given (here those a twin pair was rendered with, 30°
+        // off the default), and the reprojection error is a check again.
+        let turned = twin(TwinControls {
+            view_a_deg: [30.0, 0.0],
+            ..TwinControls::default()
+        });
+        let stated = crate::stated_geometry::StatedGeometry::of_views(&pair_views(&turned));
+        let mut upload = pair.clone();
+        upload.view_a = turned.view_a.clone();
+        upload.view_b = turned.view_b.clone();
+        upload.mask_a = turned.mask_a.clone();
+        upload.mask_b = turned.mask_b.clone();
+        let mut ws = crate::workspace::Workspace::default();
+        ws.add(upload);
+        assert!(ws.set_upload_views("u", Some(stated.views())));
+        assert!(!ws.set_upload_views("nowhere", None));
+        let upload = ws.pairs[0].clone();
+        let geometry = PairGeometry::of(&upload, &TwinControls::default()).unwrap();
+        assert!(!geometry.views_assumed);
+        assert!((geometry.views.a.primary_deg - 30.0).abs() < 1e-9);
+        let c = reconstruct_pair(
+            &geometry,
+            &PairMasks::of(&upload, None, FitMasks::LabelsFirst).unwrap(),
+        )
+        .unwrap();
+        assert!(c.mean_residual_px < 1.0, "{}", c.summary());
+        assert!(
+            c.summary().contains("px mean reprojection error"),
+            "{}",
+            c.summary()
+        );
+        // A record from before the field existed reads as not stated.
+        let json = serde_json::to_value(&pair.source).unwrap();
+        assert!(
+            json.get("Upload").is_some_and(|u| u.get("views").is_none()),
+            "{json}"
+        );
+        let read: PairSource = serde_json::from_value(json).unwrap();
+        assert_eq!(read, pair.source);
     }
 
     /// Each bad input is a typed error with a message naming the step and the view.

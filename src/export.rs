@@ -67,14 +67,30 @@ fn image(pixels: &[u8], channels: usize) -> ImageRef<'_> {
 /// The pair's manifest columns beyond id, split and force, and its record.
 fn describe(pair: &LabeledPair) -> (Vec<(String, String)>, serde_json::Value) {
     match &pair.source {
-        PairSource::Upload { view_a, view_b } => (
-            vec![
-                ("source".into(), "upload".into()),
-                ("view_a_file".into(), view_a.clone()),
-                ("view_b_file".into(), view_b.clone()),
-            ],
-            serde_json::json!({ "source": "upload", "view_a_file": view_a, "view_b_file": view_b }),
-        ),
+        PairSource::Upload {
+            view_a,
+            view_b,
+            views,
+        } => {
+            let mut record = serde_json::json!({
+                "source": "upload", "view_a_file": view_a, "view_b_file": view_b,
+            });
+            // The C-arms the user stated, as a twin pair's record holds them; none when assumed.
+            if let Some(views) = views {
+                record["views"] = serde_json::json!({
+                    "a": { "carm": views.a, "camera_matrix": views.a.camera_matrix() },
+                    "b": { "carm": views.b, "camera_matrix": views.b.camera_matrix() },
+                });
+            }
+            (
+                vec![
+                    ("source".into(), "upload".into()),
+                    ("view_a_file".into(), view_a.clone()),
+                    ("view_b_file".into(), view_b.clone()),
+                ],
+                record,
+            )
+        }
         PairSource::Twin {
             true_force_n,
             tip_mm,
@@ -348,6 +364,38 @@ mod tests {
     }
 
     #[test]
+    fn an_uploads_stated_c_arms_go_into_its_record_as_a_twin_pairs_do() {
+        let views = crate::stated_geometry::StatedGeometry {
+            views_deg: [[-30.0, 0.0], [60.0, 10.0]],
+            source_to_isocentre_mm: 700.0,
+            source_to_detector_mm: 1100.0,
+            detector_width_mm: 200.0,
+        }
+        .views();
+        let mut source = PairSource::Upload {
+            view_a: "a.png".into(),
+            view_b: "b.png".into(),
+            views: Some(views),
+        };
+        let pair =
+            |source: &PairSource| LabeledPair::new("u".into(), source.clone(), vec![], vec![]);
+        let (_, record) = describe(&pair(&source));
+        assert_eq!(record["views"]["b"]["carm"]["primary_deg"], 60.0);
+        assert_eq!(
+            record["views"]["a"]["carm"]["source_to_isocentre_mm"],
+            700.0
+        );
+        assert!(
+            record["views"]["a"]["camera_matrix"].is_object()
+                || record["views"]["a"]["camera_matrix"].is_array()
+        );
+        if let PairSource::Upload { views, .. } = &mut source {
+            *views = None;
+        }
+        assert!(describe(&pair(&source)).1.get("views").is_none());
+    }
+
+    #[test]
     fn a_pairs_split_stays_as_pairs_are_added() {
         let background = XrayBackground::phantom();
         let mut ws = Workspace::default();
@@ -472,6 +520,7 @@ pub(crate) mod properties {
                     source: PairSource::Upload {
                         view_a: a,
                         view_b: b,
+                        views: None,
                     },
                     view_a: pixels(seed, rgb, false),
                     view_b: pixels(seed ^ 1, rgb, false),
@@ -520,7 +569,7 @@ pub(crate) mod properties {
                 prop_assert_eq!(Some(row.split), splits[index]);
                 let want = pair.force_n.unwrap();
                 prop_assert_eq!(row.force_n.map(|f| (f as f32).to_bits()), want.map(f32::to_bits));
-                let PairSource::Upload { view_a, view_b } = &pair.source else { unreachable!() };
+                let PairSource::Upload { view_a, view_b, .. } = &pair.source else { unreachable!() };
                 prop_assert_eq!(&row.extra[1], &("view_a_file".to_string(), view_a.clone()));
                 prop_assert_eq!(&row.extra[2], &("view_b_file".to_string(), view_b.clone()));
                 let loaded = dataset.load_pair(row, None).unwrap();

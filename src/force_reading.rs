@@ -448,6 +448,7 @@ pub(crate) mod tests {
             PairSource::Upload {
                 view_a: "a.png".into(),
                 view_b: "b.png".into(),
+                views: None,
             },
             Vec::new(),
             Vec::new(),

@@ -12,7 +12,8 @@
 //!   rod fitted to it, and what the 3D view draws; [`orbit_camera`]: the 3D view's camera;
 //! - [`cine`]: a biplane DICOM cine: frames as pairs with the headers' geometry, window/level,
 //!   the force trace;
-//! - [`export`]: the labeled pairs as a dataset zip;
+//! - [`export`]: the labeled pairs as a dataset zip; [`stated_geometry`]: the C-arms a user
+//!   states for an uploaded pair;
 //! - [`force_reading`]: what a force estimate can be said to show against the ablation band;
 //! - [`webgpu_check`]: WebGPU's result on a check pair against the CPU's, before it is trusted;
 //! - [`keymap`]: every keyboard shortcut, for the handlers, the help list and the tooltips;
@@ -31,6 +32,7 @@ pub mod force_reading;
 pub mod imaging;
 pub mod keymap;
 pub mod orbit_camera;
+pub mod stated_geometry;
 pub mod stored_pair;
 pub mod twin_live;
 pub mod webgpu_check;

@@ -21,6 +21,10 @@ pub enum PairSource {
         view_a: String,
         /// View B's file name.
         view_b: String,
+        /// The C-arms the user stated the pair was taken with (at [`WORK_SIZE`]); `None`: not
+        /// stated, and the 3D step assumes the page's default biplane (frontal and lateral).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        views: Option<Biplane>,
     },
     /// The live digital twin, with its ground truth.
     Twin {
@@ -501,6 +505,23 @@ impl Workspace {
         }
     }
 
+    /// States (or, with `None`, forgets) the C-arms uploaded pair `id` was taken with; returns
+    /// whether there is such an uploaded pair.
+    pub fn set_upload_views(&mut self, id: &str, stated: Option<Biplane>) -> bool {
+        match self
+            .pairs
+            .iter_mut()
+            .find(|p| p.id == id)
+            .map(|p| &mut p.source)
+        {
+            Some(PairSource::Upload { views, .. }) => {
+                *views = stated;
+                true
+            }
+            _ => false,
+        }
+    }
+
     /// Marks (or unmarks) `view` of pair `id` as showing no catheter on purpose; returns
     /// whether there is such a pair.
     pub fn mark_no_catheter(&mut self, id: &str, view: View, none: bool) -> bool {
@@ -703,6 +724,7 @@ pub(crate) mod tests {
             let source = PairSource::Upload {
                 view_a: "a.png".into(),
                 view_b: "b.png".into(),
+                views: None,
             };
             ws.add(LabeledPair::new(
                 ws.next_id(),
@@ -1040,7 +1062,7 @@ mod properties {
                     views: Biplane::cardiac(WORK_SIZE),
                     settings: serde_json::json!({"force_n": true_force_n, "seed": 3}),
                 },
-                _ => PairSource::Upload { view_a: names.0, view_b: names.1 },
+                _ => PairSource::Upload { view_a: names.0, view_b: names.1, views: None },
             };
             let pair = LabeledPair {
                 id,

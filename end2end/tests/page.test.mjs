@@ -78,6 +78,19 @@ test("load a pair, run H-Net, paint, undo, reload with labels kept, export the d
   assert.match(await page.textContent("#inference-time"), /\d+ ms on (WebGPU|CPU)/);
   assert.match(await page.textContent(".view figcaption"), /frame_a\.png/);
 
+  // An upload's C-arms are assumed until stated; a value the page cannot use is named, and a
+  // stated geometry is kept with the pair.
+  assert.match(await page.textContent("#upload-geometry summary"), /not stated/);
+  await page.fill("#upload-geometry-1", "95");
+  await page.click("#upload-geometry-apply");
+  assert.match(await page.textContent("#notice"), /view A secondary angle \(°\): 95 is outside -90 to 90/);
+  await page.fill("#upload-geometry-1", "0");
+  await page.fill("#upload-geometry-0", "-30");
+  await page.fill("#upload-geometry-2", "60");
+  await page.click("#upload-geometry-apply");
+  await page.waitForFunction(() => /as stated/.test(document.querySelector("#upload-geometry summary")?.textContent));
+  assert.match(await page.textContent("#notice"), /C-arm geometry stated/);
+
   // Paint a stroke with the brush, then undo it.
   await page.click("#tool-brush");
   assert.equal(await labelPixels(page, "a"), 0);
@@ -121,6 +134,8 @@ test("load a pair, run H-Net, paint, undo, reload with labels kept, export the d
   await page.waitForSelector('#pairs li[data-id="pair-0001"] .flag.done[title="force"]');
   await page.waitForFunction(() => document.querySelector("#label-fx").value === "0.12", null, { timeout: 10_000 });
   assert.equal(await page.inputValue("#label-fz"), "0.2");
+  assert.match(await page.textContent("#upload-geometry summary"), /as stated/);
+  assert.equal(await page.inputValue("#upload-geometry-0"), "-30");
 
   // Export: a zip in the dataset format.
   const [download] = await Promise.all([page.waitForEvent("download"), page.click("#export")]);

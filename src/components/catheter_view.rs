@@ -18,10 +18,12 @@ use crate::catheter_3d::{
     scene_points,
 };
 use crate::components::stereo_view::{ESTIMATE_ARROW, TRUE_ARROW, context_2d, draw_arrow};
+use crate::components::upload_geometry::UploadGeometry;
 use crate::keymap::{self, Command, Scope, scope_help};
 use crate::orbit_camera::{OrbitCamera, Projection};
 use crate::studio::{CatheterReading, Studio};
-use crate::workspace::PairSource;
+use crate::workspace::{LabeledPair, PairSource};
+use hnet_twin::carm::Biplane;
 
 /// Side of the 3D canvas, canvas pixels.
 const SIDE: f64 = 400.0;
@@ -285,6 +287,28 @@ pub fn CatheterView() -> impl IntoView {
     let keys = scope_help(Scope::Scene);
     let title = keys.clone();
 
+    // The uploaded pair on screen and the C-arms stated for it.
+    let upload = Signal::derive(move || {
+        studio.with_shown(|p| match p {
+            Some(LabeledPair {
+                id,
+                source: PairSource::Upload { views, .. },
+                ..
+            }) => Some((id.clone(), *views)),
+            _ => None,
+        })
+    });
+    let on_state = Callback::new(move |(id, views): (String, Option<Biplane>)| {
+        let stated = views.is_some();
+        studio.edit(|ws| ws.set_upload_views(&id, views).then_some(id.clone()));
+        studio.info(if stated {
+            format!("{id}: C-arm geometry stated; the catheter is reconstructed with it")
+        } else {
+            format!("{id}: back to the default C-arms (assumed)")
+        });
+    });
+    let on_error = Callback::new(move |text: String| studio.error(text));
+
     view! {
         <section class="catheter-3d" aria-labelledby="catheter-3d-title">
             <h2 id="catheter-3d-title">"The catheter in 3D"</h2>
@@ -333,6 +357,7 @@ pub fn CatheterView() -> impl IntoView {
             </label>
             <p id="catheter-summary" role="status">{summary}</p>
             {move || error().map(|e| view! { <p id="catheter-error" class="warning">{e}</p> })}
+            <UploadGeometry upload=upload on_state=on_state on_error=on_error/>
         </section>
     }
 }

@@ -11,6 +11,7 @@ pub mod pair_list;
 pub mod shortcuts;
 pub mod sources;
 pub mod stereo_view;
+pub mod upload_geometry;
 
 use leptos::prelude::event_target_value;
 

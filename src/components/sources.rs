@@ -119,6 +119,7 @@ fn add_upload(studio: Studio, [a, b]: [PickedView; 2]) {
         PairSource::Upload {
             view_a: a.0,
             view_b: b.0,
+            views: None,
         },
         a.1,
         b.1,

@@ -513,7 +513,7 @@ fn ViewCanvas(view: View) -> impl IntoView {
             <figcaption>
                 "View "{view.letter()}
                 {move || studio.with_shown(|p| p.map(|p| match &p.source {
-                    PairSource::Upload { view_a, view_b } => format!(" · {}", if view == View::A { view_a } else { view_b }),
+                    PairSource::Upload { view_a, view_b, .. } => format!(" · {}", if view == View::A { view_a } else { view_b }),
                     PairSource::Twin { views, .. } => {
                         let c = if view == View::A { views.a } else { views.b };
                         format!(" · C-arm {:+.0}° / {:+.0}°", c.primary_deg, c.secondary_deg)
