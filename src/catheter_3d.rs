@@ -28,7 +28,7 @@
 //! [`crate::orbit_camera`].
 
 use hnet_twin::carm::{Biplane, CArm, CameraMatrix};
-use hnet_twin::catalogue::{BENCH_CATHETER, CatalogueCatheter, catalogue};
+use hnet_twin::catalogue::{BENCH_CATHETER, CatalogueCatheter, StiffnessCalibration, catalogue};
 use hnet_twin::centreline::{CentrelineError, Mask};
 use hnet_twin::physics_force::{
     MAX_FIT_RMS_MM, PhysicsError, PhysicsEstimate, PhysicsSetup, physics_estimate,
@@ -177,9 +177,16 @@ pub fn default_views() -> Biplane {
 
 impl PairGeometry {
     /// The geometry of `pair`; `catheter` (the twin tab's sliders) sets the catheter of an
-    /// uploaded pair or a DICOM frame (whose views come from its headers).
-    pub fn of(pair: &LabeledPair, catheter: &TwinControls) -> Result<Self, Catheter3dError> {
+    /// uploaded pair or a DICOM frame (whose views come from its headers). A `calibration`
+    /// ([`crate::catheter_calibration`]) scales the stiffness the page assumes: the catalogue
+    /// catheter's for twin pairs, the sliders' for the others.
+    pub fn of(
+        pair: &LabeledPair,
+        catheter: &TwinControls,
+        calibration: Option<&StiffnessCalibration>,
+    ) -> Result<Self, Catheter3dError> {
         let template = RodConfig::default();
+        let scale = calibration.map_or(1.0, |c| c.scale);
         match &pair.source {
             PairSource::Twin {
                 views, settings, ..
@@ -189,10 +196,11 @@ impl PairGeometry {
                 let scene: SceneParams = serde_json::from_value(settings["scene"].clone())
                     .map_err(Catheter3dError::TwinSettings)?;
                 let (rod, base) = scene.rod(&template);
-                let catheter = catalogue()
+                let mut catheter = catalogue()
                     .into_iter()
                     .find(|c| c.name == BENCH_CATHETER)
                     .expect("the bench catheter is in the catalogue");
+                catheter.bending_stiffness_n_m2 *= scale;
                 Ok(Self {
                     views: *views,
                     rod,
@@ -203,7 +211,9 @@ impl PairGeometry {
                 })
             }
             PairSource::Upload { .. } | PairSource::Dicom { .. } => {
-                let (rod, base) = catheter.scene().rod(&template);
+                let mut scene = catheter.scene();
+                scene.bending_stiffness_n_m2 *= scale;
+                let (rod, base) = scene.rod(&template);
                 Ok(Self {
                     views: pair_views(pair),
                     rod,
@@ -505,7 +515,7 @@ mod tests {
     }
 
     fn run(pair: &LabeledPair) -> Result<Catheter3d, Catheter3dError> {
-        let geometry = PairGeometry::of(pair, &TwinControls::default())?;
+        let geometry = PairGeometry::of(pair, &TwinControls::default(), None)?;
         reconstruct_pair(
             &geometry,
             &PairMasks::of(pair, None, FitMasks::LabelsFirst)?,
@@ -560,7 +570,7 @@ mod tests {
         let masks =
             PairMasks::of(&pair, Some([&soft[0], &soft[1]]), FitMasks::LabelsFirst).unwrap();
         assert_eq!(masks.source(), MaskSource::Predicted);
-        let geometry = PairGeometry::of(&pair, &TwinControls::default()).unwrap();
+        let geometry = PairGeometry::of(&pair, &TwinControls::default(), None).unwrap();
         let c = reconstruct_pair(&geometry, &masks).unwrap();
         assert_eq!(c.masks, MaskSource::Predicted);
         // Only a rod fitted to H-Net's masks is combined with H-Net's force, with the fit's
@@ -609,7 +619,7 @@ mod tests {
         pair.mask_a = twin_pair.mask_a.clone();
         pair.mask_b = twin_pair.mask_b.clone();
         pair.masks_labeled = true;
-        let geometry = PairGeometry::of(&pair, &TwinControls::default()).unwrap();
+        let geometry = PairGeometry::of(&pair, &TwinControls::default(), None).unwrap();
         assert_eq!(geometry.views, pair_views(&twin_pair));
         assert!(!geometry.base_known);
         let c = reconstruct_pair(
@@ -645,7 +655,7 @@ mod tests {
         assert!(ws.set_upload_views("u", Some(stated.views())));
         assert!(!ws.set_upload_views("nowhere", None));
         let upload = ws.pairs[0].clone();
-        let geometry = PairGeometry::of(&upload, &TwinControls::default()).unwrap();
+        let geometry = PairGeometry::of(&upload, &TwinControls::default(), None).unwrap();
         assert!(!geometry.views_assumed);
         assert!((geometry.views.a.primary_deg - 30.0).abs() < 1e-9);
         let c = reconstruct_pair(
@@ -751,7 +761,7 @@ mod tests {
     #[test]
     fn a_rod_that_does_not_fit_is_reported() {
         let pair = twin(TwinControls::default());
-        let geometry = PairGeometry::of(&pair, &TwinControls::default()).unwrap();
+        let geometry = PairGeometry::of(&pair, &TwinControls::default(), None).unwrap();
         let masks = PairMasks::of(&pair, None, FitMasks::LabelsFirst).unwrap();
         // A catheter far too stiff to bend this way within the largest force considered.
         let stiff = PairGeometry {

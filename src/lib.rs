@@ -10,6 +10,7 @@
 //! - [`twin_live`]: the digital twin's sliders and the synthetic X-ray background composer;
 //! - [`catheter_3d`]: the catheter in 3D from both masks and the physics-checked force of the
 //!   rod fitted to it, and what the 3D view draws; [`orbit_camera`]: the 3D view's camera;
+//!   [`catheter_calibration`]: the catheter's stiffness from the pairs' measured force labels;
 //! - [`cine`]: a biplane DICOM cine: frames as pairs with the headers' geometry, window/level,
 //!   the force trace;
 //! - [`export`]: the labeled pairs as a dataset zip; [`stated_geometry`]: the C-arms a user
@@ -25,6 +26,7 @@
 //! (`storage`) and files (`browser`). `src/main.rs` mounts [`App`].
 
 pub mod catheter_3d;
+pub mod catheter_calibration;
 pub mod cine;
 pub mod error_text;
 pub mod export;

@@ -13,6 +13,7 @@ use crate::bundled::{self, FetchError};
 use crate::catheter_3d::{
     Catheter3d, FitMasks, PairGeometry, PairMasks, pair_views, reconstruct_pair,
 };
+use crate::catheter_calibration;
 use crate::cine::CinePlayer;
 use crate::compute::{self, Backend, BackendChoice};
 use crate::engine::{Engine, EngineError, Prediction, WeightsOrigin};
@@ -25,6 +26,7 @@ use crate::webgpu_check;
 use crate::workspace::{LabeledPair, RemovedPair, Tool, View, Workspace};
 use hnet_model::catheter_entry::EntrySetting;
 use hnet_twin::carm::Biplane;
+use hnet_twin::catalogue::StiffnessCalibration;
 use hnet_twin::sensor_plate::ContactError;
 
 mod cine;
@@ -208,6 +210,9 @@ pub struct Studio {
     pub transforms: [RwSignal<ViewTransform>; 2],
     /// The twin's sliders.
     pub twin: RwSignal<TwinControls>,
+    /// The catheter's stiffness calibrated from the pairs' measured force labels, for this
+    /// session ([`crate::catheter_calibration`]); `None`: the stiffness the page assumes.
+    pub calibration: RwSignal<Option<StiffnessCalibration>>,
     /// The synthetic X-ray background.
     pub background: RwSignal<XrayBackground>,
     /// The open source panel.
@@ -266,6 +271,7 @@ impl Studio {
                 RwSignal::new(ViewTransform::default()),
             ],
             twin: RwSignal::new(TwinControls::default()),
+            calibration: RwSignal::new(None),
             background: RwSignal::new(XrayBackground::phantom()),
             tab: RwSignal::new(SourceTab::Images),
             draft_serial: RwSignal::new(0),
@@ -640,14 +646,16 @@ impl Studio {
                 .map(|p| (p.mask_a.clone(), p.mask_b.clone(), p.force_n))
         });
         let controls = self.twin.get_untracked();
+        let calibration = self.calibration.get_untracked();
         let choice = self.fit_masks.get_untracked();
         let clock = web_sys::window().and_then(|w| w.performance());
         let now = || clock.as_ref().map_or(0.0, |p| p.now());
         let start = now();
-        let result = PairGeometry::of(&pair, &controls).and_then(|geometry| {
-            let predicted = prediction.as_ref().map(|(a, b, _)| [&a[..], &b[..]]);
-            reconstruct_pair(&geometry, &PairMasks::of(&pair, predicted, choice)?)
-        });
+        let result =
+            PairGeometry::of(&pair, &controls, calibration.as_ref()).and_then(|geometry| {
+                let predicted = prediction.as_ref().map(|(a, b, _)| [&a[..], &b[..]]);
+                reconstruct_pair(&geometry, &PairMasks::of(&pair, predicted, choice)?)
+            });
         let millis = now() - start;
         self.catheter.set(Some(CatheterReading {
             views: pair_views(&pair),
@@ -657,6 +665,37 @@ impl Studio {
             result: result.map_err(|e| with_causes(&e)),
             millis,
         }));
+    }
+
+    /// Calibrates the catheter's stiffness from the pairs' measured force labels
+    /// ([`crate::catheter_calibration`]); the 3D step and the trace then read every pair with
+    /// it. A refusal says why and keeps the previous calibration.
+    pub fn calibrate_catheter(&self) {
+        let controls = self.twin.get_untracked();
+        let outcome = self.workspace.with_untracked(|ws| {
+            self.predictions.with_untracked(|predictions| {
+                let predicted = |id: &str| {
+                    predictions
+                        .get(id)
+                        .map(|p| [p.mask_a.clone(), p.mask_b.clone()])
+                };
+                catheter_calibration::calibrate_catheter(&ws.pairs, &predicted, &controls)
+            })
+        });
+        match outcome {
+            Ok(outcome) => {
+                let mut text = format!(
+                    "catheter calibrated: {}",
+                    catheter_calibration::describe(&outcome.calibration)
+                );
+                if !outcome.left_out.is_empty() {
+                    text = format!("{text}; left out: {}", outcome.left_out.join("; "));
+                }
+                self.calibration.set(Some(outcome.calibration));
+                self.info(text);
+            }
+            Err(e) => self.error(with_causes(&e)),
+        }
     }
 
     /// Undo (`redo` false) or redo the last mask edit.
@@ -817,6 +856,7 @@ pub fn install_reconstruction(studio: Studio) {
         let shown = studio.shown_id();
         studio.predictions.track();
         studio.twin.track();
+        studio.calibration.track();
         studio.fit_masks.track();
         if studio.workspace.with(Workspace::is_stroking) {
             return;

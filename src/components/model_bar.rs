@@ -8,6 +8,7 @@ use leptos::prelude::*;
 use hnet_model::catheter_entry::EntrySetting;
 
 use crate::browser::{read_file, take_picked_file};
+use crate::catheter_calibration;
 use crate::compute::BackendChoice;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
@@ -120,6 +121,20 @@ pub fn ModelBar() -> impl IntoView {
                                     }
                                     None => "not recorded in these weights: no verdict".to_string(),
                                 }}</dd>
+                            </div>
+                            <div>
+                                <dt>"Catheter"</dt>
+                                <dd id="catheter-calibration">{move || match studio.calibration.get() {
+                                    Some(c) => catheter_calibration::describe(&c),
+                                    None => "as the page assumes it (not calibrated)".to_string(),
+                                }}</dd>
+                                {move || studio.calibration.get().map(|_| view! {
+                                    <dd><button id="catheter-calibration-reset" class="link"
+                                        on:click=move |_| {
+                                            studio.calibration.set(None);
+                                            studio.info("catheter calibration cleared: the stiffness the page assumes");
+                                        }>"Clear"</button></dd>
+                                })}
                             </div>
                             <div>
                                 <dt>"Last inference"</dt>

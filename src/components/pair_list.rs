@@ -143,6 +143,12 @@ pub fn PairList() -> impl IntoView {
                     disabled=move || complete() == 0 || studio.busy.get().is_some() on:click=export>
                     {move || format!("Export {} complete pair(s) (.zip)", complete())}
                 </button>
+                <button id="calibrate-catheter"
+                    title="Fits the catheter's stiffness to the pairs' measured force labels (not H-Net's estimates), each read as the 3D view reads it; at least 3 pairs"
+                    disabled=move || studio.workspace.with(|ws| ws.pairs.iter().all(|p| p.force_n.is_none()))
+                    on:click=move |_| studio.calibrate_catheter()>
+                    "Calibrate this catheter from labelled pairs"
+                </button>
                 <button id="delete-pair" disabled=move || current_id.with(Option::is_none) || studio.showing_draft()
                     aria-expanded=move || confirming.get().to_string()
                     on:click=move |_| confirming.set(true)>"Delete pair…"</button>

@@ -276,7 +276,8 @@ impl Studio {
             .cine
             .with_untracked(|c| c.as_ref()?.pair(frame, format!("trace-{frame}")))?;
         let controls = self.twin.get_untracked();
-        let physics = PairGeometry::of(&pair, &controls)
+        let calibration = self.calibration.get_untracked();
+        let physics = PairGeometry::of(&pair, &controls, calibration.as_ref())
             .and_then(|geometry| {
                 let predicted = [&prediction.mask_a[..], &prediction.mask_b[..]];
                 reconstruct_pair(
