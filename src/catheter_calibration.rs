@@ -135,12 +135,9 @@ mod tests {
         .into_iter()
         .enumerate()
         .map(|(i, force_n)| {
-            let mut pair = TwinControls {
-                force_n,
-                ..stiffer.clone()
-            }
-            .render(format!("t{i}"), &background)
-            .unwrap();
+            let mut pair = TwinControls { force_n, ..stiffer }
+                .render(format!("t{i}"), &background)
+                .unwrap();
             pair.force_n = pair.true_force();
             pair.force_origin = LabelOrigin::Simulated;
             pair
