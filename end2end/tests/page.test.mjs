@@ -542,9 +542,11 @@ test("a twin pair in 3D: the catheter, the physics force beside H-Net's, the epi
   assert.ok(Math.hypot(u1 - u0, v1 - v0) > 100, `a line across view B: ${[u0, v0, u1, v1]}`);
   await page.waitForFunction((b) => document.querySelector("#view-b").toDataURL() !== b, before);
 
-  // Calibrate the catheter from labelled pairs: three twin pairs kept with their true force as
-  // the label (the twin's catheter is the catalogue's, so the scale comes out near 1); one label
-  // alone is refused, saying why.
+  // Calibrate the catheter from labelled pairs: three more twin pairs kept with their true force
+  // as the label (the twin's catheter is the catalogue's, so the scale comes out near 1; the
+  // pairs earlier tests labelled take part too, and one that gives no estimate is named).
+  // Refusals (too few pairs, contradictory ones, estimates as labels) are tested natively
+  // (src/catheter_calibration.rs).
   const kept = await page.locator("#pairs li[data-id]").count();
   for (let i = 0; i < 3; i++) {
     await page.focus("#twin-fx");
@@ -553,15 +555,11 @@ test("a twin pair in 3D: the catheter, the physics force beside H-Net's, the epi
     await page.click("#keep-draft");
     await page.waitForFunction((n) => document.querySelectorAll("#pairs li[data-id]").length === n, kept + i + 1);
     await page.click("#label-from-truth");
-    if (i === 0) {
-      await page.click("#calibrate-catheter");
-      assert.match(await page.textContent("#notice"), /cannot calibrate the catheter from 1 labelled pair.*at least 3 are needed/);
-    }
   }
   await page.click("#calibrate-catheter");
   await page.waitForFunction(() => /^catheter calibrated: stiffness ×/.test(document.querySelector("#notice")?.textContent));
   const calibrated = await page.textContent("#catheter-calibration");
-  console.log(`# page calibration on 3 twin pairs: ${calibrated}`);
+  console.log(`# page calibration: ${calibrated}`);
   const scale = Number(calibrated.match(/×(\d+\.\d+)/)[1]);
   assert.ok(Math.abs(scale - 1) < 0.2, calibrated);
   await page.click("#catheter-calibration-reset");
