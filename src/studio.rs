@@ -5,42 +5,28 @@
 //! render this state and call these actions.
 
 use std::collections::HashMap;
-use std::rc::Rc;
 
 use leptos::prelude::*;
 
-use crate::bundled::{self, FetchError};
-use crate::catheter_3d::{
-    Catheter3d, FitMasks, PairGeometry, PairMasks, pair_views, reconstruct_pair,
-};
-use crate::catheter_calibration;
+use crate::catheter_3d::FitMasks;
 use crate::cine::CinePlayer;
-use crate::compute::{self, Backend, BackendChoice};
-use crate::engine::{Engine, EngineError, Prediction, WeightsOrigin};
+use crate::compute::BackendChoice;
+use crate::engine::Prediction;
 use crate::error_text::with_causes;
-use crate::gpu_worker::GpuWorker;
 use crate::orbit_camera::OrbitCamera;
 use crate::storage;
 use crate::twin_live::{TwinControls, XrayBackground};
-use crate::webgpu_check;
 use crate::workspace::{LabeledPair, RemovedPair, Tool, View, Workspace};
 use hnet_model::catheter_entry::EntrySetting;
-use hnet_twin::carm::Biplane;
 use hnet_twin::catalogue::StiffnessCalibration;
 use hnet_twin::sensor_plate::ContactError;
 
+mod catheter;
 mod cine;
+mod model;
 
-/// The model's state.
-#[derive(Clone)]
-pub enum ModelState {
-    /// Choosing the backend and loading the weights.
-    Loading(String),
-    /// Ready to run.
-    Ready(Rc<Engine>),
-    /// No model could be loaded.
-    Failed(String),
-}
+pub use catheter::{CatheterReading, install_reconstruction};
+pub use model::{ModelState, load_model};
 
 /// A message for the user.
 #[derive(Debug, Clone, PartialEq)]
@@ -131,36 +117,6 @@ impl ViewTransform {
             scale,
             offset: [at[0] - image[0] * scale, at[1] - image[1] * scale],
         }
-    }
-}
-
-/// The catheter in 3D of one pair, as the page computed it ([`Studio::reconstruct_shown`]).
-#[derive(Debug, Clone, PartialEq)]
-pub struct CatheterReading {
-    /// The pair's id.
-    pub id: String,
-    /// The masks the rod was asked to be fitted to.
-    pub fit_masks: FitMasks,
-    /// H-Net's force estimate of the prediction on hand when it was made, newtons (whose masks
-    /// it was fitted to, when it was fitted to H-Net's).
-    pub prediction_force_n: Option<[f32; 3]>,
-    /// Its views (for drawing the C-arms).
-    pub views: Biplane,
-    /// The catheter and its physics force, or why there is none (with its causes).
-    pub result: Result<Catheter3d, String>,
-    /// Time of the centrelines, the reconstruction and the rod fit, milliseconds.
-    pub millis: f64,
-}
-
-impl CatheterReading {
-    /// The physics estimate to combine with H-Net's estimate `hnet_n`
-    /// ([`Catheter3d::for_combination`]), when the rod was fitted to the masks of the prediction
-    /// that gave `hnet_n` (not to an earlier prediction's, of other weights).
-    pub fn physics_for(&self, hnet_n: [f32; 3]) -> Option<([f32; 3], Option<[f32; 3]>)> {
-        if self.prediction_force_n != Some(hnet_n) {
-            return None;
-        }
-        self.result.as_ref().ok()?.for_combination()
     }
 }
 
@@ -460,87 +416,6 @@ impl Studio {
         self.info(format!("{id} added to the labeled pairs"));
     }
 
-    /// Runs H-Net on the pair on screen when the model is ready. A request made while H-Net is
-    /// busy runs once the current inference is done, on the pair then on screen.
-    pub fn run_model(&self) {
-        let ModelState::Ready(engine) = self.model.get_untracked() else {
-            return;
-        };
-        if self.busy.get_untracked().is_some() {
-            self.rerun.set(true);
-            return;
-        }
-        let shown = self
-            .draft
-            .with_untracked(|d| d.clone())
-            .or_else(|| self.workspace.with_untracked(|ws| ws.current().cloned()));
-        let Some(pair) = shown else {
-            return;
-        };
-        let studio = *self;
-        let id = pair.id;
-        let entry = self.catheter_entry.get_untracked();
-        self.busy.set(Some(format!("Running H-Net on {id}…")));
-        leptos::task::spawn_local(async move {
-            match engine.infer(&pair.view_a, &pair.view_b, entry).await {
-                // A reading under a model or an entry setting the page has left since is not
-                // shown: the rerun below reads the pair again.
-                Ok(prediction)
-                    if studio.uses(&engine) && studio.catheter_entry.get_untracked() == entry =>
-                {
-                    studio.predictions.update(|p| {
-                        p.insert(id, prediction);
-                    })
-                }
-                Ok(_) => {}
-                Err(e) => {
-                    studio.error(format!("H-Net failed on {id}: {}", with_causes(&e)));
-                    studio.leave_webgpu_after(&engine, &e);
-                }
-            }
-            studio.busy.set(None);
-            if studio.rerun.get_untracked() {
-                studio.rerun.set(false);
-                let current = studio.shown_id_untracked();
-                if current
-                    .is_some_and(|id| studio.predictions.with_untracked(|p| !p.contains_key(&id)))
-                {
-                    studio.run_model();
-                }
-            }
-        });
-    }
-
-    /// Whether `engine` is the model the page runs now (not one it has since replaced).
-    fn uses(&self, engine: &Rc<Engine>) -> bool {
-        matches!(
-            self.model.get_untracked(),
-            ModelState::Ready(current) if Rc::ptr_eq(&current, engine)
-        )
-    }
-
-    /// After `engine` failed on WebGPU with `error`, the same weights on the CPU, which says why
-    /// (the worker is stopped: every later call would fail too), and the pair on screen again.
-    /// Any other failure, or an engine the page no longer uses, changes nothing.
-    fn leave_webgpu_after(&self, engine: &Rc<Engine>, error: &EngineError) {
-        if !self.uses(engine) || !matches!(error, EngineError::WebGpu(_)) {
-            return;
-        }
-        let reason = format!("WebGPU failed ({}), so the CPU is used", with_causes(error));
-        match Engine::from_weights(
-            engine.weights.clone(),
-            &engine.weights_name,
-            engine.origin.clone(),
-            reason,
-        ) {
-            Ok(cpu) => {
-                self.model.set(ModelState::Ready(Rc::new(cpu)));
-                self.run_model();
-            }
-            Err(e) => self.model.set(ModelState::Failed(with_causes(&e))),
-        }
-    }
-
     /// Id of the pair on screen, without tracking.
     fn shown_id_untracked(&self) -> Option<String> {
         self.draft
@@ -629,253 +504,11 @@ impl Studio {
         }
     }
 
-    /// Reconstructs the catheter of the pair on screen in 3D and fits the rod to it (the label
-    /// masks, else H-Net's, or H-Net's as [`Studio::fit_masks`] asks), into
-    /// [`Studio::catheter`]. A failure is kept there as its message; nothing else changes.
-    pub fn reconstruct_shown(&self) {
-        let shown = self
-            .draft
-            .with_untracked(|d| d.clone())
-            .or_else(|| self.workspace.with_untracked(|ws| ws.current().cloned()));
-        let Some(pair) = shown else {
-            self.catheter.set(None);
-            return;
-        };
-        let prediction = self.predictions.with_untracked(|p| {
-            p.get(&pair.id)
-                .map(|p| (p.mask_a.clone(), p.mask_b.clone(), p.force_n))
-        });
-        let controls = self.twin.get_untracked();
-        let calibration = self.calibration.get_untracked();
-        let choice = self.fit_masks.get_untracked();
-        let clock = web_sys::window().and_then(|w| w.performance());
-        let now = || clock.as_ref().map_or(0.0, |p| p.now());
-        let start = now();
-        let result =
-            PairGeometry::of(&pair, &controls, calibration.as_ref()).and_then(|geometry| {
-                let predicted = prediction.as_ref().map(|(a, b, _)| [&a[..], &b[..]]);
-                reconstruct_pair(&geometry, &PairMasks::of(&pair, predicted, choice)?)
-            });
-        let millis = now() - start;
-        self.catheter.set(Some(CatheterReading {
-            views: pair_views(&pair),
-            id: pair.id,
-            fit_masks: choice,
-            prediction_force_n: prediction.and_then(|(_, _, force)| force),
-            result: result.map_err(|e| with_causes(&e)),
-            millis,
-        }));
-    }
-
-    /// Calibrates the catheter's stiffness from the pairs' measured force labels
-    /// ([`crate::catheter_calibration`]); the 3D step and the trace then read every pair with
-    /// it. A refusal says why and keeps the previous calibration.
-    pub fn calibrate_catheter(&self) {
-        let controls = self.twin.get_untracked();
-        let outcome = self.workspace.with_untracked(|ws| {
-            self.predictions.with_untracked(|predictions| {
-                let predicted = |id: &str| {
-                    predictions
-                        .get(id)
-                        .map(|p| [p.mask_a.clone(), p.mask_b.clone()])
-                };
-                catheter_calibration::calibrate_catheter(&ws.pairs, &predicted, &controls)
-            })
-        });
-        match outcome {
-            Ok(outcome) => {
-                let mut text = format!(
-                    "catheter calibrated: {}",
-                    catheter_calibration::describe(&outcome.calibration)
-                );
-                if !outcome.left_out.is_empty() {
-                    text = format!("{text}; left out: {}", outcome.left_out.join("; "));
-                }
-                self.calibration.set(Some(outcome.calibration));
-                self.info(text);
-            }
-            Err(e) => self.error(with_causes(&e)),
-        }
-    }
-
     /// Undo (`redo` false) or redo the last mask edit.
     pub fn undo_redo(&self, redo: bool) {
         self.draft.set(None);
         self.edit(|ws| if redo { ws.redo() } else { ws.undo() });
     }
-}
-
-/// Why no model could be loaded.
-#[derive(Debug, thiserror::Error)]
-enum LoadError {
-    /// The bundled weights could not be fetched.
-    #[error(transparent)]
-    Fetch(#[from] FetchError),
-    /// The weights give no network the page can run.
-    #[error(transparent)]
-    Engine(#[from] EngineError),
-}
-
-/// The engine of `weights` (else the bundled weights, else an untrained H-Net) on the backend
-/// the user chose. The weights are always read on the CPU first: that engine names a bad file,
-/// checks WebGPU's result, and is used whenever WebGPU cannot be.
-async fn load_engine(
-    studio: Studio,
-    weights: Option<(Rc<[u8]>, String, WeightsOrigin)>,
-) -> Result<Engine, LoadError> {
-    let backend = compute::choose_backend(studio.backend_choice.get_untracked()).await;
-    let weights = match weights {
-        Some(w) => Some(w),
-        None => bundled::fetch_bytes(bundled::BUNDLED_WEIGHTS)
-            .await?
-            .map(|bytes| {
-                (
-                    Rc::<[u8]>::from(bytes),
-                    bundled::BUNDLED_WEIGHTS.to_string(),
-                    WeightsOrigin::Bundled,
-                )
-            }),
-    };
-    let reason = backend.reason().unwrap_or_default().to_string();
-    let cpu = match weights {
-        Some((bytes, name, origin)) => Engine::from_weights(bytes, &name, origin, reason)?,
-        None => Engine::untrained(reason)?,
-    };
-    Ok(match backend {
-        Backend::WebGpu => onto_webgpu(cpu).await,
-        Backend::Cpu { .. } => cpu,
-    })
-}
-
-/// `cpu`'s network on WebGPU, once its result on the check pair ([`webgpu_check`]) is within
-/// the tolerances of the CPU's; with what the check found. When the worker cannot be started,
-/// fails, or differs beyond them, `cpu` itself, whose reason says why.
-async fn onto_webgpu(cpu: Engine) -> Engine {
-    match checked_on_webgpu(&cpu).await {
-        Ok(gpu) => gpu,
-        Err(reason) => cpu.with_cpu_reason(reason),
-    }
-}
-
-/// [`onto_webgpu`]'s engine on WebGPU, or why the CPU is to be used.
-async fn checked_on_webgpu(cpu: &Engine) -> Result<Engine, String> {
-    const CPU_USED: &str = "so the CPU is used";
-    /// What happened (`error`, with its causes), and so what.
-    fn reason(what: &str, error: &dyn std::error::Error, so: &str) -> String {
-        format!("{what} ({}), {so}", with_causes(error))
-    }
-    let worker = GpuWorker::shared()
-        .await
-        .map_err(|e| reason("WebGPU could not be set up", &e, CPU_USED))?;
-    let gpu = cpu
-        .on_webgpu(&worker)
-        .await
-        .map_err(|e| reason("WebGPU could not load the network", &e, CPU_USED))?;
-    let pair = match webgpu_check::check_pair() {
-        Ok(pair) => pair,
-        Err(e) => {
-            return Ok(gpu.with_check(format!(
-                "not checked against the CPU: the check pair could not be made ({})",
-                with_causes(&e)
-            )));
-        }
-    };
-    let expected = cpu
-        .infer(&pair.view_a, &pair.view_b, EntrySetting::AS_TRAINED)
-        .await
-        .map_err(|e| {
-            reason(
-                "the CPU failed on the check pair",
-                &e,
-                "so WebGPU's result cannot be checked",
-            )
-        })?;
-    let found = gpu
-        .infer(&pair.view_a, &pair.view_b, EntrySetting::AS_TRAINED)
-        .await
-        .map_err(|e| reason("WebGPU failed on a check pair", &e, CPU_USED))?;
-    fn output(p: &Prediction) -> webgpu_check::Output<'_> {
-        webgpu_check::Output {
-            masks: [&p.mask_a[..], &p.mask_b[..]],
-            // Read as trained, a pair always has the force head's estimate (catheter or not);
-            // a missing one reads as NaN, which the check refuses.
-            force_n: p.head_force_n.unwrap_or([f32::NAN; 3]),
-        }
-    }
-    let scale = web_sys::window()
-        .and_then(|w| w.location().search().ok())
-        .map_or(1.0, |query| webgpu_check::tolerance_scale(&query));
-    let difference = webgpu_check::Difference::between(output(&expected), output(&found));
-    if !difference.within(scale) {
-        return Err(difference.refusal(scale));
-    }
-    Ok(gpu.with_check(difference.text()))
-}
-
-/// Loads the model (bundled weights, or `weights`) on the chosen backend. On failure the model
-/// that was loaded stays.
-pub fn load_model(studio: Studio, weights: Option<(Rc<[u8]>, String, WeightsOrigin)>) {
-    let previous = studio.model.get_untracked();
-    let name = weights.as_ref().map(|w| w.1.clone());
-    studio.model.set(ModelState::Loading(match &name {
-        Some(name) => format!("Loading {name}…"),
-        None => "Loading H-Net…".into(),
-    }));
-    leptos::task::spawn_local(async move {
-        match load_engine(studio, weights).await {
-            Ok(engine) => {
-                let engine = Rc::new(engine);
-                studio.model.set(ModelState::Ready(engine.clone()));
-                if name.is_some() {
-                    studio.info(format!("Loaded {}", engine.weights_name));
-                }
-                studio.predictions.set(HashMap::new());
-                studio.run_model();
-            }
-            Err(e) => {
-                let text = with_causes(&e);
-                match previous {
-                    ModelState::Ready(engine) => {
-                        studio.model.set(ModelState::Ready(engine.clone()));
-                        studio.error(format!("{text}. Still using {}.", engine.weights_name));
-                    }
-                    _ => studio.model.set(ModelState::Failed(text)),
-                }
-            }
-        }
-    });
-}
-
-/// Keeps [`Studio::catheter`] up to date: after the pair on screen, its masks, H-Net's masks,
-/// the masks the rod is to be fitted to or the twin's catheter settings change (not during a
-/// brush stroke), the catheter is reconstructed again, once the changes have paused for a
-/// moment (a slider being dragged renders many pairs).
-pub fn install_reconstruction(studio: Studio) {
-    let serial = StoredValue::new(0u64);
-    Effect::new(move |_| {
-        let shown = studio.shown_id();
-        studio.predictions.track();
-        studio.twin.track();
-        studio.calibration.track();
-        studio.fit_masks.track();
-        if studio.workspace.with(Workspace::is_stroking) {
-            return;
-        }
-        if shown.is_none() {
-            studio.catheter.set(None);
-            return;
-        }
-        serial.update_value(|s| *s += 1);
-        let mine = serial.get_value();
-        set_timeout(
-            move || {
-                if serial.get_value() == mine {
-                    studio.reconstruct_shown();
-                }
-            },
-            std::time::Duration::from_millis(40),
-        );
-    });
 }
 
 /// Ids of both views, for element ids and labels.

@@ -1,0 +1,251 @@
+//! The network on the page's state: loading the weights on the backend the user chose (WebGPU
+//! checked against the CPU before it is trusted), and running it on the pair on screen.
+
+use std::collections::HashMap;
+use std::rc::Rc;
+
+use leptos::prelude::*;
+
+use super::Studio;
+use crate::bundled::{self, FetchError};
+use crate::compute::{self, Backend};
+use crate::engine::{Engine, EngineError, Prediction, WeightsOrigin};
+use crate::error_text::with_causes;
+use crate::gpu_worker::GpuWorker;
+use crate::webgpu_check;
+use hnet_model::catheter_entry::EntrySetting;
+
+/// The model's state.
+#[derive(Clone)]
+pub enum ModelState {
+    /// Choosing the backend and loading the weights.
+    Loading(String),
+    /// Ready to run.
+    Ready(Rc<Engine>),
+    /// No model could be loaded.
+    Failed(String),
+}
+
+impl Studio {
+    /// Runs H-Net on the pair on screen when the model is ready. A request made while H-Net is
+    /// busy runs once the current inference is done, on the pair then on screen.
+    pub fn run_model(&self) {
+        let ModelState::Ready(engine) = self.model.get_untracked() else {
+            return;
+        };
+        if self.busy.get_untracked().is_some() {
+            self.rerun.set(true);
+            return;
+        }
+        let shown = self
+            .draft
+            .with_untracked(|d| d.clone())
+            .or_else(|| self.workspace.with_untracked(|ws| ws.current().cloned()));
+        let Some(pair) = shown else {
+            return;
+        };
+        let studio = *self;
+        let id = pair.id;
+        let entry = self.catheter_entry.get_untracked();
+        self.busy.set(Some(format!("Running H-Net on {id}…")));
+        leptos::task::spawn_local(async move {
+            match engine.infer(&pair.view_a, &pair.view_b, entry).await {
+                // A reading under a model or an entry setting the page has left since is not
+                // shown: the rerun below reads the pair again.
+                Ok(prediction)
+                    if studio.uses(&engine) && studio.catheter_entry.get_untracked() == entry =>
+                {
+                    studio.predictions.update(|p| {
+                        p.insert(id, prediction);
+                    })
+                }
+                Ok(_) => {}
+                Err(e) => {
+                    studio.error(format!("H-Net failed on {id}: {}", with_causes(&e)));
+                    studio.leave_webgpu_after(&engine, &e);
+                }
+            }
+            studio.busy.set(None);
+            if studio.rerun.get_untracked() {
+                studio.rerun.set(false);
+                let current = studio.shown_id_untracked();
+                if current
+                    .is_some_and(|id| studio.predictions.with_untracked(|p| !p.contains_key(&id)))
+                {
+                    studio.run_model();
+                }
+            }
+        });
+    }
+
+    /// Whether `engine` is the model the page runs now (not one it has since replaced).
+    pub(super) fn uses(&self, engine: &Rc<Engine>) -> bool {
+        matches!(
+            self.model.get_untracked(),
+            ModelState::Ready(current) if Rc::ptr_eq(&current, engine)
+        )
+    }
+
+    /// After `engine` failed on WebGPU with `error`, the same weights on the CPU, which says why
+    /// (the worker is stopped: every later call would fail too), and the pair on screen again.
+    /// Any other failure, or an engine the page no longer uses, changes nothing.
+    pub(super) fn leave_webgpu_after(&self, engine: &Rc<Engine>, error: &EngineError) {
+        if !self.uses(engine) || !matches!(error, EngineError::WebGpu(_)) {
+            return;
+        }
+        let reason = format!("WebGPU failed ({}), so the CPU is used", with_causes(error));
+        match Engine::from_weights(
+            engine.weights.clone(),
+            &engine.weights_name,
+            engine.origin.clone(),
+            reason,
+        ) {
+            Ok(cpu) => {
+                self.model.set(ModelState::Ready(Rc::new(cpu)));
+                self.run_model();
+            }
+            Err(e) => self.model.set(ModelState::Failed(with_causes(&e))),
+        }
+    }
+}
+
+/// Why no model could be loaded.
+#[derive(Debug, thiserror::Error)]
+enum LoadError {
+    /// The bundled weights could not be fetched.
+    #[error(transparent)]
+    Fetch(#[from] FetchError),
+    /// The weights give no network the page can run.
+    #[error(transparent)]
+    Engine(#[from] EngineError),
+}
+
+/// The engine of `weights` (else the bundled weights, else an untrained H-Net) on the backend
+/// the user chose. The weights are always read on the CPU first: that engine names a bad file,
+/// checks WebGPU's result, and is used whenever WebGPU cannot be.
+async fn load_engine(
+    studio: Studio,
+    weights: Option<(Rc<[u8]>, String, WeightsOrigin)>,
+) -> Result<Engine, LoadError> {
+    let backend = compute::choose_backend(studio.backend_choice.get_untracked()).await;
+    let weights = match weights {
+        Some(w) => Some(w),
+        None => bundled::fetch_bytes(bundled::BUNDLED_WEIGHTS)
+            .await?
+            .map(|bytes| {
+                (
+                    Rc::<[u8]>::from(bytes),
+                    bundled::BUNDLED_WEIGHTS.to_string(),
+                    WeightsOrigin::Bundled,
+                )
+            }),
+    };
+    let reason = backend.reason().unwrap_or_default().to_string();
+    let cpu = match weights {
+        Some((bytes, name, origin)) => Engine::from_weights(bytes, &name, origin, reason)?,
+        None => Engine::untrained(reason)?,
+    };
+    Ok(match backend {
+        Backend::WebGpu => onto_webgpu(cpu).await,
+        Backend::Cpu { .. } => cpu,
+    })
+}
+
+/// `cpu`'s network on WebGPU, once its result on the check pair ([`webgpu_check`]) is within
+/// the tolerances of the CPU's; with what the check found. When the worker cannot be started,
+/// fails, or differs beyond them, `cpu` itself, whose reason says why.
+async fn onto_webgpu(cpu: Engine) -> Engine {
+    match checked_on_webgpu(&cpu).await {
+        Ok(gpu) => gpu,
+        Err(reason) => cpu.with_cpu_reason(reason),
+    }
+}
+
+/// [`onto_webgpu`]'s engine on WebGPU, or why the CPU is to be used.
+async fn checked_on_webgpu(cpu: &Engine) -> Result<Engine, String> {
+    const CPU_USED: &str = "so the CPU is used";
+    /// What happened (`error`, with its causes), and so what.
+    fn reason(what: &str, error: &dyn std::error::Error, so: &str) -> String {
+        format!("{what} ({}), {so}", with_causes(error))
+    }
+    let worker = GpuWorker::shared()
+        .await
+        .map_err(|e| reason("WebGPU could not be set up", &e, CPU_USED))?;
+    let gpu = cpu
+        .on_webgpu(&worker)
+        .await
+        .map_err(|e| reason("WebGPU could not load the network", &e, CPU_USED))?;
+    let pair = match webgpu_check::check_pair() {
+        Ok(pair) => pair,
+        Err(e) => {
+            return Ok(gpu.with_check(format!(
+                "not checked against the CPU: the check pair could not be made ({})",
+                with_causes(&e)
+            )));
+        }
+    };
+    let expected = cpu
+        .infer(&pair.view_a, &pair.view_b, EntrySetting::AS_TRAINED)
+        .await
+        .map_err(|e| {
+            reason(
+                "the CPU failed on the check pair",
+                &e,
+                "so WebGPU's result cannot be checked",
+            )
+        })?;
+    let found = gpu
+        .infer(&pair.view_a, &pair.view_b, EntrySetting::AS_TRAINED)
+        .await
+        .map_err(|e| reason("WebGPU failed on a check pair", &e, CPU_USED))?;
+    fn output(p: &Prediction) -> webgpu_check::Output<'_> {
+        webgpu_check::Output {
+            masks: [&p.mask_a[..], &p.mask_b[..]],
+            // Read as trained, a pair always has the force head's estimate (catheter or not);
+            // a missing one reads as NaN, which the check refuses.
+            force_n: p.head_force_n.unwrap_or([f32::NAN; 3]),
+        }
+    }
+    let scale = web_sys::window()
+        .and_then(|w| w.location().search().ok())
+        .map_or(1.0, |query| webgpu_check::tolerance_scale(&query));
+    let difference = webgpu_check::Difference::between(output(&expected), output(&found));
+    if !difference.within(scale) {
+        return Err(difference.refusal(scale));
+    }
+    Ok(gpu.with_check(difference.text()))
+}
+
+/// Loads the model (bundled weights, or `weights`) on the chosen backend. On failure the model
+/// that was loaded stays.
+pub fn load_model(studio: Studio, weights: Option<(Rc<[u8]>, String, WeightsOrigin)>) {
+    let previous = studio.model.get_untracked();
+    let name = weights.as_ref().map(|w| w.1.clone());
+    studio.model.set(ModelState::Loading(match &name {
+        Some(name) => format!("Loading {name}…"),
+        None => "Loading H-Net…".into(),
+    }));
+    leptos::task::spawn_local(async move {
+        match load_engine(studio, weights).await {
+            Ok(engine) => {
+                let engine = Rc::new(engine);
+                studio.model.set(ModelState::Ready(engine.clone()));
+                if name.is_some() {
+                    studio.info(format!("Loaded {}", engine.weights_name));
+                }
+                studio.predictions.set(HashMap::new());
+                studio.run_model();
+            }
+            Err(e) => {
+                let text = with_causes(&e);
+                match previous {
+                    ModelState::Ready(engine) => {
+                        studio.model.set(ModelState::Ready(engine.clone()));
+                        studio.error(format!("{text}. Still using {}.", engine.weights_name));
+                    }
+                    _ => studio.model.set(ModelState::Failed(text)),
+                }
+            }
+        }
+    });
+}
