@@ -15,6 +15,7 @@
 //!   the force trace;
 //! - [`export`]: the labeled pairs as a dataset zip; [`stated_geometry`]: the C-arms a user
 //!   states for an uploaded pair;
+//! - [`force_label`]: force labels as typed or read from a CSV file;
 //! - [`force_reading`]: what a force estimate can be said to show against the ablation band;
 //! - [`webgpu_check`]: WebGPU's result on a check pair against the CPU's, before it is trusted;
 //! - [`keymap`]: every keyboard shortcut, for the handlers, the help list and the tooltips;
@@ -30,6 +31,7 @@ pub mod catheter_calibration;
 pub mod cine;
 pub mod error_text;
 pub mod export;
+pub mod force_label;
 pub mod force_reading;
 pub mod imaging;
 pub mod keymap;

@@ -5,11 +5,11 @@
 //! `[x, x+1) x [y, y+1)` in image coordinates (origin at the top-left corner, `y` down).
 
 use hnet_twin::carm::Biplane;
-use hnet_twin::dataset::{Split, implausible_tip_force, next_split};
-use hnet_twin::force_table::{ForceTableError, read_force_table};
+use hnet_twin::dataset::{Split, next_split};
 use hnet_twin::label_origin::LabelOrigin;
 use serde::{Deserialize, Serialize};
 
+use crate::force_label::ForceLabelRow;
 use crate::imaging::WORK_SIZE;
 
 /// Where a pair came from.
@@ -580,7 +580,7 @@ impl Workspace {
         assigned
     }
 
-    /// Applies force labels read from a CSV file (see [`parse_force_labels`]) to the pairs with
+    /// Applies force labels read from a CSV file (see [`crate::force_label::parse_force_labels`]) to the pairs with
     /// those ids. Returns how many were applied and the ids that match no pair.
     pub fn apply_force_labels(&mut self, labels: &[ForceLabelRow]) -> (usize, Vec<String>) {
         let mut applied = 0;
@@ -621,99 +621,11 @@ pub fn export_splits(pairs: &[LabeledPair]) -> Vec<Option<Split>> {
     splits
 }
 
-/// Why a force-label file cannot be used: the file, and what is wrong in it (with the line,
-/// when it is one line's fault).
-#[derive(Debug, Clone, thiserror::Error)]
-#[error("{file}, {table}")]
-pub struct ForceLabelError {
-    /// The file's name.
-    pub file: String,
-    /// What is wrong in it.
-    pub table: ForceTableError,
-}
-
-/// A typed force component that is not a number of newtons.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum TypedForceError {
-    /// Nothing was typed.
-    #[error("{axis} is empty: enter a number of newtons")]
-    Empty {
-        /// The component (`Fx`, `Fy` or `Fz`).
-        axis: String,
-    },
-    /// What was typed is not a finite number (of f32's range).
-    #[error("{axis} is `{text}`, not a number of newtons")]
-    NotNewtons {
-        /// The component (`Fx`, `Fy` or `Fz`).
-        axis: String,
-        /// What was typed, trimmed.
-        text: String,
-    },
-}
-
-/// Reads one typed force component in newtons (`axis` names it in the message), by the rule of
-/// [`hnet_twin::force_table::parse_newtons`].
-pub fn parse_newtons(axis: &str, text: &str) -> Result<f32, TypedForceError> {
-    let trimmed = text.trim();
-    if trimmed.is_empty() {
-        return Err(TypedForceError::Empty {
-            axis: axis.to_string(),
-        });
-    }
-    hnet_twin::force_table::parse_newtons(trimmed)
-        .map(|v| v as f32)
-        // A finite f64 beyond f32's range (1e39) would become an infinite label.
-        .filter(|v| v.is_finite())
-        .ok_or_else(|| TypedForceError::NotNewtons {
-            axis: axis.to_string(),
-            text: trimmed.to_string(),
-        })
-}
-
-/// Why a force label is implausible (see [`implausible_tip_force`]), or `None`.
-pub fn implausible_label(force_n: [f32; 3]) -> Option<String> {
-    implausible_tip_force(force_n.map(f64::from))
-}
-
-/// A force label read from a file: the pair's id, the force in newtons, and where it came from.
-pub type ForceLabelRow = (String, [f32; 3], LabelOrigin);
-
-/// Reads force labels from a CSV file with a header naming the columns `id`, `fx`, `fy` and `fz`
-/// (newtons; other columns are ignored, so a dataset's `manifest.csv` works too). Every value must
-/// be a finite number of newtons and the label plausible (see [`implausible_label`]); the first
-/// bad line is reported and nothing is applied. A `label_origin` column says where each label
-/// came from (a sensor's log writes `measured`); without one, they are `imported`.
-pub fn parse_force_labels(file: &str, bytes: &[u8]) -> Result<Vec<ForceLabelRow>, ForceLabelError> {
-    let error = |table: ForceTableError| ForceLabelError {
-        file: file.to_string(),
-        table,
-    };
-    let mut labels = Vec::new();
-    for row in read_force_table(bytes, &["id"]).map_err(error)? {
-        let row = row.map_err(error)?;
-        let force = row.force_n.map(|f| f as f32);
-        if let Some(why) = implausible_label(force) {
-            return Err(error(ForceTableError::new(
-                Some(row.line),
-                format!("the force of `{}` is refused: {why}", row.key),
-            )));
-        }
-        let origin = match row.origin {
-            LabelOrigin::Unrecorded => LabelOrigin::Imported,
-            origin => origin,
-        };
-        labels.push((row.key, force, origin));
-    }
-    if labels.is_empty() {
-        return Err(error(ForceTableError::new(None, "holds no force labels")));
-    }
-    Ok(labels)
-}
-
 // Native tests (`cargo test`); the browser tests are in tests/web.rs.
 #[cfg(all(test, not(target_arch = "wasm32")))]
 pub(crate) mod tests {
     use super::*;
+    use crate::force_label::{implausible_label, parse_force_labels, parse_newtons};
 
     /// A workspace of `n` black uploaded pairs, `pair-0001` to `pair-000n` (also the export's
     /// tests).
@@ -963,22 +875,12 @@ pub(crate) mod tests {
     }
 }
 
-/// Regression (found by `typed_forces_are_finite_or_an_error`): a typed force beyond f32's
-/// range was read as an infinite label.
-#[cfg(all(test, not(target_arch = "wasm32")))]
-#[test]
-fn typed_forces_beyond_f32_are_refused() {
-    let err = parse_newtons("Fx", "6445156245511322000000000000000000000000").unwrap_err();
-    assert!(err.to_string().contains("not a number of newtons"), "{err}");
-    assert!(parse_newtons("Fx", "1e39").is_err());
-    assert_eq!(parse_newtons("Fx", "0.25"), Ok(0.25));
-}
-
 // Property tests (issue #13, docs/reliability.md): force-label files and typed forces give
 // labels or an error, never a panic or a non-finite label, and labels round-trip exactly.
 #[cfg(all(test, not(target_arch = "wasm32")))]
 mod properties {
     use super::*;
+    use crate::force_label::{implausible_label, parse_force_labels, parse_newtons};
     use crate::imaging::properties::cases;
     use proptest::prelude::*;
 
