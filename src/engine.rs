@@ -8,7 +8,8 @@ use burn::module::Module;
 use burn::tensor::Device;
 use hnet_model::architectures::{ModelSpec, StereoModel};
 use hnet_model::catheter_entry::{
-    CatheterEntry, EntryReading, EntrySetting, read_predictions, turned_pairs,
+    CatheterEntry, EntryReading, EntrySetting, ReadEntryError, TurnError, read_predictions,
+    turned_pairs,
 };
 use hnet_model::inference::{PredictError, StereoPair, StereoPrediction};
 use hnet_model::weights::{WeightsError, WeightsHeader};
@@ -151,6 +152,9 @@ pub enum EngineError {
     /// The forward pass or the read-back failed.
     #[error(transparent)]
     Predict(#[from] PredictError),
+    /// A view or a mask could not be turned for its catheter's entry edge.
+    #[error(transparent)]
+    Turn(#[from] TurnError),
     /// The WebGPU worker failed.
     #[error(transparent)]
     WebGpu(#[from] GpuWorkerError),
@@ -290,12 +294,12 @@ impl Engine {
             }
             Runner::WebGpu(network) => {
                 // The worker runs one pair per call: each turned copy in turn.
-                let turned = turned_pairs(&a, &b, self.input, entry).map_err(PredictError::from)?;
+                let turned = turned_pairs(&a, &b, self.input, entry)?;
                 let mut predictions: Vec<StereoPrediction> = Vec::with_capacity(turned.len());
                 for t in &turned {
                     predictions.push(network.infer(&t.view_a, &t.view_b, self.input).await?);
                 }
-                read_predictions(&turned, predictions, self.input).map_err(PredictError::from)?
+                read_predictions(&turned, predictions, self.input)?
             }
         };
         let millis = now_ms() - start;
@@ -311,5 +315,14 @@ impl Engine {
             millis,
             backend: self.backend.label(),
         })
+    }
+}
+
+impl From<ReadEntryError> for EngineError {
+    fn from(error: ReadEntryError) -> Self {
+        match error {
+            ReadEntryError::Predict(e) => Self::Predict(e),
+            ReadEntryError::Turn(e) => Self::Turn(e),
+        }
     }
 }

@@ -1,5 +1,5 @@
 //! `hnet import`: real recordings into the dataset format: two folders of images, or two DICOM
-//! series (plane A and plane B of a biplane cine, [`crate::import_dicom`]).
+//! series (plane A and plane B of a biplane cine, `import_dicom`).
 
 use std::path::PathBuf;
 
@@ -75,12 +75,26 @@ fn parse_threshold(text: &str) -> Result<MaskThreshold, String> {
         .map_err(|_| format!("`{text}` is neither a grey level 0-255 nor `otsu`"))
 }
 
-pub fn run(args: &ImportArgs) -> anyhow::Result<()> {
-    if args.size == Some(0) {
-        bail!("--size must be at least 1");
+impl ImportArgs {
+    /// Whether the pairs come from the two planes of a DICOM cine (`import_dicom`), not from
+    /// image folders.
+    pub fn is_dicom(&self) -> bool {
+        self.dicom_a.is_some()
     }
+
+    /// The `--size` asked for (pixels, square), refused when 0.
+    pub fn checked_size(&self) -> anyhow::Result<Option<usize>> {
+        if self.size == Some(0) {
+            bail!("--size must be at least 1");
+        }
+        Ok(self.size)
+    }
+}
+
+pub fn run(args: &ImportArgs) -> anyhow::Result<()> {
+    let size = args.checked_size()?;
     let (Some(view_a), Some(view_b)) = (&args.view_a, &args.view_b) else {
-        return crate::import_dicom::run(args);
+        bail!("give --view-a and --view-b (image folders), or --dicom-a and --dicom-b");
     };
     let options = ImportOptions {
         view_a: view_a.clone(),
@@ -89,7 +103,7 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<()> {
         out: args.out.clone(),
         threshold: args.threshold,
         bright_catheter: args.bright_catheter,
-        size: args.size,
+        size,
         skip_bad: args.skip_bad,
         seed: args.seed,
         label_origin: args.label_origin.clone(),

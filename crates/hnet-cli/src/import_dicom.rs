@@ -88,7 +88,7 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<()> {
     let cine = open_cine(plane_a, plane_b)?;
     let frames = cine.pairing.pairs.len();
     let [a, b] = &cine.planes;
-    let size = match args.size {
+    let size = match args.checked_size()? {
         Some(side) => ImageSize::square(side),
         None if a.frames.size == b.frames.size => a.frames.size,
         None => bail!(

@@ -74,6 +74,8 @@ fn main() -> ExitCode {
         Command::Info(args) => info::run(&args),
         Command::Simulate(args) => simulate::run(&args),
         Command::Merge(args) => simulate::merge(&args),
+        // Image folders, or the two planes of a DICOM cine.
+        Command::Import(args) if args.is_dicom() => import_dicom::run(&args),
         Command::Import(args) => import::run(&args),
         Command::Train(args) => training::run(&args),
         Command::Eval(args) => evaluation::run(&args),

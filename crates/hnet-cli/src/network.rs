@@ -115,6 +115,7 @@ pub fn predict_entry(
                     "--catheter-entry needs a square network; this one takes {size} images"
                 ),
                 EntryError::Predict(error) => anyhow::Error::new(error),
+                EntryError::Turn(error) => anyhow::Error::new(error),
             })?;
         for (item, read) in chunk.iter().zip(outputs) {
             for (count, edge) in read_turned_views.iter_mut().zip(read.entry) {

@@ -316,6 +316,17 @@ pub fn read_turned(outputs: Vec<TurnedOutput>, size: ImageSize) -> Result<EntryR
     })
 }
 
+/// Why a pair could not be read with its views turned.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadEntryError {
+    /// The network could not be run.
+    #[error(transparent)]
+    Predict(#[from] PredictError),
+    /// A view or a mask could not be turned.
+    #[error(transparent)]
+    Turn(#[from] TurnError),
+}
+
 impl HNet {
     /// [`HNet::predict_async`] for one pair (RGB images of `size`) under `setting`: its views
     /// turned for each candidate edge, run as one batch, read back by [`read_turned`]. (`hnet
@@ -326,7 +337,7 @@ impl HNet {
         size: ImageSize,
         device: &Device,
         setting: EntrySetting,
-    ) -> Result<EntryReading, PredictError> {
+    ) -> Result<EntryReading, ReadEntryError> {
         let turned = turned_pairs(pair.view_a, pair.view_b, size, setting)?;
         let predictions = self.predict_async(&as_pairs(&turned), size, device).await?;
         Ok(read_predictions(&turned, predictions, size)?)

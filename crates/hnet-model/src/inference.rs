@@ -237,8 +237,4 @@ pub enum PredictError {
     /// The device could not return the result.
     #[error(transparent)]
     Readback(#[from] ReadbackError),
-    /// A view or a mask could not be turned for its catheter's entry edge
-    /// ([`crate::catheter_entry`]).
-    #[error(transparent)]
-    Turn(#[from] crate::catheter_entry::TurnError),
 }

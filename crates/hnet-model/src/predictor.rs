@@ -300,8 +300,7 @@ impl Predictor {
                         turn(pair.view_b, candidate[1])?,
                     ))
                 })
-                .collect::<Result<Vec<_>, TurnError>>()
-                .map_err(PredictError::from)?;
+                .collect::<Result<Vec<_>, TurnError>>()?;
             let inputs: Vec<PairInput<'_>> = turned
                 .iter()
                 .map(|(a, b)| PairInput {
@@ -323,7 +322,7 @@ impl Predictor {
         outputs
             .into_iter()
             .map(|outputs| {
-                let reading = read_turned(outputs, size).map_err(PredictError::from)?;
+                let reading = read_turned(outputs, size)?;
                 Ok(EntryOutput {
                     output: PairOutput {
                         masks: Some(reading.masks),
@@ -348,4 +347,7 @@ pub enum EntryError {
     /// The network could not be run.
     #[error(transparent)]
     Predict(#[from] PredictError),
+    /// A view or a mask could not be turned.
+    #[error(transparent)]
+    Turn(#[from] TurnError),
 }

@@ -11,7 +11,25 @@ use burn::train::metric::{
     SerializedEntry,
 };
 
-use super::trainee::StepSummary;
+/// Host values of one step, computed once for all metrics with [`hnet_model::metrics`].
+#[derive(Debug, Clone, Copy)]
+pub struct StepSummary {
+    /// Pairs in the batch.
+    pub batch_size: usize,
+    /// View A's mean BCE.
+    pub bce_a: f64,
+    /// View B's mean BCE.
+    pub bce_b: f64,
+    /// Force MSE, N².
+    pub mse: f64,
+    /// Mean IoU over both views and both classes (networks that segment).
+    pub miou: Option<f64>,
+    /// Mean Dice over both views and both classes.
+    pub mdice: Option<f64>,
+    /// Force MAE over the three axes and the pairs with a force label, N (networks that
+    /// estimate the force; `None` also when no pair in the batch has a label).
+    pub force_mae: Option<f64>,
+}
 
 /// A metric's input: the step's host values.
 pub struct StepInput(pub Result<StepSummary, String>);

@@ -13,7 +13,7 @@ use hnet_model::architectures::{ModelSpec, StereoInput, StereoModel};
 use hnet_model::inference::host_values;
 use hnet_model::metrics::{ForceAccumulator, SegmentationAccumulator};
 
-use super::metrics::StepInput;
+use super::metrics::{StepInput, StepSummary};
 use crate::data::StereoBatch;
 
 /// The network with its loss, as burn-train sees it.
@@ -95,26 +95,6 @@ pub struct StereoStepOutput {
     target_force: Tensor<2>,
     force_known: Tensor<2>,
     summary: Arc<OnceLock<Result<StepSummary, String>>>,
-}
-
-/// Host values of one step, computed once for all metrics with [`hnet_model::metrics`].
-#[derive(Debug, Clone, Copy)]
-pub struct StepSummary {
-    /// Pairs in the batch.
-    pub batch_size: usize,
-    /// View A's mean BCE.
-    pub bce_a: f64,
-    /// View B's mean BCE.
-    pub bce_b: f64,
-    /// Force MSE, N².
-    pub mse: f64,
-    /// Mean IoU over both views and both classes (networks that segment).
-    pub miou: Option<f64>,
-    /// Mean Dice over both views and both classes.
-    pub mdice: Option<f64>,
-    /// Force MAE over the three axes and the pairs with a force label, N (networks that
-    /// estimate the force; `None` also when no pair in the batch has a label).
-    pub force_mae: Option<f64>,
 }
 
 /// A tensor's values on the host.
