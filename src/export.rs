@@ -430,7 +430,7 @@ mod tests {
         for id in ["pair-0001", "pair-0002"] {
             ws.select(ws.pairs.iter().position(|p| p.id == id).unwrap());
             ws.set_force(id, Some(([0.1, 0.0, 0.0], LabelOrigin::Typed)));
-            ws.begin_stroke(View::A);
+            ws.begin_stroke(View::A, None);
             ws.stroke_to([10.0, 10.0], [100.0, 10.0], 3.0, Tool::Brush);
             ws.end_stroke();
         }

@@ -405,16 +405,24 @@ impl Workspace {
         Some(id)
     }
 
-    /// Starts a stroke on `view` of the pair on screen.
-    pub fn begin_stroke(&mut self, view: View) {
-        if let Some(pair) = self.current() {
-            self.stroke_start = Some((
-                pair.id.clone(),
-                view,
-                pair.mask(view).to_vec(),
-                pair.masks_labeled,
-            ));
+    /// Starts a stroke on `view` of the pair on screen. A view whose label mask is still empty
+    /// starts from `start_from` (H-Net's mask of it, binarized) when given, so that a correction
+    /// is an edit of H-Net's mask rather than a redraw; the stroke's undo step takes both away.
+    pub fn begin_stroke(&mut self, view: View, start_from: Option<Vec<u8>>) {
+        let Some(pair) = self.current_mut() else {
+            return;
+        };
+        let before = pair.mask(view).to_vec();
+        let start = (pair.id.clone(), view, before.clone(), pair.masks_labeled);
+        if let Some(seed) = start_from.filter(|seed| {
+            seed.len() == before.len()
+                && before.iter().all(|&v| v == 0)
+                && seed.iter().any(|&v| v > 0)
+        }) {
+            *pair.mask_mut(view) = seed;
+            pair.masks_labeled = true;
         }
+        self.stroke_start = Some(start);
     }
 
     /// Paints part of the stroke in progress (image coordinates, radius in pixels).
@@ -650,7 +658,7 @@ pub(crate) mod tests {
 
     /// One stroke of `tool` from `from` to `to`, radius `r`, on the current pair's `view`.
     fn stroke(ws: &mut Workspace, view: View, tool: Tool, [from, to]: [[f64; 2]; 2], r: f64) {
-        ws.begin_stroke(view);
+        ws.begin_stroke(view, None);
         ws.stroke_to(from, to, r, tool);
         ws.end_stroke();
     }
@@ -663,6 +671,31 @@ pub(crate) mod tests {
     /// An eraser stroke.
     fn erase(ws: &mut Workspace, view: View, from: [f64; 2], to: [f64; 2], r: f64) {
         stroke(ws, view, Tool::Eraser, [from, to], r);
+    }
+    #[test]
+    fn a_correction_starts_from_h_nets_mask_and_undoes_with_it() {
+        let mut ws = workspace(1);
+        let size = WORK_SIZE * WORK_SIZE;
+        let mut hnet = vec![0u8; size];
+        hnet[..WORK_SIZE * 3].fill(255);
+        // The first stroke on an empty view starts from H-Net's mask, and adds to it.
+        ws.begin_stroke(View::A, Some(hnet.clone()));
+        ws.stroke_to([50.0, 100.0], [60.0, 100.0], 3.0, Tool::Brush);
+        ws.end_stroke();
+        let painted = ws.current().unwrap().mask(View::A).to_vec();
+        assert!(painted[..WORK_SIZE * 3].iter().all(|&v| v == 255));
+        assert!(painted.iter().filter(|&&v| v > 0).count() > WORK_SIZE * 3);
+        // One undo step takes both away.
+        ws.undo();
+        assert!(ws.current().unwrap().mask(View::A).iter().all(|&v| v == 0));
+        assert!(!ws.current().unwrap().masks_labeled);
+        // A view that already holds a label is not overwritten.
+        ws.redo();
+        let mut other = vec![0u8; size];
+        other[size - 10..].fill(255);
+        ws.begin_stroke(View::A, Some(other));
+        ws.end_stroke();
+        assert_eq!(ws.current().unwrap().mask(View::A), painted.as_slice());
     }
 
     #[test]

@@ -97,6 +97,9 @@ test("load a pair, run H-Net, paint, undo, reload with labels kept, export the d
   await paint(page, "a", [0.2, 0.2], [0.6, 0.3]);
   const painted = await labelPixels(page, "a");
   assert.ok(painted > 50, `${painted} pixels painted`);
+  // The stroke started from H-Net's mask of the view: the label holds at least its pixels.
+  const predicted = Number(await page.getAttribute("#view-a", "data-predicted-pixels"));
+  assert.ok(painted >= predicted, `${painted} label pixels, H-Net's mask ${predicted}`);
   await page.keyboard.press("Control+z");
   await page.waitForFunction(() => document.querySelector("#view-a").dataset.labelPixels === "0");
   await page.keyboard.press("Control+Shift+z");

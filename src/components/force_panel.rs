@@ -46,6 +46,7 @@ pub fn ForcePanel() -> impl IntoView {
     let truth = move || studio.with_shown(|p| p.and_then(|p| p.true_force()));
     // The physics estimate of the pair on screen, if its catheter was reconstructed.
     let physics = move || shown_reading(studio, |r| Some(r.result.as_ref().ok()?.force_f32()));
+    let physics_masks = move || shown_reading(studio, |r| Some(r.result.as_ref().ok()?.masks));
     // What the loaded weights' force was trained on and how far off it is, when their file
     // records it (hnet_twin::model_facts).
     let domain = move || {
@@ -211,7 +212,17 @@ pub fn ForcePanel() -> impl IntoView {
                 <thead><tr><th></th><th>"Fx (N)"</th><th>"Fy (N)"</th><th>"Fz (N)"</th><th>"|F| (N)"</th></tr></thead>
                 <tbody>
                     {move || row(EstimateKind::Head.name().into(), estimate(), head_interval(), "estimate")}
-                    {move || row("Physics (rod fit)".into(), physics(), None, "physics")}
+                    // Named by the masks the rod was fitted to: painting a correction changes
+                    // them from H-Net's to the labels, and the row says so rather than vanish.
+                    {move || row(
+                        match physics_masks() {
+                            Some(masks) => format!("Physics (rod fit to {})", masks.phrase()),
+                            None => "Physics (rod fit)".into(),
+                        },
+                        physics(),
+                        None,
+                        "physics",
+                    )}
                     // Each axis of H-Net's and the physics estimate fitted to its masks, weighted
                     // by the inverse of its error variance (docs/app.md, "The catheter in 3D and
                     // the physics estimate").

@@ -356,8 +356,19 @@ fn ViewCanvas(view: View) -> impl IntoView {
                 }
                 let at = transform.get_untracked().to_image(p);
                 let radius = studio.brush_radius.get_untracked();
+                // A view not yet labelled starts from H-Net's mask of it (issue #39).
+                let start_from = studio.shown_id().and_then(|id| {
+                    studio.predictions.with_untracked(|p| {
+                        p.get(&id).map(|p| {
+                            crate::imaging::binarize(match view {
+                                View::A => &p.mask_a,
+                                View::B => &p.mask_b,
+                            })
+                        })
+                    })
+                });
                 studio.workspace.update(|ws| {
-                    ws.begin_stroke(view);
+                    ws.begin_stroke(view, start_from);
                     ws.stroke_to(at, at, radius, mask_tool);
                 });
                 studio.show_label.set(true);
