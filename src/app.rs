@@ -40,6 +40,14 @@ pub fn App() -> impl IntoView {
                     });
                     studio.run_model();
                 }
+                // A first screen that starts somewhere: with nothing saved, a twin pair is on
+                // screen at once, with H-Net's masks, force and 3D view once the model is ready.
+                if studio.workspace.with_untracked(|ws| ws.pairs.is_empty())
+                    && studio.draft.with_untracked(Option::is_none)
+                {
+                    studio.render_twin();
+                    studio.run_model();
+                }
                 if !damaged.is_empty() {
                     studio.error(format!(
                         "{} saved pair(s) could not be read: {}",

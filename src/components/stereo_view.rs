@@ -9,7 +9,7 @@ use crate::catheter_3d::{epipolar_line, pair_views};
 use crate::components::on_slider;
 use crate::imaging::{WORK_SIZE, estimate_tip, force_arrow, overlay, project, rgba};
 use crate::keymap::{self, Command, Scope, tooltip};
-use crate::studio::{CANVAS_SIDE, PointerTool, Studio, ViewTransform, view_index};
+use crate::studio::{CANVAS_SIDE, PointerTool, SourceTab, Studio, ViewTransform, view_index};
 use crate::workspace::{PairSource, View};
 
 /// Colour of H-Net's masks.
@@ -99,6 +99,9 @@ pub fn StereoView() -> impl IntoView {
             <p class="draft-note">
                 {move || if studio.showing_cine_frame() {
                     "DICOM cine frame (not kept yet). "
+                } else if studio.tab.get() == SourceTab::Images {
+                    "A sample pair from the digital twin, with H-Net's masks, force and 3D view: \
+                     load your own pair above, or change this one in the Digital twin tab. "
                 } else {
                     "Live twin pair (not kept yet). "
                 }}
