@@ -48,6 +48,17 @@ fn execute(studio: Studio, command: Command) {
 /// Listens to the keyboard on the whole page (not while typing in a field).
 pub fn install_shortcuts(studio: Studio) {
     let handle = window_event_listener(leptos::ev::keydown, move |ev: web_sys::KeyboardEvent| {
+        // Enter opens a focused file picker as Space does (Chromium opens it on Space only).
+        if ev.key() == "Enter"
+            && let Some(input) = ev
+                .target()
+                .and_then(|t| wasm_bindgen::JsCast::dyn_into::<web_sys::HtmlInputElement>(t).ok())
+                .filter(|input| input.type_() == "file")
+        {
+            ev.prevent_default();
+            input.click();
+            return;
+        }
         let typing = ev
             .target()
             .and_then(|t| wasm_bindgen::JsCast::dyn_into::<web_sys::HtmlElement>(t).ok())
