@@ -133,6 +133,8 @@ pub struct CinePlayer {
     /// H-Net's masks, else H-Net's force head; with its 90 % intervals where the weights carry
     /// their calibration), once traced.
     pub estimates: Vec<Option<TipForceEstimate>>,
+    /// The weights file (its name) the trace was made with.
+    pub traced_with: String,
     /// What the user should know: geometry the headers lacked, how frames were paired.
     pub notes: Vec<String>,
 }
@@ -169,6 +171,7 @@ impl CinePlayer {
             windows: Plane::BOTH.map(|plane| cine.series(plane).initial_window(0)),
             frame: 0,
             estimates: vec![None; cine.frame_count()],
+            traced_with: String::new(),
             notes: cine.notes(),
             cine,
         }
@@ -285,9 +288,11 @@ impl CinePlayer {
         }
     }
 
-    /// Forgets every frame's estimate.
-    pub fn clear_trace(&mut self) {
+    /// Starts a new trace with the weights file `weights` (its name): every frame's estimate is
+    /// forgotten.
+    pub fn start_trace(&mut self, weights: &str) {
         self.estimates.iter_mut().for_each(|f| *f = None);
+        self.traced_with = weights.to_string();
     }
 
     /// The frames with an estimate, in order.
@@ -305,9 +310,10 @@ impl CinePlayer {
             .collect()
     }
 
-    /// The force trace as CSV (`hnet trace`'s format): frames with a force only.
+    /// The force trace as CSV (`hnet trace`'s format, naming the weights that traced it):
+    /// frames with a force only.
     pub fn trace_csv(&self) -> String {
-        trace_csv(&self.trace())
+        trace_csv(&self.trace(), &self.traced_with)
     }
 
     /// The first frame without a force at or after `from`, wrapping around, if any.
@@ -388,21 +394,22 @@ mod tests {
         let [a, b] = small_cine(3);
         let mut player = CinePlayer::read(vec![a], vec![b]).unwrap();
         assert_eq!(player.next_untraced(1), Some(1));
+        player.start_trace("hnet-cpu.bpk");
         player.record_estimate(1, TipForceEstimate::uncalibrated([0.1, 0.0, 0.0]));
         let combination = crate::force_reading::tests::bench_domain().combination;
         player.record_estimate(0, combination.estimate([0.0, 0.0, 0.2], None));
         assert_eq!(player.next_untraced(1), Some(2));
         assert_eq!(
             player.trace_csv(),
-            "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,fx_90_n,fy_90_n,fz_90_n,estimator,note\n\
-             1,0.0000,0.0000,0.0000,0.2000,0.2000,0.1217,0.1230,0.1133,H-Net force head,\n\
-             2,0.0667,0.1000,0.0000,0.0000,0.1000,,,,H-Net force head,\n"
+            "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,fx_90_n,fy_90_n,fz_90_n,estimator,weights,note\n\
+             1,0.0000,0.0000,0.0000,0.2000,0.2000,0.1217,0.1230,0.1133,H-Net force head,\"hnet-cpu.bpk\",\n\
+             2,0.0667,0.1000,0.0000,0.0000,0.1000,,,,H-Net force head,\"hnet-cpu.bpk\",\n"
         );
         player.step(-1);
         assert_eq!(player.frame, 2);
         player.step(1);
         assert_eq!(player.frame, 0);
-        player.clear_trace();
+        player.start_trace("other.bpk");
         assert!(player.trace().is_empty());
     }
 

@@ -643,11 +643,11 @@ test("a DICOM cine: sample, step, scrub, play, window/level, trace with cancel, 
   assert.equal(csv.suggestedFilename(), "hnet-force-trace.csv");
   await csv.saveAs(join(files, "trace.csv"));
   const lines = (await readFile(join(files, "trace.csv"), "utf8")).trim().split("\n");
-  assert.equal(lines[0], "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,fx_90_n,fy_90_n,fz_90_n,estimator,note");
+  assert.equal(lines[0], "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,fx_90_n,fy_90_n,fz_90_n,estimator,weights,note");
   assert.equal(lines.length, 25);
   // Each frame as the verdict reads it, with its 90 % intervals (the bundled weights carry their
   // calibration): combined where the rod was fitted to H-Net's masks, else the force head.
-  assert.match(lines[2], /^2,0\.0667,(-?\d\.\d{4},){3}\d\.\d{4},(\d\.\d{4},){3}(H-Net force head|Combined),$/);
+  assert.match(lines[2], /^2,0\.0667,(-?\d\.\d{4},){3}\d\.\d{4},(\d\.\d{4},){3}(H-Net force head|Combined),"hnet-cpu\.bpk",$/);
   const combinedFrames = lines.filter((l) => l.includes(",Combined,")).length;
   console.log(`# cine trace: ${combinedFrames} of 24 frames combined with the physics estimate`);
   assert.equal(await page.getAttribute("#force-trace", "data-combined"), String(combinedFrames));

@@ -162,8 +162,10 @@ impl Studio {
         }
         self.stop_playback();
         let serial = self.cine_serial.get_untracked();
-        self.cine
-            .update(|c| c.iter_mut().for_each(CinePlayer::clear_trace));
+        self.cine.update(|c| {
+            c.iter_mut()
+                .for_each(|c| c.start_trace(&engine.weights_name))
+        });
         self.trace_cancelled.set(false);
         self.trace_progress.set(Some((0, total)));
         self.busy

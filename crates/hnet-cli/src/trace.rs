@@ -134,7 +134,11 @@ pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
         bar.inc(chunk.len() as u64);
     }
     bar.finish_and_clear();
-    hnet_twin::files::write_atomically(&args.out, trace_csv(&trace).as_bytes())
+    let weights_name = args.weights.file_name().map_or_else(
+        || args.weights.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    );
+    hnet_twin::files::write_atomically(&args.out, trace_csv(&trace, &weights_name).as_bytes())
         .with_context(|| format!("cannot write {}", args.out.display()))?;
     let count = |kind| {
         trace

@@ -1150,7 +1150,7 @@ fn a_biplane_dicom_cine_imports_and_traces_without_patient_identifiers() {
     let lines: Vec<&str> = text.lines().collect();
     assert_eq!(
         lines[0],
-        "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,fx_90_n,fy_90_n,fz_90_n,estimator,note"
+        "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,fx_90_n,fy_90_n,fz_90_n,estimator,weights,note"
     );
     assert_eq!(lines.len(), 5);
     // Every frame is in the trace, with its time. These 32 px frames, blown up to the model's
@@ -1158,7 +1158,7 @@ fn a_biplane_dicom_cine_imports_and_traces_without_patient_identifiers() {
     for (i, line) in lines[1..].iter().enumerate() {
         assert!(line.starts_with(&format!("{},", i + 1)), "{line}");
         assert!(
-            line.contains(",,,,,,,,,\"view A: no catheter found"),
+            line.contains(",,,,,,,,,\"hnet-cpu.bpk\",\"view A: no catheter found"),
             "{line}"
         );
     }

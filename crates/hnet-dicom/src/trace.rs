@@ -1,9 +1,11 @@
 //! A force trace over a cine: one tip-force estimate per frame pair, written as CSV
-//! (`frame,time_s,fx_n,fy_n,fz_n,magnitude_n,fx_90_n,fy_90_n,fz_90_n,estimator,note`: frames
+//! (`frame,time_s,fx_n,fy_n,fz_n,magnitude_n,fx_90_n,fy_90_n,fz_90_n,estimator,weights,note`:
+//! frames
 //! from 1, time in seconds after plane A's first frame, empty when the headers give no frame
 //! time, forces in newtons in the twin's world frame to 0.1 mN, half the width of each axis's
 //! 90 % interval (empty for weights that carry no calibration), the estimate it is (H-Net's
-//! force head, or combined with the physics estimate), and for a frame without a force why, its
+//! force head, or combined with the physics estimate), the weights file that made it, and for a
+//! frame without a force why, its
 //! force columns empty). The one format of `hnet trace` and the page's trace export; it holds
 //! no header value besides the frame times, so no patient identifier.
 
@@ -14,7 +16,7 @@ use hnet_units::force_magnitude;
 
 /// The trace's header line.
 pub const TRACE_COLUMNS: &str =
-    "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,fx_90_n,fy_90_n,fz_90_n,estimator,note";
+    "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,fx_90_n,fy_90_n,fz_90_n,estimator,weights,note";
 
 /// One frame pair's estimate.
 #[derive(Debug, Clone, PartialEq)]
@@ -27,8 +29,12 @@ pub struct TracePoint {
     pub estimate: Result<TipForceEstimate, String>,
 }
 
-/// The CSV of `points`, header line first, one line per point in the given order.
-pub fn trace_csv<'a>(points: impl IntoIterator<Item = &'a TracePoint>) -> String {
+/// The CSV of `points` made with the weights file `weights` (its name), header line first, one
+/// line per point in the given order.
+pub fn trace_csv<'a>(points: impl IntoIterator<Item = &'a TracePoint>, weights: &str) -> String {
+    // Commas and quotes cannot break a row: a text field is quoted, quotes doubled.
+    let quoted = |text: &str| format!("\"{}\"", text.replace('"', "\"\""));
+    let weights = quoted(weights);
     let mut csv = format!("{TRACE_COLUMNS}\n");
     for point in points {
         let time = point.time_s.map(|t| format!("{t:.4}")).unwrap_or_default();
@@ -42,7 +48,7 @@ pub fn trace_csv<'a>(points: impl IntoIterator<Item = &'a TracePoint>) -> String
                     .unwrap_or_else(|| ",,".into());
                 writeln!(
                     csv,
-                    "{frame},{time},{:.4},{:.4},{:.4},{:.4},{interval},{},",
+                    "{frame},{time},{:.4},{:.4},{:.4},{:.4},{interval},{},{weights},",
                     f[0],
                     f[1],
                     f[2],
@@ -50,12 +56,7 @@ pub fn trace_csv<'a>(points: impl IntoIterator<Item = &'a TracePoint>) -> String
                     estimate.kind.name()
                 )
             }
-            // Commas and quotes cannot break the row: the note is quoted, quotes doubled.
-            Err(why) => writeln!(
-                csv,
-                "{frame},{time},,,,,,,,,\"{}\"",
-                why.replace('"', "\"\"")
-            ),
+            Err(why) => writeln!(csv, "{frame},{time},,,,,,,,,{weights},{}", quoted(why)),
         }
         .expect("writing to a string");
     }
@@ -91,11 +92,11 @@ mod tests {
             },
         ];
         assert_eq!(
-            trace_csv(&points),
-            "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,fx_90_n,fy_90_n,fz_90_n,estimator,note\n\
-             1,0.0667,0.3000,0.0000,-0.4000,0.5000,0.0500,0.0600,0.0700,Combined,\n\
-             2,,0.0000,0.0000,0.0000,0.0000,,,,H-Net force head,\n\
-             3,0.1333,,,,,,,,,\"view A: no catheter found, \"\"as said\"\"\"\n"
+            trace_csv(&points, "hnet-cpu.bpk"),
+            "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,fx_90_n,fy_90_n,fz_90_n,estimator,weights,note\n\
+             1,0.0667,0.3000,0.0000,-0.4000,0.5000,0.0500,0.0600,0.0700,Combined,\"hnet-cpu.bpk\",\n\
+             2,,0.0000,0.0000,0.0000,0.0000,,,,H-Net force head,\"hnet-cpu.bpk\",\n\
+             3,0.1333,,,,,,,,,\"hnet-cpu.bpk\",\"view A: no catheter found, \"\"as said\"\"\"\n"
         );
     }
 }
