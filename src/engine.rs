@@ -18,10 +18,12 @@ use hnet_units::ImageSize;
 
 use crate::browser::{now_ms, yield_to_browser};
 use crate::compute::Backend;
+use crate::error_text::with_causes;
 use crate::force_reading::TrainingDomain;
 use crate::gpu_worker::{GpuNetwork, GpuWorker, GpuWorkerError};
 use crate::imaging::{WORK_SIZE, rescale_mask, rescale_rgb};
 use hnet_twin::model_facts::ModelFacts;
+use hnet_twin::physics_force::ForceCombination;
 
 /// Input size of the untrained network the page falls back to when it ships no weights, pixels.
 pub const FALLBACK_INPUT: usize = 64;
@@ -68,6 +70,11 @@ pub struct Engine {
     /// What the weights' force was trained on and how far off it is there, when their file
     /// records it ([`hnet_twin::model_facts`]); `None`: their accuracy is unknown.
     pub domain: Option<TrainingDomain>,
+    /// The calibrated combination with the physics estimate and both estimates' intervals,
+    /// when the file records one (with or without a training domain).
+    pub combination: Option<ForceCombination>,
+    /// Why the file's facts could not be read, when they could not.
+    pub facts_error: Option<String>,
 }
 
 /// What H-Net says about one pair, at [`WORK_SIZE`].
@@ -182,16 +189,19 @@ impl Engine {
                 size: config.image_size,
             });
         }
-        // Facts that cannot be read leave the accuracy unknown; the network still runs.
-        let domain = ModelFacts::read(&header.provenance)
-            .ok()
-            .as_ref()
-            .and_then(TrainingDomain::of_facts);
+        // Facts that cannot be read leave the accuracy unknown, saying why; the network still
+        // runs.
+        let (facts, facts_error) = match ModelFacts::read(&header.provenance) {
+            Ok(facts) => (facts, None),
+            Err(e) => (ModelFacts::default(), Some(with_causes(&e))),
+        };
         Ok(Self {
             weights_name: name.to_string(),
             origin,
             header: Some(header),
-            domain,
+            domain: TrainingDomain::of_facts(&facts),
+            combination: facts.combination().copied(),
+            facts_error,
             ..Self::without_file(model, config.image_size, bytes, reason)
         })
     }
@@ -209,6 +219,8 @@ impl Engine {
             weights,
             check: None,
             domain: None,
+            combination: None,
+            facts_error: None,
         }
     }
 
@@ -262,6 +274,8 @@ impl Engine {
             weights: self.weights.clone(),
             check: None,
             domain: self.domain.clone(),
+            combination: self.combination,
+            facts_error: self.facts_error.clone(),
         })
     }
 

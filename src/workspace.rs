@@ -414,8 +414,10 @@ impl Workspace {
         };
         let before = pair.mask(view).to_vec();
         let start = (pair.id.clone(), view, before.clone(), pair.masks_labeled);
+        let marked_empty = pair.marked_no_catheter(view);
         if let Some(seed) = start_from.filter(|seed| {
-            seed.len() == before.len()
+            !marked_empty
+                && seed.len() == before.len()
                 && before.iter().all(|&v| v == 0)
                 && seed.iter().any(|&v| v > 0)
         }) {

@@ -288,7 +288,9 @@ pub fn CatheterView() -> impl IntoView {
     let title = keys.clone();
 
     // The uploaded pair on screen and the C-arms stated for it.
-    let upload = Signal::derive(move || {
+    // A memo: the form resets only when another upload is shown or its geometry changes, not on
+    // every workspace update (a stroke, a label).
+    let upload = Memo::new(move |_| {
         studio.with_shown(|p| match p {
             Some(LabeledPair {
                 id,

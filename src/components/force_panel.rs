@@ -63,15 +63,21 @@ pub fn ForcePanel() -> impl IntoView {
     // The estimate the gauge and the verdict read, with its 90 % intervals: H-Net's force
     // combined with the physics estimate where the rod was fitted to H-Net's masks, else H-Net's
     // alone; without recorded facts, H-Net's with no interval.
+    let combination = move || {
+        studio.model.with(|m| match m {
+            ModelState::Ready(e) => e.combination,
+            _ => None,
+        })
+    };
     let reading = move || -> Option<TipForceEstimate> {
         let e = estimate()?;
-        Some(match domain() {
-            Some(d) => d.estimate(e, shown_reading(studio, |r| r.physics_for(e))),
+        Some(match combination() {
+            Some(c) => c.estimate(e, shown_reading(studio, |r| r.physics_for(e))),
             None => TipForceEstimate::uncalibrated(e),
         })
     };
     // H-Net's own interval, for its row of the table.
-    let head_interval = move || Some(domain()?.combination.head_interval_90_n());
+    let head_interval = move || Some(combination()?.head_interval_90_n());
     let label = move || studio.with_shown(|p| p.and_then(|p| p.force_n));
     // The label being typed, per axis, exactly as typed. The fields show the pair's label when
     // another pair is shown or its label changes, and are never rewritten while typing (a

@@ -119,7 +119,10 @@ pub fn ModelBar() -> impl IntoView {
                                             d.domain.data
                                         )
                                     }
-                                    None => "not recorded in these weights: no verdict".to_string(),
+                                    None => match &engine.facts_error {
+                                        Some(why) => format!("{why}: no verdict"),
+                                        None => "not recorded in these weights: no verdict".to_string(),
+                                    },
                                 }}</dd>
                             </div>
                             <div>

@@ -9,7 +9,7 @@ use crate::catheter_3d::{FitMasks, PairGeometry, PairMasks, reconstruct_pair};
 use crate::cine::CinePlayer;
 use crate::engine::{Engine, Prediction};
 use crate::error_text::with_causes;
-use crate::workspace::View;
+use crate::workspace::{PairSource, View};
 use hnet_twin::physics_force::TipForceEstimate;
 
 impl Studio {
@@ -164,7 +164,7 @@ impl Studio {
         let serial = self.cine_serial.get_untracked();
         self.cine.update(|c| {
             c.iter_mut()
-                .for_each(|c| c.start_trace(&engine.weights_name))
+                .for_each(|c| c.start_trace(weights_file_name(&engine.weights_name)))
         });
         self.trace_cancelled.set(false);
         self.trace_progress.set(Some((0, total)));
@@ -224,7 +224,7 @@ impl Studio {
                 )),
                 None if traced < total => studio.info(format!(
                     "tip force traced over {traced} of {total} frames in {seconds:.1} s: the \
-                     other {} had a view read turned, which H-Net's force is not read for",
+                     other {} got no force (a view showed no catheter, or was read turned)",
                     total - traced
                 )),
                 None => studio.info(format!(
@@ -271,12 +271,21 @@ impl Studio {
         prediction: &Prediction,
     ) -> Option<TipForceEstimate> {
         let force = prediction.force_n?;
-        let Some(domain) = &engine.domain else {
+        let Some(combination) = &engine.combination else {
             return Some(TipForceEstimate::uncalibrated(force));
         };
         let pair = self
             .cine
             .with_untracked(|c| c.as_ref()?.pair(frame, format!("trace-{frame}")))?;
+        // Headers without the geometry: the C-arms are the defaults, and the physics estimate
+        // would only reflect them (`hnet trace` does the same).
+        if let PairSource::Dicom {
+            missing_geometry, ..
+        } = &pair.source
+            && missing_geometry.iter().any(|m| !m.is_empty())
+        {
+            return Some(combination.estimate(force, None));
+        }
         let controls = self.twin.get_untracked();
         let calibration = self.calibration.get_untracked();
         let physics = PairGeometry::of(&pair, &controls, calibration.as_ref())
@@ -289,6 +298,12 @@ impl Studio {
             })
             .ok()
             .and_then(|catheter| catheter.for_combination());
-        Some(domain.estimate(force, physics))
+        Some(combination.estimate(force, physics))
     }
+}
+
+/// A weights file's name without its folder (the bundled weights are fetched from `assets/`):
+/// what the trace records, as `hnet trace` does.
+fn weights_file_name(name: &str) -> &str {
+    name.rsplit('/').next().unwrap_or(name)
 }

@@ -118,7 +118,8 @@ pub struct EvalArgs {
     /// intervals, in the weights file evaluated (the run's `model.bpk`, or `--weights`): the
     /// facts the page and `hnet trace` read (`hnet_twin::model_facts`). The file is rewritten
     /// atomically with the same parameters.
-    #[arg(long, conflicts_with_all = ["turn_views", "carm_angle_error", "carm_distance_error", "carm_isocentre_error"])]
+    /// Measured blind, as the page and `hnet trace` read pairs: not with `--oracle`.
+    #[arg(long, conflicts_with_all = ["oracle", "turn_views", "carm_angle_error", "carm_distance_error", "carm_isocentre_error"])]
     record: bool,
     /// With `--record`: also record this twin dataset's ranges as the data the weights' force
     /// was trained on (for weights written before `hnet train` recorded it).
@@ -631,6 +632,16 @@ fn record_facts(
             mse_n2: mse(metrics),
             coverage_90: coverage.map(|c| c.map(|v| v as f32)),
         });
+    if combined.is_none()
+        && let Some(recorded) = facts.measured.as_ref().filter(|m| m.combined.is_some())
+    {
+        anyhow::bail!(
+            "--record: this evaluation calibrated no combined estimate (a simulated set and the \
+             physics estimate are needed), and recording it would erase the calibration the \
+             file holds (recorded by `{}`)",
+            recorded.command
+        );
+    }
     facts.measured = Some(MeasuredForce {
         data: data_name(&evaluation.data),
         split: evaluation.split.clone(),

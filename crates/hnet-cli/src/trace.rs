@@ -76,10 +76,16 @@ pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
             a: carm(Plane::A),
             b: carm(Plane::B),
         };
+        // The base where the weights' force learned it (the dataset's fixture), as `hnet eval`
+        // calibrated the combination with; the twin's bench for weights that do not say.
+        let scenes = facts
+            .force_domain
+            .as_ref()
+            .map_or_else(SceneSampling::bench, |d| d.scenes.clone());
         PhysicsSetup::blind(
             [views.a.camera_matrix(), views.b.camera_matrix()],
             &catheter,
-            &SceneSampling::bench().nominal_base(),
+            &scenes.nominal_base(),
         )
     });
     let pairs = &cine.pairing.pairs;

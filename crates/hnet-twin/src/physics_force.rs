@@ -381,18 +381,9 @@ impl ForceCombination {
             interval_90_sd: normal_interval_90(),
             network_interval_90_n: None,
         };
-        let mut head_scores: [Vec<f64>; 3] = std::array::from_fn(|axis| {
-            pairs
-                .iter()
-                .map(|p| f64::from((p.network_n[axis] - p.truth_n[axis]).abs()))
-                .filter(|s| s.is_finite())
-                .collect()
-        });
-        let head: Option<Vec<f32>> = head_scores
-            .iter_mut()
-            .map(|scores| conformal_quantile(scores, 0.9).map(|q| q as f32))
-            .collect();
-        combination.network_interval_90_n = head.map(|h| [h[0], h[1], h[2]]);
+        let both: Vec<([f32; 3], [f32; 3])> =
+            pairs.iter().map(|p| (p.truth_n, p.network_n)).collect();
+        combination.calibrate_head_interval(&both);
         // Split-conformal: the calibration pairs' normalised errors of the combined estimate.
         let scores: [Vec<f64>; 3] = std::array::from_fn(|axis| {
             pairs
@@ -414,6 +405,27 @@ impl ForceCombination {
         Some(combination)
     }
 
+    /// Measures the network's own 90 % interval ([`Self::network_interval_90_n`]) on `pairs` of
+    /// (true force, the network's), N. [`Self::calibrate`] measures it on its pairs, which the rod
+    /// fitted; the interval is for pairs without a physics estimate, so `hnet eval` measures it
+    /// again on every calibration pair with a network force, fitted or not.
+    pub fn calibrate_head_interval(&mut self, pairs: &[([f32; 3], [f32; 3])]) {
+        let mut scores: [Vec<f64>; 3] = std::array::from_fn(|axis| {
+            pairs
+                .iter()
+                .map(|(truth, network)| f64::from((network[axis] - truth[axis]).abs()))
+                .filter(|s| s.is_finite())
+                .collect()
+        });
+        let head: Option<Vec<f32>> = scores
+            .iter_mut()
+            .map(|scores| conformal_quantile(scores, 0.9).map(|q| q as f32))
+            .collect();
+        if let Some(h) = head {
+            self.network_interval_90_n = Some([h[0], h[1], h[2]]);
+        }
+    }
+
     /// Half the width of the network's own 90 % interval per axis, N
     /// ([`Self::network_interval_90_n`], or a normal's from its error where that was not
     /// measured).
@@ -423,23 +435,24 @@ impl ForceCombination {
     }
 
     /// The estimate of a pair: combined with the physics estimate `physics` (its force and its
-    /// fit's standard error, N) where there is one, else the network's `network_n` alone; each
-    /// with its 90 % interval. The one rule of `hnet eval`, `hnet trace` and the page.
+    /// fit's standard error, N) where there is one with a standard error, else the network's
+    /// `network_n` alone (the combination's intervals were calibrated on fits with a standard
+    /// error); each with its 90 % interval. The one rule of `hnet trace` and the page.
     pub fn estimate(
         &self,
         network_n: [f32; 3],
         physics: Option<([f32; 3], Option<[f32; 3]>)>,
     ) -> TipForceEstimate {
         match physics {
-            Some((physics_n, physics_sd_n)) => {
-                let (force_n, sd) = self.combine_with_sd(network_n, physics_n, physics_sd_n);
+            Some((physics_n, Some(physics_sd_n))) => {
+                let (force_n, sd) = self.combine_with_sd(network_n, physics_n, Some(physics_sd_n));
                 TipForceEstimate {
                     force_n,
                     interval_90_n: Some(self.interval_90_n(sd)),
                     kind: EstimateKind::Combined,
                 }
             }
-            None => TipForceEstimate {
+            Some((_, None)) | None => TipForceEstimate {
                 force_n: network_n,
                 interval_90_n: Some(self.head_interval_90_n()),
                 kind: EstimateKind::Head,
@@ -614,6 +627,12 @@ mod tests {
         let both = c.estimate([0.1; 3], Some(([0.0; 3], Some([0.01; 3]))));
         assert_eq!(both.kind, EstimateKind::Combined);
         assert!(both.interval_90_n.unwrap()[0] < head[0]);
+        // A fit without a standard error is not combined: the intervals were not calibrated
+        // for it.
+        assert_eq!(
+            c.estimate([0.1; 3], Some(([0.0; 3], None))).kind,
+            EstimateKind::Head
+        );
         // An older combination without the network's measured interval reads a normal's.
         let older = ForceCombination {
             network_interval_90_n: None,

@@ -55,7 +55,16 @@ pub(super) fn calibrate_combination(
         estimator,
         None,
     );
-    let combination = ForceCombination::calibrate(&check.calibration_pairs(&to_check));
+    let mut combination = ForceCombination::calibrate(&check.calibration_pairs(&to_check));
+    // The force head's own interval is for pairs without a physics estimate: measured on every
+    // calibration pair with a network force, fitted or not.
+    if let Some(c) = combination.as_mut() {
+        let heads: Vec<([f32; 3], [f32; 3])> = to_check
+            .iter()
+            .filter_map(|p| Some((p.truth_n, p.network_n?)))
+            .collect();
+        c.calibrate_head_interval(&heads);
+    }
     if combination.is_none() {
         eprintln!(
             "no combined force: {} of the {} pairs of the {} split of {} were fitted, at least {} \
