@@ -562,7 +562,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
             (None, Some(weights)) => weights.clone(),
             (None, None) => unreachable!("a model was loaded"),
         };
-        record_facts(&model, &evaluation, args, &path)?;
+        record_facts(&model, &evaluation, &predictions, args, &path)?;
     }
     if let Some(path) = &args.predictions {
         std::fs::write(path, predictions_csv(&predictions, &evaluation.estimator))
@@ -589,6 +589,7 @@ fn data_name(path: &Path) -> String {
 fn record_facts(
     model: &Predictor,
     evaluation: &Evaluation,
+    predictions: &[PairPrediction],
     args: &EvalArgs,
     path: &Path,
 ) -> anyhow::Result<()> {
@@ -642,12 +643,36 @@ fn record_facts(
             recorded.command
         );
     }
+    // How often the force head's own interval held on the evaluated pairs.
+    let head_coverage_90 = combined.as_ref().map(|c| {
+        let half = c.combination.head_interval_90_n();
+        let heads: Vec<([f32; 3], [f32; 3])> = predictions
+            .iter()
+            .filter_map(|p| Some((p.truth, p.predicted?)))
+            .collect();
+        std::array::from_fn(|axis| {
+            let held = heads
+                .iter()
+                .filter(|(truth, head)| (head[axis] - truth[axis]).abs() <= half[axis])
+                .count();
+            held as f32 / heads.len().max(1) as f32
+        })
+    });
+    if let Some([x, y, z]) = head_coverage_90 {
+        eprintln!(
+            "the force head's own 90 % interval held {:.0} / {:.0} / {:.0} % of the true forces",
+            x * 100.0,
+            y * 100.0,
+            z * 100.0
+        );
+    }
     facts.measured = Some(MeasuredForce {
         data: data_name(&evaluation.data),
         split: evaluation.split.clone(),
         pairs: force.samples as usize,
         estimator: evaluation.estimator.clone(),
         head_mse_n2: mse(&force),
+        head_coverage_90,
         combined,
         command: crate::command_line(),
     });

@@ -55,6 +55,11 @@ pub struct MeasuredForce {
     pub estimator: String,
     /// The force head's mean square error per axis (x, y, z), N².
     pub head_mse_n2: [f32; 3],
+    /// The share of the evaluated pairs whose true force the force head's own 90 % interval
+    /// held, per axis ([`ForceCombination::head_interval_90_n`]), when a combination was
+    /// calibrated.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub head_coverage_90: Option<[f32; 3]>,
     /// The combined estimate, when one was calibrated and evaluated.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub combined: Option<MeasuredCombination>,
@@ -177,6 +182,7 @@ mod tests {
                 pairs: 480,
                 estimator: "blind".into(),
                 head_mse_n2: [0.0048, 0.0051, 0.0037],
+                head_coverage_90: None,
                 combined: None,
                 command: "hnet eval".into(),
             }),
