@@ -86,12 +86,17 @@ test("load a pair, run H-Net, paint, undo, reload with labels kept, export the d
   // An upload's C-arms are assumed until stated; a value the page cannot use is named, and a
   // stated geometry is kept with the pair.
   assert.match(await page.textContent("#upload-geometry summary"), /not stated/);
-  await page.fill("#upload-geometry-1", "95");
+  // Typed key by key over what the field holds, as a person does.
+  const retype = async (field, text) => {
+    await page.click(field, { clickCount: 3 });
+    await page.keyboard.type(text, { delay: 30 });
+  };
+  await retype("#upload-geometry-1", "95");
   await page.click("#upload-geometry-apply");
   assert.match(await page.textContent("#notice"), /view A secondary angle \(°\): 95 is outside -90 to 90/);
-  await page.fill("#upload-geometry-1", "0");
-  await page.fill("#upload-geometry-0", "-30");
-  await page.fill("#upload-geometry-2", "60");
+  await retype("#upload-geometry-1", "0");
+  await retype("#upload-geometry-0", "-30");
+  await retype("#upload-geometry-2", "60");
   await page.click("#upload-geometry-apply");
   await page.waitForFunction(() => /as stated/.test(document.querySelector("#upload-geometry summary")?.textContent));
   assert.match(await page.textContent("#notice"), /C-arm geometry stated/);

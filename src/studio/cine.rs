@@ -10,6 +10,9 @@ use crate::cine::CinePlayer;
 use crate::engine::{Engine, Prediction};
 use crate::error_text::with_causes;
 use crate::workspace::{PairSource, View};
+use std::path::Path;
+
+use hnet_twin::model_facts::recorded_name;
 use hnet_twin::physics_force::TipForceEstimate;
 
 impl Studio {
@@ -164,7 +167,7 @@ impl Studio {
         let serial = self.cine_serial.get_untracked();
         self.cine.update(|c| {
             c.iter_mut()
-                .for_each(|c| c.start_trace(weights_file_name(&engine.weights_name)))
+                .for_each(|c| c.start_trace(&recorded_name(Path::new(&engine.weights_name))))
         });
         self.trace_cancelled.set(false);
         self.trace_progress.set(Some((0, total)));
@@ -300,10 +303,4 @@ impl Studio {
             .and_then(|catheter| catheter.for_combination());
         Some(combination.estimate(force, physics))
     }
-}
-
-/// A weights file's name without its folder (the bundled weights are fetched from `assets/`):
-/// what the trace records, as `hnet trace` does.
-fn weights_file_name(name: &str) -> &str {
-    name.rsplit('/').next().unwrap_or(name)
 }

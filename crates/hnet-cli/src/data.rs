@@ -14,7 +14,7 @@ use anyhow::Context;
 use burn::data::dataloader::batcher::Batcher;
 use burn::data::dataset::{Dataset as BurnDataset, DatasetError};
 use burn::tensor::{Device, Tensor, TensorData};
-use hnet_model::inference::push_planar;
+use hnet_model::inference::{push_mask, push_planar};
 use hnet_twin::dataset::{Dataset, LoadedPair, ManifestRow, Split, SquareSymmetry};
 use hnet_twin::label_origin::LabelFilter;
 use hnet_units::ImageSize;
@@ -247,8 +247,8 @@ impl Batcher<StereoItem, StereoBatch> for StereoBatcher {
         for item in &items {
             push_planar(&item.view_a, &mut a);
             push_planar(&item.view_b, &mut b);
-            ma.extend(item.mask_a.iter().map(|&v| f32::from(v) / 255.0));
-            mb.extend(item.mask_b.iter().map(|&v| f32::from(v) / 255.0));
+            push_mask(&item.mask_a, &mut ma);
+            push_mask(&item.mask_b, &mut mb);
             f.extend_from_slice(&item.force_n);
             known.push(if item.force_known { 1.0f32 } else { 0.0 });
         }

@@ -27,7 +27,9 @@ use crate::physics_check::{self, BlindEstimator, Estimator, MaskOrigin, PhysicsE
 use crate::run_dir::RunDir;
 use hnet_twin::carm::HeaderError;
 use hnet_twin::catalogue::{BENCH_CATHETER, CatalogueCatheter};
-use hnet_twin::model_facts::{ForceDomain, MeasuredCombination, MeasuredForce, ModelFacts};
+use hnet_twin::model_facts::{
+    ForceDomain, MeasuredCombination, MeasuredForce, ModelFacts, recorded_name,
+};
 use hnet_twin::simulate::nominal_base;
 
 #[derive(clap::Args, Debug)]
@@ -576,14 +578,6 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The name a dataset folder is recorded by in a weights file's facts: its last component.
-fn data_name(path: &Path) -> String {
-    path.file_name().map_or_else(
-        || path.display().to_string(),
-        |n| n.to_string_lossy().into_owned(),
-    )
-}
-
 /// Writes what `evaluation` measured into the facts of the weights file at `path` (and, with
 /// `--trained-on`, the data its force was trained on), rewriting it atomically.
 fn record_facts(
@@ -621,7 +615,7 @@ fn record_facts(
             combination,
             calibration_data: format!(
                 "{} ({})",
-                data_name(
+                recorded_name(
                     evaluation
                         .calibration_data
                         .as_deref()
@@ -667,7 +661,7 @@ fn record_facts(
         );
     }
     facts.measured = Some(MeasuredForce {
-        data: data_name(&evaluation.data),
+        data: recorded_name(&evaluation.data),
         split: evaluation.split.clone(),
         pairs: force.samples as usize,
         estimator: evaluation.estimator.clone(),
@@ -679,7 +673,7 @@ fn record_facts(
     if let Some(trained_on) = &args.trained_on {
         let dataset = Dataset::open(trained_on)?;
         facts.force_domain = Some(
-            ForceDomain::of_twin_source(&data_name(trained_on), &dataset.header.source)
+            ForceDomain::of_twin_source(&recorded_name(trained_on), &dataset.header.source)
                 .with_context(|| {
                     format!(
                         "--trained-on '{}': not a dataset of the twin (its header names no twin \

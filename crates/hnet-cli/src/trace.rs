@@ -15,7 +15,7 @@ use hnet_twin::carm::Biplane;
 use hnet_twin::catalogue::{BENCH_CATHETER, CatalogueCatheter};
 use hnet_twin::centreline::{CentrelineSettings, Mask, catheter_seen};
 use hnet_twin::dataset::LoadedPair;
-use hnet_twin::model_facts::ModelFacts;
+use hnet_twin::model_facts::{ModelFacts, recorded_name};
 use hnet_twin::physics_force::{
     EstimateKind, ForceCombination, PhysicsSetup, TipForceEstimate, physics_estimate,
 };
@@ -140,10 +140,7 @@ pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
         bar.inc(chunk.len() as u64);
     }
     bar.finish_and_clear();
-    let weights_name = args.weights.file_name().map_or_else(
-        || args.weights.display().to_string(),
-        |n| n.to_string_lossy().into_owned(),
-    );
+    let weights_name = recorded_name(&args.weights);
     hnet_twin::files::write_atomically(&args.out, trace_csv(&trace, &weights_name).as_bytes())
         .with_context(|| format!("cannot write {}", args.out.display()))?;
     let count = |kind| {

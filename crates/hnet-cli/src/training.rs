@@ -34,7 +34,7 @@ use hnet_model::HNet;
 use hnet_model::architectures::{ModelSpec, StereoModel};
 use hnet_model::model::ForceScale;
 use hnet_twin::dataset::{Dataset, Split};
-use hnet_twin::model_facts::{ForceDomain, ModelFacts};
+use hnet_twin::model_facts::{ForceDomain, ModelFacts, recorded_name};
 
 use self::checkpoints::{RunCheckpointer, WriteFailure};
 use self::metric_log::RunMetricLogger;
@@ -505,8 +505,7 @@ fn export_best(
     // twin settings; its off-bench pairs teach masks only): what the page's verdict compares a
     // pair with (hnet_twin::model_facts).
     let force_domain = Dataset::open(&request.data).ok().and_then(|dataset| {
-        let name = request.data.file_name()?.to_string_lossy().into_owned();
-        ForceDomain::of_twin_source(&name, &dataset.header.source)
+        ForceDomain::of_twin_source(&recorded_name(&request.data), &dataset.header.source)
     });
     ModelFacts {
         force_domain,

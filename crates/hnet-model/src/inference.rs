@@ -101,6 +101,12 @@ pub fn push_planar(pixels: &[u8], out: &mut Vec<f32>) {
     }
 }
 
+/// Appends an 8-bit mask (255 = catheter) scaled to `[0, 1]`: the one conversion of masks to
+/// network input (Y-Net reads masks), used by the predictor and `hnet`'s training batches.
+pub fn push_mask(mask: &[u8], out: &mut Vec<f32>) {
+    out.extend(mask.iter().map(|&v| f32::from(v) / 255.0));
+}
+
 /// Builds the two input tensors `[B, 3, H, W]` (values in `[0, 1]`) of a batch of pairs.
 pub fn stereo_batch(
     pairs: &[StereoPair<'_>],

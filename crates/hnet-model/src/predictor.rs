@@ -19,7 +19,7 @@ use crate::architectures::{ModelSpec, StereoModel};
 use crate::catheter_entry::{
     CatheterEntry, EntrySetting, TurnError, TurnedOutput, read_turned, turn_clockwise,
 };
-use crate::inference::{InputSizeError, PredictError, ReadbackError, push_planar};
+use crate::inference::{InputSizeError, PredictError, ReadbackError, push_mask, push_planar};
 use crate::weights::{WeightsError, WeightsHeader};
 
 /// A network ready to read pairs: its weights, its settings and the input size it takes.
@@ -199,7 +199,7 @@ impl Predictor {
                 push_planar(pixels_of, &mut views[view]);
                 match pair.masks.map(|m| m[view]) {
                     Some(mask) if mask.len() == pixels => {
-                        masks[view].extend(mask.iter().map(|&v| f32::from(v) / 255.0));
+                        push_mask(mask, &mut masks[view]);
                     }
                     Some(mask) => {
                         return Err(InputSizeError {

@@ -123,6 +123,15 @@ impl ModelFacts {
     }
 }
 
+/// The name a file or folder is recorded by in a weights file's facts and in a force trace: its
+/// last component (no machine's folders).
+pub fn recorded_name(path: &std::path::Path) -> String {
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    )
+}
+
 /// The root-mean-square length of an error vector whose per-axis mean square errors are
 /// `mse_n2` (N²), newtons.
 pub fn error_length_n(mse_n2: [f32; 3]) -> f32 {
