@@ -13,8 +13,8 @@ use std::sync::Arc;
 use anyhow::Context;
 use burn::data::dataloader::batcher::Batcher;
 use burn::data::dataset::{Dataset as BurnDataset, DatasetError};
-use burn::tensor::{Device, Tensor, TensorData};
-use hnet_model::inference::{push_mask, push_planar};
+use burn::tensor::{Device, Tensor};
+use hnet_model::training::{LabelledPair, TrainingBatch};
 use hnet_twin::dataset::{Dataset, LoadedPair, ManifestRow, Split, SquareSymmetry};
 use hnet_twin::label_origin::LabelFilter;
 use hnet_units::ImageSize;
@@ -210,58 +210,29 @@ impl BurnDataset<StereoItem> for StereoSplit {
     }
 }
 
-/// A batch of `B` pairs as tensors.
-#[derive(Debug, Clone)]
-pub struct StereoBatch {
-    /// View A images `[B, 3, H, W]` in `[0, 1]`.
-    pub view_a: Tensor<4>,
-    /// View B images.
-    pub view_b: Tensor<4>,
-    /// View A masks `[B, 1, H, W]` in `[0, 1]`.
-    pub mask_a: Tensor<4>,
-    /// View B masks.
-    pub mask_b: Tensor<4>,
-    /// Tip forces `[B, 3]` in newtons.
-    pub force: Tensor<2>,
-    /// `[B, 1]`: 1 for pairs whose force is a label, 0 for masks-only pairs.
-    pub force_known: Tensor<2>,
-}
-
-/// Turns pairs into [`StereoBatch`]es.
+/// Turns pairs into [`TrainingBatch`]es (the one batch of `hnet train` and the page's
+/// fine-tuning).
 #[derive(Debug, Clone)]
 pub struct StereoBatcher {
     /// The images' size.
     pub size: ImageSize,
 }
 
-impl Batcher<StereoItem, StereoBatch> for StereoBatcher {
-    fn batch(&self, items: Vec<StereoItem>, device: &Device) -> StereoBatch {
-        let [h, w] = self.size.height_width();
-        let n = items.len();
-        let mut a = Vec::with_capacity(n * 3 * h * w);
-        let mut b = Vec::with_capacity(n * 3 * h * w);
-        let mut ma = Vec::with_capacity(n * h * w);
-        let mut mb = Vec::with_capacity(n * h * w);
-        let mut f = Vec::with_capacity(n * 3);
-        let mut known = Vec::with_capacity(n);
-        for item in &items {
-            push_planar(&item.view_a, &mut a);
-            push_planar(&item.view_b, &mut b);
-            push_mask(&item.mask_a, &mut ma);
-            push_mask(&item.mask_b, &mut mb);
-            f.extend_from_slice(&item.force_n);
-            known.push(if item.force_known { 1.0f32 } else { 0.0 });
-        }
-        let image = |data| Tensor::from_data(TensorData::new(data, [n, 3, h, w]), device);
-        let mask = |data| Tensor::from_data(TensorData::new(data, [n, 1, h, w]), device);
-        StereoBatch {
-            view_a: image(a),
-            view_b: image(b),
-            mask_a: mask(ma),
-            mask_b: mask(mb),
-            force: Tensor::from_data(TensorData::new(f, [n, 3]), device),
-            force_known: Tensor::from_data(TensorData::new(known, [n, 1]), device),
-        }
+impl Batcher<StereoItem, TrainingBatch> for StereoBatcher {
+    fn batch(&self, items: Vec<StereoItem>, device: &Device) -> TrainingBatch {
+        let pairs: Vec<LabelledPair<'_>> = items
+            .iter()
+            .map(|item| LabelledPair {
+                view_a: &item.view_a,
+                view_b: &item.view_b,
+                mask_a: &item.mask_a,
+                mask_b: &item.mask_b,
+                force_n: item.force_known.then_some(item.force_n),
+            })
+            .collect();
+        // Every item was decoded at the batcher's size (StereoSplit, DiskSplit, TwinStream).
+        TrainingBatch::of(&pairs, self.size, device)
+            .unwrap_or_else(|e| panic!("a training pair was decoded at another size: {e}"))
     }
 }
 

@@ -22,7 +22,6 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use burn::data::dataloader::{DataLoader, DataLoaderBuilder};
 use burn::module::{Module, ParamGroup};
-use burn::optim::RmsPropConfig;
 use burn::optim::lr_scheduler::LrSchedulerConfig;
 use burn::optim::lr_scheduler::cosine::CosineAnnealingLrSchedulerConfig;
 use burn::optim::lr_scheduler::module_lr_scheduler::{ModuleLrScheduler, ModuleLrSchedulerConfig};
@@ -33,6 +32,7 @@ use burn::train::{Learner, MetricEarlyStoppingStrategy, StoppingCondition, Super
 use hnet_model::HNet;
 use hnet_model::architectures::{ModelSpec, StereoModel};
 use hnet_model::model::ForceScale;
+use hnet_model::training::{RmsPropSettings, TrainingBatch};
 use hnet_twin::dataset::{Dataset, Split};
 use hnet_twin::model_facts::{ForceDomain, ModelFacts, recorded_name};
 
@@ -44,9 +44,7 @@ use self::trainee::StereoTrainee;
 use crate::backend::BackendChoice;
 use crate::config::{DEFAULT_MAX_MEMORY_MIB, LearningRateSchedule, TrainingConfig, builtin_config};
 use crate::data::twin_stream::{EpochCounting, TwinStream};
-use crate::data::{
-    DiskSplit, StereoBatch, StereoBatcher, StereoSplit, force_label_admitted, pair_bytes,
-};
+use crate::data::{DiskSplit, StereoBatcher, StereoSplit, force_label_admitted, pair_bytes};
 use crate::run_dir::{LOSS_METRIC, RunDir, RunInfo, log_name};
 
 /// What `hnet train` was asked to do.
@@ -173,7 +171,7 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
             .batch_size(config.batch_size)
             .num_workers(config.num_workers)
     };
-    let (loader_train, train_pairs): (Arc<dyn DataLoader<StereoBatch>>, usize) = match stream {
+    let (loader_train, train_pairs): (Arc<dyn DataLoader<TrainingBatch>>, usize) = match stream {
         Some(twin) => {
             let epochs_started = twin.epochs_started();
             let pairs = twin.pairs_per_epoch();
@@ -239,11 +237,12 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
             .map_err(anyhow::Error::msg)?,
     };
     let trainee = StereoTrainee::new(net, &config.model, config.loss.clone());
-    let optimizer = RmsPropConfig::new()
-        .with_alpha(config.rmsprop_alpha)
-        .with_momentum(config.rmsprop_momentum)
-        .with_epsilon(config.rmsprop_epsilon)
-        .init();
+    let optimizer = RmsPropSettings {
+        alpha: config.rmsprop_alpha,
+        momentum: config.rmsprop_momentum,
+        epsilon: config.rmsprop_epsilon,
+    }
+    .init();
 
     // Checkpoints written atomically, the last complete one never deleted, a failed write named.
     let write_failure = WriteFailure::default();

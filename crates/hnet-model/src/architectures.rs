@@ -304,6 +304,17 @@ architectures! {
     Ynet(YNetConfig),
 }
 
+impl StereoModel {
+    /// The network with its encoders frozen for fine-tuning ([`HNet::with_frozen_encoders`]);
+    /// a baseline is returned as it is.
+    pub fn with_frozen_encoders(self) -> Self {
+        match self {
+            Self::Hnet(net) => Self::Hnet(net.with_frozen_encoders()),
+            other => other,
+        }
+    }
+}
+
 impl fmt::Display for ModelSpec {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.name())

@@ -13,6 +13,9 @@
 //!   they need no backend;
 //! - [`inference`]: turning RGB pixel buffers into input tensors and outputs into masks and a
 //!   tip force;
+//! - [`training`]: one training step (a batch of labelled pairs, the forward pass and its loss)
+//!   and the recipe's optimiser, for `hnet train` and the page's [`fine_tune`] (feature
+//!   `training`);
 //! - [`predictor`]: any network of the registry loaded from its weights file and run on pairs,
 //!   with turned-view reading: the one inference API of the command-line tool;
 //! - [`catheter_entry`]: reading a view whose catheter enters through another edge than the
@@ -35,11 +38,13 @@ extern crate alloc;
 pub mod architectures;
 pub mod baselines;
 pub mod catheter_entry;
+pub mod fine_tune;
 pub mod inference;
 pub mod loss;
 pub mod metrics;
 pub mod model;
 pub mod predictor;
+pub mod training;
 pub mod weights;
 
 pub use loss::{HNetLoss, HNetLossConfig, LossTerms};

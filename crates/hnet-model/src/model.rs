@@ -273,6 +273,13 @@ impl SegmentationBranch {
         }
     }
 
+    /// The branch with its encoder blocks frozen (no gradient): the bottleneck, decoder and
+    /// head still learn.
+    fn with_frozen_encoder(mut self) -> Self {
+        self.encoder = self.encoder.into_iter().map(Module::freeze).collect();
+        self
+    }
+
     /// Runs images `[N, C, H, W]` through the branch.
     pub fn forward(&self, images: Tensor<4>) -> BranchOutput {
         let mut skips = Vec::with_capacity(self.encoder.len());
@@ -378,6 +385,16 @@ impl HNet {
     /// What the paths of the force head's parameters contain (`force.hidden1.weight`, ...), to
     /// give the head its own optimiser settings.
     pub const FORCE_HEAD_PATH: &'static str = "force.";
+
+    /// This network with the encoder blocks of its segmentation branches frozen (no gradient),
+    /// for fine-tuning on a few pairs: the bottleneck, decoders and heads still learn.
+    pub fn with_frozen_encoders(mut self) -> Self {
+        self.segmentation = self.segmentation.with_frozen_encoder();
+        self.segmentation_b = self
+            .segmentation_b
+            .map(SegmentationBranch::with_frozen_encoder);
+        self
+    }
 
     /// Whether both views run through one set of encoder-decoder weights.
     pub fn shares_weights(&self) -> bool {

@@ -387,3 +387,134 @@ fn a_standardised_force_head_answers_in_newtons_and_its_loss_is_standardised() {
         );
     }
 }
+
+/// A fine-tune of small H-Net weights on a few synthetic pairs (a bright vertical bar, its
+/// mask, and a force label on some): held-back pairs are scored before and after, epochs end
+/// with reports, the best epoch's weights are a readable weights file, a frozen encoder does
+/// not move, and a run that diverges says so and keeps no diverged weights.
+#[cfg(feature = "training")]
+#[test]
+fn fine_tuning_scores_held_back_pairs_and_keeps_the_best_epoch() {
+    use hnet_model::fine_tune::{
+        FineTune, FineTuneError, FineTuneSettings, FinishReason, TrainingPair,
+    };
+    use std::collections::BTreeMap;
+
+    let device = Device::flex();
+    let net: HNet = small_config().init(&device).unwrap();
+    let weights = net
+        .to_weights_bytes(&small_config(), &BTreeMap::new())
+        .unwrap();
+    let side = 16;
+    let pair = |column: usize, force: Option<[f32; 3]>| {
+        let mut view = vec![20u8; side * side * 3];
+        let mut mask = vec![0u8; side * side];
+        for row in 0..side {
+            for x in column..column + 2 {
+                view[(row * side + x) * 3..][..3].fill(230);
+                mask[row * side + x] = 255;
+            }
+        }
+        TrainingPair {
+            view_a: view.clone(),
+            view_b: view,
+            mask_a: mask.clone(),
+            mask_b: mask,
+            force_n: force,
+        }
+    };
+    let pairs: Vec<TrainingPair> = (0..6)
+        .map(|i| {
+            pair(
+                2 + 2 * i,
+                (i % 2 == 0).then_some([0.1 * i as f32, 0.0, -0.1]),
+            )
+        })
+        .collect();
+    let settings = FineTuneSettings {
+        max_epochs: 3,
+        patience: 3,
+        batch_size: 2,
+        learning_rate: 1e-3,
+        hold_back_every: 3,
+        ..FineTuneSettings::default()
+    };
+    let mut run = FineTune::new(&weights, "small.bpk", pairs.clone(), settings, &device).unwrap();
+    assert_eq!(run.split(), (4, 2));
+    let before = run.score().unwrap();
+    assert_eq!((before.pairs, before.force_pairs), (2, 1));
+    assert!(before.loss.is_finite() && before.force_mae_n.is_some());
+    let mut reports = Vec::new();
+    while run.finished().is_none() {
+        if let Some(report) = run.step().unwrap() {
+            reports.push(report);
+        }
+    }
+    assert_eq!(reports.len(), 3);
+    assert_eq!(
+        reports.last().unwrap().finished_because,
+        Some(FinishReason::LastEpoch)
+    );
+    assert!(reports.iter().any(|r| r.best));
+    let kept = run
+        .best_weights(&BTreeMap::new())
+        .unwrap()
+        .expect("a best epoch");
+    let (tuned, _, _) = HNet::from_weights_bytes(&kept, &device, "tuned.bpk").unwrap();
+    // The first encoder block was frozen: its weights are the starting ones.
+    let first_encoder = |net: &HNet| {
+        let mut visitor = FirstParam::default();
+        net.visit(&mut visitor);
+        visitor.values.unwrap()
+    };
+    assert_eq!(first_encoder(&tuned), first_encoder(&net));
+
+    // Bad input, refused before anything runs.
+    let too_few = FineTune::new(
+        &weights,
+        "small.bpk",
+        pairs[..1].to_vec(),
+        settings,
+        &device,
+    );
+    assert!(matches!(
+        too_few,
+        Err(FineTuneError::TooFewPairs { found: 1 })
+    ));
+    let mut big = pairs.clone();
+    big[3].mask_b.push(0);
+    let other_size = FineTune::new(&weights, "small.bpk", big, settings, &device);
+    let Err(error) = other_size else {
+        panic!("a pair of another size was accepted")
+    };
+    assert!(error.to_string().contains("input size"), "{error}");
+
+    // A learning rate that blows up ends the run as diverged, with no diverged weights kept.
+    let wild = FineTuneSettings {
+        learning_rate: 1e30,
+        ..settings
+    };
+    let mut run = FineTune::new(&weights, "small.bpk", pairs, wild, &device).unwrap();
+    let mut last = None;
+    while run.finished().is_none() {
+        last = run.step().unwrap().or(last);
+    }
+    assert_eq!(run.finished(), Some(FinishReason::Diverged));
+    assert!(!last.unwrap().best);
+}
+
+/// The values of the first float parameter a visitor meets (the first encoder convolution).
+#[cfg(feature = "training")]
+#[derive(Default)]
+struct FirstParam {
+    values: Option<Vec<f32>>,
+}
+
+#[cfg(feature = "training")]
+impl ModuleVisitor for FirstParam {
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        if self.values.is_none() {
+            self.values = Some(host_values(param.val()).unwrap());
+        }
+    }
+}

@@ -377,8 +377,9 @@ impl<O: 'static> DataLoader<O> for EpochCounting<O> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::data::{StereoBatch, StereoBatcher, StereoItem};
+    use crate::data::{StereoBatcher, StereoItem};
     use burn::data::dataloader::DataLoaderBuilder;
+    use hnet_model::training::TrainingBatch;
     use hnet_twin::scene::Modality;
     use hnet_twin::simulate::simulate_dataset;
 
@@ -392,22 +393,37 @@ mod tests {
         Dataset::open(&root).unwrap()
     }
 
-    /// The forces (N) and labels of one epoch of `loader`, in a fixed order.
-    fn epoch(loader: &dyn DataLoader<StereoBatch>) -> Vec<([u32; 3], bool)> {
+    /// Each pair of one epoch of `loader` (its view A's pixel sum and its force, in N, which
+    /// is zero for masks-only pairs) and whether its force is a label, in a fixed order.
+    fn epoch(loader: &dyn DataLoader<TrainingBatch>) -> Vec<([u32; 4], bool)> {
         let mut pairs = Vec::new();
         for batch in loader.iter() {
             let batch = batch.unwrap();
+            let n = batch.len();
+            let views = hnet_model::inference::host_values(batch.view_a).unwrap();
             let forces = hnet_model::inference::host_values(batch.force).unwrap();
             let known = hnet_model::inference::host_values(batch.force_known).unwrap();
-            for (f, k) in forces.chunks_exact(3).zip(known) {
-                pairs.push(([f[0].to_bits(), f[1].to_bits(), f[2].to_bits()], k > 0.5));
+            let per_view = views.len() / n;
+            for ((v, f), k) in views
+                .chunks_exact(per_view)
+                .zip(forces.chunks_exact(3))
+                .zip(known)
+            {
+                let sum: f32 = v.iter().sum();
+                let bits = [
+                    sum.to_bits(),
+                    f[0].to_bits(),
+                    f[1].to_bits(),
+                    f[2].to_bits(),
+                ];
+                pairs.push((bits, k > 0.5));
             }
         }
         pairs.sort();
         pairs
     }
 
-    fn loader(stream: TwinStream) -> EpochCounting<StereoBatch> {
+    fn loader(stream: TwinStream) -> EpochCounting<TrainingBatch> {
         let counter = stream.epochs_started();
         let size = ImageSize::square(16);
         let inner = DataLoaderBuilder::new(StereoBatcher { size })

@@ -1,6 +1,6 @@
-//! The network with its loss as burn-train trains it: one step's forward pass, the loss of
-//! eq. 7 over the heads the network has (`hnet_model::loss`), and the step's host values that
-//! every logged metric reads.
+//! The network with its loss as burn-train trains it: the one training step
+//! ([`hnet_model::training::step_loss`], shared with the page's fine-tuning), and the step's
+//! host values that every logged metric reads.
 
 use std::sync::{Arc, OnceLock};
 
@@ -12,9 +12,10 @@ use hnet_model::HNetLossConfig;
 use hnet_model::architectures::{ModelSpec, StereoInput, StereoModel};
 use hnet_model::inference::host_values;
 use hnet_model::metrics::{ForceAccumulator, SegmentationAccumulator};
+use hnet_model::training::{StepLoss, step_loss};
 
 use super::metrics::{StepInput, StepSummary};
-use crate::data::StereoBatch;
+use hnet_model::training::TrainingBatch;
 
 /// The network with its loss, as burn-train sees it.
 #[derive(Module, Debug)]
@@ -24,16 +25,9 @@ pub struct StereoTrainee {
     #[module(skip)]
     loss: HNetLossConfig,
     #[module(skip)]
-    input: InputKind,
+    input: StereoInput,
     #[module(skip)]
     heads: (bool, bool),
-}
-
-/// [`StereoInput`] as a plain value the module derive can skip.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum InputKind {
-    Images,
-    Masks,
 }
 
 impl StereoTrainee {
@@ -42,38 +36,24 @@ impl StereoTrainee {
         Self {
             net,
             loss,
-            input: match spec.input() {
-                StereoInput::Images => InputKind::Images,
-                StereoInput::Masks => InputKind::Masks,
-            },
+            input: spec.input(),
             heads: spec.heads(),
         }
     }
 
-    fn run(&self, batch: StereoBatch) -> StereoStepOutput {
-        let masks = [batch.mask_a.clone(), batch.mask_b.clone()];
-        let views = match self.input {
-            InputKind::Images => [batch.view_a, batch.view_b],
-            InputKind::Masks => masks.clone(),
-        };
-        let out = self.net.forward(views, masks.clone());
-        let terms = self.loss.init().forward_heads(
-            out.mask_logits.clone(),
-            out.force.clone(),
-            masks.clone(),
-            batch.force.clone(),
-            Some(batch.force_known.clone()),
-        );
+    fn run(&self, batch: TrainingBatch) -> StereoStepOutput {
+        let StepLoss { outputs, terms } =
+            step_loss(&self.net, self.input, &self.loss.init(), &batch);
         StereoStepOutput {
             total: terms.total,
             bce_a: terms.bce_a,
             bce_b: terms.bce_b,
             mse: terms.mse,
-            predicted_masks: out
+            predicted_masks: outputs
                 .mask_logits
                 .map(|logits| logits.map(|l| burn::tensor::activation::sigmoid(l.detach()))),
-            target_masks: masks,
-            predicted_force: out.force.map(|f| f.detach()),
+            target_masks: [batch.mask_a, batch.mask_b],
+            predicted_force: outputs.force.map(|f| f.detach()),
             target_force: batch.force,
             force_known: batch.force_known,
             summary: Arc::new(OnceLock::new()),
@@ -170,10 +150,10 @@ impl Adaptor<StepInput> for StereoStepOutput {
 }
 
 impl TrainStep for StereoTrainee {
-    type Input = StereoBatch;
+    type Input = TrainingBatch;
     type Output = StereoStepOutput;
 
-    fn step(&self, batch: StereoBatch) -> TrainOutput<StereoStepOutput> {
+    fn step(&self, batch: TrainingBatch) -> TrainOutput<StereoStepOutput> {
         let output = self.run(batch);
         let grads = output.total.backward();
         TrainOutput::new(self, grads, output)
@@ -181,10 +161,10 @@ impl TrainStep for StereoTrainee {
 }
 
 impl InferenceStep for StereoTrainee {
-    type Input = StereoBatch;
+    type Input = TrainingBatch;
     type Output = StereoStepOutput;
 
-    fn step(&self, batch: StereoBatch) -> StereoStepOutput {
+    fn step(&self, batch: TrainingBatch) -> StereoStepOutput {
         self.run(batch)
     }
 }

@@ -1,0 +1,165 @@
+//! Fine-tuning a trained H-Net on a few labelled pairs: the page's "Fine-tune on my pairs"
+//! (run in its worker, crates/hnet-tune), on any device with autodiff. The run itself,
+//! [`FineTune`], needs the feature `training`; its settings and reports do not, so that the
+//! page reads them without the training stack.
+//!
+//! The pairs are split once into the ones trained on and the ones held back (every
+//! [`FineTuneSettings::hold_back_every`]-th pair, at least one): the held-back pairs score the
+//! network before and after, and choose the best epoch (early stopping on their loss). The
+//! training step is [`crate::training`]'s, the one `hnet train` takes; by default the encoders are
+//! frozen (few pairs teach the decoder and the heads, not the features), and an epoch whose loss
+//! is not finite ends the run with the best weights so far kept.
+
+use alloc::string::String;
+use alloc::vec::Vec;
+
+use hnet_units::ImageSize;
+
+use crate::inference::InputSizeError;
+use crate::training::LabelledPair;
+use crate::weights::WeightsError;
+
+#[cfg(feature = "training")]
+mod run;
+#[cfg(feature = "training")]
+pub use run::FineTune;
+
+/// How a fine-tune runs. The defaults suit the tens of pairs a user labels in the page.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct FineTuneSettings {
+    /// Most epochs.
+    pub max_epochs: usize,
+    /// Stop when the held-back loss has not improved for this many epochs.
+    pub patience: usize,
+    /// Pairs per step.
+    pub batch_size: usize,
+    /// RMSprop's learning rate (the bundled model's last stage trained at 1e-4).
+    pub learning_rate: f64,
+    /// Keep the encoders' weights as they are (the decoders and heads learn).
+    pub freeze_encoders: bool,
+    /// Hold back every n-th pair (at least one) to score before and after.
+    pub hold_back_every: usize,
+    /// Seed of the order the pairs are visited in.
+    pub seed: u64,
+}
+
+impl Default for FineTuneSettings {
+    fn default() -> Self {
+        Self {
+            max_epochs: 12,
+            patience: 3,
+            batch_size: 2,
+            learning_rate: 1e-4,
+            freeze_encoders: true,
+            hold_back_every: 5,
+            seed: 0,
+        }
+    }
+}
+
+/// One labelled pair, owned: what the page sends the worker.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrainingPair {
+    /// View A, 8-bit RGB at the network's input size.
+    pub view_a: Vec<u8>,
+    /// View B.
+    pub view_b: Vec<u8>,
+    /// View A's catheter mask (255 catheter).
+    pub mask_a: Vec<u8>,
+    /// View B's.
+    pub mask_b: Vec<u8>,
+    /// The tip force label in newtons, where the pair has one (masks only otherwise).
+    pub force_n: Option<[f32; 3]>,
+}
+
+impl TrainingPair {
+    /// The pair as a training step reads it.
+    pub fn labelled(&self) -> LabelledPair<'_> {
+        LabelledPair {
+            view_a: &self.view_a,
+            view_b: &self.view_b,
+            mask_a: &self.mask_a,
+            mask_b: &self.mask_b,
+            force_n: self.force_n,
+        }
+    }
+}
+
+/// Why a fine-tune cannot start or go on.
+#[derive(Debug, thiserror::Error)]
+pub enum FineTuneError {
+    /// The weights are not a network this can fine-tune.
+    #[error("the weights cannot be fine-tuned")]
+    Weights(#[source] WeightsError),
+    /// Only H-Net is fine-tuned here.
+    #[error("only H-Net weights can be fine-tuned here, not {0}")]
+    NotHnet(&'static str),
+    /// Too few pairs to train on some and score on others.
+    #[error(
+        "fine-tuning needs at least 2 labelled pairs (one to train on, one held back to score \
+         on); {found} given"
+    )]
+    TooFewPairs {
+        /// Pairs given.
+        found: usize,
+    },
+    /// A pair is not at the network's input size.
+    #[error("the pairs must be at the network's input size, {size}")]
+    OtherSize {
+        /// The network's input size.
+        size: ImageSize,
+        /// Which pair and buffer.
+        #[source]
+        cause: InputSizeError,
+    },
+    /// Reading the network's outputs back failed.
+    #[error("reading the network's outputs failed: {0}")]
+    Readback(String),
+    /// The weights could not be written.
+    #[error("the fine-tuned weights cannot be written")]
+    Write(#[source] WeightsError),
+}
+
+/// How the network does on the held-back pairs.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct HeldBackScores {
+    /// Held-back pairs.
+    pub pairs: usize,
+    /// The loss of eq. 7 on them (masks, and the force where labelled).
+    pub loss: f64,
+    /// Catheter IoU over both views of every held-back pair (masks thresholded at 0.5).
+    pub catheter_iou: f64,
+    /// Mean absolute error of the force head over the labelled held-back pairs, newtons.
+    pub force_mae_n: Option<f64>,
+    /// Held-back pairs with a force label.
+    pub force_pairs: usize,
+}
+
+/// What one epoch did.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct EpochReport {
+    /// The epoch, from 1.
+    pub epoch: usize,
+    /// Mean training loss over its steps.
+    pub train_loss: f64,
+    /// The held-back pairs after it.
+    pub held_back: HeldBackScores,
+    /// Whether it is the best epoch so far (lowest held-back loss): its weights are the result.
+    pub best: bool,
+    /// Whether the run is over: patience spent, the last epoch done, or a loss not finite.
+    pub finished: bool,
+    /// Why it finished, when it has.
+    pub finished_because: Option<FinishReason>,
+}
+
+/// Why a fine-tune ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum FinishReason {
+    /// Every epoch asked for was run.
+    LastEpoch,
+    /// The held-back loss stopped improving.
+    NoImprovement,
+    /// A loss was not finite: the run diverged; the best weights before it are kept.
+    Diverged,
+}

@@ -1,0 +1,304 @@
+//! [`FineTune`]: the run (feature `training`).
+
+use alloc::string::String;
+use alloc::vec::Vec;
+
+use burn::module::Module;
+use burn::optim::{GradientsParams, ModuleOptimizer};
+use burn::tensor::Device;
+use hnet_units::ImageSize;
+
+use super::{
+    EpochReport, FineTuneError, FineTuneSettings, FinishReason, HeldBackScores, TrainingPair,
+};
+use crate::architectures::{ModelSpec, StereoInput, StereoModel};
+use crate::inference::{InputSizeError, host_values};
+use crate::loss::{HNetLoss, HNetLossConfig};
+use crate::metrics::{ForceAccumulator, SegmentationAccumulator};
+use crate::training::{LabelledPair, RmsPropSettings, TrainingBatch, step_loss};
+use crate::weights::WeightsHeader;
+
+/// A fine-tune in progress.
+pub struct FineTune {
+    net: StereoModel,
+    spec: ModelSpec,
+    header: WeightsHeader,
+    size: ImageSize,
+    loss: HNetLoss,
+    optimizer: ModuleOptimizer,
+    settings: FineTuneSettings,
+    pairs: Vec<TrainingPair>,
+    train: Vec<usize>,
+    held_back: Vec<usize>,
+    /// The autodiff device trained on, and the plain one scored on.
+    device: Device,
+    plain: Device,
+    epoch: usize,
+    /// Steps taken in the current epoch, and the sum of their losses.
+    in_epoch: (usize, f64),
+    /// The order of this epoch's training pairs.
+    order: Vec<usize>,
+    best: Option<(f64, StereoModel)>,
+    since_best: usize,
+    finished: Option<FinishReason>,
+    rng: u64,
+}
+
+impl FineTune {
+    /// Starts from the weights file `weights` (`source` names it in errors) on `device`
+    /// (made an autodiff device here), with `pairs` at the network's input size.
+    pub fn new(
+        weights: &[u8],
+        source: &str,
+        pairs: Vec<TrainingPair>,
+        settings: FineTuneSettings,
+        device: &Device,
+    ) -> Result<Self, FineTuneError> {
+        let plain = device.clone().without_autodiff();
+        let device = plain.clone().autodiff();
+        let (net, spec, header) = StereoModel::from_weights_bytes(weights, &device, source)
+            .map_err(FineTuneError::Weights)?;
+        let ModelSpec::Hnet(config) = &spec else {
+            return Err(FineTuneError::NotHnet(spec.name()));
+        };
+        let (size, force_std_n) = (config.image_size, config.force_scale.map(|s| s.std_n));
+        if pairs.len() < 2 {
+            return Err(FineTuneError::TooFewPairs { found: pairs.len() });
+        }
+        for (index, pair) in pairs.iter().enumerate() {
+            TrainingBatch::of(&[pair.labelled()], size, &device).map_err(|cause| {
+                FineTuneError::OtherSize {
+                    size,
+                    cause: InputSizeError {
+                        pair: index,
+                        ..cause
+                    },
+                }
+            })?;
+        }
+        let every = settings.hold_back_every.max(2);
+        let (mut train, mut held_back) = (Vec::new(), Vec::new());
+        for index in 0..pairs.len() {
+            if index % every == every - 1 {
+                held_back.push(index);
+            } else {
+                train.push(index);
+            }
+        }
+        if held_back.is_empty() {
+            held_back.push(train.pop().expect("at least 2 pairs"));
+        }
+        let net = if settings.freeze_encoders {
+            net.with_frozen_encoders()
+        } else {
+            net
+        };
+        let loss = HNetLossConfig::new().with_force_std_n(force_std_n).init();
+        Ok(Self {
+            net,
+            spec,
+            header,
+            size,
+            loss,
+            optimizer: RmsPropSettings::default().init(),
+            settings,
+            pairs,
+            train,
+            held_back,
+            device,
+            plain,
+            epoch: 0,
+            in_epoch: (0, 0.0),
+            order: Vec::new(),
+            best: None,
+            since_best: 0,
+            finished: None,
+            rng: settings.seed ^ 0x9E37_79B9_7F4A_7C15,
+        })
+    }
+
+    /// The network's input size.
+    pub fn input_size(&self) -> ImageSize {
+        self.size
+    }
+
+    /// Pairs trained on and held back.
+    pub fn split(&self) -> (usize, usize) {
+        (self.train.len(), self.held_back.len())
+    }
+
+    /// Steps in one epoch.
+    pub fn steps_per_epoch(&self) -> usize {
+        self.train.len().div_ceil(self.settings.batch_size.max(1))
+    }
+
+    /// Why the run ended, once it has.
+    pub fn finished(&self) -> Option<FinishReason> {
+        self.finished
+    }
+
+    /// The current network's scores on the held-back pairs (before the first step: the
+    /// starting network's).
+    pub fn score(&self) -> Result<HeldBackScores, FineTuneError> {
+        let net = self.net.valid();
+        let input = self.spec.input();
+        let at = (&self.pairs[..], self.size, &self.plain);
+        score(&net, input, &self.loss, at, &self.held_back)
+    }
+
+    /// One training step on the next batch. Returns the epoch's report when the step ended an
+    /// epoch, `None` otherwise (and after the run has finished).
+    pub fn step(&mut self) -> Result<Option<EpochReport>, FineTuneError> {
+        if self.finished.is_some() {
+            return Ok(None);
+        }
+        if self.in_epoch.0 == 0 {
+            self.order = self.train.clone();
+            shuffle(&mut self.order, &mut self.rng);
+        }
+        let batch_size = self.settings.batch_size.max(1);
+        let at = self.in_epoch.0 * batch_size;
+        let indices = &self.order[at..(at + batch_size).min(self.order.len())];
+        let labelled: Vec<LabelledPair<'_>> =
+            indices.iter().map(|&i| self.pairs[i].labelled()).collect();
+        let batch = TrainingBatch::of(&labelled, self.size, &self.device).map_err(|cause| {
+            FineTuneError::OtherSize {
+                size: self.size,
+                cause,
+            }
+        })?;
+        let step = step_loss(&self.net, self.spec.input(), &self.loss, &batch);
+        let loss = scalar(&step.terms.total)?;
+        self.in_epoch.0 += 1;
+        self.in_epoch.1 += loss;
+        if !loss.is_finite() {
+            return self.end_epoch(Some(FinishReason::Diverged)).map(Some);
+        }
+        let grads = GradientsParams::from_grads(step.terms.total.backward(), &self.net);
+        let net = self.net.clone();
+        self.net = self.optimizer.step(self.settings.learning_rate, net, grads);
+        if self.in_epoch.0 >= self.steps_per_epoch() {
+            return self.end_epoch(None).map(Some);
+        }
+        Ok(None)
+    }
+
+    fn end_epoch(&mut self, diverged: Option<FinishReason>) -> Result<EpochReport, FineTuneError> {
+        self.epoch += 1;
+        let (steps, sum) = core::mem::replace(&mut self.in_epoch, (0, 0.0));
+        let train_loss = sum / steps.max(1) as f64;
+        let held_back = self.score()?;
+        let improved = diverged.is_none()
+            && held_back.loss.is_finite()
+            && self
+                .best
+                .as_ref()
+                .is_none_or(|(best, _)| held_back.loss < *best);
+        if improved {
+            self.best = Some((held_back.loss, self.net.clone()));
+            self.since_best = 0;
+        } else {
+            self.since_best += 1;
+        }
+        let finished = diverged
+            .or_else(|| (!held_back.loss.is_finite()).then_some(FinishReason::Diverged))
+            .or_else(|| {
+                (self.since_best >= self.settings.patience.max(1))
+                    .then_some(FinishReason::NoImprovement)
+            })
+            .or_else(|| {
+                (self.epoch >= self.settings.max_epochs).then_some(FinishReason::LastEpoch)
+            });
+        self.finished = finished;
+        Ok(EpochReport {
+            epoch: self.epoch,
+            train_loss,
+            held_back,
+            best: improved,
+            finished: finished.is_some(),
+            finished_because: finished,
+        })
+    }
+
+    /// The best epoch's network as a weights file: the starting file's header with
+    /// `provenance` replacing its record (the caller says where it came from and drops what no
+    /// longer holds, such as measured errors). `None` before an epoch improved on nothing.
+    pub fn best_weights(
+        &self,
+        provenance: &alloc::collections::BTreeMap<String, String>,
+    ) -> Result<Option<Vec<u8>>, FineTuneError> {
+        let Some((_, net)) = &self.best else {
+            return Ok(None);
+        };
+        net.valid()
+            .to_weights_bytes(&self.spec, provenance)
+            .map(Some)
+            .map_err(FineTuneError::Write)
+    }
+
+    /// The starting file's header (its provenance, to build the fine-tuned file's from).
+    pub fn header(&self) -> &WeightsHeader {
+        &self.header
+    }
+}
+
+/// The scores of `net` on the pairs `indices` (one pair per pass, without the autodiff graph).
+fn score(
+    net: &StereoModel,
+    input: StereoInput,
+    loss: &HNetLoss,
+    (pairs, size, device): (&[TrainingPair], ImageSize, &Device),
+    indices: &[usize],
+) -> Result<HeldBackScores, FineTuneError> {
+    let mut masks = SegmentationAccumulator::new();
+    let mut force = ForceAccumulator::new();
+    let mut loss_sum = 0.0;
+    let readback = |e: crate::inference::ReadbackError| FineTuneError::Readback(e.to_string());
+    for &index in indices {
+        let pair = &pairs[index];
+        let batch = TrainingBatch::of(&[pair.labelled()], size, device)
+            .map_err(|cause| FineTuneError::OtherSize { size, cause })?;
+        let step = step_loss(net, input, loss, &batch);
+        loss_sum += scalar(&step.terms.total)?;
+        if let Some([logits_a, logits_b]) = step.outputs.mask_logits {
+            for (logits, target) in [(logits_a, &batch.mask_a), (logits_b, &batch.mask_b)] {
+                let probabilities = burn::tensor::activation::sigmoid(logits);
+                let predicted = host_values(probabilities).map_err(readback)?;
+                let target = host_values(target.clone()).map_err(readback)?;
+                masks
+                    .push(&predicted, &target)
+                    .map_err(|e| FineTuneError::Readback(e.to_string()))?;
+            }
+        }
+        if let (Some(estimate), Some(label)) = (step.outputs.force, pair.force_n) {
+            let f = host_values(estimate).map_err(readback)?;
+            force.push([f[0], f[1], f[2]], label);
+        }
+    }
+    Ok(HeldBackScores {
+        pairs: indices.len(),
+        loss: loss_sum / indices.len().max(1) as f64,
+        catheter_iou: masks.finish().map_or(f64::NAN, |m| m.catheter.iou),
+        force_mae_n: force.finish().map(|m| m.overall.mae),
+        force_pairs: force.len() as usize,
+    })
+}
+
+/// A one-element tensor's value on the host.
+fn scalar(t: &burn::tensor::Tensor<1>) -> Result<f64, FineTuneError> {
+    t.clone()
+        .try_into_scalar::<f64>()
+        .map_err(|e| FineTuneError::Readback(alloc::format!("{e:?}")))
+}
+
+/// Fisher-Yates with SplitMix64: the visiting order, reproducible from the seed.
+fn shuffle(items: &mut [usize], state: &mut u64) {
+    for i in (1..items.len()).rev() {
+        *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = *state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        items.swap(i, (z % (i as u64 + 1)) as usize);
+    }
+}
