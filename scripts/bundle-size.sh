@@ -27,7 +27,7 @@ sizes() {
 cd "$dist"
 page_code=(hnet-studio-*_bg.wasm hnet-studio-*.js boot.js style-*.css index.html)
 weights=(assets/hnet-cpu.bpk)
-gpu=(hnet-gpu_bg.wasm hnet-gpu.js gpu-worker.js)
+gpu=(hnet-gpu_bg.wasm hnet-gpu.js module-worker.js)
 echo "release page: $dist"
 printf '  page code (wasm, JS, CSS, HTML): %s\n' "$(sizes "${page_code[@]}")"
 printf '  bundled weights:                 %s\n' "$(sizes "${weights[@]}")"

@@ -1,23 +1,17 @@
-//! The page's side of the WebGPU worker (`www/gpu-worker.js`, running crates/hnet-gpu): H-Net
-//! on WebGPU, in a module the page fetches only when it uses WebGPU. Each call becomes a
-//! message and its reply a Rust result; a worker that fails is dropped, and the next use of
-//! WebGPU starts a fresh one.
+//! The page's side of the WebGPU worker (crates/hnet-gpu in a [`ModuleWorker`]): H-Net on
+//! WebGPU, in a module the page fetches only when it uses WebGPU. A worker that fails is
+//! dropped, and the next use of WebGPU starts a fresh one.
 
-use std::cell::{Cell, RefCell};
-use std::collections::HashMap;
+use std::cell::RefCell;
 use std::rc::Rc;
 
 use hnet_model::inference::StereoPrediction;
 use hnet_units::ImageSize;
-use js_sys::{Array, Float32Array, Function, Object, Promise, Reflect, Uint8Array};
+use js_sys::{Array, Float32Array, Promise, Uint8Array};
 use wasm_bindgen::prelude::*;
-use wasm_bindgen_futures::JsFuture;
-use web_sys::{Event, MessageEvent, Worker, WorkerOptions, WorkerType};
 
 use crate::browser::JsError;
-
-/// The worker's script, next to the page (trunk copies it; index.html).
-pub const WORKER_SCRIPT: &str = "gpu-worker.js";
+use crate::module_worker::{ModuleWorker, ModuleWorkerError};
 
 /// How long the worker may take to start: to fetch and compile its module (2.4 MB gzipped,
 /// docs/benchmarks.md) and set WebGPU up, seconds. A browser whose WebGPU never answers would
@@ -27,21 +21,9 @@ pub const START_TIMEOUT_S: i32 = 120;
 /// Why the WebGPU worker gave no answer.
 #[derive(Debug, thiserror::Error)]
 pub enum GpuWorkerError {
-    /// The browser would not start the worker.
-    #[error("the WebGPU worker cannot be started")]
-    Spawn(#[source] JsError),
-    /// The worker stopped (its script or module could not be loaded, or it crashed).
-    #[error("the WebGPU worker stopped ({0})")]
-    Stopped(String),
-    /// A call failed in the worker (the cause is the worker's own account).
-    #[error("the WebGPU worker's `{call}` failed")]
-    Call {
-        /// The worker function called.
-        call: &'static str,
-        /// What the worker said.
-        #[source]
-        cause: JsError,
-    },
+    /// The worker could not be started, stopped, or a call failed.
+    #[error(transparent)]
+    Worker(#[from] ModuleWorkerError),
     /// The worker answered with something else than the prediction asked for.
     #[error("the WebGPU worker returned {found} values, not a prediction for {size} images")]
     NotAPrediction {
@@ -52,19 +34,13 @@ pub enum GpuWorkerError {
     },
 }
 
-/// The `resolve` and `reject` functions of a call waiting for its reply.
-type Pending = HashMap<u32, (Function, Function)>;
-
 /// A running WebGPU worker with WebGPU set up in it.
 pub struct GpuWorker {
-    worker: Worker,
-    pending: Rc<RefCell<Pending>>,
-    /// Why the worker stopped, once it has.
-    stopped: Rc<RefCell<Option<String>>>,
-    next_id: Cell<u32>,
-    _on_message: Closure<dyn FnMut(MessageEvent)>,
-    _on_error: Closure<dyn FnMut(Event)>,
+    worker: ModuleWorker,
 }
+
+/// The worker, in words.
+const NAME: &str = "the WebGPU worker";
 
 thread_local! {
     /// The page's worker and the reply to its `start` call (awaited by every caller, so that
@@ -79,20 +55,22 @@ impl GpuWorker {
     pub async fn shared() -> Result<Rc<Self>, GpuWorkerError> {
         let running = SHARED
             .with_borrow(Clone::clone)
-            .filter(|(worker, _)| worker.stopped.borrow().is_none());
+            .filter(|(worker, _)| worker.worker.stopped().is_none());
         let (worker, started) = match running {
             Some(running) => running,
             None => {
-                let worker = Rc::new(Self::spawn()?);
+                let worker = Rc::new(Self {
+                    worker: ModuleWorker::spawn("hnet-gpu", NAME)?,
+                });
                 let started =
-                    within_start_time(worker.send("start", &Array::new(), &Array::new())?);
+                    within_start_time(worker.worker.send("start", &Array::new(), &Array::new())?);
                 SHARED.set(Some((worker.clone(), started.clone())));
                 (worker, started)
             }
         };
-        if let Err(e) = worker.reply("start", started).await {
+        if let Err(e) = worker.worker.reply("start", started).await {
             worker.discard(&hnet_units::with_causes(&e));
-            return Err(e);
+            return Err(e.into());
         }
         Ok(worker)
     }
@@ -100,8 +78,7 @@ impl GpuWorker {
     /// Stops the worker after a failure: its calls fail from now on, and the next use of WebGPU
     /// starts a fresh worker.
     pub fn discard(&self, why: &str) {
-        self.worker.terminate();
-        stop(&self.pending, &self.stopped, why);
+        self.worker.stop(why);
         SHARED.with_borrow_mut(|shared| {
             if shared
                 .as_ref()
@@ -112,119 +89,18 @@ impl GpuWorker {
         });
     }
 
-    /// Starts the worker script as a module worker, listening for its replies.
-    fn spawn() -> Result<Self, GpuWorkerError> {
-        let options = WorkerOptions::new();
-        options.set_type(WorkerType::Module);
-        options.set_name("hnet-gpu");
-        let worker = Worker::new_with_options(WORKER_SCRIPT, &options)
-            .map_err(|e| GpuWorkerError::Spawn(e.into()))?;
-        let pending: Rc<RefCell<Pending>> = Rc::default();
-        let stopped: Rc<RefCell<Option<String>>> = Rc::default();
-        let on_message = {
-            let pending = pending.clone();
-            Closure::<dyn FnMut(MessageEvent)>::new(move |event: MessageEvent| {
-                let data = event.data();
-                let field = |key: &str| Reflect::get(&data, &JsValue::from_str(key)).ok();
-                let Some(id) = field("id").and_then(|id| id.as_f64()) else {
-                    return;
-                };
-                let Some((resolve, reject)) = pending.borrow_mut().remove(&(id as u32)) else {
-                    return;
-                };
-                match field("error").filter(|e| !e.is_undefined()) {
-                    Some(error) => reject.call1(
-                        &JsValue::NULL,
-                        &js_sys::Error::new(
-                            &error.as_string().unwrap_or_else(|| format!("{error:?}")),
-                        ),
-                    ),
-                    None => resolve.call1(&JsValue::NULL, &field("value").unwrap_or_default()),
-                }
-                .ok();
-            })
-        };
-        // The script or its module could not be loaded, or the worker crashed: every waiting
-        // call fails with why, and so does every later one.
-        let on_error = {
-            let (pending, stopped) = (pending.clone(), stopped.clone());
-            Closure::<dyn FnMut(Event)>::new(move |event: Event| {
-                event.prevent_default();
-                let message = Reflect::get(&event, &JsValue::from_str("message"))
-                    .ok()
-                    .and_then(|m| m.as_string())
-                    .filter(|m| !m.is_empty())
-                    .unwrap_or_else(|| format!("{WORKER_SCRIPT} could not be run"));
-                stop(&pending, &stopped, &message);
-            })
-        };
-        worker.set_onmessage(Some(on_message.as_ref().unchecked_ref()));
-        worker.set_onerror(Some(on_error.as_ref().unchecked_ref()));
-        Ok(Self {
-            worker,
-            pending,
-            stopped,
-            next_id: Cell::new(0),
-            _on_message: on_message,
-            _on_error: on_error,
-        })
-    }
-
-    /// Sends the worker a call of `call` with `args`, handing over the buffers in `transfer`;
-    /// the promise settles with its reply.
-    fn send(
-        &self,
-        call: &'static str,
-        args: &Array,
-        transfer: &Array,
-    ) -> Result<Promise, GpuWorkerError> {
-        if let Some(why) = self.stopped.borrow().clone() {
-            return Err(GpuWorkerError::Stopped(why));
-        }
-        let id = self.next_id.get();
-        self.next_id.set(id.wrapping_add(1) % UNANSWERED);
-        let pending = self.pending.clone();
-        let reply = Promise::new(&mut |resolve, reject| {
-            pending.borrow_mut().insert(id, (resolve, reject));
-        });
-        if let Err(e) = self
-            .worker
-            .post_message_with_transfer(&message(id, call, args), transfer)
-        {
-            self.pending.borrow_mut().remove(&id);
-            return Err(GpuWorkerError::Call {
-                call,
-                cause: e.into(),
-            });
-        }
-        Ok(reply)
-    }
-
-    /// The reply to a call of `call`.
-    async fn reply(&self, call: &'static str, reply: Promise) -> Result<JsValue, GpuWorkerError> {
-        JsFuture::from(reply).await.map_err(|e| {
-            let cause = JsError::from(e);
-            match self.stopped.borrow().clone() {
-                Some(why) => GpuWorkerError::Stopped(why),
-                None => GpuWorkerError::Call { call, cause },
-            }
-        })
-    }
-
-    /// Calls the worker's `call` with `args`, handing over the buffers in `transfer`. A failed
-    /// call stops the worker: a module that trapped (a panic aborts it) cannot be trusted again.
+    /// Calls the worker; a failed call stops it for good.
     async fn call(
         &self,
         call: &'static str,
         args: &Array,
         transfer: &Array,
     ) -> Result<JsValue, GpuWorkerError> {
-        let reply = self.send(call, args, transfer)?;
-        let result = self.reply(call, reply).await;
+        let result = self.worker.call(call, args, transfer).await;
         if let Err(e) = &result {
             self.discard(&hnet_units::with_causes(e));
         }
-        result
+        Ok(result?)
     }
 
     /// Loads a weights file (`name` names it in errors) onto WebGPU; the network lives in the
@@ -240,7 +116,8 @@ impl GpuWorker {
             .call("load", &args, &Array::of1(&bytes.buffer()))
             .await?
             .as_f64()
-            .ok_or_else(|| GpuWorkerError::Call {
+            .ok_or_else(|| ModuleWorkerError::Call {
+                worker: NAME,
                 call: "load",
                 cause: JsError::missing("the network's handle"),
             })?;
@@ -248,15 +125,6 @@ impl GpuWorker {
             worker: self.clone(),
             handle: handle as u32,
         })
-    }
-}
-
-impl Drop for GpuWorker {
-    /// The last user of a worker stops it; its replies find no handler any more.
-    fn drop(&mut self) {
-        self.worker.set_onmessage(None);
-        self.worker.set_onerror(None);
-        self.worker.terminate();
     }
 }
 
@@ -292,15 +160,11 @@ impl GpuNetwork {
 
 impl Drop for GpuNetwork {
     fn drop(&mut self) {
-        // Nothing waits for the reply (no call has this id); a stopped worker holds nothing.
+        // Nothing waits for the reply; a stopped worker holds nothing.
         let args = Array::of1(&JsValue::from(self.handle));
-        let unload = message(UNANSWERED, "unload", &args);
-        self.worker.worker.post_message(&unload).ok();
+        self.worker.worker.post("unload", &args);
     }
 }
-
-/// The id of a message whose reply nobody waits for (calls count up from 0).
-const UNANSWERED: u32 = u32::MAX;
 
 /// `started`, or a rejection once [`START_TIMEOUT_S`] have passed without its settling.
 fn within_start_time(started: Promise) -> Promise {
@@ -317,25 +181,4 @@ fn within_start_time(started: Promise) -> Promise {
         }
     });
     Promise::race(&Array::of2(&started, &timeout))
-}
-
-/// The message that calls the worker's `call` with `args`; its reply carries `id`.
-fn message(id: u32, call: &str, args: &Array) -> Object {
-    let message = Object::new();
-    for (key, value) in [
-        ("id", JsValue::from(id)),
-        ("call", JsValue::from_str(call)),
-        ("args", args.into()),
-    ] {
-        Reflect::set(&message, &JsValue::from_str(key), &value).ok();
-    }
-    message
-}
-
-/// Marks a worker stopped for `why` and fails every call waiting for a reply.
-fn stop(pending: &RefCell<Pending>, stopped: &RefCell<Option<String>>, why: &str) {
-    stopped.borrow_mut().get_or_insert_with(|| why.to_string());
-    for (_, (_, reject)) in pending.borrow_mut().drain() {
-        reject.call1(&JsValue::NULL, &js_sys::Error::new(why)).ok();
-    }
 }

@@ -1,4 +1,4 @@
-//! H-Net on WebGPU for the page, run in a dedicated Web Worker (`www/gpu-worker.js`).
+//! H-Net on WebGPU for the page, run in a dedicated Web Worker (`www/module-worker.js?module=hnet-gpu`).
 //!
 //! The WebGPU stack (Burn's wgpu backend: wgpu, cubecl) is about two thirds of the code the page
 //! would otherwise download (docs/benchmarks.md, "The page's download"). The page keeps only
