@@ -5,6 +5,7 @@ use leptos::prelude::*;
 
 use crate::components::{
     catheter_view::CatheterView,
+    fine_tune_panel::FineTunePanel,
     force_panel::ForcePanel,
     model_bar::ModelBar,
     pair_list::PairList,
@@ -12,6 +13,7 @@ use crate::components::{
     sources::Sources,
     stereo_view::StereoView,
 };
+use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
 use crate::storage;
 use crate::studio::{Studio, install_reconstruction, load_model};
@@ -22,7 +24,30 @@ use crate::workspace::Workspace;
 pub fn App() -> impl IntoView {
     let studio = Studio::new();
     provide_context(studio);
-    load_model(studio, None);
+    // The weights the user fine-tuned and chose, when the browser keeps some; else the bundled.
+    leptos::task::spawn_local(async move {
+        match storage::load_kept_weights().await {
+            Ok(Some(kept)) => {
+                let chosen = kept.chosen.then(|| {
+                    (
+                        std::rc::Rc::<[u8]>::from(kept.bytes.as_slice()),
+                        kept.name.clone(),
+                        WeightsOrigin::FineTuned,
+                    )
+                });
+                studio.kept.set(Some(std::rc::Rc::new(kept)));
+                load_model(studio, chosen);
+            }
+            Ok(None) => load_model(studio, None),
+            Err(e) => {
+                load_model(studio, None);
+                studio.error(format!(
+                    "The kept fine-tuned weights could not be read ({}): the bundled weights are used",
+                    with_causes(&e)
+                ));
+            }
+        }
+    });
     leptos::task::spawn_local(async move {
         match storage::load_pairs().await {
             Ok((pairs, damaged)) => {
@@ -93,6 +118,7 @@ pub fn App() -> impl IntoView {
             </section>
             <aside class="pairs">
                 <PairList/>
+                <FineTunePanel/>
                 <Shortcuts/>
             </aside>
         </main>

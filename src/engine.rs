@@ -35,6 +35,8 @@ pub enum WeightsOrigin {
     Bundled,
     /// A file the user loaded.
     File,
+    /// Weights the user fine-tuned in the page and kept (stored in the browser).
+    FineTuned,
     /// None: freshly initialised weights (the page was built without bundled weights).
     Untrained,
 }

@@ -31,6 +31,7 @@ pub mod catheter_calibration;
 pub mod cine;
 pub mod error_text;
 pub mod export;
+pub mod fine_tune;
 pub mod force_label;
 pub mod force_reading;
 pub mod imaging;
@@ -56,6 +57,8 @@ pub mod compute;
 pub mod engine;
 #[cfg(target_arch = "wasm32")]
 pub mod gpu_worker;
+#[cfg(target_arch = "wasm32")]
+pub mod module_worker;
 #[cfg(target_arch = "wasm32")]
 pub mod storage;
 #[cfg(target_arch = "wasm32")]

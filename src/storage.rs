@@ -18,7 +18,12 @@ use crate::stored_pair::{self, IMAGE_KEYS, METADATA_KEY};
 use crate::workspace::LabeledPair;
 
 const DATABASE: &str = "hnet-studio";
+/// The database's version: 2 added the store of fine-tuned weights.
+const VERSION: u32 = 2;
 const STORE: &str = "pairs";
+/// Weights the user fine-tuned and kept: one record, [`FINE_TUNED_KEY`].
+const MODELS: &str = "models";
+const FINE_TUNED_KEY: &str = "fine-tuned";
 
 /// The browser's storage of pairs could not be used.
 #[derive(Debug, thiserror::Error)]
@@ -40,6 +45,15 @@ pub enum StorageError {
     #[error("{action} the browser's store `pairs` failed")]
     Request {
         /// What was asked: `saving in`, `deleting from` or `reading`.
+        action: &'static str,
+        /// What the browser said.
+        #[source]
+        cause: JsError,
+    },
+    /// A request to the store of fine-tuned weights was refused or failed.
+    #[error("{action} the browser's store of fine-tuned weights failed")]
+    ModelRequest {
+        /// What was asked: `saving in` or `reading`.
         action: &'static str,
         /// What the browser said.
         #[source]
@@ -126,14 +140,19 @@ async fn open() -> Result<IdbDatabase, StorageError> {
         .indexed_db()
         .map_err(open_error)?
         .ok_or(StorageError::NoIndexedDb)?;
-    let request = factory.open_with_u32(DATABASE, 1).map_err(open_error)?;
+    let request = factory
+        .open_with_u32(DATABASE, VERSION)
+        .map_err(open_error)?;
     let upgrade = request.clone();
     let on_upgrade = Closure::once_into_js(move |_: web_sys::Event| {
         if let Ok(result) = upgrade.result()
             && let Ok(db) = result.dyn_into::<IdbDatabase>()
-            && !db.object_store_names().contains(STORE)
         {
-            let _ = db.create_object_store(STORE);
+            for name in [STORE, MODELS] {
+                if !db.object_store_names().contains(name) {
+                    let _ = db.create_object_store(name);
+                }
+            }
         }
     });
     request.set_onupgradeneeded(Some(on_upgrade.unchecked_ref()));
@@ -324,4 +343,77 @@ pub async fn load_pairs() -> Result<(Vec<LabeledPair>, Vec<DamagedRecord>), Stor
     }
     pairs.sort_by(|a, b| a.id.cmp(&b.id));
     Ok((pairs, damaged))
+}
+
+/// Fine-tuned weights the user kept, as stored.
+#[derive(Debug, Clone)]
+pub struct KeptWeights {
+    /// The weights file's name.
+    pub name: String,
+    /// The weights file.
+    pub bytes: Vec<u8>,
+    /// Whether the page uses them (rather than the bundled weights) when it opens.
+    pub chosen: bool,
+}
+
+/// The failure of a request to the store of weights (a full storage named as such).
+fn model_request(action: &'static str) -> impl Fn(JsValue) -> StorageError {
+    move |e| {
+        let cause = JsError::from(e);
+        if cause.name == "QuotaExceededError" {
+            StorageError::Full(cause)
+        } else {
+            StorageError::ModelRequest { action, cause }
+        }
+    }
+}
+
+/// Keeps `weights` as the fine-tuned weights (replacing any kept before, only once the write
+/// has committed: a refused write leaves the previous ones).
+pub async fn save_kept_weights(weights: &KeptWeights) -> Result<(), StorageError> {
+    let db = open().await?;
+    let failed = model_request("saving in");
+    let record = Object::new();
+    let set = |key: &str, value: &JsValue| Reflect::set(&record, &key.into(), value);
+    set("name", &JsValue::from_str(&weights.name)).map_err(&failed)?;
+    set("bytes", &Uint8Array::from(weights.bytes.as_slice())).map_err(&failed)?;
+    set("chosen", &JsValue::from_bool(weights.chosen)).map_err(&failed)?;
+    let transaction = db
+        .transaction_with_str_and_mode(MODELS, IdbTransactionMode::Readwrite)
+        .map_err(&failed)?;
+    transaction
+        .object_store(MODELS)
+        .and_then(|store| store.put_with_key(&record, &JsValue::from_str(FINE_TUNED_KEY)))
+        .map_err(&failed)?;
+    committed(&transaction).await.map_err(failed)
+}
+
+/// The kept fine-tuned weights, if any.
+pub async fn load_kept_weights() -> Result<Option<KeptWeights>, StorageError> {
+    let db = open().await?;
+    let failed = model_request("reading");
+    let request = db
+        .transaction_with_str_and_mode(MODELS, IdbTransactionMode::Readonly)
+        .and_then(|t| t.object_store(MODELS))
+        .and_then(|store| store.get(&JsValue::from_str(FINE_TUNED_KEY)))
+        .map_err(&failed)?;
+    let record = settled(&request).await.map_err(&failed)?;
+    if record.is_undefined() || record.is_null() {
+        return Ok(None);
+    }
+    let get = |key: &str| Reflect::get(&record, &key.into()).unwrap_or_default();
+    let damaged = |what: &str| StorageError::ModelRequest {
+        action: "reading",
+        cause: JsError::missing(&format!("the kept weights' {what}")),
+    };
+    let name = get("name").as_string().ok_or_else(|| damaged("name"))?;
+    let bytes = get("bytes")
+        .dyn_into::<Uint8Array>()
+        .map_err(|_| damaged("file"))?
+        .to_vec();
+    Ok(Some(KeptWeights {
+        name,
+        bytes,
+        chosen: get("chosen").as_bool().unwrap_or(false),
+    }))
 }

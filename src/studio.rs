@@ -5,6 +5,7 @@
 //! render this state and call these actions.
 
 use std::collections::HashMap;
+use std::rc::Rc;
 
 use leptos::prelude::*;
 
@@ -13,8 +14,9 @@ use crate::cine::CinePlayer;
 use crate::compute::BackendChoice;
 use crate::engine::Prediction;
 use crate::error_text::with_causes;
+use crate::module_worker::ModuleWorker;
 use crate::orbit_camera::OrbitCamera;
-use crate::storage;
+use crate::storage::{self, KeptWeights};
 use crate::twin_live::{TwinControls, XrayBackground};
 use crate::workspace::{LabeledPair, RemovedPair, Tool, View, Workspace};
 use hnet_model::catheter_entry::EntrySetting;
@@ -24,9 +26,11 @@ use hnet_twin::sensor_plate::ContactError;
 mod catheter;
 mod cine;
 mod model;
+mod tuning;
 
 pub use catheter::{CatheterReading, install_reconstruction};
 pub use model::{ModelState, load_model};
+pub use tuning::{KEPT_NAME, TuningProgress, TuningResult, TuningState};
 
 /// A message for the user.
 #[derive(Debug, Clone, PartialEq)]
@@ -195,6 +199,12 @@ pub struct Studio {
     playback: StoredValue<Option<IntervalHandle>>,
     /// Frames traced and frames to trace, while H-Net runs over the cine.
     pub trace_progress: RwSignal<Option<(usize, usize)>>,
+    /// The fine-tune running or ended ([`tuning`]).
+    pub tuning: RwSignal<TuningState, LocalStorage>,
+    /// Its worker, while it runs.
+    tuning_worker: StoredValue<Option<Rc<ModuleWorker>>, LocalStorage>,
+    /// The fine-tuned weights kept in the browser, if any.
+    pub kept: RwSignal<Option<Rc<KeptWeights>>, LocalStorage>,
     /// The user asked to stop the trace.
     pub trace_cancelled: RwSignal<bool>,
 }
@@ -242,6 +252,9 @@ impl Studio {
             playback: StoredValue::new(None),
             trace_progress: RwSignal::new(None),
             trace_cancelled: RwSignal::new(false),
+            tuning: RwSignal::new_local(TuningState::Idle),
+            tuning_worker: StoredValue::new_local(None),
+            kept: RwSignal::new_local(None),
         }
     }
 

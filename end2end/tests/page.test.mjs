@@ -65,7 +65,7 @@ test("the page loads H-Net, says where it runs, and asks for nothing outside", a
 });
 
 /** Whether a request is for the WebGPU worker's script or module (crates/hnet-gpu). */
-const isWebGpuModule = (url) => /gpu-worker\.js|hnet-gpu(_bg\.wasm|\.js)/.test(url);
+const isWebGpuModule = (url) => /hnet-gpu(_bg\.wasm|\.js)/.test(url);
 
 test("load a pair, run H-Net, paint, undo, reload with labels kept, export the dataset", async () => {
   const { page, errors } = await openPage(context, server.url);
@@ -846,4 +846,67 @@ test("storage faults: an older record loads, a damaged or newer one is named whi
   });
   assert.deepEqual(errors, []);
   await page.close();
+});
+
+test("fine-tune on my pairs: refused without labelled pairs, a one-epoch run with its before/after table, kept, chosen after a reload, the bundled weights chosen back", async () => {
+  // A browser of its own: the pairs it trains on are the three kept below, whatever the other
+  // tests stored.
+  const own = await launchBrowser();
+  try {
+    const { page, errors, requests } = await openPage(own, server.url);
+    await waitForModel(page);
+    const bundledName = await page.textContent("#weights");
+    // The training stack is fetched only when the user fine-tunes.
+    assert.ok(!requests.some((url) => /hnet-tune/.test(url)), "hnet-tune fetched before it was used");
+    await page.click("#tune-start");
+    await page.waitForFunction(() => /^Cannot fine-tune: fine-tuning needs at least 2 pairs/.test(document.querySelector("#notice")?.textContent));
+    await page.click("#tab-twin");
+    for (let i = 0; i < 3; i++) {
+      await page.focus("#twin-fx");
+      await page.keyboard.press("ArrowRight");
+      await page.waitForSelector("#keep-draft:not([disabled])");
+      await page.click("#keep-draft");
+      await page.waitForFunction((n) => document.querySelectorAll("#pairs li[data-id]").length === n, i + 1);
+    }
+    assert.match(await page.textContent("#tune-pairs"), /^3 of 3 pairs have labelled masks/);
+    await page.fill("#tune-epochs", "1");
+    await page.dispatchEvent("#tune-epochs", "change");
+    const started = Date.now();
+    await page.click("#tune-start");
+    await page.waitForSelector("#tune-progress");
+    assert.match(await page.textContent("#tune-progress-text"), /^3 labelled pairs \(3 with a force label\)\. Scoring/);
+    await page.waitForFunction(() => /^2 pairs trained on, 1 held back \(3 with a force label\)\. Epoch 1 of at most 1/.test(document.querySelector("#tune-progress-text")?.textContent), null, { timeout: 120_000 });
+    // The page answers while the worker trains.
+    await page.click("#tab-images");
+    await page.waitForSelector("#tune-table", { timeout: 300_000 });
+    console.log(`# a one-epoch fine-tune of 2 pairs at 224 px in the page: ${((Date.now() - started) / 1000).toFixed(1)} s`);
+    const rows = await page.$$eval("#tune-table tbody tr", (trs) => trs.map((tr) => [...tr.cells].map((c) => c.textContent)));
+    assert.equal(rows[0][0], "Catheter IoU");
+    assert.match(rows[0][1], /^\d\.\d{3}$/);
+    assert.match(await page.textContent("#tune-table caption"), /^On the 1 held-back pairs/);
+    // A one-epoch run improves on nothing before it: its only epoch is the best one.
+    assert.match(rows[0][2], /^\d\.\d{3}$/);
+    await page.click("#tune-keep");
+    await page.waitForFunction(() => document.querySelector("#weights")?.textContent === "hnet-fine-tuned.bpk");
+    // The kept weights record no measured force errors: no verdict is given from them.
+    assert.match(await page.textContent("#force-facts"), /not recorded in these weights/);
+    assert.equal(await page.$eval("#weights-choice", (s) => s.value), "fine-tuned");
+    // Chosen after a reload.
+    await page.reload();
+    await waitForModel(page);
+    assert.equal(await page.textContent("#weights"), "hnet-fine-tuned.bpk");
+    assert.equal(await page.$eval("#weights-choice", (s) => s.value), "fine-tuned");
+    // A weights file hnet eval reads: the download is the kept file.
+    const [download] = await Promise.all([page.waitForEvent("download"), page.click("#tune-download")]);
+    assert.equal(download.suggestedFilename(), "hnet-fine-tuned.bpk");
+    // The bundled weights chosen back, and still after a reload.
+    await page.selectOption("#weights-choice", "bundled");
+    await page.waitForFunction((name) => document.querySelector("#weights")?.textContent === name, bundledName);
+    await page.reload();
+    await waitForModel(page);
+    assert.equal(await page.textContent("#weights"), bundledName);
+    assert.deepEqual(errors, []);
+  } finally {
+    await own.close();
+  }
 });

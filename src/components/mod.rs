@@ -4,6 +4,7 @@
 pub mod catheter_view;
 pub mod cine_panel;
 pub mod composer;
+pub mod fine_tune_panel;
 pub mod force_panel;
 pub mod force_trace;
 pub mod model_bar;

@@ -180,6 +180,24 @@ pub fn ModelBar() -> impl IntoView {
                         }).collect_view()}
                     </select>
                 </label>
+                {move || studio.kept.get().map(|kept| {
+                    let fine_tuned = move || studio.model.with(|m| {
+                        matches!(m, ModelState::Ready(e) if e.origin == WeightsOrigin::FineTuned)
+                    });
+                    view! {
+                        <label title="Weights you fine-tuned in this page and kept in this browser">
+                            "Weights "
+                            <select id="weights-choice" on:change=move |ev| {
+                                studio.choose_kept(event_target_value(&ev) == "fine-tuned");
+                            }>
+                                <option value="bundled" selected=move || !fine_tuned()>"bundled"</option>
+                                <option value="fine-tuned" selected=fine_tuned>
+                                    {format!("fine-tuned ({})", kept.name)}
+                                </option>
+                            </select>
+                        </label>
+                    }
+                })}
                 <label class="file-button">
                     "Load weights…"
                     <input id="weights-file" type="file" accept=".bpk" on:change=on_weights/>

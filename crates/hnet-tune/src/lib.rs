@@ -1,0 +1,134 @@
+//! Fine-tuning H-Net in the page, in a dedicated Web Worker (`www/module-worker.js?module=hnet-tune`),
+//! so that the page keeps answering while it trains. The training itself is
+//! [`hnet_model::fine_tune`]'s, on Burn's CPU backend with the project's kernels (WebAssembly
+//! SIMD). The page (src/fine_tune.rs) drives it with messages, each calling one export:
+//!
+//! 1. [`start`] takes the weights file, the labelled pairs and the settings, splits the pairs
+//!    into trained-on and held-back ones, and scores the starting network on the held-back ones;
+//! 2. [`step`] takes one training step, and at the end of an epoch scores the held-back pairs
+//!    again; the page calls it until the run has finished (or stops the worker);
+//! 3. [`best_weights`] writes the best epoch's network as a weights file.
+//!
+//! One fine-tune per worker: the page starts a fresh worker for each run and stops it by
+//! terminating it, which leaves every weights file the page holds as it was.
+#![cfg(target_arch = "wasm32")]
+
+use std::cell::RefCell;
+use std::collections::BTreeMap;
+
+use burn::tensor::Device;
+use hnet_model::fine_tune::{FineTune, FineTuneSettings, TrainingPair};
+use hnet_units::with_causes;
+use wasm_bindgen::prelude::*;
+
+thread_local! {
+    /// The run [`start`] began.
+    static RUN: RefCell<Option<FineTune>> = const { RefCell::new(None) };
+}
+
+/// The JavaScript error the page receives: the message with its causes.
+fn js_error(error: &dyn std::error::Error) -> JsError {
+    JsError::new(&with_causes(error))
+}
+
+fn json<T: serde::Serialize>(value: &T) -> Result<String, JsError> {
+    serde_json::to_string(value).map_err(|e| js_error(&e))
+}
+
+/// Starts a fine-tune of the weights file `weights` (`name` names it in errors) on the pairs in
+/// `images` and `forces`, with the settings in `settings_json` ([`FineTuneSettings`]; fields
+/// left out keep their defaults).
+///
+/// `images` holds each pair in turn at `side`×`side` pixels: view A and view B as 8-bit RGB,
+/// then mask A and mask B (255 catheter). `forces` holds each pair's force label
+/// `(Fx, Fy, Fz)` in newtons, NaN for a pair that trains its masks only.
+///
+/// Returns, as JSON, the split (`train`, `held_back`), `steps_per_epoch` and the starting
+/// network's scores on the held-back pairs (`before`).
+#[wasm_bindgen]
+pub fn start(
+    weights: &[u8],
+    name: &str,
+    side: u32,
+    images: &[u8],
+    forces: &[f32],
+    settings_json: &str,
+) -> Result<String, JsError> {
+    console_error_panic_hook::set_once();
+    let settings: FineTuneSettings = serde_json::from_str(settings_json)
+        .map_err(|e| JsError::new(&format!("the fine-tune settings are not readable: {e}")))?;
+    let side = side as usize;
+    let (rgb, grey) = (side * side * 3, side * side);
+    let per_pair = 2 * rgb + 2 * grey;
+    if per_pair == 0
+        || !images.len().is_multiple_of(per_pair)
+        || images.len() / per_pair * 3 != forces.len()
+    {
+        return Err(JsError::new(&format!(
+            "the pairs sent are not whole {side}×{side} pairs: {} image bytes, {} force values",
+            images.len(),
+            forces.len()
+        )));
+    }
+    let pairs = images
+        .chunks_exact(per_pair)
+        .zip(forces.chunks_exact(3))
+        .map(|(bytes, force)| {
+            let (view_a, rest) = bytes.split_at(rgb);
+            let (view_b, rest) = rest.split_at(rgb);
+            let (mask_a, mask_b) = rest.split_at(grey);
+            TrainingPair {
+                view_a: view_a.to_vec(),
+                view_b: view_b.to_vec(),
+                mask_a: mask_a.to_vec(),
+                mask_b: mask_b.to_vec(),
+                force_n: force
+                    .iter()
+                    .all(|f| f.is_finite())
+                    .then(|| [force[0], force[1], force[2]]),
+            }
+        })
+        .collect();
+    let run =
+        FineTune::new(weights, name, pairs, settings, &Device::flex()).map_err(|e| js_error(&e))?;
+    let before = run.score().map_err(|e| js_error(&e))?;
+    let (train, held_back) = run.split();
+    let reply = serde_json::json!({
+        "train": train,
+        "held_back": held_back,
+        "steps_per_epoch": run.steps_per_epoch(),
+        "before": before,
+    });
+    RUN.set(Some(run));
+    json(&reply)
+}
+
+/// One training step. Returns, as JSON, the epoch's report when the step ended an epoch
+/// ([`hnet_model::fine_tune::EpochReport`]), or `null`.
+#[wasm_bindgen]
+pub fn step() -> Result<String, JsError> {
+    RUN.with_borrow_mut(|run| {
+        let run = run
+            .as_mut()
+            .ok_or_else(|| JsError::new("no fine-tune has been started in this worker"))?;
+        let report = run.step().map_err(|e| js_error(&e))?;
+        json(&report)
+    })
+}
+
+/// The best epoch's network as a weights file whose provenance is `provenance_json` (an object
+/// of strings); empty when no epoch improved on the held-back pairs.
+#[wasm_bindgen]
+pub fn best_weights(provenance_json: &str) -> Result<Vec<u8>, JsError> {
+    let provenance: BTreeMap<String, String> = serde_json::from_str(provenance_json)
+        .map_err(|e| JsError::new(&format!("the provenance is not readable: {e}")))?;
+    RUN.with_borrow(|run| {
+        let run = run
+            .as_ref()
+            .ok_or_else(|| JsError::new("no fine-tune has been started in this worker"))?;
+        Ok(run
+            .best_weights(&provenance)
+            .map_err(|e| js_error(&e))?
+            .unwrap_or_default())
+    })
+}

@@ -1,0 +1,254 @@
+//! What the page's "Fine-tune on my pairs" trains on and what it writes: the labelled pairs as
+//! the fine-tuning worker takes them (crates/hnet-tune), the kept weights' provenance, and the
+//! time left. The worker is driven from `studio/tuning.rs`; the training is
+//! [`hnet_model::fine_tune`]'s, the step `hnet train`'s.
+
+use std::collections::BTreeMap;
+
+use hnet_model::fine_tune::{EpochReport, HeldBackScores};
+use hnet_twin::label_origin::LabelFilter;
+use hnet_twin::model_facts::FACTS_KEY;
+use hnet_units::ImageSize;
+
+use crate::imaging::WORK_SIZE;
+use crate::workspace::LabeledPair;
+
+/// The pairs a fine-tune learns from, packed for the worker's `start`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TuningSet {
+    /// Each pair in turn: view A and view B (RGB), then mask A and mask B.
+    pub images: Vec<u8>,
+    /// Each pair's force label `(Fx, Fy, Fz)` in newtons, NaN where it trains its masks only.
+    pub forces: Vec<f32>,
+    /// Pairs in the set.
+    pub pairs: usize,
+    /// Of which with a force label the head learns from.
+    pub with_force: usize,
+    /// Pairs left out because their masks are not labels yet.
+    pub left_out: usize,
+}
+
+/// Why no fine-tune can start.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TuningRefusal {
+    /// Fewer than two pairs with labelled masks.
+    #[error(
+        "fine-tuning needs at least 2 pairs whose masks are labels (painted or kept, each view \
+         with a catheter or marked as showing none); {found} found{}",
+        if *.left_out > 0 { format!(", {left_out} pair(s) not labelled yet", left_out = .left_out) } else { String::new() }
+    )]
+    TooFewPairs {
+        /// Pairs with labelled masks.
+        found: usize,
+        /// Pairs without.
+        left_out: usize,
+    },
+    /// The network reads another size than the page's pairs.
+    #[error(
+        "the loaded network reads {network} images and the page's pairs are {pairs}: load \
+         weights trained at {pairs} to fine-tune here"
+    )]
+    OtherSize {
+        /// The network's input size.
+        network: ImageSize,
+        /// The pairs' size.
+        pairs: ImageSize,
+    },
+}
+
+/// The pairs of `pairs` whose masks are labels, for a network reading `input` images. A force
+/// label trains the force head unless it was copied from a model's estimate (as `hnet train`
+/// leaves those out by default: a network never learns its own guesses).
+pub fn tuning_set(pairs: &[LabeledPair], input: ImageSize) -> Result<TuningSet, TuningRefusal> {
+    let work = ImageSize::square(WORK_SIZE);
+    if input != work {
+        return Err(TuningRefusal::OtherSize {
+            network: input,
+            pairs: work,
+        });
+    }
+    let learnt = LabelFilter::not_estimates();
+    let labelled: Vec<&LabeledPair> = pairs.iter().filter(|p| p.masks_complete()).collect();
+    let left_out = pairs.len() - labelled.len();
+    if labelled.len() < 2 {
+        return Err(TuningRefusal::TooFewPairs {
+            found: labelled.len(),
+            left_out,
+        });
+    }
+    let mut set = TuningSet {
+        images: Vec::with_capacity(labelled.len() * work.pixels() * 8),
+        forces: Vec::with_capacity(labelled.len() * 3),
+        pairs: labelled.len(),
+        with_force: 0,
+        left_out,
+    };
+    for pair in labelled {
+        for bytes in [&pair.view_a, &pair.view_b, &pair.mask_a, &pair.mask_b] {
+            set.images.extend_from_slice(bytes);
+        }
+        match pair.force_n.filter(|_| learnt.admits(&pair.force_origin)) {
+            Some(force) => {
+                set.forces.extend_from_slice(&force);
+                set.with_force += 1;
+            }
+            None => set.forces.extend_from_slice(&[f32::NAN; 3]),
+        }
+    }
+    Ok(set)
+}
+
+/// The kept weights' provenance: the starting file's, without its recorded force errors and
+/// calibration (they were measured on the network before it was fine-tuned, and no longer
+/// hold), with where it came from and how it did on the held-back pairs.
+pub fn kept_provenance(
+    start: &BTreeMap<String, String>,
+    start_name: &str,
+    set: &TuningSet,
+    held_back: usize,
+    before: &HeldBackScores,
+    best: &EpochReport,
+) -> BTreeMap<String, String> {
+    let mut provenance: BTreeMap<String, String> = start
+        .iter()
+        .filter(|(key, _)| key.as_str() != FACTS_KEY)
+        .map(|(k, v)| (k.clone(), v.clone()))
+        .collect();
+    let scores = |s: &HeldBackScores| match s.force_mae_n {
+        Some(mae) => format!("catheter IoU {:.3}, force MAE {mae:.3} N", s.catheter_iou),
+        None => format!("catheter IoU {:.3}", s.catheter_iou),
+    };
+    provenance.insert(
+        "command".into(),
+        format!("H-Net Studio page: Fine-tune on my pairs, from {start_name}"),
+    );
+    provenance.insert("fine_tuned_from".into(), start_name.to_string());
+    provenance.insert(
+        "fine_tuned_on".into(),
+        format!(
+            "{} labelled pairs in the page ({} with a force label), {held_back} of them held back",
+            set.pairs, set.with_force
+        ),
+    );
+    provenance.insert("fine_tune_best_epoch".into(), best.epoch.to_string());
+    provenance.insert("held_back_before".into(), scores(before));
+    provenance.insert("held_back_after".into(), scores(&best.held_back));
+    provenance
+}
+
+/// Seconds left, from `elapsed_s` for `done` of `total` steps (`None` before the first).
+pub fn seconds_left(elapsed_s: f64, done: usize, total: usize) -> Option<f64> {
+    (done > 0).then(|| elapsed_s / done as f64 * total.saturating_sub(done) as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::workspace::{PairSource, View};
+    use hnet_twin::label_origin::LabelOrigin;
+
+    fn pair(id: &str, painted: bool, force: Option<([f32; 3], LabelOrigin)>) -> LabeledPair {
+        let rgb = vec![40u8; WORK_SIZE * WORK_SIZE * 3];
+        let mut p = LabeledPair::new(
+            id.into(),
+            PairSource::Upload {
+                view_a: "a.png".into(),
+                view_b: "b.png".into(),
+                views: None,
+            },
+            rgb.clone(),
+            rgb,
+        );
+        if painted {
+            p.mask_a[5] = 255;
+            p.mask_b[9] = 255;
+            p.masks_labeled = true;
+        }
+        if let Some((f, origin)) = force {
+            p.force_n = Some(f);
+            p.force_origin = origin;
+        }
+        p
+    }
+
+    #[test]
+    fn only_labelled_masks_train_and_estimates_never_teach_the_force() {
+        let estimate = LabelOrigin::Estimate {
+            weights: "bundled".into(),
+            estimator: "H-Net".into(),
+        };
+        let pairs = vec![
+            pair("p1", true, Some(([0.1, 0.2, 0.3], LabelOrigin::Measured))),
+            pair("p2", true, Some(([0.5, 0.5, 0.5], estimate))),
+            // Masks not labelled yet: left out whatever its force.
+            pair("p3", false, Some(([0.1, 0.1, 0.1], LabelOrigin::Typed))),
+            pair("p4", true, None),
+        ];
+        let set = tuning_set(&pairs, ImageSize::square(WORK_SIZE)).unwrap();
+        assert_eq!((set.pairs, set.with_force, set.left_out), (3, 1, 1));
+        let per_pair = WORK_SIZE * WORK_SIZE * 8;
+        assert_eq!(set.images.len(), 3 * per_pair);
+        assert_eq!(&set.forces[..3], &[0.1, 0.2, 0.3]);
+        assert!(set.forces[3..].iter().all(|f| f.is_nan()));
+        // Pair p1's mask A is right after its two views.
+        assert_eq!(set.images[2 * WORK_SIZE * WORK_SIZE * 3 + 5], 255);
+        assert_eq!(pairs[0].labeled_pixels(View::A), 1);
+    }
+
+    #[test]
+    fn too_few_pairs_or_another_size_are_refused_with_why() {
+        let one = vec![pair("p1", true, None), pair("p2", false, None)];
+        let refusal = tuning_set(&one, ImageSize::square(WORK_SIZE)).unwrap_err();
+        assert_eq!(
+            refusal,
+            TuningRefusal::TooFewPairs {
+                found: 1,
+                left_out: 1
+            }
+        );
+        assert!(refusal.to_string().contains("1 pair(s) not labelled yet"));
+        let two = vec![pair("p1", true, None), pair("p2", true, None)];
+        let refusal = tuning_set(&two, ImageSize::square(64)).unwrap_err();
+        assert!(
+            refusal.to_string().contains("reads 64×64 images"),
+            "{refusal}"
+        );
+    }
+
+    #[test]
+    fn kept_weights_drop_the_measured_errors_and_say_where_they_came_from() {
+        let start = BTreeMap::from([
+            ("command".to_string(), "hnet train …".to_string()),
+            (FACTS_KEY.to_string(), "{}".to_string()),
+            ("seed".to_string(), "42".to_string()),
+        ]);
+        let set = tuning_set(
+            &[pair("p1", true, None), pair("p2", true, None)],
+            ImageSize::square(WORK_SIZE),
+        )
+        .unwrap();
+        let scores = |iou| HeldBackScores {
+            pairs: 1,
+            loss: 0.1,
+            catheter_iou: iou,
+            force_mae_n: None,
+            force_pairs: 0,
+        };
+        let best = EpochReport {
+            epoch: 3,
+            train_loss: 0.1,
+            held_back: scores(0.9),
+            best: true,
+            finished: true,
+            finished_because: None,
+        };
+        let kept = kept_provenance(&start, "hnet-cpu.bpk", &set, 1, &scores(0.2), &best);
+        assert!(!kept.contains_key(FACTS_KEY));
+        assert_eq!(kept["seed"], "42");
+        assert_eq!(kept["held_back_before"], "catheter IoU 0.200");
+        assert_eq!(kept["held_back_after"], "catheter IoU 0.900");
+        assert!(kept["command"].contains("from hnet-cpu.bpk"));
+        assert_eq!(seconds_left(10.0, 2, 6), Some(20.0));
+        assert_eq!(seconds_left(0.0, 0, 6), None);
+    }
+}

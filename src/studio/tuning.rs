@@ -1,0 +1,381 @@
+//! "Fine-tune on my pairs" on the page's state: the fine-tuning worker (crates/hnet-tune in a
+//! [`ModuleWorker`]) driven step by step, its progress, the result kept or discarded, and the
+//! kept weights chosen in the model bar. Nothing is stored until the user keeps a result: a tab
+//! closed or a run stopped midway leaves the weights in use, and those kept before, as they were.
+
+use std::rc::Rc;
+
+use hnet_model::fine_tune::{EpochReport, FineTuneSettings, FinishReason, HeldBackScores};
+use js_sys::{Array, Float32Array, Uint8Array};
+use leptos::prelude::*;
+use wasm_bindgen::JsValue;
+
+use super::{ModelState, Studio, load_model};
+use crate::browser::now_ms;
+use crate::engine::WeightsOrigin;
+use crate::error_text::with_causes;
+use crate::fine_tune::{TuningSet, kept_provenance, seconds_left, tuning_set};
+use crate::imaging::WORK_SIZE;
+use crate::module_worker::{ModuleWorker, ModuleWorkerError};
+use crate::storage::{self, KeptWeights};
+
+/// The kept weights' file name.
+pub const KEPT_NAME: &str = "hnet-fine-tuned.bpk";
+
+/// Where a fine-tune stands.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub enum TuningState {
+    /// None running, none to keep.
+    #[default]
+    Idle,
+    /// Running.
+    Running(TuningProgress),
+    /// Ended: the before/after table and the weights to keep, if an epoch improved.
+    Ended(TuningResult),
+}
+
+/// A running fine-tune's progress.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TuningProgress {
+    /// Pairs trained on and held back, and those with a force label.
+    pub split: (usize, usize),
+    /// Pairs in the set, and of them with a force label.
+    pub pairs: usize,
+    /// Pairs with a force label.
+    pub with_force: usize,
+    /// Steps done and steps in the whole run (at most `max_epochs`).
+    pub steps: (usize, usize),
+    /// Most epochs.
+    pub max_epochs: usize,
+    /// Steps per epoch.
+    pub steps_per_epoch: usize,
+    /// The held-back scores of the starting network, once measured.
+    pub before: Option<HeldBackScores>,
+    /// The epochs done.
+    pub epochs: Vec<EpochReport>,
+    /// Pairs trained per second so far.
+    pub pairs_per_s: Option<f64>,
+    /// Seconds left if every epoch runs (early stopping may end it sooner).
+    pub seconds_left: Option<f64>,
+}
+
+/// An ended fine-tune.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TuningResult {
+    /// Pairs trained on and held back.
+    pub split: (usize, usize),
+    /// The starting network on the held-back pairs.
+    pub before: HeldBackScores,
+    /// The best epoch, if one improved on the held-back loss.
+    pub best: Option<EpochReport>,
+    /// Every epoch done.
+    pub epochs: Vec<EpochReport>,
+    /// Why it ended: `None` when the user stopped it.
+    pub reason: Option<FinishReason>,
+    /// The best epoch's weights file.
+    pub weights: Option<Rc<[u8]>>,
+}
+
+impl Studio {
+    /// Starts fine-tuning the loaded network on the page's labelled pairs with `settings`, in a
+    /// worker of its own; says why when it cannot.
+    pub fn start_tuning(&self, settings: FineTuneSettings) {
+        if matches!(self.tuning.get_untracked(), TuningState::Running(_)) {
+            return;
+        }
+        let ModelState::Ready(engine) = self.model.get_untracked() else {
+            self.error("Fine-tuning needs a loaded network");
+            return;
+        };
+        let set = match self
+            .workspace
+            .with_untracked(|ws| tuning_set(&ws.pairs, engine.input))
+        {
+            Ok(set) => set,
+            Err(why) => {
+                self.error(format!("Cannot fine-tune: {why}"));
+                return;
+            }
+        };
+        let worker = match ModuleWorker::spawn("hnet-tune", "the fine-tuning worker") {
+            Ok(worker) => Rc::new(worker),
+            Err(e) => {
+                self.error(format!("Cannot fine-tune: {}", with_causes(&e)));
+                return;
+            }
+        };
+        self.tuning_worker.set_value(Some(worker.clone()));
+        let studio = *self;
+        let (start_name, start_provenance) = (
+            engine.weights_name.clone(),
+            engine
+                .header
+                .as_ref()
+                .map(|h| h.provenance.clone())
+                .unwrap_or_default(),
+        );
+        self.tuning.set(TuningState::Running(TuningProgress {
+            split: (0, 0),
+            pairs: set.pairs,
+            with_force: set.with_force,
+            steps: (0, 0),
+            max_epochs: settings.max_epochs,
+            steps_per_epoch: 0,
+            before: None,
+            epochs: Vec::new(),
+            pairs_per_s: None,
+            seconds_left: None,
+        }));
+        leptos::task::spawn_local(async move {
+            let outcome = run(
+                studio,
+                &worker,
+                &engine.weights,
+                &start_name,
+                &start_provenance,
+                &set,
+                settings,
+            )
+            .await;
+            worker.stop("the fine-tune is over");
+            studio.tuning_worker.set_value(None);
+            match outcome {
+                Ok(result) => {
+                    let said = match (result.reason, &result.best) {
+                        (Some(FinishReason::Diverged), _) => {
+                            "Fine-tuning diverged (a loss was not finite) and stopped; the model in use is unchanged"
+                        }
+                        (None, _) => "Fine-tuning stopped",
+                        (_, None) => {
+                            "Fine-tuning ended without improving on the held-back pairs; the model in use is unchanged"
+                        }
+                        (_, Some(_)) => "Fine-tuning ended: keep or discard the result",
+                    };
+                    if result.reason == Some(FinishReason::Diverged) {
+                        studio.error(said);
+                    } else {
+                        studio.info(said);
+                    }
+                    studio.tuning.set(TuningState::Ended(result));
+                }
+                Err(e) => {
+                    studio.tuning.set(TuningState::Idle);
+                    studio.error(format!(
+                        "Fine-tuning failed: {}; the model in use is unchanged",
+                        with_causes(&e)
+                    ));
+                }
+            }
+        });
+    }
+
+    /// Stops the running fine-tune: its best epoch so far, if any, can still be kept.
+    pub fn stop_tuning(&self) {
+        if let Some(worker) = self.tuning_worker.get_value() {
+            worker.stop("stopped by the user");
+        }
+    }
+
+    /// Keeps the ended fine-tune's weights: stored in the browser, chosen, and loaded.
+    pub fn keep_tuned(&self) {
+        let TuningState::Ended(result) = self.tuning.get_untracked() else {
+            return;
+        };
+        let Some(bytes) = result.weights else {
+            return;
+        };
+        let studio = *self;
+        leptos::task::spawn_local(async move {
+            let kept = KeptWeights {
+                name: KEPT_NAME.to_string(),
+                bytes: bytes.to_vec(),
+                chosen: true,
+            };
+            match storage::save_kept_weights(&kept).await {
+                Ok(()) => {
+                    studio.kept.set(Some(Rc::new(kept)));
+                    studio.tuning.set(TuningState::Idle);
+                    load_model(
+                        studio,
+                        Some((bytes, KEPT_NAME.to_string(), WeightsOrigin::FineTuned)),
+                    );
+                }
+                // The result stays on the page (to retry or download); what was kept before
+                // is untouched.
+                Err(e) => studio.error(format!(
+                    "The fine-tuned weights could not be kept: {}",
+                    with_causes(&e)
+                )),
+            }
+        });
+    }
+
+    /// Discards the ended fine-tune.
+    pub fn discard_tuned(&self) {
+        self.tuning.set(TuningState::Idle);
+        self.info("Fine-tuned weights discarded; the model in use is unchanged");
+    }
+
+    /// Uses the kept fine-tuned weights (`true`) or the bundled ones, now and when the page
+    /// opens next.
+    pub fn choose_kept(&self, fine_tuned: bool) {
+        let Some(kept) = self.kept.get_untracked() else {
+            return;
+        };
+        let studio = *self;
+        load_model(
+            studio,
+            fine_tuned.then(|| {
+                (
+                    Rc::<[u8]>::from(kept.bytes.as_slice()),
+                    kept.name.clone(),
+                    WeightsOrigin::FineTuned,
+                )
+            }),
+        );
+        leptos::task::spawn_local(async move {
+            let chosen = KeptWeights {
+                chosen: fine_tuned,
+                ..(*kept).clone()
+            };
+            match storage::save_kept_weights(&chosen).await {
+                Ok(()) => studio.kept.set(Some(Rc::new(chosen))),
+                Err(e) => studio.error(format!(
+                    "The choice of weights could not be saved: {}",
+                    with_causes(&e)
+                )),
+            }
+        });
+    }
+}
+
+/// Runs the fine-tune in `worker` to its end (or until the worker is stopped), updating the
+/// page's progress; the best epoch's weights are fetched as soon as it is best, so that a
+/// stopped run keeps them.
+async fn run(
+    studio: Studio,
+    worker: &ModuleWorker,
+    weights: &[u8],
+    start_name: &str,
+    start_provenance: &std::collections::BTreeMap<String, String>,
+    set: &TuningSet,
+    settings: FineTuneSettings,
+) -> Result<TuningResult, ModuleWorkerError> {
+    let images = Uint8Array::from(set.images.as_slice());
+    let forces = Float32Array::from(set.forces.as_slice());
+    let settings_json = serde_json::to_string(&settings).unwrap_or_else(|_| "{}".into());
+    let args = Array::new();
+    for value in [
+        Uint8Array::from(weights).into(),
+        JsValue::from_str(start_name),
+        JsValue::from(WORK_SIZE as u32),
+        images.clone().into(),
+        forces.clone().into(),
+        JsValue::from_str(&settings_json),
+    ] {
+        args.push(&value);
+    }
+    let started: serde_json::Value = json_reply(
+        worker
+            .call(
+                "start",
+                &args,
+                &Array::of2(&images.buffer(), &forces.buffer()),
+            )
+            .await?,
+    );
+    let split = (
+        started["train"].as_u64().unwrap_or(0) as usize,
+        started["held_back"].as_u64().unwrap_or(0) as usize,
+    );
+    let steps_per_epoch = started["steps_per_epoch"].as_u64().unwrap_or(1) as usize;
+    let before: HeldBackScores = serde_json::from_value(started["before"].clone())
+        .map_err(|e| reply_error("start", &e.to_string()))?;
+    let total = steps_per_epoch * settings.max_epochs;
+    let update = |f: &dyn Fn(&mut TuningProgress)| {
+        studio.tuning.update(|state| {
+            if let TuningState::Running(progress) = state {
+                f(progress);
+            }
+        })
+    };
+    update(&|p| {
+        p.split = split;
+        p.steps = (0, total);
+        p.steps_per_epoch = steps_per_epoch;
+        p.before = Some(before);
+    });
+    let began = now_ms();
+    let (mut epochs, mut best, mut kept) = (Vec::<EpochReport>::new(), None, None);
+    let mut done = 0;
+    let reason = loop {
+        let reply = match worker.call("step", &Array::new(), &Array::new()).await {
+            Ok(reply) => reply,
+            // Stopped by the user: the best epoch so far stands.
+            Err(ModuleWorkerError::Stopped { why, .. }) if why == "stopped by the user" => {
+                break None;
+            }
+            Err(e) => return Err(e),
+        };
+        done += 1;
+        let report: Option<EpochReport> = serde_json::from_value(json_reply(reply))
+            .map_err(|e| reply_error("step", &e.to_string()))?;
+        let elapsed_s = (now_ms() - began) / 1000.0;
+        let in_epoch = (done % steps_per_epoch.max(1)) * settings.batch_size.max(1);
+        let trained = done / steps_per_epoch.max(1) * split.0 + in_epoch.min(split.0);
+        if let Some(report) = report {
+            epochs.push(report);
+            if report.best {
+                let provenance =
+                    kept_provenance(start_provenance, start_name, set, split.1, &before, &report);
+                let provenance = serde_json::to_string(&provenance).unwrap_or_default();
+                let bytes = worker
+                    .call(
+                        "best_weights",
+                        &Array::of1(&provenance.into()),
+                        &Array::new(),
+                    )
+                    .await?;
+                let bytes = Uint8Array::new(&bytes).to_vec();
+                if !bytes.is_empty() {
+                    kept = Some(Rc::<[u8]>::from(bytes));
+                    best = Some(report);
+                }
+            }
+            if report.finished {
+                break report.finished_because;
+            }
+        }
+        let epochs_now = epochs.clone();
+        update(&move |p| {
+            p.steps = (done, total);
+            p.epochs = epochs_now.clone();
+            p.pairs_per_s = Some(trained as f64 / elapsed_s.max(1e-3));
+            p.seconds_left = seconds_left(elapsed_s, done, total);
+        });
+    };
+    Ok(TuningResult {
+        split,
+        before,
+        best,
+        epochs,
+        reason,
+        weights: kept,
+    })
+}
+
+/// A worker's JSON reply, parsed (`null` when it is not JSON text).
+fn json_reply(reply: JsValue) -> serde_json::Value {
+    reply
+        .as_string()
+        .and_then(|text| serde_json::from_str(&text).ok())
+        .unwrap_or(serde_json::Value::Null)
+}
+
+fn reply_error(call: &'static str, what: &str) -> ModuleWorkerError {
+    ModuleWorkerError::Call {
+        worker: "the fine-tuning worker",
+        call,
+        cause: crate::browser::JsError::missing(&format!("an unreadable reply ({what})")),
+    }
+}
