@@ -6,8 +6,10 @@
 use std::collections::BTreeMap;
 
 use hnet_model::fine_tune::{EpochReport, HeldBackScores};
+use hnet_twin::carm::{Biplane, CArm};
 use hnet_twin::label_origin::LabelFilter;
-use hnet_twin::model_facts::FACTS_KEY;
+use hnet_twin::model_facts::{FineTuneRecord, ForceDomain, fine_tuned_provenance};
+use hnet_twin::scene::{Backgrounds, TwinConfig, TwinError, generate};
 use hnet_units::ImageSize;
 
 use crate::imaging::WORK_SIZE;
@@ -98,9 +100,8 @@ pub fn tuning_set(pairs: &[LabeledPair], input: ImageSize) -> Result<TuningSet, 
     Ok(set)
 }
 
-/// The kept weights' provenance: the starting file's, without its recorded force errors and
-/// calibration (they were measured on the network before it was fine-tuned, and no longer
-/// hold), with where it came from and how it did on the held-back pairs.
+/// The kept weights' provenance ([`fine_tuned_provenance`]): where they came from and how
+/// they did on the held-back pairs.
 pub fn kept_provenance(
     start: &BTreeMap<String, String>,
     start_name: &str,
@@ -109,32 +110,75 @@ pub fn kept_provenance(
     before: &HeldBackScores,
     best: &EpochReport,
 ) -> BTreeMap<String, String> {
-    let mut provenance: BTreeMap<String, String> = start
-        .iter()
-        .filter(|(key, _)| key.as_str() != FACTS_KEY)
-        .map(|(k, v)| (k.clone(), v.clone()))
-        .collect();
-    let scores = |s: &HeldBackScores| match s.force_mae_n {
-        Some(mae) => format!("catheter IoU {:.3}, force MAE {mae:.3} N", s.catheter_iou),
-        None => format!("catheter IoU {:.3}", s.catheter_iou),
-    };
-    provenance.insert(
-        "command".into(),
-        format!("H-Net Studio page: Fine-tune on my pairs, from {start_name}"),
-    );
-    provenance.insert("fine_tuned_from".into(), start_name.to_string());
-    provenance.insert(
-        "fine_tuned_on".into(),
-        format!(
-            "{} labelled pairs in the page ({} with a force label), {held_back} of them held back",
-            set.pairs, set.with_force
-        ),
-    );
-    provenance.insert("fine_tune_best_epoch".into(), best.epoch.to_string());
-    provenance.insert("held_back_before".into(), scores(before));
-    provenance.insert("held_back_after".into(), scores(&best.held_back));
-    provenance
+    let command = format!("H-Net Studio page: Fine-tune on my pairs, from {start_name}");
+    fine_tuned_provenance(
+        start,
+        FineTuneRecord {
+            command: &command,
+            from: start_name,
+            on: format!(
+                "{} labelled pairs in the page ({} with a force label), {held_back} of them held back",
+                set.pairs, set.with_force
+            ),
+            best_epoch: best.epoch,
+            before: before.to_string(),
+            after: best.held_back.to_string(),
+        },
+    )
 }
+
+/// Reference pairs scored beside the held-back ones.
+pub const REFERENCE_PAIRS: usize = 4;
+
+/// `count` twin pairs drawn from the domain the weights' force was trained on (their facts'
+/// [`ForceDomain`]: modality, scene ranges, C-arm angles, phantom backgrounds), with the twin's
+/// exact masks and true force: what fine-tuning costs there shows on them. `None` when the
+/// domain was not the twin's phantom bench (radiograph backgrounds, which the page does not
+/// hold, or the paper's bench, whose masks and X-rays are made another way).
+pub fn reference_set(domain: &ForceDomain, count: usize) -> Option<Result<TuningSet, TwinError>> {
+    if !domain.phantom_backgrounds || domain.scenes.plate.is_some() {
+        return None;
+    }
+    let mut config = TwinConfig::new(domain.modality, WORK_SIZE);
+    config.scene = domain.scenes.clone();
+    let view = |deg: [f64; 2]| {
+        if domain.modality.is_xray() {
+            CArm::cardiac(deg[0], deg[1], WORK_SIZE)
+        } else {
+            CArm::bench_camera(deg[0], deg[1], WORK_SIZE)
+        }
+    };
+    config.views = Biplane {
+        a: view(domain.views_deg[0]),
+        b: view(domain.views_deg[1]),
+    };
+    let backgrounds = Backgrounds::phantom(&config.views);
+    let mut set = TuningSet {
+        images: Vec::new(),
+        forces: Vec::new(),
+        pairs: count,
+        with_force: count,
+        left_out: 0,
+    };
+    for index in 0..count as u64 {
+        let sample = match generate(&config, &backgrounds, REFERENCE_SEED, index) {
+            Ok(sample) => sample,
+            Err(e) => return Some(Err(e)),
+        };
+        let [a, b] = &sample.views;
+        set.images.extend(a.pixels.to_rgb());
+        set.images.extend(b.pixels.to_rgb());
+        set.images.extend_from_slice(&a.mask);
+        set.images.extend_from_slice(&b.mask);
+        let f = sample.params.tip_force_n;
+        set.forces
+            .extend([f.x() as f32, f.y() as f32, f.z() as f32]);
+    }
+    Some(Ok(set))
+}
+
+/// The reference pairs' seed: the same pairs for every fine-tune.
+const REFERENCE_SEED: u64 = 0x5EF_E4E4CE;
 
 /// Seconds left, from `elapsed_s` for `done` of `total` steps (`None` before the first).
 pub fn seconds_left(elapsed_s: f64, done: usize, total: usize) -> Option<f64> {
@@ -146,6 +190,7 @@ mod tests {
     use super::*;
     use crate::workspace::{PairSource, View};
     use hnet_twin::label_origin::LabelOrigin;
+    use hnet_twin::model_facts::FACTS_KEY;
 
     fn pair(id: &str, painted: bool, force: Option<([f32; 3], LabelOrigin)>) -> LabeledPair {
         let rgb = vec![40u8; WORK_SIZE * WORK_SIZE * 3];
@@ -216,6 +261,23 @@ mod tests {
     }
 
     #[test]
+    fn reference_pairs_come_from_the_weights_own_twin_domain() {
+        let domain = ForceDomain {
+            data: "bench".into(),
+            modality: hnet_twin::scene::Modality::Xray2,
+            scenes: hnet_twin::scene::SceneSampling::bench(),
+            views_deg: [[0.0, 0.0], [90.0, 0.0]],
+            phantom_backgrounds: true,
+        };
+        let set = reference_set(&domain, 2).unwrap().unwrap();
+        assert_eq!(set.images.len(), 2 * WORK_SIZE * WORK_SIZE * 8);
+        assert!(set.forces.iter().all(|f| f.is_finite()));
+        // A mask holds the catheter.
+        let mask_a = &set.images[2 * WORK_SIZE * WORK_SIZE * 3..][..WORK_SIZE * WORK_SIZE];
+        assert!(mask_a.iter().filter(|&&m| m >= 128).count() > 50);
+    }
+
+    #[test]
     fn kept_weights_drop_the_measured_errors_and_say_where_they_came_from() {
         let start = BTreeMap::from([
             ("command".to_string(), "hnet train …".to_string()),
@@ -238,6 +300,7 @@ mod tests {
             epoch: 3,
             train_loss: 0.1,
             held_back: scores(0.9),
+            reference: None,
             best: true,
             finished: true,
             finished_because: None,

@@ -6,7 +6,7 @@ use hnet_twin::carm::{Biplane, CArm};
 use hnet_twin::raster::{GreyImage, Rect};
 use hnet_twin::rod;
 use hnet_twin::scene::{
-    Modality, PAPER_BENCH, SceneParams, SceneSampling, TwinConfig, ViewPixels, render_view,
+    Modality, PAPER_BENCH, SceneParams, SceneSampling, TwinConfig, render_view,
 };
 use hnet_twin::sensor_plate::{self, ContactError, ContactState, PlateContact};
 use hnet_twin::synthetic_xray::{Anatomy, BackgroundSource, PatchLayout, PatchRule, compose};
@@ -158,10 +158,6 @@ impl TwinControls {
                 .then_some((&background.source, layout));
             views.push(render_view(&config, &shape, view, bg, &mut rng));
         }
-        let rgb = |p: &ViewPixels| match p {
-            ViewPixels::Grey(g) => g.iter().flat_map(|&v| [v, v, v]).collect(),
-            ViewPixels::Rgb(c) => c.clone(),
-        };
         let mut settings = serde_json::json!({
             "modality": self.modality.name(),
             "scene": scene,
@@ -184,8 +180,8 @@ impl TwinControls {
                 views: config.views,
                 settings,
             },
-            rgb(&views[0].pixels),
-            rgb(&views[1].pixels),
+            views[0].pixels.to_rgb(),
+            views[1].pixels.to_rgb(),
         );
         // The twin knows the exact masks and force: they are the labels.
         let binary = |m: &[u8]| m.iter().map(|&m| if m >= 128 { 255 } else { 0 }).collect();

@@ -884,6 +884,8 @@ test("fine-tune on my pairs: refused without labelled pairs, a one-epoch run wit
     assert.equal(rows[0][0], "Catheter IoU");
     assert.match(rows[0][1], /^\d\.\d{3}$/);
     assert.match(await page.textContent("#tune-table caption"), /^On the 1 held-back pairs/);
+    // Beside them, twin pairs of the bundled weights' own domain, never trained on.
+    assert.match(await page.textContent("#tune-reference"), /^On 4 twin pairs of the weights' own domain: catheter IoU \d\.\d{3} before, \d\.\d{3} after/);
     // A one-epoch run improves on nothing before it: its only epoch is the best one.
     assert.match(rows[0][2], /^\d\.\d{3}$/);
     await page.click("#tune-keep");

@@ -145,6 +145,25 @@ fn ended(studio: Studio, r: TuningResult) -> impl IntoView {
                 {row("Loss", |s| Some(format!("{:.4}", s.loss)))}
             </tbody>
         </table>
+        {match (r.before_reference, r.best.and_then(|b| b.reference)) {
+            (Some(before), after) => view! {
+                <p id="tune-reference" class="hint" title="Twin pairs drawn from the data the \
+                    weights were trained on (their recorded domain), never trained on: what \
+                    fine-tuning costs there">
+                    {format!(
+                        "On {} twin pairs of the weights' own domain: catheter IoU {:.3} before, {} after",
+                        before.pairs,
+                        before.catheter_iou,
+                        after.map_or("–".to_string(), |a| format!("{:.3}", a.catheter_iou)),
+                    )}
+                </p>
+            }.into_any(),
+            (None, _) => view! {
+                <p id="tune-reference" class="hint">
+                    "The weights record no twin domain of their own: what fine-tuning costs there is not measured here."
+                </p>
+            }.into_any(),
+        }}
         <div class="tune-actions">
             <button id="tune-keep" disabled=!keepable on:click=move |_| studio.keep_tuned()>
                 "Keep and use"

@@ -14,10 +14,13 @@ use super::{ModelState, Studio, load_model};
 use crate::browser::now_ms;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
-use crate::fine_tune::{TuningSet, kept_provenance, seconds_left, tuning_set};
+use crate::fine_tune::{
+    REFERENCE_PAIRS, TuningSet, kept_provenance, reference_set, seconds_left, tuning_set,
+};
 use crate::imaging::WORK_SIZE;
 use crate::module_worker::{ModuleWorker, ModuleWorkerError};
 use crate::storage::{self, KeptWeights};
+use hnet_twin::model_facts::ModelFacts;
 
 /// The kept weights' file name.
 pub const KEPT_NAME: &str = "hnet-fine-tuned.bpk";
@@ -66,6 +69,8 @@ pub struct TuningResult {
     pub split: (usize, usize),
     /// The starting network on the held-back pairs.
     pub before: HeldBackScores,
+    /// And on the reference twin pairs of the weights' own domain, when it is known.
+    pub before_reference: Option<HeldBackScores>,
     /// The best epoch, if one improved on the held-back loss.
     pub best: Option<EpochReport>,
     /// Every epoch done.
@@ -97,6 +102,23 @@ impl Studio {
                 return;
             }
         };
+        // Twin pairs of the weights' own domain, scored beside the held-back pairs.
+        let domain = engine
+            .header
+            .as_ref()
+            .and_then(|h| ModelFacts::read(&h.provenance).ok())
+            .and_then(|facts| facts.force_domain);
+        let reference = match domain
+            .as_ref()
+            .and_then(|d| reference_set(d, REFERENCE_PAIRS))
+        {
+            Some(Ok(set)) => Some(set),
+            Some(Err(e)) => {
+                self.error(format!("Cannot fine-tune: the reference twin pairs: {e}"));
+                return;
+            }
+            None => None,
+        };
         let worker = match ModuleWorker::spawn("hnet-tune", "the fine-tuning worker") {
             Ok(worker) => Rc::new(worker),
             Err(e) => {
@@ -127,16 +149,15 @@ impl Studio {
             seconds_left: None,
         }));
         leptos::task::spawn_local(async move {
-            let outcome = run(
-                studio,
-                &worker,
-                &engine.weights,
-                &start_name,
-                &start_provenance,
-                &set,
+            let start = TuningStart {
+                weights: &engine.weights,
+                name: &start_name,
+                provenance: &start_provenance,
+                set: &set,
+                reference: reference.as_ref(),
                 settings,
-            )
-            .await;
+            };
+            let outcome = run(studio, &worker, &start).await;
             worker.stop("the fine-tune is over");
             studio.tuning_worker.set_value(None);
             match outcome {
@@ -249,20 +270,40 @@ impl Studio {
     }
 }
 
+/// What a fine-tune starts from.
+#[derive(Clone, Copy)]
+struct TuningStart<'a> {
+    /// The weights file, its name and its provenance.
+    weights: &'a [u8],
+    name: &'a str,
+    provenance: &'a std::collections::BTreeMap<String, String>,
+    /// The pairs it learns from.
+    set: &'a TuningSet,
+    /// Twin pairs of the weights' own domain, scored only.
+    reference: Option<&'a TuningSet>,
+    settings: FineTuneSettings,
+}
+
 /// Runs the fine-tune in `worker` to its end (or until the worker is stopped), updating the
 /// page's progress; the best epoch's weights are fetched as soon as it is best, so that a
 /// stopped run keeps them.
 async fn run(
     studio: Studio,
     worker: &ModuleWorker,
-    weights: &[u8],
-    start_name: &str,
-    start_provenance: &std::collections::BTreeMap<String, String>,
-    set: &TuningSet,
-    settings: FineTuneSettings,
+    start: &TuningStart<'_>,
 ) -> Result<TuningResult, ModuleWorkerError> {
+    let TuningStart {
+        weights,
+        name: start_name,
+        provenance: start_provenance,
+        set,
+        reference,
+        settings,
+    } = *start;
     let images = Uint8Array::from(set.images.as_slice());
     let forces = Float32Array::from(set.forces.as_slice());
+    let reference_images = Uint8Array::from(reference.map_or(&[][..], |r| &r.images[..]));
+    let reference_forces = Float32Array::from(reference.map_or(&[][..], |r| &r.forces[..]));
     let settings_json = serde_json::to_string(&settings).unwrap_or_else(|_| "{}".into());
     let args = Array::new();
     for value in [
@@ -271,9 +312,18 @@ async fn run(
         JsValue::from(WORK_SIZE as u32),
         images.clone().into(),
         forces.clone().into(),
+        reference_images.clone().into(),
+        reference_forces.clone().into(),
         JsValue::from_str(&settings_json),
     ] {
         args.push(&value);
+    }
+    let transfer = Array::new();
+    for buffer in [&images, &reference_images] {
+        transfer.push(&buffer.buffer());
+    }
+    for buffer in [&forces, &reference_forces] {
+        transfer.push(&buffer.buffer());
     }
     let started: serde_json::Value = json_reply(
         worker
@@ -291,6 +341,9 @@ async fn run(
     let steps_per_epoch = started["steps_per_epoch"].as_u64().unwrap_or(1) as usize;
     let before: HeldBackScores = serde_json::from_value(started["before"].clone())
         .map_err(|e| reply_error("start", &e.to_string()))?;
+    let before_reference: Option<HeldBackScores> =
+        serde_json::from_value(started["before_reference"].clone())
+            .map_err(|e| reply_error("start", &e.to_string()))?;
     let total = steps_per_epoch * settings.max_epochs;
     let update = |f: &dyn Fn(&mut TuningProgress)| {
         studio.tuning.update(|state| {
@@ -357,6 +410,7 @@ async fn run(
     Ok(TuningResult {
         split,
         before,
+        before_reference,
         best,
         epochs,
         reason,

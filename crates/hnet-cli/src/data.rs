@@ -13,7 +13,7 @@ use std::sync::Arc;
 use anyhow::Context;
 use burn::data::dataloader::batcher::Batcher;
 use burn::data::dataset::{Dataset as BurnDataset, DatasetError};
-use burn::tensor::{Device, Tensor};
+use burn::tensor::Device;
 use hnet_model::training::{LabelledPair, TrainingBatch};
 use hnet_twin::dataset::{Dataset, LoadedPair, ManifestRow, Split, SquareSymmetry};
 use hnet_twin::label_origin::LabelFilter;
@@ -239,6 +239,7 @@ impl Batcher<StereoItem, TrainingBatch> for StereoBatcher {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use burn::tensor::Tensor;
     use hnet_twin::dataset::{DatasetHeader, DatasetWriter, ImageRef, sample_files};
 
     /// A non-square dataset (48 wide, 32 high) with one marked pixel reaches the network's

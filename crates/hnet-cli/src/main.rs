@@ -13,6 +13,7 @@ mod config;
 mod contact_sheet;
 mod data;
 mod evaluation;
+mod fine_tune;
 mod import;
 mod import_dicom;
 mod info;
@@ -50,6 +51,9 @@ enum Command {
     Import(import::ImportArgs),
     /// Train H-Net (or a baseline) on a dataset.
     Train(training::TrainArgs),
+    /// Fine-tune weights on a few pairs the way the page does (encoders frozen, every fifth
+    /// pair held back): the page's "Fine-tune on my pairs", natively.
+    FineTune(fine_tune::FineTuneArgs),
     /// The paper's Tables I and II for a trained run on a dataset split.
     Eval(evaluation::EvalArgs),
     /// The paper's figures (SVG and PNG) for a trained run.
@@ -78,6 +82,7 @@ fn main() -> ExitCode {
         Command::Import(args) if args.is_dicom() => import_dicom::run(&args),
         Command::Import(args) => import::run(&args),
         Command::Train(args) => training::run(&args),
+        Command::FineTune(args) => fine_tune::run(&args),
         Command::Eval(args) => evaluation::run(&args),
         Command::Report(args) => report::run(&args),
         Command::ContactSheet(args) => contact_sheet::run(&args),

@@ -136,6 +136,18 @@ pub struct HeldBackScores {
     pub force_pairs: usize,
 }
 
+impl core::fmt::Display for HeldBackScores {
+    /// `catheter IoU 0.912, force MAE 0.031 N`: what the page's table and the weights' provenance
+    /// say.
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "catheter IoU {:.3}", self.catheter_iou)?;
+        if let Some(mae) = self.force_mae_n {
+            write!(f, ", force MAE {mae:.3} N")?;
+        }
+        Ok(())
+    }
+}
+
 /// What one epoch did.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EpochReport {
@@ -145,6 +157,9 @@ pub struct EpochReport {
     pub train_loss: f64,
     /// The held-back pairs after it.
     pub held_back: HeldBackScores,
+    /// The reference pairs after it ([`FineTune::with_reference`]), when there are some.
+    #[serde(default)]
+    pub reference: Option<HeldBackScores>,
     /// Whether it is the best epoch so far (lowest held-back loss): its weights are the result.
     pub best: bool,
     /// Whether the run is over: patience spent, the last epoch done, or a loss not finite.

@@ -439,8 +439,12 @@ fn fine_tuning_scores_held_back_pairs_and_keeps_the_best_epoch() {
         hold_back_every: 3,
         ..FineTuneSettings::default()
     };
-    let mut run = FineTune::new(&weights, "small.bpk", pairs.clone(), settings, &device).unwrap();
+    let mut run = FineTune::new(&weights, "small.bpk", pairs.clone(), settings, &device)
+        .unwrap()
+        .with_reference(vec![pair(7, Some([0.0, 0.1, 0.0]))])
+        .unwrap();
     assert_eq!(run.split(), (4, 2));
+    assert_eq!(run.score_reference().unwrap().unwrap().pairs, 1);
     let before = run.score().unwrap();
     assert_eq!((before.pairs, before.force_pairs), (2, 1));
     assert!(before.loss.is_finite() && before.force_mae_n.is_some());
@@ -456,6 +460,11 @@ fn fine_tuning_scores_held_back_pairs_and_keeps_the_best_epoch() {
         Some(FinishReason::LastEpoch)
     );
     assert!(reports.iter().any(|r| r.best));
+    assert!(
+        reports
+            .iter()
+            .all(|r| r.reference.is_some_and(|s| s.force_pairs == 1))
+    );
     let kept = run
         .best_weights(&BTreeMap::new())
         .unwrap()

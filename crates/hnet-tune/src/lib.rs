@@ -36,28 +36,59 @@ fn json<T: serde::Serialize>(value: &T) -> Result<String, JsError> {
 }
 
 /// Starts a fine-tune of the weights file `weights` (`name` names it in errors) on the pairs in
-/// `images` and `forces`, with the settings in `settings_json` ([`FineTuneSettings`]; fields
-/// left out keep their defaults).
+/// `images` and `forces`, scoring the reference pairs in `reference_images` and
+/// `reference_forces` after every epoch without training on them, with the settings in
+/// `settings_json` ([`FineTuneSettings`]; fields left out keep their defaults).
 ///
 /// `images` holds each pair in turn at `side`×`side` pixels: view A and view B as 8-bit RGB,
 /// then mask A and mask B (255 catheter). `forces` holds each pair's force label
 /// `(Fx, Fy, Fz)` in newtons, NaN for a pair that trains its masks only.
 ///
 /// Returns, as JSON, the split (`train`, `held_back`), `steps_per_epoch` and the starting
-/// network's scores on the held-back pairs (`before`).
+/// network's scores on the held-back pairs (`before`) and the reference pairs
+/// (`before_reference`, `null` without any).
 #[wasm_bindgen]
+#[allow(clippy::too_many_arguments)]
 pub fn start(
     weights: &[u8],
     name: &str,
     side: u32,
     images: &[u8],
     forces: &[f32],
+    reference_images: &[u8],
+    reference_forces: &[f32],
     settings_json: &str,
 ) -> Result<String, JsError> {
     console_error_panic_hook::set_once();
     let settings: FineTuneSettings = serde_json::from_str(settings_json)
         .map_err(|e| JsError::new(&format!("the fine-tune settings are not readable: {e}")))?;
     let side = side as usize;
+    let pairs = unpack(side, images, forces, "pairs")?;
+    let reference = unpack(side, reference_images, reference_forces, "reference pairs")?;
+    let run = FineTune::new(weights, name, pairs, settings, &Device::flex())
+        .and_then(|run| run.with_reference(reference))
+        .map_err(|e| js_error(&e))?;
+    let before = run.score().map_err(|e| js_error(&e))?;
+    let before_reference = run.score_reference().map_err(|e| js_error(&e))?;
+    let (train, held_back) = run.split();
+    let reply = serde_json::json!({
+        "train": train,
+        "held_back": held_back,
+        "steps_per_epoch": run.steps_per_epoch(),
+        "before": before,
+        "before_reference": before_reference,
+    });
+    RUN.set(Some(run));
+    json(&reply)
+}
+
+/// The pairs packed in `images` and `forces` ([`start`]'s layout); `what` names them in errors.
+fn unpack(
+    side: usize,
+    images: &[u8],
+    forces: &[f32],
+    what: &str,
+) -> Result<Vec<TrainingPair>, JsError> {
     let (rgb, grey) = (side * side * 3, side * side);
     let per_pair = 2 * rgb + 2 * grey;
     if per_pair == 0
@@ -65,12 +96,12 @@ pub fn start(
         || images.len() / per_pair * 3 != forces.len()
     {
         return Err(JsError::new(&format!(
-            "the pairs sent are not whole {side}×{side} pairs: {} image bytes, {} force values",
+            "the {what} sent are not whole {side}×{side} pairs: {} image bytes, {} force values",
             images.len(),
             forces.len()
         )));
     }
-    let pairs = images
+    Ok(images
         .chunks_exact(per_pair)
         .zip(forces.chunks_exact(3))
         .map(|(bytes, force)| {
@@ -88,19 +119,7 @@ pub fn start(
                     .then(|| [force[0], force[1], force[2]]),
             }
         })
-        .collect();
-    let run =
-        FineTune::new(weights, name, pairs, settings, &Device::flex()).map_err(|e| js_error(&e))?;
-    let before = run.score().map_err(|e| js_error(&e))?;
-    let (train, held_back) = run.split();
-    let reply = serde_json::json!({
-        "train": train,
-        "held_back": held_back,
-        "steps_per_epoch": run.steps_per_epoch(),
-        "before": before,
-    });
-    RUN.set(Some(run));
-    json(&reply)
+        .collect())
 }
 
 /// One training step. Returns, as JSON, the epoch's report when the step ended an epoch

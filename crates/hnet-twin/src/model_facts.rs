@@ -205,3 +205,46 @@ mod tests {
         assert!(error.to_string().contains("`facts`"), "{error}");
     }
 }
+
+/// What a fine-tune adds to the provenance of the weights it writes (the page's "Fine-tune on
+/// my pairs" and `hnet fine-tune`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FineTuneRecord<'a> {
+    /// How it was made (the command line, or the page's button).
+    pub command: &'a str,
+    /// The weights file it started from.
+    pub from: &'a str,
+    /// The pairs it learned from, in words.
+    pub on: String,
+    /// Its best epoch, from 1.
+    pub best_epoch: usize,
+    /// The starting network on the held-back pairs, in words.
+    pub before: String,
+    /// The best epoch's network on them.
+    pub after: String,
+}
+
+/// The provenance of fine-tuned weights: the starting file's, without its [`FACTS_KEY`] entry
+/// (its force errors and calibration were measured on the network before it was fine-tuned and
+/// no longer hold: `hnet eval --record` measures the new one), with the fine-tune's own entries.
+pub fn fine_tuned_provenance(
+    start: &BTreeMap<String, String>,
+    record: FineTuneRecord<'_>,
+) -> BTreeMap<String, String> {
+    let mut provenance: BTreeMap<String, String> = start
+        .iter()
+        .filter(|(key, _)| key.as_str() != FACTS_KEY)
+        .map(|(k, v)| (k.clone(), v.clone()))
+        .collect();
+    for (key, value) in [
+        ("command", record.command.to_string()),
+        ("fine_tuned_from", record.from.to_string()),
+        ("fine_tuned_on", record.on),
+        ("fine_tune_best_epoch", record.best_epoch.to_string()),
+        ("held_back_before", record.before),
+        ("held_back_after", record.after),
+    ] {
+        provenance.insert(key.to_string(), value);
+    }
+    provenance
+}

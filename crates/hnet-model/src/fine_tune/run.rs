@@ -28,6 +28,9 @@ pub struct FineTune {
     optimizer: ModuleOptimizer,
     settings: FineTuneSettings,
     pairs: Vec<TrainingPair>,
+    /// Pairs scored after every epoch and never trained on: the domain the starting network
+    /// was trained on, to show what fine-tuning costs there.
+    reference: Vec<TrainingPair>,
     train: Vec<usize>,
     held_back: Vec<usize>,
     /// The autodiff device trained on, and the plain one scored on.
@@ -103,6 +106,7 @@ impl FineTune {
             optimizer: RmsPropSettings::default().init(),
             settings,
             pairs,
+            reference: Vec::new(),
             train,
             held_back,
             device,
@@ -115,6 +119,36 @@ impl FineTune {
             finished: None,
             rng: settings.seed ^ 0x9E37_79B9_7F4A_7C15,
         })
+    }
+
+    /// Scores `pairs` after every epoch too, never training on them: pairs of the domain the
+    /// starting network was trained on (the page renders them with the twin), so that what
+    /// fine-tuning costs there shows beside what it gains on the user's pairs.
+    pub fn with_reference(mut self, pairs: Vec<TrainingPair>) -> Result<Self, FineTuneError> {
+        for (index, pair) in pairs.iter().enumerate() {
+            TrainingBatch::of(&[pair.labelled()], self.size, &self.plain).map_err(|cause| {
+                FineTuneError::OtherSize {
+                    size: self.size,
+                    cause: InputSizeError {
+                        pair: index,
+                        ..cause
+                    },
+                }
+            })?;
+        }
+        self.reference = pairs;
+        Ok(self)
+    }
+
+    /// The current network's scores on the reference pairs, when there are some.
+    pub fn score_reference(&self) -> Result<Option<HeldBackScores>, FineTuneError> {
+        if self.reference.is_empty() {
+            return Ok(None);
+        }
+        let net = self.net.valid();
+        let all: Vec<usize> = (0..self.reference.len()).collect();
+        let at = (&self.reference[..], self.size, &self.plain);
+        score(&net, self.spec.input(), &self.loss, at, &all).map(Some)
     }
 
     /// The network's input size.
@@ -188,6 +222,7 @@ impl FineTune {
         let (steps, sum) = core::mem::replace(&mut self.in_epoch, (0, 0.0));
         let train_loss = sum / steps.max(1) as f64;
         let held_back = self.score()?;
+        let reference = self.score_reference()?;
         let improved = diverged.is_none()
             && held_back.loss.is_finite()
             && self
@@ -214,6 +249,7 @@ impl FineTune {
             epoch: self.epoch,
             train_loss,
             held_back,
+            reference,
             best: improved,
             finished: finished.is_some(),
             finished_because: finished,

@@ -167,6 +167,15 @@ impl ViewPixels {
             ViewPixels::Grey(b) | ViewPixels::Rgb(b) => b,
         }
     }
+
+    /// The pixels as 8-bit RGB, row-major (a grey value in all three channels): what H-Net
+    /// reads.
+    pub fn to_rgb(&self) -> Vec<u8> {
+        match self {
+            ViewPixels::Grey(g) => g.iter().flat_map(|&v| [v, v, v]).collect(),
+            ViewPixels::Rgb(c) => c.clone(),
+        }
+    }
 }
 
 /// One rendered view of a sample.
