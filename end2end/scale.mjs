@@ -27,7 +27,7 @@ try {
   await page.waitForTimeout(1000);
   const written = await page.evaluate(async (n) => {
     const db = await new Promise((ok) => {
-      const r = indexedDB.open("hnet-studio", 1);
+      const r = indexedDB.open("hnet-studio");
       r.onsuccess = () => ok(r.result);
     });
     const keys = await new Promise((ok) => {
@@ -118,7 +118,7 @@ try {
   // Leave the profile as it was (it is a fresh temporary one anyway).
   await page.evaluate(async () => {
     const db = await new Promise((ok) => {
-      const r = indexedDB.open("hnet-studio", 1);
+      const r = indexedDB.open("hnet-studio");
       r.onsuccess = () => ok(r.result);
     });
     const t = db.transaction("pairs", "readwrite");

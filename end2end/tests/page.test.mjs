@@ -320,7 +320,7 @@ test("bad input gets a clear message and loses nothing", async () => {
   const storedKeys = () =>
     page.evaluate(async () => {
       const db = await new Promise((ok, fail) => {
-        const r = indexedDB.open("hnet-studio", 1);
+        const r = indexedDB.open("hnet-studio");
         r.onsuccess = () => ok(r.result);
         r.onerror = () => fail(r.error);
       });
@@ -728,7 +728,7 @@ test("storage faults: an older record loads, a damaged or newer one is named whi
   const stored = () =>
     page.evaluate(async () => {
       const db = await new Promise((ok, fail) => {
-        const r = indexedDB.open("hnet-studio", 1);
+        const r = indexedDB.open("hnet-studio");
         r.onsuccess = () => ok(r.result);
         r.onerror = () => fail(r.error);
       });
@@ -751,7 +751,7 @@ test("storage faults: an older record loads, a damaged or newer one is named whi
   // a damaged one (no images).
   await page.evaluate(async (mine) => {
     const db = await new Promise((ok) => {
-      const r = indexedDB.open("hnet-studio", 1);
+      const r = indexedDB.open("hnet-studio");
       r.onsuccess = () => ok(r.result);
     });
     const record = await new Promise((ok) => {
@@ -836,7 +836,7 @@ test("storage faults: an older record loads, a damaged or newer one is named whi
   // Later tests share this profile: the records made here go.
   await page.evaluate(async () => {
     const db = await new Promise((ok) => {
-      const r = indexedDB.open("hnet-studio", 1);
+      const r = indexedDB.open("hnet-studio");
       r.onsuccess = () => ok(r.result);
     });
     const t = db.transaction("pairs", "readwrite");
