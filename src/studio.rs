@@ -345,6 +345,14 @@ impl Studio {
         self.draft.with(Option::is_some)
     }
 
+    /// Whether the pair on screen is an upload not kept yet.
+    pub fn showing_upload_draft(&self) -> bool {
+        self.draft.with(|d| {
+            d.as_ref()
+                .is_some_and(|p| matches!(p.source, crate::workspace::PairSource::Upload { .. }))
+        })
+    }
+
     /// Whether the pair on screen is an unsaved frame of the DICOM cine.
     pub fn showing_cine_frame(&self) -> bool {
         self.draft.with(|d| {
@@ -401,16 +409,13 @@ impl Studio {
         });
     }
 
-    /// Adds a pair to the workspace, shows it, saves it and runs H-Net on it.
-    pub fn add_pair(&self, pair: LabeledPair) {
-        let id = pair.id.clone();
-        self.draft.set(None);
-        self.workspace.update(|ws| ws.add(pair));
-        self.persist(Some(id));
+    /// Shows `pair` as the draft (an upload not kept yet) and runs H-Net on it.
+    pub fn show_draft(&self, pair: LabeledPair) {
+        self.replace_draft(Some(pair));
         self.run_model();
     }
 
-    /// Keeps the live twin's draft as a workspace pair.
+    /// Keeps the draft (the live twin's pair, a cine frame or an upload) as a workspace pair.
     pub fn keep_draft(&self) {
         let Some(mut pair) = self.draft.get_untracked() else {
             return;

@@ -71,7 +71,9 @@ test("load a pair, run H-Net, paint, undo, reload with labels kept, export the d
   const { page, errors } = await openPage(context, server.url);
   await waitForModel(page);
   await page.setInputFiles("#file-pair", [join(files, "frame_b.png"), join(files, "frame_a.png")]);
-  await page.waitForSelector('#pairs li[data-id="pair-0001"]');
+  // An upload is a draft until it is labelled or kept: images only looked at never fill the list.
+  await page.waitForFunction(() => /^Your pair \(not kept yet/.test(document.querySelector(".draft-note")?.textContent));
+  assert.equal(await page.locator("#pairs li[data-id]").count(), 0);
   // H-Net runs on the new pair: masks on both views and the force with its band.
   await page.waitForSelector("#force-verdict", { timeout: 120_000 });
   // Real images are not what the bundled weights' error was measured on: no verdict.
@@ -100,6 +102,9 @@ test("load a pair, run H-Net, paint, undo, reload with labels kept, export the d
   await page.click("#upload-geometry-apply");
   await page.waitForFunction(() => /as stated/.test(document.querySelector("#upload-geometry summary")?.textContent));
   assert.match(await page.textContent("#notice"), /C-arm geometry stated/);
+  // Stating its C-arms labels the pair: it joins the list.
+  await page.waitForSelector('#pairs li[data-id="pair-0001"]');
+  assert.equal(await page.$(".draft-note"), null);
 
   // Paint a stroke with the brush, then undo it.
   await page.click("#tool-brush");
@@ -186,13 +191,14 @@ test("labels you can build on: one painted view is not complete, an empty view i
   const ids = () => page.locator("#pairs li[data-id]").evaluateAll((items) => items.map((li) => li.dataset.id));
   const before = await ids();
   await page.setInputFiles("#file-pair", [join(files, "frame_a.png"), join(files, "frame_b.png")]);
-  await page.waitForFunction((n) => document.querySelectorAll("#pairs li[data-id]").length === n + 1, before.length);
-  const id = (await ids()).find((i) => !before.includes(i));
   await page.waitForSelector("#force-verdict", { timeout: 120_000 });
 
-  // View A painted, view B not: the masks are not a label yet.
+  // View A painted, view B not: the masks are not a label yet. The first stroke keeps the
+  // uploaded pair.
   await page.click("#tool-brush");
   await paint(page, "a", [0.2, 0.5], [0.8, 0.5]);
+  await page.waitForFunction((n) => document.querySelectorAll("#pairs li[data-id]").length === n + 1, before.length);
+  const id = (await ids()).find((i) => !before.includes(i));
   assert.ok((await labelPixels(page, "a")) > 50);
   assert.equal(await labelPixels(page, "b"), 0);
   const masksFlag = `#pairs li[data-id="${id}"] .flag[title="masks"]`;
@@ -272,6 +278,9 @@ test("bad input gets a clear message and loses nothing", async () => {
   await page.waitForSelector('#notice[data-kind="error"]');
   assert.match(await page.textContent("#notice"), /view B: notes\.txt: not an image/);
   await page.setInputFiles("#file-view-b", join(files, "frame_b.png"));
+  await page.waitForSelector("#keep-draft");
+  assert.equal(await page.locator("#pairs li").count(), before);
+  await page.click("#keep-draft");
   await page.waitForFunction((n) => document.querySelectorAll("#pairs li").length === n + 1, before);
 
   // Typed labels that are not numbers, or not plausible, are not saved.

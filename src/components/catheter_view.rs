@@ -301,6 +301,14 @@ pub fn CatheterView() -> impl IntoView {
         })
     });
     let on_state = Callback::new(move |(id, views): (String, Option<Biplane>)| {
+        // Stating an upload's C-arms labels it: a draft upload is kept first.
+        let Some(id) = (if studio.showing_draft() {
+            studio.labeled_pair_id()
+        } else {
+            Some(id)
+        }) else {
+            return;
+        };
         let stated = views.is_some();
         studio.edit(|ws| ws.set_upload_views(&id, views).then_some(id.clone()));
         studio.info(if stated {

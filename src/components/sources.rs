@@ -111,9 +111,14 @@ async fn decode_view(file: &web_sys::File) -> Result<PickedView, PickedFileError
     .await
 }
 
-/// Adds the pair of two decoded views to the workspace and runs H-Net on it.
+/// Shows the pair of two decoded views as a draft and runs H-Net on it: it joins the pairs when
+/// the user labels it or keeps it, so that images only looked at never fill the list.
 fn add_upload(studio: Studio, [a, b]: [PickedView; 2]) {
     let id = studio.workspace.with_untracked(|ws| ws.next_id());
+    let loaded = format!(
+        "{} and {} loaded: label the pair or keep it to add it to your pairs",
+        a.0, b.0
+    );
     let pair = LabeledPair::new(
         id,
         PairSource::Upload {
@@ -124,8 +129,8 @@ fn add_upload(studio: Studio, [a, b]: [PickedView; 2]) {
         a.1,
         b.1,
     );
-    studio.info(format!("{} loaded", pair.id));
-    studio.add_pair(pair);
+    studio.info(loaded);
+    studio.show_draft(pair);
 }
 
 /// Reads two image files (dropped or picked together) into a pair, the first by name as view

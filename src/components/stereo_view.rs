@@ -99,6 +99,8 @@ pub fn StereoView() -> impl IntoView {
             <p class="draft-note">
                 {move || if studio.showing_cine_frame() {
                     "DICOM cine frame (not kept yet). "
+                } else if studio.showing_upload_draft() {
+                    "Your pair (not kept yet: it joins your pairs when you label it or keep it). "
                 } else if studio.tab.get() == SourceTab::Images {
                     "A sample pair from the digital twin, with H-Net's masks, force and 3D view: \
                      load your own pair above, or change this one in the Digital twin tab. "
