@@ -7,6 +7,7 @@ use crate::components::{
     catheter_view::CatheterView,
     fine_tune_panel::FineTunePanel,
     force_panel::ForcePanel,
+    force_trace::ForceTracePlot,
     model_bar::ModelBar,
     pair_list::PairList,
     shortcuts::{Shortcuts, install_shortcuts},
@@ -113,6 +114,8 @@ pub fn App() -> impl IntoView {
             </aside>
             <section class="work">
                 <StereoView/>
+                // The cine's force trace, as wide as the views, while a cine is loaded.
+                {move || studio.cine.with(Option::is_some).then(|| view! { <ForceTracePlot/> })}
                 <ForcePanel/>
                 <CatheterView/>
             </section>

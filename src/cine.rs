@@ -263,17 +263,27 @@ impl CinePlayer {
     /// Changes `view`'s window as a drag on it does: `right` and `down` are the drag's distance
     /// as fractions of the view's side. Right widens the window (less contrast), down raises its
     /// centre (a darker image), each by the frame's value range per whole side.
-    pub fn drag_window(&mut self, view: View, right: f64, down: f64) {
-        let plane = Self::plane(view);
-        let (min, max) = self
-            .cine
-            .series(plane)
-            .frames
-            .range(self.frame)
-            .unwrap_or((0.0, 255.0));
-        let span = (max - min).max(1.0);
-        let slot = view_slot(view);
-        self.windows[slot] = self.windows[slot].dragged(down * span, right * span);
+    ///
+    /// With `linked`, both planes' windows change with the drag, each by its own frame's range
+    /// (as a viewer's linked planes do); otherwise only `view`'s plane.
+    pub fn drag_window(&mut self, view: View, right: f64, down: f64, linked: bool) {
+        let views = if linked {
+            vec![View::A, View::B]
+        } else {
+            vec![view]
+        };
+        for view in views {
+            let plane = Self::plane(view);
+            let (min, max) = self
+                .cine
+                .series(plane)
+                .frames
+                .range(self.frame)
+                .unwrap_or((0.0, 255.0));
+            let span = (max - min).max(1.0);
+            let slot = view_slot(view);
+            self.windows[slot] = self.windows[slot].dragged(down * span, right * span);
+        }
     }
 
     /// Each plane's window back to its header's (else the frame's range).
@@ -374,19 +384,25 @@ mod tests {
     }
 
     #[test]
-    fn dragging_changes_one_planes_window_and_its_pixels() {
+    fn dragging_changes_one_planes_window_or_both_linked_and_their_pixels() {
         let [a, b] = small_cine(2);
         let mut player = CinePlayer::read(vec![a], vec![b]).unwrap();
         let before = player.rgb(View::A, 0).unwrap();
         let other = player.rgb(View::B, 0).unwrap();
         let window = player.windows[0];
-        player.drag_window(View::A, -0.5, 0.25);
+        player.drag_window(View::A, -0.5, 0.25, false);
         assert!(player.windows[0].width < window.width);
         assert!(player.windows[0].centre > window.centre);
         assert_ne!(player.rgb(View::A, 0).unwrap(), before);
         assert_eq!(player.rgb(View::B, 0).unwrap(), other);
         player.reset_windows();
         assert_eq!(player.windows[0], window);
+        // Linked, a drag on view B changes both planes.
+        let window_b = player.windows[1];
+        player.drag_window(View::B, -0.5, 0.25, true);
+        assert!(player.windows[0].width < window.width && player.windows[1].width < window_b.width);
+        assert_ne!(player.rgb(View::A, 0).unwrap(), before);
+        assert_ne!(player.rgb(View::B, 0).unwrap(), other);
     }
 
     #[test]

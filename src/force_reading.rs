@@ -223,6 +223,28 @@ impl Verdict {
         }
     }
 
+    /// How far to trust the estimate, in plain words: the line beside the number, for a reader
+    /// who does not know the project's terms (the details are one click away).
+    pub fn trust(&self) -> &'static str {
+        match self {
+            Self::Clear { .. } => {
+                "How far to trust this: on images like the ones these weights learned from, 9 \
+                 estimates in 10 fall within the range shown. A guide, not a measurement."
+            }
+            Self::Unclear { .. } => {
+                "How far to trust this: the range shown crosses an edge of the band, so it cannot \
+                 say on which side the force is."
+            }
+            Self::UnknownAccuracy => {
+                "How far to trust this: not known. These weights carry no measured error."
+            }
+            Self::OutsideTraining(_) => {
+                "How far to trust this: little. These images differ from the ones the weights \
+                 learned from, and nothing here has measured how far off they are on them."
+            }
+        }
+    }
+
     /// The sentence shown under the gauge, for `estimate`.
     pub fn text(&self, estimate: &TipForceEstimate) -> String {
         let m = magnitude(estimate.force_n);
@@ -432,6 +454,24 @@ pub(crate) mod tests {
                 .any(|d| d.starts_with("view A at +30°/+0°"))
         );
         assert!(verdict.text(&estimate).contains("no verdict"));
+        // Beside it, how far to trust it in plain words: none of the project's own terms.
+        for v in [
+            verdict.clone(),
+            Verdict::UnknownAccuracy,
+            Verdict::Unclear {
+                range_n: (0.05, 0.2),
+            },
+            Verdict::Clear {
+                position: BandPosition::of(0.2),
+                range_n: (0.15, 0.25),
+            },
+        ] {
+            let trust = v.trust();
+            assert!(trust.starts_with("How far to trust this: "), "{trust}");
+            for jargon in ["R²", "IoU", "xray", "rod", "RMSE", "interval"] {
+                assert!(!trust.contains(jargon), "{trust}");
+            }
+        }
 
         let rgb = twin(TwinControls {
             modality: Modality::Rgb,

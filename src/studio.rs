@@ -199,6 +199,8 @@ pub struct Studio {
     playback: StoredValue<Option<IntervalHandle>>,
     /// Frames traced and frames to trace, while H-Net runs over the cine.
     pub trace_progress: RwSignal<Option<(usize, usize)>>,
+    /// Whether a window/level drag changes both cine planes (else the dragged view's only).
+    pub link_windows: RwSignal<bool>,
     /// The fine-tune running or ended ([`tuning`]).
     pub tuning: RwSignal<TuningState, LocalStorage>,
     /// Its worker, while it runs.
@@ -252,6 +254,7 @@ impl Studio {
             playback: StoredValue::new(None),
             trace_progress: RwSignal::new(None),
             trace_cancelled: RwSignal::new(false),
+            link_windows: RwSignal::new(false),
             tuning: RwSignal::new_local(TuningState::Idle),
             tuning_worker: StoredValue::new_local(None),
             kept: RwSignal::new_local(None),

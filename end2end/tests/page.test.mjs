@@ -28,6 +28,8 @@ const labelPixels = async (page, view) =>
 
 /** Drags the mouse across a view's canvas, from and to fractions of its size. */
 async function paint(page, view, from, to) {
+  // Scrolled to first, as a person would (a control clicked far down the page scrolls it away).
+  await page.locator(`#view-${view}`).scrollIntoViewIfNeeded();
   const box = await page.locator(`#view-${view}`).boundingBox();
   const at = ([fx, fy]) => [box.x + fx * box.width, box.y + fy * box.height];
   await page.mouse.move(...at(from));
@@ -81,6 +83,24 @@ test("load a pair, run H-Net, paint, undo, reload with labels kept, export the d
     await page.textContent("#force-verdict"),
     /\|F\| = \d\.\d{3} N: no verdict: .*images that are not the twin's/,
   );
+  // How far to trust it, in plain words, beside the number.
+  assert.match(await page.textContent("#force-trust"), /^How far to trust this: little\./);
+  // At 1280 x 720 (a laptop), the tabs fit their panel and the verdict is in view without
+  // scrolling.
+  await page.setViewportSize({ width: 1280, height: 720 });
+  const layout = await page.evaluate(() => {
+    const box = (e) => e.getBoundingClientRect();
+    const panel = box(document.querySelector("aside.sources"));
+    const tabs = [...document.querySelectorAll("aside.sources .tab")].map(box);
+    return {
+      tabsInside: tabs.every((t) => t.right <= panel.right + 0.5 && t.left >= panel.left - 0.5),
+      verdictBottom: box(document.querySelector("#force-verdict")).bottom,
+      scrolled: window.scrollY,
+    };
+  });
+  assert.ok(layout.tabsInside, "a source tab is cut at its panel's edge");
+  assert.equal(layout.scrolled, 0);
+  assert.ok(layout.verdictBottom <= 720, `the verdict ends at y = ${layout.verdictBottom} px, below the fold`);
   assert.notEqual(await page.getAttribute("#view-a", "data-predicted-pixels"), "");
   assert.match(await page.textContent("#inference-time"), /\d+ ms on (WebGPU|CPU)/);
   assert.match(await page.textContent(".view figcaption"), /frame_a\.png/);
@@ -635,6 +655,15 @@ test("a DICOM cine: sample, step, scrub, play, window/level, trace with cancel, 
   const dragged = await page.textContent("#cine-windows");
   assert.notEqual(dragged, windows);
   assert.equal(dragged.split("·")[1], windows.split("·")[1]);
+  // Both planes linked: a drag on view B changes plane A's window too.
+  await page.click("#cine-link-windows");
+  await paint(page, "b", [0.3, 0.5], [0.6, 0.7]);
+  await page.waitForFunction((w) => document.querySelector("#cine-windows").textContent.split("·")[0] !== w.split("·")[0], dragged, { timeout: 5_000 });
+  const linked = await page.textContent("#cine-windows");
+  assert.notEqual(linked.split("·")[1], dragged.split("·")[1]);
+  // The force trace is as wide as a view, below them.
+  const widths = await page.evaluate(() => [document.querySelector("#force-trace").getBoundingClientRect().width, document.querySelector("#view-a").getBoundingClientRect().width]);
+  assert.ok(widths[0] >= widths[1], `trace ${widths[0]} px wide, a view ${widths[1]} px`);
 
   // With the catheter entering from the left every frame would be read turned, and a turned
   // view gets no force of H-Net's: the trace says so instead of running.

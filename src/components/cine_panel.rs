@@ -6,7 +6,6 @@ use leptos::prelude::*;
 
 use crate::browser::{download, files, read_file, take_picked_files, yield_to_browser};
 use crate::cine::{CinePlayer, GivenFile, SAMPLE_FILES, read_plane, sample_files};
-use crate::components::force_trace::ForceTracePlot;
 use crate::error_text::with_causes;
 use crate::keymap::{Command, tooltip};
 use crate::studio::{PointerTool, Studio};
@@ -260,6 +259,12 @@ fn CinePlayerControls() -> impl IntoView {
                     title=tooltip("Window/level: drag on a view", Command::WindowLevel)
                     on:click=move |_| studio.tool.set(PointerTool::WindowLevel)>"Window/level"</button>
                 <button id="cine-window-reset" on:click=move |_| studio.reset_windows()>"Header windows"</button>
+                <label title="A drag on either view changes both planes' windows">
+                    <input id="cine-link-windows" type="checkbox"
+                        prop:checked=move || studio.link_windows.get()
+                        on:change=move |ev| studio.link_windows.set(event_target_checked(&ev))/>
+                    " Both planes"
+                </label>
                 <output id="cine-windows">{move || read(|c| format!(
                     "A: C {:.0} W {:.0} · B: C {:.0} W {:.0}",
                     c.windows[0].centre, c.windows[0].width, c.windows[1].centre, c.windows[1].width
@@ -288,7 +293,6 @@ fn CinePlayerControls() -> impl IntoView {
                     title="Keep this frame as a labeled pair (label its masks and force, then export)"
                     on:click=move |_| studio.keep_draft()>"Keep this frame"</button>
             </div>
-            <ForceTracePlot/>
         </section>
     }
 }

@@ -188,7 +188,10 @@ pub fn ForcePanel() -> impl IntoView {
         studio.with_shown(|pair| {
             pair.map(|pair| {
                 let verdict = Verdict::of(&estimate, domain.as_ref(), pair);
-                format!("{}: {}", estimate.kind.name(), verdict.text(&estimate))
+                (
+                    format!("{}: {}", estimate.kind.name(), verdict.text(&estimate)),
+                    verdict.trust(),
+                )
             })
         })
     };
@@ -214,6 +217,49 @@ pub fn ForcePanel() -> impl IntoView {
     view! {
         <section class="force" aria-labelledby="force-title">
             <h2 id="force-title">"Tip force"</h2>
+            // The verdict first, where it is seen without scrolling; the numbers below it.
+            {move || reading().map(|r| {
+                let m = magnitude(r.force_n);
+                let pct = |v: f32| format!("{:.1}%", (v / GAUGE_MAX_N).clamp(0.0, 1.0) * 100.0);
+                let range = r.magnitude_range_n();
+                let label = match range {
+                    Some((low, high)) => format!(
+                        "{} estimate {m:.3} N, {low:.3} to {high:.3} N within its 90 % intervals, on a 0 to {GAUGE_MAX_N} N scale",
+                        r.kind.name()
+                    ),
+                    None => format!("{} estimate {m:.3} N on a 0 to {GAUGE_MAX_N} N scale", r.kind.name()),
+                };
+                view! {
+                    <div class="gauge" id="force-gauge" role="img" aria-label=label>
+                        <div class="band" style:left=pct(ABLATION_BAND_N[0])
+                            style:width=pct(ABLATION_BAND_N[1] - ABLATION_BAND_N[0])></div>
+                        // The range of |F| within the estimate's 90 % intervals: a marker in the
+                        // band's zone says nothing while its range crosses an edge.
+                        {range.map(|(low, high)| view! {
+                            <div class="range" id="force-range" style:left=pct(low)
+                                style:width=pct(high - low)></div>
+                        })}
+                        <div class="marker" style:left=pct(m)></div>
+                        {truth().map(|t| view! { <div class="marker truth" style:left=pct(magnitude(t))></div> })}
+                    </div>
+                    {verdict_text(r).map(|(verdict, trust)| view! {
+                        <p class="verdict" id="force-verdict" data-estimator=r.kind.name()>{verdict}</p>
+                        <p class="trust" id="force-trust">
+                            {trust}" "
+                            <a href="https://github.com/hnet-studio/hnet-studio/blob/main/docs/clinicians.md"
+                                target="_blank" rel="noopener">"What the force can and cannot tell"</a>
+                        </p>
+                    })}
+                    {truth().map(|t| {
+                        let m = magnitude(t);
+                        view! {
+                            <p class="verdict truth" id="force-truth-verdict">
+                                {format!("True |F| = {m:.3} N: {}", BandPosition::of(m).phrase())}
+                            </p>
+                        }
+                    })}
+                }
+            })}
             <table id="force-table">
                 <thead><tr><th></th><th>"Fx (N)"</th><th>"Fy (N)"</th><th>"Fz (N)"</th><th>"|F| (N)"</th></tr></thead>
                 <tbody>
@@ -265,45 +311,13 @@ pub fn ForcePanel() -> impl IntoView {
                 _ => None,
             }}
             {move || {
-                bundled().then(|| view! { <p class="caveat" id="force-caveat">{BUNDLED_FORCE_CAVEAT}</p> })
+                bundled().then(|| view! {
+                    <details class="caveat-details">
+                        <summary>"Details: how the bundled weights were trained and measured"</summary>
+                        <p class="caveat" id="force-caveat">{BUNDLED_FORCE_CAVEAT}</p>
+                    </details>
+                })
             }}
-            {move || reading().map(|r| {
-                let m = magnitude(r.force_n);
-                let pct = |v: f32| format!("{:.1}%", (v / GAUGE_MAX_N).clamp(0.0, 1.0) * 100.0);
-                let range = r.magnitude_range_n();
-                let label = match range {
-                    Some((low, high)) => format!(
-                        "{} estimate {m:.3} N, {low:.3} to {high:.3} N within its 90 % intervals, on a 0 to {GAUGE_MAX_N} N scale",
-                        r.kind.name()
-                    ),
-                    None => format!("{} estimate {m:.3} N on a 0 to {GAUGE_MAX_N} N scale", r.kind.name()),
-                };
-                view! {
-                    <div class="gauge" id="force-gauge" role="img" aria-label=label>
-                        <div class="band" style:left=pct(ABLATION_BAND_N[0])
-                            style:width=pct(ABLATION_BAND_N[1] - ABLATION_BAND_N[0])></div>
-                        // The range of |F| within the estimate's 90 % intervals: a marker in the
-                        // band's zone says nothing while its range crosses an edge.
-                        {range.map(|(low, high)| view! {
-                            <div class="range" id="force-range" style:left=pct(low)
-                                style:width=pct(high - low)></div>
-                        })}
-                        <div class="marker" style:left=pct(m)></div>
-                        {truth().map(|t| view! { <div class="marker truth" style:left=pct(magnitude(t))></div> })}
-                    </div>
-                    <p class="verdict" id="force-verdict" data-estimator=r.kind.name()>
-                        {verdict_text(r)}
-                    </p>
-                    {truth().map(|t| {
-                        let m = magnitude(t);
-                        view! {
-                            <p class="verdict truth" id="force-truth-verdict">
-                                {format!("True |F| = {m:.3} N: {}", BandPosition::of(m).phrase())}
-                            </p>
-                        }
-                    })}
-                }
-            })}
             <fieldset class="label-force">
                 <legend>"Force label of this pair"</legend>
                 <form class="typed-force" on:submit=move |ev: leptos::ev::SubmitEvent| {

@@ -74,6 +74,19 @@ pub fn ModelBar() -> impl IntoView {
                     <p data-state="failed" class="error">"H-Net could not be loaded: "{message}</p>
                 }.into_any(),
                 ModelState::Ready(engine) => {
+                    let facts = match &engine.domain {
+                        Some(d) => {
+                            let [x, y, z] = d.combination.head_interval_90_n();
+                            format!(
+                                "±{x:.3} / ±{y:.3} / ±{z:.3} N (90 %, force head; trained on {})",
+                                d.domain.data
+                            )
+                        }
+                        None => match &engine.facts_error {
+                            Some(why) => format!("{why}: no verdict"),
+                            None => "not recorded in these weights: no verdict".to_string(),
+                        },
+                    };
                     let provenance = match engine.origin {
                         WeightsOrigin::Untrained => {
                             "untrained: this build ships no weights (see assets/MODEL.md)".to_string()
@@ -109,21 +122,11 @@ pub fn ModelBar() -> impl IntoView {
                             </div>
                             <div>
                                 <dt>"Force error"</dt>
-                                <dd id="force-facts" title="What the weights file records about its force \
-                                    (hnet eval --record): where it was measured and the 90 % \
-                                    intervals the verdict reads">{match &engine.domain {
-                                    Some(d) => {
-                                        let [x, y, z] = d.combination.head_interval_90_n();
-                                        format!(
-                                            "±{x:.3} / ±{y:.3} / ±{z:.3} N (90 %, force head; trained on {})",
-                                            d.domain.data
-                                        )
-                                    }
-                                    None => match &engine.facts_error {
-                                        Some(why) => format!("{why}: no verdict"),
-                                        None => "not recorded in these weights: no verdict".to_string(),
-                                    },
-                                }}</dd>
+                                <dd id="force-facts" title=format!(
+                                    "{facts}. What the weights file records about its force (hnet \
+                                     eval --record): where it was measured and the 90 % intervals \
+                                     the verdict reads"
+                                )>{facts.clone()}</dd>
                             </div>
                             <div>
                                 <dt>"Catheter"</dt>

@@ -114,11 +114,11 @@ pub fn StereoView() -> impl IntoView {
             <ViewCanvas view=View::A/>
             <ViewCanvas view=View::B/>
         </div>
-        <p class="legend">
-            <span class="arrow estimate"></span>"H-Net's force estimate "
-            <span class="arrow truth"></span>"true force (twin) · arrows: "
-            {crate::imaging::ARROW_PX_PER_NEWTON}" px per N, projected on each view · "
-            <span class="arrow epipolar"></span>"epipolar line of the pointer in the other view"
+        <p class="legend" title="The force arrows are the tip force projected on each view">
+            <span class="arrow estimate"></span>"H-Net's force "
+            <span class="arrow truth"></span>"true force (twin) · "
+            {crate::imaging::ARROW_PX_PER_NEWTON}" px per N · "
+            <span class="arrow epipolar"></span>"epipolar line of the pointer"
         </p>
     }
 }

@@ -120,8 +120,11 @@ impl Studio {
     /// Changes a plane's window as a drag on its view does (fractions of the view's side) and
     /// shows the frame again; H-Net runs when the drag ends.
     pub fn drag_window(&self, view: View, right: f64, down: f64) {
-        self.cine
-            .update(|c| c.iter_mut().for_each(|c| c.drag_window(view, right, down)));
+        let linked = self.link_windows.get_untracked();
+        self.cine.update(|c| {
+            c.iter_mut()
+                .for_each(|c| c.drag_window(view, right, down, linked))
+        });
         self.show_cine_frame();
     }
 
