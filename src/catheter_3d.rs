@@ -484,6 +484,26 @@ pub fn force_arrow_mm(tip_mm: [f64; 3], force_n: [f32; 3]) -> [[f64; 3]; 2] {
     [tip_mm, end]
 }
 
+/// An arrow from `from` to `to` (canvas pixels) shortened along its direction so that its head
+/// stays `margin` pixels inside a `side`-pixel square canvas (a zoomed view would otherwise run
+/// it off the edge, hiding its head and so its direction). `None` when its tail is outside.
+pub fn arrow_within(from: [f64; 2], to: [f64; 2], side: f64, margin: f64) -> Option<[f64; 2]> {
+    let inside = |v: f64| (margin..=side - margin).contains(&v);
+    if !inside(from[0]) || !inside(from[1]) {
+        return None;
+    }
+    let mut t: f64 = 1.0;
+    for axis in 0..2 {
+        let d = to[axis] - from[axis];
+        if d > 0.0 {
+            t = t.min((side - margin - from[axis]) / d);
+        } else if d < 0.0 {
+            t = t.min((margin - from[axis]) / d);
+        }
+    }
+    Some([0, 1].map(|i| from[i] + t * (to[i] - from[i])))
+}
+
 /// The catheter's points and the sketch's, for framing the 3D view.
 pub fn scene_points(catheter: &Catheter3d, views: &Biplane) -> Vec<[f64; 3]> {
     let mut points = catheter.centreline_mm.clone();
@@ -499,6 +519,26 @@ pub fn scene_points(catheter: &Catheter3d, views: &Biplane) -> Vec<[f64; 3]> {
 mod tests {
     use super::*;
     use crate::error_text::with_causes;
+
+    #[test]
+    fn an_arrow_is_shortened_to_keep_its_head_on_the_canvas() {
+        // Inside: unchanged.
+        assert_eq!(
+            arrow_within([100.0, 100.0], [150.0, 120.0], 400.0, 8.0),
+            Some([150.0, 120.0])
+        );
+        // Running off the right edge: cut where it meets the margin, along its direction.
+        let head = arrow_within([300.0, 200.0], [500.0, 250.0], 400.0, 8.0).unwrap();
+        assert!(
+            (head[0] - 392.0).abs() < 1e-9 && (head[1] - 223.0).abs() < 1e-9,
+            "{head:?}"
+        );
+        // Off the top and the left at once: the nearer edge cuts it.
+        let head = arrow_within([50.0, 50.0], [-50.0, -150.0], 400.0, 8.0).unwrap();
+        assert!((head[1] - 8.0).abs() < 1e-9 && head[0] > 8.0, "{head:?}");
+        // Its tail off the canvas: not drawn.
+        assert_eq!(arrow_within([-5.0, 50.0], [50.0, 50.0], 400.0, 8.0), None);
+    }
     use crate::twin_live::XrayBackground;
     use crate::workspace::PairSource;
     use hnet_twin::vec3::Vec3;

@@ -530,6 +530,8 @@ test("a twin pair in 3D: the catheter, the physics force beside H-Net's, the epi
   });
   assert.ok(drawn > 500, `${drawn} bright pixels in the 3D view`);
   assert.match(await page.textContent("#catheter-summary"), /^Catheter \d+ mm reconstructed from the label masks .*physics force/);
+  // The axis letters are explained beside the view.
+  assert.match(await page.textContent("section.catheter-3d .legend"), /L the patient's left, A anterior, H the head/);
   assert.match(await page.getAttribute("#catheter-3d", "aria-label"), /^3D view of the catheter\. Catheter \d+ mm/);
   const millis = Number(await page.getAttribute("#catheter-3d", "data-millis"));
   console.log(`# reconstruct + fit in the page: ${millis} ms`);

@@ -14,8 +14,8 @@
 use leptos::prelude::*;
 
 use crate::catheter_3d::{
-    ARROW_MM_PER_NEWTON, CARM_SKETCH_SCALE, CArmSketch, Catheter3d, FitMasks, force_arrow_mm,
-    scene_points,
+    ARROW_MM_PER_NEWTON, CARM_SKETCH_SCALE, CArmSketch, Catheter3d, FitMasks, arrow_within,
+    force_arrow_mm, scene_points,
 };
 use crate::components::stereo_view::{ESTIMATE_ARROW, TRUE_ARROW, context_2d, draw_arrow};
 use crate::components::upload_geometry::UploadGeometry;
@@ -119,7 +119,9 @@ fn draw(
     polyline(ctx, &camera, &catheter.centreline_mm, CATHETER, 3.0);
     for &(tip, force, colour, dashed) in arrows {
         let [from, to] = force_arrow_mm(tip, force);
-        if let (Some(a), Some(b)) = (camera.project(from, SIDE), camera.project(to, SIDE)) {
+        if let (Some(a), Some(b)) = (camera.project(from, SIDE), camera.project(to, SIDE))
+            && let Some(b) = arrow_within(a, b, SIDE, 8.0)
+        {
             draw_arrow(ctx, a, b, colour, dashed);
         }
     }
@@ -346,6 +348,7 @@ pub fn CatheterView() -> impl IntoView {
                 <span class="dot view-a"></span>"C-arm A "
                 <span class="dot view-b"></span>"C-arm B (sources and detectors drawn at "
                 {format!("{:.0} % of their size about the isocentre)", CARM_SKETCH_SCALE * 100.0)}
+                " · axes (20 mm): L the patient's left, A anterior, H the head · an arrow longer than the view is cut at its edge"
             </p>
             <label class="fit-masks">
                 "Fit the rod to "

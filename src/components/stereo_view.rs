@@ -20,8 +20,9 @@ const LABEL_COLOUR: [u8; 3] = [255, 110, 0];
 pub(crate) const ESTIMATE_ARROW: &str = "#ffd400";
 /// Colour of the true force arrow (twin pairs).
 pub(crate) const TRUE_ARROW: &str = "#3ddc84";
-/// Colour of the pointer's epipolar line, drawn in the other view.
-const EPIPOLAR_LINE: &str = "#c9a6ff";
+/// Colour of the pointer's epipolar line, drawn in the other view, and of its casing.
+const EPIPOLAR_LINE: &str = "#e4d2ff";
+const EPIPOLAR_CASING: &str = "rgba(20, 10, 40, 0.85)";
 
 /// The toolbar and both views.
 #[component]
@@ -308,16 +309,21 @@ fn ViewCanvas(view: View) -> impl IntoView {
         }
         if let Some([from, to]) = epipolar.get() {
             let (from, to) = (t.to_canvas(from), t.to_canvas(to));
-            ctx.set_line_width(1.5);
-            ctx.set_stroke_style_str(EPIPOLAR_LINE);
+            // A dark casing under a bright dash: visible on bright and dark images alike.
+            let line = |width: f64, colour: &str| {
+                ctx.set_line_width(width);
+                ctx.set_stroke_style_str(colour);
+                ctx.begin_path();
+                ctx.move_to(from[0], from[1]);
+                ctx.line_to(to[0], to[1]);
+                ctx.stroke();
+            };
+            line(4.5, EPIPOLAR_CASING);
             let dash = js_sys::Array::new();
-            dash.push(&6.0.into());
+            dash.push(&8.0.into());
             dash.push(&4.0.into());
             let _ = ctx.set_line_dash(&dash);
-            ctx.begin_path();
-            ctx.move_to(from[0], from[1]);
-            ctx.line_to(to[0], to[1]);
-            ctx.stroke();
+            line(2.0, EPIPOLAR_LINE);
             let _ = ctx.set_line_dash(&js_sys::Array::new());
         }
         if let (Some(p), Some(_)) = (pointer.get(), studio.tool.get().mask_tool()) {
