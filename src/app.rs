@@ -25,6 +25,20 @@ use crate::workspace::Workspace;
 pub fn App() -> impl IntoView {
     let studio = Studio::new();
     provide_context(studio);
+    // The catheter calibrated on an earlier visit.
+    leptos::task::spawn_local(async move {
+        match storage::load_calibration().await {
+            Ok(calibration) => {
+                if calibration.is_some() && studio.calibration.get_untracked().is_none() {
+                    studio.calibration.set(calibration);
+                }
+            }
+            Err(e) => studio.error(format!(
+                "The kept catheter calibration could not be read ({}): the stiffness the page assumes is used",
+                with_causes(&e)
+            )),
+        }
+    });
     // The weights the user fine-tuned and chose, when the browser keeps some; else the bundled.
     leptos::task::spawn_local(async move {
         match storage::load_kept_weights().await {

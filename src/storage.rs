@@ -16,14 +16,17 @@ use crate::browser::JsError;
 pub use crate::stored_pair::DamagedRecord;
 use crate::stored_pair::{self, IMAGE_KEYS, METADATA_KEY};
 use crate::workspace::LabeledPair;
+use hnet_twin::catalogue::StiffnessCalibration;
 
 const DATABASE: &str = "hnet-studio";
 /// The database's version: 2 added the store of fine-tuned weights.
 const VERSION: u32 = 2;
 const STORE: &str = "pairs";
-/// Weights the user fine-tuned and kept: one record, [`FINE_TUNED_KEY`].
+/// What the page reads pairs with, as the user set it: the fine-tuned weights kept
+/// ([`FINE_TUNED_KEY`]) and the catheter's calibration ([`CALIBRATION_KEY`]), a record each.
 const MODELS: &str = "models";
 const FINE_TUNED_KEY: &str = "fine-tuned";
+const CALIBRATION_KEY: &str = "catheter-calibration";
 
 /// The browser's storage of pairs could not be used.
 #[derive(Debug, thiserror::Error)]
@@ -371,36 +374,81 @@ fn model_request(action: &'static str) -> impl Fn(JsValue) -> StorageError {
 /// Keeps `weights` as the fine-tuned weights (replacing any kept before, only once the write
 /// has committed: a refused write leaves the previous ones).
 pub async fn save_kept_weights(weights: &KeptWeights) -> Result<(), StorageError> {
-    let db = open().await?;
     let failed = model_request("saving in");
     let record = Object::new();
     let set = |key: &str, value: &JsValue| Reflect::set(&record, &key.into(), value);
     set("name", &JsValue::from_str(&weights.name)).map_err(&failed)?;
     set("bytes", &Uint8Array::from(weights.bytes.as_slice())).map_err(&failed)?;
     set("chosen", &JsValue::from_bool(weights.chosen)).map_err(&failed)?;
+    put_model_record(FINE_TUNED_KEY, Some(&record)).await
+}
+
+/// Puts `record` under `key` in the store of what the page reads pairs with, or deletes the
+/// key's record (`None`); done once the transaction has committed.
+async fn put_model_record(key: &str, record: Option<&JsValue>) -> Result<(), StorageError> {
+    let db = open().await?;
+    let failed = model_request("saving in");
     let transaction = db
         .transaction_with_str_and_mode(MODELS, IdbTransactionMode::Readwrite)
         .map_err(&failed)?;
-    transaction
-        .object_store(MODELS)
-        .and_then(|store| store.put_with_key(&record, &JsValue::from_str(FINE_TUNED_KEY)))
-        .map_err(&failed)?;
+    let store = transaction.object_store(MODELS).map_err(&failed)?;
+    match record {
+        Some(record) => store.put_with_key(record, &JsValue::from_str(key)),
+        None => store.delete(&JsValue::from_str(key)),
+    }
+    .map_err(&failed)?;
     committed(&transaction).await.map_err(failed)
 }
 
-/// The kept fine-tuned weights, if any.
-pub async fn load_kept_weights() -> Result<Option<KeptWeights>, StorageError> {
+/// The record under `key` in the store of what the page reads pairs with, if any.
+async fn model_record(key: &str) -> Result<Option<JsValue>, StorageError> {
     let db = open().await?;
     let failed = model_request("reading");
     let request = db
         .transaction_with_str_and_mode(MODELS, IdbTransactionMode::Readonly)
         .and_then(|t| t.object_store(MODELS))
-        .and_then(|store| store.get(&JsValue::from_str(FINE_TUNED_KEY)))
+        .and_then(|store| store.get(&JsValue::from_str(key)))
         .map_err(&failed)?;
     let record = settled(&request).await.map_err(&failed)?;
-    if record.is_undefined() || record.is_null() {
+    Ok((!record.is_undefined() && !record.is_null()).then_some(record))
+}
+
+/// Keeps the catheter's calibration for the next visit (`None`: forgets it).
+pub async fn save_calibration(
+    calibration: Option<&StiffnessCalibration>,
+) -> Result<(), StorageError> {
+    let json = calibration
+        .map(|c| serde_json::to_string(c).map(|json| JsValue::from_str(&json)))
+        .transpose()
+        .map_err(|e| StorageError::ModelRequest {
+            action: "saving in",
+            cause: JsError::missing(&format!("the calibration cannot be written: {e}")),
+        })?;
+    put_model_record(CALIBRATION_KEY, json.as_ref()).await
+}
+
+/// The catheter's calibration kept from an earlier visit, if any.
+pub async fn load_calibration() -> Result<Option<StiffnessCalibration>, StorageError> {
+    let Some(record) = model_record(CALIBRATION_KEY).await? else {
         return Ok(None);
-    }
+    };
+    let damaged = |why: String| StorageError::ModelRequest {
+        action: "reading",
+        cause: JsError::missing(&format!("the kept catheter calibration {why}")),
+    };
+    let json = record
+        .as_string()
+        .ok_or_else(|| damaged("is not text".into()))?;
+    serde_json::from_str(&json)
+        .map(Some)
+        .map_err(|e| damaged(format!("cannot be read: {e}")))
+}
+
+/// The kept fine-tuned weights, if any.
+pub async fn load_kept_weights() -> Result<Option<KeptWeights>, StorageError> {
+    let Some(record) = model_record(FINE_TUNED_KEY).await? else {
+        return Ok(None);
+    };
     let get = |key: &str| Reflect::get(&record, &key.into()).unwrap_or_default();
     let damaged = |what: &str| StorageError::ModelRequest {
         action: "reading",

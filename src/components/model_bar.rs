@@ -137,7 +137,7 @@ pub fn ModelBar() -> impl IntoView {
                                 {move || studio.calibration.get().map(|_| view! {
                                     <dd><button id="catheter-calibration-reset" class="link"
                                         on:click=move |_| {
-                                            studio.calibration.set(None);
+                                            studio.set_calibration(None);
                                             studio.info("catheter calibration cleared: the stiffness the page assumes");
                                         }>"Clear"</button></dd>
                                 })}

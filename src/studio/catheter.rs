@@ -10,8 +10,10 @@ use crate::catheter_3d::{
 };
 use crate::catheter_calibration;
 use crate::error_text::with_causes;
+use crate::storage;
 use crate::workspace::Workspace;
 use hnet_twin::carm::Biplane;
+use hnet_twin::catalogue::StiffnessCalibration;
 
 /// The catheter in 3D of one pair, as the page computed it ([`Studio::reconstruct_shown`]).
 #[derive(Debug, Clone, PartialEq)]
@@ -106,11 +108,27 @@ impl Studio {
                 if !outcome.left_out.is_empty() {
                     text = format!("{text}; left out: {}", outcome.left_out.join("; "));
                 }
-                self.calibration.set(Some(outcome.calibration));
+                self.set_calibration(Some(outcome.calibration));
                 self.info(text);
             }
             Err(e) => self.error(with_causes(&e)),
         }
+    }
+
+    /// Uses `calibration` (`None`: the stiffness the page assumes) now and on the next visit:
+    /// it is kept in the browser. A failed write says so; the calibration still applies to this
+    /// visit.
+    pub fn set_calibration(&self, calibration: Option<StiffnessCalibration>) {
+        self.calibration.set(calibration);
+        let studio = *self;
+        leptos::task::spawn_local(async move {
+            if let Err(e) = storage::save_calibration(calibration.as_ref()).await {
+                studio.error(format!(
+                    "the catheter calibration applies to this visit only: {}",
+                    with_causes(&e)
+                ));
+            }
+        });
     }
 }
 

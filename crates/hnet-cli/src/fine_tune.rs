@@ -51,7 +51,7 @@ pub struct FineTuneArgs {
     #[arg(long)]
     patience: Option<usize>,
     /// Rehearse on the first `--replay-pairs` training pairs of this dataset too, as they are
-    /// (not turned) and with their force labels: pairs of the domain the weights were trained
+    /// (not turned) and with their force labels unless `--masks-only`: pairs of the domain the weights were trained
     /// on, so that fine-tuning on another does not make them forget it.
     #[arg(long)]
     replay: Option<PathBuf>,
@@ -107,7 +107,10 @@ pub fn run(args: &FineTuneArgs) -> anyhow::Result<()> {
         )?;
         // Interleaved, so that every fifth pair held back comes from both.
         let own = std::mem::take(&mut pairs);
-        let mut replayed = rehearsed.items.iter().map(|item| pair(item, true));
+        let mut replayed = rehearsed
+            .items
+            .iter()
+            .map(|item| pair(item, !args.masks_only));
         for p in own {
             pairs.push(p);
             pairs.extend(replayed.next());
