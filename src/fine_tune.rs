@@ -1,6 +1,6 @@
 //! What the page's "Fine-tune on my pairs" trains on and what it writes: the labelled pairs as
-//! the fine-tuning worker takes them (crates/hnet-tune), the kept weights' provenance, and the
-//! time left. The worker is driven from `studio/tuning.rs`; the training is
+//! the fine-tuning worker takes them (crates/hnet-tune), twin pairs of the weights' own domain
+//! (scored for reference, or rehearsed), the kept weights' provenance, and the time left. The worker is driven from `studio/tuning.rs`; the training is
 //! [`hnet_model::fine_tune`]'s, the step `hnet train`'s.
 
 use std::collections::BTreeMap;
@@ -130,12 +130,25 @@ pub fn kept_provenance(
 /// Reference pairs scored beside the held-back ones.
 pub const REFERENCE_PAIRS: usize = 4;
 
-/// `count` twin pairs drawn from the domain the weights' force was trained on (their facts'
+/// Twin pairs rehearsed beside the user's (trained on, never held back), when the user asks.
+pub const REHEARSAL_PAIRS: usize = 8;
+
+/// The reference pairs' seed: the same pairs for every fine-tune.
+pub const REFERENCE_SEED: u64 = 0x5EF_E4E4CE;
+
+/// The rehearsed pairs' seed: other pairs than the reference ones, which are never trained on.
+pub const REHEARSAL_SEED: u64 = 0x4E4EA45E;
+
+/// `count` twin pairs (seeded `seed`) drawn from the domain the weights' force was trained on (their facts'
 /// [`ForceDomain`]: modality, scene ranges, C-arm angles, phantom backgrounds), with the twin's
 /// exact masks and true force: what fine-tuning costs there shows on them. `None` when the
 /// domain was not the twin's phantom bench (radiograph backgrounds, which the page does not
 /// hold, or the paper's bench, whose masks and X-rays are made another way).
-pub fn reference_set(domain: &ForceDomain, count: usize) -> Option<Result<TuningSet, TwinError>> {
+pub fn twin_domain_set(
+    domain: &ForceDomain,
+    count: usize,
+    seed: u64,
+) -> Option<Result<TuningSet, TwinError>> {
     if !domain.phantom_backgrounds || domain.scenes.plate.is_some() {
         return None;
     }
@@ -161,7 +174,7 @@ pub fn reference_set(domain: &ForceDomain, count: usize) -> Option<Result<Tuning
         left_out: 0,
     };
     for index in 0..count as u64 {
-        let sample = match generate(&config, &backgrounds, REFERENCE_SEED, index) {
+        let sample = match generate(&config, &backgrounds, seed, index) {
             Ok(sample) => sample,
             Err(e) => return Some(Err(e)),
         };
@@ -176,9 +189,6 @@ pub fn reference_set(domain: &ForceDomain, count: usize) -> Option<Result<Tuning
     }
     Some(Ok(set))
 }
-
-/// The reference pairs' seed: the same pairs for every fine-tune.
-const REFERENCE_SEED: u64 = 0x5EF_E4E4CE;
 
 /// Seconds left, from `elapsed_s` for `done` of `total` steps (`None` before the first).
 pub fn seconds_left(elapsed_s: f64, done: usize, total: usize) -> Option<f64> {
@@ -269,7 +279,13 @@ mod tests {
             views_deg: [[0.0, 0.0], [90.0, 0.0]],
             phantom_backgrounds: true,
         };
-        let set = reference_set(&domain, 2).unwrap().unwrap();
+        let set = twin_domain_set(&domain, 2, REFERENCE_SEED)
+            .unwrap()
+            .unwrap();
+        let rehearsed = twin_domain_set(&domain, 1, REHEARSAL_SEED)
+            .unwrap()
+            .unwrap();
+        assert_ne!(&rehearsed.images[..], &set.images[..rehearsed.images.len()]);
         assert_eq!(set.images.len(), 2 * WORK_SIZE * WORK_SIZE * 8);
         assert!(set.forces.iter().all(|f| f.is_finite()));
         // A mask holds the catheter.

@@ -8,6 +8,7 @@ use hnet_model::fine_tune::{FineTuneSettings, HeldBackScores};
 
 use crate::browser::download;
 use crate::error_text::with_causes;
+use crate::fine_tune::REHEARSAL_PAIRS;
 use crate::studio::{KEPT_NAME, Studio, TuningProgress, TuningResult, TuningState};
 
 /// The panel.
@@ -22,6 +23,7 @@ pub fn FineTunePanel() -> impl IntoView {
     };
     let defaults = FineTuneSettings::default();
     let epochs = RwSignal::new(defaults.max_epochs);
+    let rehearse = RwSignal::new(true);
     let about = format!(
         "Trains the loaded network on the pairs whose masks are labels, and its force head on \
          those with a force label (not on labels copied from a model's estimate). Every \
@@ -52,10 +54,21 @@ pub fn FineTunePanel() -> impl IntoView {
                                 }/>
                             " epochs "
                         </label>
-                        <button id="tune-start" on:click=move |_| studio.start_tuning(FineTuneSettings {
-                            max_epochs: epochs.get_untracked(),
-                            ..FineTuneSettings::default()
-                        })>
+                        <label title="Twin pairs drawn from the data the weights were trained on, \
+                            trained on beside yours so that the weights do not forget it (when \
+                            their file records it)">
+                            <input id="tune-rehearse" type="checkbox"
+                                prop:checked=move || rehearse.get()
+                                on:change=move |ev| rehearse.set(event_target_checked(&ev))/>
+                            {format!(" Rehearse on {REHEARSAL_PAIRS} twin pairs of the weights' own domain")}
+                        </label>
+                        <button id="tune-start" on:click=move |_| studio.start_tuning(
+                            FineTuneSettings {
+                                max_epochs: epochs.get_untracked(),
+                                ..FineTuneSettings::default()
+                            },
+                            rehearse.get_untracked(),
+                        )>
                             "Fine-tune on my pairs"
                         </button>
                     }.into_any()
@@ -109,9 +122,15 @@ fn running(studio: Studio, p: TuningProgress) -> impl IntoView {
             p.pairs, p.with_force
         )
     } else {
+        let rehearsed = match p.rehearsed {
+            0 => String::new(),
+            n => format!(" and {n} twin pairs rehearsed"),
+        };
         format!(
-            "{} pairs trained on, {} held back ({} with a force label). ",
-            p.split.0, p.split.1, p.with_force
+            "{} of your pairs trained on{rehearsed}, {} held back ({} with a force label). ",
+            p.split.0.saturating_sub(p.rehearsed),
+            p.split.1,
+            p.with_force
         )
     };
     view! {

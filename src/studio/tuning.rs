@@ -15,7 +15,8 @@ use crate::browser::now_ms;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
 use crate::fine_tune::{
-    REFERENCE_PAIRS, TuningSet, kept_provenance, reference_set, seconds_left, tuning_set,
+    REFERENCE_PAIRS, REFERENCE_SEED, REHEARSAL_PAIRS, REHEARSAL_SEED, TuningSet, kept_provenance,
+    seconds_left, tuning_set, twin_domain_set,
 };
 use crate::imaging::WORK_SIZE;
 use crate::module_worker::{ModuleWorker, ModuleWorkerError};
@@ -44,6 +45,8 @@ pub struct TuningProgress {
     pub split: (usize, usize),
     /// Pairs in the set, and of them with a force label.
     pub pairs: usize,
+    /// Twin pairs rehearsed beside them (counted in `split`'s trained-on pairs).
+    pub rehearsed: usize,
     /// Pairs with a force label.
     pub with_force: usize,
     /// Steps done and steps in the whole run (at most `max_epochs`).
@@ -83,8 +86,9 @@ pub struct TuningResult {
 
 impl Studio {
     /// Starts fine-tuning the loaded network on the page's labelled pairs with `settings`, in a
-    /// worker of its own; says why when it cannot.
-    pub fn start_tuning(&self, settings: FineTuneSettings) {
+    /// worker of its own; with `rehearse`, on twin pairs of the weights' own domain too (when
+    /// their file records it). Says why when it cannot.
+    pub fn start_tuning(&self, settings: FineTuneSettings, rehearse: bool) {
         if matches!(self.tuning.get_untracked(), TuningState::Running(_)) {
             return;
         }
@@ -108,16 +112,24 @@ impl Studio {
             .as_ref()
             .and_then(|h| ModelFacts::read(&h.provenance).ok())
             .and_then(|facts| facts.force_domain);
-        let reference = match domain
+        let twin = |count, seed, what: &str| match domain
             .as_ref()
-            .and_then(|d| reference_set(d, REFERENCE_PAIRS))
+            .and_then(|d| twin_domain_set(d, count, seed))
         {
-            Some(Ok(set)) => Some(set),
-            Some(Err(e)) => {
-                self.error(format!("Cannot fine-tune: the reference twin pairs: {e}"));
-                return;
-            }
-            None => None,
+            Some(Ok(set)) => Ok(Some(set)),
+            Some(Err(e)) => Err(format!("Cannot fine-tune: the {what} twin pairs: {e}")),
+            None => Ok(None),
+        };
+        let reference = match twin(REFERENCE_PAIRS, REFERENCE_SEED, "reference") {
+            Ok(set) => set,
+            Err(why) => return self.error(why),
+        };
+        let rehearsal = match rehearse {
+            true => match twin(REHEARSAL_PAIRS, REHEARSAL_SEED, "rehearsed") {
+                Ok(set) => set,
+                Err(why) => return self.error(why),
+            },
+            false => None,
         };
         let worker = match ModuleWorker::spawn("hnet-tune", "the fine-tuning worker") {
             Ok(worker) => Rc::new(worker),
@@ -139,6 +151,7 @@ impl Studio {
         self.tuning.set(TuningState::Running(TuningProgress {
             split: (0, 0),
             pairs: set.pairs,
+            rehearsed: rehearsal.as_ref().map_or(0, |r| r.pairs),
             with_force: set.with_force,
             steps: (0, 0),
             max_epochs: settings.max_epochs,
@@ -155,6 +168,7 @@ impl Studio {
                 provenance: &start_provenance,
                 set: &set,
                 reference: reference.as_ref(),
+                rehearsal: rehearsal.as_ref(),
                 settings,
             };
             let outcome = run(studio, &worker, &start).await;
@@ -281,6 +295,8 @@ struct TuningStart<'a> {
     set: &'a TuningSet,
     /// Twin pairs of the weights' own domain, scored only.
     reference: Option<&'a TuningSet>,
+    /// Twin pairs of the weights' own domain, trained on too.
+    rehearsal: Option<&'a TuningSet>,
     settings: FineTuneSettings,
 }
 
@@ -298,12 +314,15 @@ async fn run(
         provenance: start_provenance,
         set,
         reference,
+        rehearsal,
         settings,
     } = *start;
     let images = Uint8Array::from(set.images.as_slice());
     let forces = Float32Array::from(set.forces.as_slice());
     let reference_images = Uint8Array::from(reference.map_or(&[][..], |r| &r.images[..]));
     let reference_forces = Float32Array::from(reference.map_or(&[][..], |r| &r.forces[..]));
+    let rehearsal_images = Uint8Array::from(rehearsal.map_or(&[][..], |r| &r.images[..]));
+    let rehearsal_forces = Float32Array::from(rehearsal.map_or(&[][..], |r| &r.forces[..]));
     let settings_json = serde_json::to_string(&settings).unwrap_or_else(|_| "{}".into());
     let args = Array::new();
     for value in [
@@ -314,15 +333,17 @@ async fn run(
         forces.clone().into(),
         reference_images.clone().into(),
         reference_forces.clone().into(),
+        rehearsal_images.clone().into(),
+        rehearsal_forces.clone().into(),
         JsValue::from_str(&settings_json),
     ] {
         args.push(&value);
     }
     let transfer = Array::new();
-    for buffer in [&images, &reference_images] {
+    for buffer in [&images, &reference_images, &rehearsal_images] {
         transfer.push(&buffer.buffer());
     }
-    for buffer in [&forces, &reference_forces] {
+    for buffer in [&forces, &reference_forces, &rehearsal_forces] {
         transfer.push(&buffer.buffer());
     }
     let started: serde_json::Value = json_reply(

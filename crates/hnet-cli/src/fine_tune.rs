@@ -50,8 +50,8 @@ pub struct FineTuneArgs {
     /// Most epochs without a better held-back loss (the page's default when absent).
     #[arg(long)]
     patience: Option<usize>,
-    /// Rehearse on the first `--replay-pairs` training pairs of this dataset too, as they are
-    /// (not turned) and with their force labels unless `--masks-only`: pairs of the domain the weights were trained
+    /// Rehearse on the first `--replay-pairs` training pairs of this dataset too, never held
+    /// back, as they are (not turned) and with their force labels unless `--masks-only`: pairs of the domain the weights were trained
     /// on, so that fine-tuning on another does not make them forget it.
     #[arg(long)]
     replay: Option<PathBuf>,
@@ -92,31 +92,25 @@ pub fn run(args: &FineTuneArgs) -> anyhow::Result<()> {
         mask_b: item.mask_b.to_vec(),
         force_n: with_force.then_some(item.force_n),
     };
-    let mut pairs: Vec<TrainingPair> = split
+    let pairs: Vec<TrainingPair> = split
         .items
         .iter()
         .map(|item| pair(item, !args.masks_only))
         .collect();
-    if let Some(replay) = &args.replay {
-        let rehearsed = StereoSplit::load_turned(
+    let rehearsed: Vec<TrainingPair> = match &args.replay {
+        Some(replay) => StereoSplit::load_turned(
             &Dataset::open(replay)?,
             Split::Train,
             size,
             Some(args.replay_pairs),
             SquareSymmetry::IDENTITY,
-        )?;
-        // Interleaved, so that every fifth pair held back comes from both.
-        let own = std::mem::take(&mut pairs);
-        let mut replayed = rehearsed
-            .items
-            .iter()
-            .map(|item| pair(item, !args.masks_only));
-        for p in own {
-            pairs.push(p);
-            pairs.extend(replayed.next());
-        }
-        pairs.extend(replayed);
-    }
+        )?
+        .items
+        .iter()
+        .map(|item| pair(item, !args.masks_only))
+        .collect(),
+        None => Vec::new(),
+    };
     let defaults = FineTuneSettings::default();
     let settings = FineTuneSettings {
         max_epochs: args.epochs.unwrap_or(defaults.max_epochs),
@@ -126,7 +120,8 @@ pub fn run(args: &FineTuneArgs) -> anyhow::Result<()> {
         ..defaults
     };
     let count = pairs.len();
-    let mut run = FineTune::new(&weights, &source, pairs, settings, &Device::flex())?;
+    let mut run = FineTune::new(&weights, &source, pairs, settings, &Device::flex())?
+        .with_rehearsal(rehearsed)?;
     let (train, held) = run.split();
     let before = run.score()?;
     eprintln!(

@@ -442,8 +442,11 @@ fn fine_tuning_scores_held_back_pairs_and_keeps_the_best_epoch() {
     let mut run = FineTune::new(&weights, "small.bpk", pairs.clone(), settings, &device)
         .unwrap()
         .with_reference(vec![pair(7, Some([0.0, 0.1, 0.0]))])
+        .unwrap()
+        .with_rehearsal(vec![pair(1, Some([0.0, 0.0, 0.1]))])
         .unwrap();
-    assert_eq!(run.split(), (4, 2));
+    // The rehearsed pair is trained on, never held back.
+    assert_eq!(run.split(), (5, 2));
     assert_eq!(run.score_reference().unwrap().unwrap().pairs, 1);
     let before = run.score().unwrap();
     assert_eq!((before.pairs, before.force_pairs), (2, 1));

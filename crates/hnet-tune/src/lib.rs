@@ -37,7 +37,8 @@ fn json<T: serde::Serialize>(value: &T) -> Result<String, JsError> {
 
 /// Starts a fine-tune of the weights file `weights` (`name` names it in errors) on the pairs in
 /// `images` and `forces`, scoring the reference pairs in `reference_images` and
-/// `reference_forces` after every epoch without training on them, with the settings in
+/// `reference_forces` after every epoch without training on them, and training on the pairs in
+/// `rehearsal_images` and `rehearsal_forces` without holding any back, with the settings in
 /// `settings_json` ([`FineTuneSettings`]; fields left out keep their defaults).
 ///
 /// `images` holds each pair in turn at `side`×`side` pixels: view A and view B as 8-bit RGB,
@@ -57,6 +58,8 @@ pub fn start(
     forces: &[f32],
     reference_images: &[u8],
     reference_forces: &[f32],
+    rehearsal_images: &[u8],
+    rehearsal_forces: &[f32],
     settings_json: &str,
 ) -> Result<String, JsError> {
     console_error_panic_hook::set_once();
@@ -65,8 +68,10 @@ pub fn start(
     let side = side as usize;
     let pairs = unpack(side, images, forces, "pairs")?;
     let reference = unpack(side, reference_images, reference_forces, "reference pairs")?;
+    let rehearsal = unpack(side, rehearsal_images, rehearsal_forces, "rehearsed pairs")?;
     let run = FineTune::new(weights, name, pairs, settings, &Device::flex())
         .and_then(|run| run.with_reference(reference))
+        .and_then(|run| run.with_rehearsal(rehearsal))
         .map_err(|e| js_error(&e))?;
     let before = run.score().map_err(|e| js_error(&e))?;
     let before_reference = run.score_reference().map_err(|e| js_error(&e))?;

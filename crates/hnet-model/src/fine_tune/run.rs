@@ -140,6 +140,27 @@ impl FineTune {
         Ok(self)
     }
 
+    /// Trains on `pairs` too, never holding any back: pairs of the domain the starting network
+    /// was trained on, rehearsed so that fine-tuning on another does not make it forget that one
+    /// (docs/results.md, "Fine-tuning on a few pairs").
+    pub fn with_rehearsal(mut self, pairs: Vec<TrainingPair>) -> Result<Self, FineTuneError> {
+        for (index, pair) in pairs.iter().enumerate() {
+            TrainingBatch::of(&[pair.labelled()], self.size, &self.plain).map_err(|cause| {
+                FineTuneError::OtherSize {
+                    size: self.size,
+                    cause: InputSizeError {
+                        pair: index,
+                        ..cause
+                    },
+                }
+            })?;
+        }
+        let first = self.pairs.len();
+        self.train.extend(first..first + pairs.len());
+        self.pairs.extend(pairs);
+        Ok(self)
+    }
+
     /// The current network's scores on the reference pairs, when there are some.
     pub fn score_reference(&self) -> Result<Option<HeldBackScores>, FineTuneError> {
         if self.reference.is_empty() {
