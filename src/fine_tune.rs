@@ -149,35 +149,52 @@ pub fn twin_domain_set(
     count: usize,
     seed: u64,
 ) -> Option<Result<TuningSet, TwinError>> {
-    if !domain.phantom_backgrounds || domain.scenes.plate.is_some() {
-        return None;
-    }
-    let mut config = TwinConfig::new(domain.modality, WORK_SIZE);
-    config.scene = domain.scenes.clone();
-    let view = |deg: [f64; 2]| {
-        if domain.modality.is_xray() {
-            CArm::cardiac(deg[0], deg[1], WORK_SIZE)
-        } else {
-            CArm::bench_camera(deg[0], deg[1], WORK_SIZE)
-        }
-    };
-    config.views = Biplane {
-        a: view(domain.views_deg[0]),
-        b: view(domain.views_deg[1]),
-    };
-    let backgrounds = Backgrounds::phantom(&config.views);
-    let mut set = TuningSet {
-        images: Vec::new(),
-        forces: Vec::new(),
-        pairs: count,
-        with_force: count,
-        left_out: 0,
-    };
+    let sampler = TwinDomainSampler::new(domain)?;
+    let mut set = TuningSet::empty();
     for index in 0..count as u64 {
-        let sample = match generate(&config, &backgrounds, seed, index) {
-            Ok(sample) => sample,
-            Err(e) => return Some(Err(e)),
+        if let Err(e) = sampler.push(seed, index, &mut set) {
+            return Some(Err(e));
+        }
+    }
+    Some(Ok(set))
+}
+
+/// Draws twin pairs from a weights' recorded domain one at a time ([`twin_domain_set`]), so
+/// that the page can let the browser answer between them.
+pub struct TwinDomainSampler {
+    config: TwinConfig,
+    backgrounds: Backgrounds,
+}
+
+impl TwinDomainSampler {
+    /// The sampler of `domain`; `None` when it is not the twin's phantom bench.
+    pub fn new(domain: &ForceDomain) -> Option<Self> {
+        if !domain.phantom_backgrounds || domain.scenes.plate.is_some() {
+            return None;
+        }
+        let mut config = TwinConfig::new(domain.modality, WORK_SIZE);
+        config.scene = domain.scenes.clone();
+        let view = |deg: [f64; 2]| {
+            if domain.modality.is_xray() {
+                CArm::cardiac(deg[0], deg[1], WORK_SIZE)
+            } else {
+                CArm::bench_camera(deg[0], deg[1], WORK_SIZE)
+            }
         };
+        config.views = Biplane {
+            a: view(domain.views_deg[0]),
+            b: view(domain.views_deg[1]),
+        };
+        let backgrounds = Backgrounds::phantom(&config.views);
+        Some(Self {
+            config,
+            backgrounds,
+        })
+    }
+
+    /// Adds pair `index` of the run seeded `seed` to `set`, with its masks and true force.
+    pub fn push(&self, seed: u64, index: u64, set: &mut TuningSet) -> Result<(), TwinError> {
+        let sample = generate(&self.config, &self.backgrounds, seed, index)?;
         let [a, b] = &sample.views;
         set.images.extend(a.pixels.to_rgb());
         set.images.extend(b.pixels.to_rgb());
@@ -186,8 +203,23 @@ pub fn twin_domain_set(
         let f = sample.params.tip_force_n;
         set.forces
             .extend([f.x() as f32, f.y() as f32, f.z() as f32]);
+        set.pairs += 1;
+        set.with_force += 1;
+        Ok(())
     }
-    Some(Ok(set))
+}
+
+impl TuningSet {
+    /// A set of no pairs.
+    pub fn empty() -> Self {
+        Self {
+            images: Vec::new(),
+            forces: Vec::new(),
+            pairs: 0,
+            with_force: 0,
+            left_out: 0,
+        }
+    }
 }
 
 /// Seconds left, from `elapsed_s` for `done` of `total` steps (`None` before the first).

@@ -12,16 +12,19 @@ use wasm_bindgen::JsValue;
 
 use super::{ModelState, Studio, load_model};
 use crate::browser::now_ms;
+use crate::browser::yield_to_browser;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
 use crate::fine_tune::{
-    REFERENCE_PAIRS, REFERENCE_SEED, REHEARSAL_PAIRS, REHEARSAL_SEED, TuningSet, kept_provenance,
-    seconds_left, tuning_set, twin_domain_set,
+    REFERENCE_PAIRS, REFERENCE_SEED, REHEARSAL_PAIRS, REHEARSAL_SEED, TuningSet, TwinDomainSampler,
+    kept_provenance, seconds_left, tuning_set,
 };
 use crate::imaging::WORK_SIZE;
 use crate::module_worker::{ModuleWorker, ModuleWorkerError};
 use crate::storage::{self, KeptWeights};
+use hnet_twin::model_facts::ForceDomain;
 use hnet_twin::model_facts::ModelFacts;
+use hnet_twin::scene::TwinError;
 
 /// The kept weights' file name.
 pub const KEPT_NAME: &str = "hnet-fine-tuned.bpk";
@@ -112,25 +115,6 @@ impl Studio {
             .as_ref()
             .and_then(|h| ModelFacts::read(&h.provenance).ok())
             .and_then(|facts| facts.force_domain);
-        let twin = |count, seed, what: &str| match domain
-            .as_ref()
-            .and_then(|d| twin_domain_set(d, count, seed))
-        {
-            Some(Ok(set)) => Ok(Some(set)),
-            Some(Err(e)) => Err(format!("Cannot fine-tune: the {what} twin pairs: {e}")),
-            None => Ok(None),
-        };
-        let reference = match twin(REFERENCE_PAIRS, REFERENCE_SEED, "reference") {
-            Ok(set) => set,
-            Err(why) => return self.error(why),
-        };
-        let rehearsal = match rehearse {
-            true => match twin(REHEARSAL_PAIRS, REHEARSAL_SEED, "rehearsed") {
-                Ok(set) => set,
-                Err(why) => return self.error(why),
-            },
-            false => None,
-        };
         let worker = match ModuleWorker::spawn("hnet-tune", "the fine-tuning worker") {
             Ok(worker) => Rc::new(worker),
             Err(e) => {
@@ -151,7 +135,7 @@ impl Studio {
         self.tuning.set(TuningState::Running(TuningProgress {
             split: (0, 0),
             pairs: set.pairs,
-            rehearsed: rehearsal.as_ref().map_or(0, |r| r.pairs),
+            rehearsed: 0,
             with_force: set.with_force,
             steps: (0, 0),
             max_epochs: settings.max_epochs,
@@ -162,6 +146,25 @@ impl Studio {
             seconds_left: None,
         }));
         leptos::task::spawn_local(async move {
+            // The twin pairs are drawn one at a time, the browser answering in between.
+            let (reference, rehearsal) = match twin_pairs(domain.as_ref(), rehearse).await {
+                Ok(sets) => sets,
+                Err(e) => {
+                    worker.stop("the fine-tune did not start");
+                    studio.tuning_worker.set_value(None);
+                    studio.tuning.set(TuningState::Idle);
+                    studio.error(format!(
+                        "Cannot fine-tune: the twin pairs of the weights' domain: {e}"
+                    ));
+                    return;
+                }
+            };
+            let rehearsed = rehearsal.as_ref().map_or(0, |r| r.pairs);
+            studio.tuning.update(|state| {
+                if let TuningState::Running(progress) = state {
+                    progress.rehearsed = rehearsed;
+                }
+            });
             let start = TuningStart {
                 weights: &engine.weights,
                 name: &start_name,
@@ -282,6 +285,37 @@ impl Studio {
             }
         });
     }
+}
+
+/// The reference twin pairs of `domain` (when it is the twin's) and, with `rehearse`, the pairs
+/// rehearsed, drawn one at a time with the browser answering in between.
+async fn twin_pairs(
+    domain: Option<&ForceDomain>,
+    rehearse: bool,
+) -> Result<(Option<TuningSet>, Option<TuningSet>), TwinError> {
+    yield_to_browser().await;
+    let Some(sampler) = domain.and_then(TwinDomainSampler::new) else {
+        return Ok((None, None));
+    };
+    let mut sets = Vec::new();
+    let wanted = [
+        (REFERENCE_PAIRS, REFERENCE_SEED, true),
+        (REHEARSAL_PAIRS, REHEARSAL_SEED, rehearse),
+    ];
+    for (count, seed, wanted) in wanted {
+        if !wanted {
+            sets.push(None);
+            continue;
+        }
+        let mut set = TuningSet::empty();
+        for index in 0..count as u64 {
+            yield_to_browser().await;
+            sampler.push(seed, index, &mut set)?;
+        }
+        sets.push(Some(set));
+    }
+    let rehearsal = sets.pop().flatten();
+    Ok((sets.pop().flatten(), rehearsal))
 }
 
 /// What a fine-tune starts from.

@@ -51,13 +51,17 @@ pub struct FineTuneArgs {
     #[arg(long)]
     patience: Option<usize>,
     /// Rehearse on the first `--replay-pairs` training pairs of this dataset too, never held
-    /// back, as they are (not turned) and with their force labels unless `--masks-only`: pairs of the domain the weights were trained
+    /// back, as they are (not turned) and with their force labels unless
+    /// `--replay-masks-only`: pairs of the domain the weights were trained
     /// on, so that fine-tuning on another does not make them forget it.
     #[arg(long)]
     replay: Option<PathBuf>,
     /// Pairs of `--replay` to rehearse on.
     #[arg(long, default_value_t = 20)]
     replay_pairs: usize,
+    /// Rehearse the masks only: leave the rehearsed pairs' force labels out.
+    #[arg(long)]
+    replay_masks_only: bool,
     /// The weights file to write (the best epoch's network).
     #[arg(long)]
     out: PathBuf,
@@ -107,7 +111,7 @@ pub fn run(args: &FineTuneArgs) -> anyhow::Result<()> {
         )?
         .items
         .iter()
-        .map(|item| pair(item, !args.masks_only))
+        .map(|item| pair(item, !args.replay_masks_only))
         .collect(),
         None => Vec::new(),
     };

@@ -1,0 +1,57 @@
+// The page's fine-tune on this machine (docs/benchmarks.md, "Fine-tuning in the page"): how long
+// its epochs take and whether the page keeps answering while the worker trains.
+// Usage, after `trunk build --release` (or `trunk build`): node end2end/bench-fine-tune.mjs [PAIRS] [EPOCHS]
+import { serveDist, launchBrowser, openPage, waitForModel } from "./harness.mjs";
+
+const pairs = Number(process.argv[2] ?? 10);
+const epochs = Number(process.argv[3] ?? 2);
+const server = await serveDist();
+const context = await launchBrowser();
+try {
+  const { page } = await openPage(context, server.url);
+  await waitForModel(page);
+  await page.click("#tab-twin");
+  for (let i = 0; i < pairs; i++) {
+    await page.focus("#twin-fx");
+    await page.keyboard.press(i % 2 ? "ArrowLeft" : "ArrowRight");
+    await page.waitForSelector("#keep-draft:not([disabled])");
+    await page.click("#keep-draft");
+    await page.waitForFunction((n) => document.querySelectorAll("#pairs li[data-id]").length === n, i + 1);
+  }
+  await page.fill("#tune-epochs", String(epochs));
+  await page.dispatchEvent("#tune-epochs", "change");
+  // The page's event loop, sampled every 50 ms while the worker trains: the longest wait for a
+  // timer is the longest the page could not answer input.
+  await page.evaluate(() => {
+    window.__lags = [];
+    let last = performance.now();
+    window.__lagTimer = setInterval(() => {
+      const now = performance.now();
+      window.__lags.push(now - last - 50);
+      last = now;
+    }, 50);
+  });
+  const started = Date.now();
+  await page.click("#tune-start");
+  // A click on a tab answers while it trains.
+  await page.waitForFunction(() => /Epoch 1 of/.test(document.querySelector("#tune-progress-text")?.textContent ?? ""), null, { timeout: 600_000 });
+  const clicks = [];
+  for (const tab of ["#tab-images", "#tab-twin", "#tab-images", "#tab-twin"]) {
+    const t0 = Date.now();
+    await page.click(tab);
+    await page.waitForSelector(`${tab}[aria-selected=true]`);
+    clicks.push(Date.now() - t0);
+  }
+  await page.waitForSelector("#tune-table", { timeout: 1_800_000 });
+  const seconds = (Date.now() - started) / 1000;
+  const lags = await page.evaluate(() => {
+    clearInterval(window.__lagTimer);
+    const sorted = [...window.__lags].sort((a, b) => a - b);
+    return { samples: sorted.length, p99: sorted[Math.floor(sorted.length * 0.99)], max: sorted[sorted.length - 1] };
+  });
+  const rows = await page.$$eval("#tune-table tbody tr", (trs) => trs.map((tr) => [...tr.cells].map((c) => c.textContent)));
+  console.log(JSON.stringify({ pairs, epochs, seconds, clicks_ms: clicks, event_loop_lag_ms: lags, table: rows, reference: await page.textContent("#tune-reference") }));
+} finally {
+  await context.close();
+  await server.close();
+}
