@@ -18,8 +18,9 @@ try {
     await page.click("#keep-draft");
     await page.waitForFunction((n) => document.querySelectorAll("#pairs li[data-id]").length === n, i + 1);
   }
-  await page.fill("#tune-epochs", String(epochs));
-  await page.dispatchEvent("#tune-epochs", "change");
+  await page.click("#tune-epochs", { clickCount: 3 });
+  await page.keyboard.type(String(epochs));
+  await page.keyboard.press("Tab");
   // The page's event loop, sampled every 50 ms while the worker trains: the longest wait for a
   // timer is the longest the page could not answer input.
   await page.evaluate(() => {

@@ -228,8 +228,9 @@ impl Verdict {
     pub fn trust(&self) -> &'static str {
         match self {
             Self::Clear { .. } => {
-                "How far to trust this: on images like the ones these weights learned from, 9 \
-                 estimates in 10 fall within the range shown. A guide, not a measurement."
+                "How far to trust this: on images like the ones these weights learned from, \
+                 the true force lay within each axis's range about 9 times in 10 when it was \
+                 measured. A guide, not a measurement."
             }
             Self::Unclear { .. } => {
                 "How far to trust this: the range shown crosses an edge of the band, so it cannot \

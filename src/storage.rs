@@ -76,12 +76,17 @@ pub enum StorageError {
 impl StorageError {
     /// The error of a failed request, for `map_err`.
     fn request(action: &'static str) -> impl Fn(JsValue) -> Self {
+        Self::failed(move |cause| Self::Request { action, cause })
+    }
+
+    /// The error of a failed request: a full storage named as such, any other failure `other`.
+    fn failed(other: impl Fn(JsError) -> Self) -> impl Fn(JsValue) -> Self {
         move |e| {
             let cause = JsError::from(e);
             if cause.name == "QuotaExceededError" {
                 Self::Full(cause)
             } else {
-                Self::Request { action, cause }
+                other(cause)
             }
         }
     }
@@ -361,14 +366,7 @@ pub struct KeptWeights {
 
 /// The failure of a request to the store of weights (a full storage named as such).
 fn model_request(action: &'static str) -> impl Fn(JsValue) -> StorageError {
-    move |e| {
-        let cause = JsError::from(e);
-        if cause.name == "QuotaExceededError" {
-            StorageError::Full(cause)
-        } else {
-            StorageError::ModelRequest { action, cause }
-        }
-    }
+    StorageError::failed(move |cause| StorageError::ModelRequest { action, cause })
 }
 
 /// Keeps `weights` as the fine-tuned weights (replacing any kept before, only once the write

@@ -28,6 +28,31 @@ pub struct LabelledPair<'a> {
     pub force_n: Option<[f32; 3]>,
 }
 
+impl LabelledPair<'_> {
+    /// Whether its four buffers hold images of `size` (views RGB, masks one byte a pixel); the
+    /// error names the buffer, as pair `index` of its batch.
+    pub fn check_size(&self, size: ImageSize, index: usize) -> Result<(), InputSizeError> {
+        let (rgb, grey) = (size.pixels() * 3, size.pixels());
+        let buffers = [
+            ("A", self.view_a, rgb),
+            ("B", self.view_b, rgb),
+            ("A's mask", self.mask_a, grey),
+            ("B's mask", self.mask_b, grey),
+        ];
+        for (view, pixels, expected) in buffers {
+            if pixels.len() != expected {
+                return Err(InputSizeError {
+                    pair: index,
+                    view,
+                    found: pixels.len(),
+                    expected,
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
 /// A batch of `B` labelled pairs as the network and its loss read them.
 #[derive(Debug, Clone)]
 pub struct TrainingBatch {
@@ -62,22 +87,7 @@ impl TrainingBatch {
         let mut f = Vec::with_capacity(n * 3);
         let mut known = Vec::with_capacity(n);
         for (index, pair) in pairs.iter().enumerate() {
-            let buffers = [
-                ("A", pair.view_a, rgb),
-                ("B", pair.view_b, rgb),
-                ("A's mask", pair.mask_a, grey),
-                ("B's mask", pair.mask_b, grey),
-            ];
-            for (view, pixels, expected) in buffers {
-                if pixels.len() != expected {
-                    return Err(InputSizeError {
-                        pair: index,
-                        view,
-                        found: pixels.len(),
-                        expected,
-                    });
-                }
-            }
+            pair.check_size(size, index)?;
             push_planar(pair.view_a, &mut a);
             push_planar(pair.view_b, &mut b);
             push_mask(pair.mask_a, &mut ma);

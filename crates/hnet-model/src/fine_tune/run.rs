@@ -12,7 +12,7 @@ use super::{
     EpochReport, FineTuneError, FineTuneSettings, FinishReason, HeldBackScores, TrainingPair,
 };
 use crate::architectures::{ModelSpec, StereoInput, StereoModel};
-use crate::inference::{InputSizeError, host_values};
+use crate::inference::host_values;
 use crate::loss::{HNetLoss, HNetLossConfig};
 use crate::metrics::{ForceAccumulator, SegmentationAccumulator};
 use crate::training::{LabelledPair, RmsPropSettings, TrainingBatch, step_loss};
@@ -68,17 +68,7 @@ impl FineTune {
         if pairs.len() < 2 {
             return Err(FineTuneError::TooFewPairs { found: pairs.len() });
         }
-        for (index, pair) in pairs.iter().enumerate() {
-            TrainingBatch::of(&[pair.labelled()], size, &device).map_err(|cause| {
-                FineTuneError::OtherSize {
-                    size,
-                    cause: InputSizeError {
-                        pair: index,
-                        ..cause
-                    },
-                }
-            })?;
-        }
+        check_sizes(&pairs, size)?;
         let every = settings.hold_back_every.max(2);
         let (mut train, mut held_back) = (Vec::new(), Vec::new());
         for index in 0..pairs.len() {
@@ -125,17 +115,7 @@ impl FineTune {
     /// starting network was trained on (the page renders them with the twin), so that what
     /// fine-tuning costs there shows beside what it gains on the user's pairs.
     pub fn with_reference(mut self, pairs: Vec<TrainingPair>) -> Result<Self, FineTuneError> {
-        for (index, pair) in pairs.iter().enumerate() {
-            TrainingBatch::of(&[pair.labelled()], self.size, &self.plain).map_err(|cause| {
-                FineTuneError::OtherSize {
-                    size: self.size,
-                    cause: InputSizeError {
-                        pair: index,
-                        ..cause
-                    },
-                }
-            })?;
-        }
+        check_sizes(&pairs, self.size)?;
         self.reference = pairs;
         Ok(self)
     }
@@ -144,17 +124,7 @@ impl FineTune {
     /// was trained on, rehearsed so that fine-tuning on another does not make it forget that one
     /// (docs/results.md, "Fine-tuning on a few pairs").
     pub fn with_rehearsal(mut self, pairs: Vec<TrainingPair>) -> Result<Self, FineTuneError> {
-        for (index, pair) in pairs.iter().enumerate() {
-            TrainingBatch::of(&[pair.labelled()], self.size, &self.plain).map_err(|cause| {
-                FineTuneError::OtherSize {
-                    size: self.size,
-                    cause: InputSizeError {
-                        pair: index,
-                        ..cause
-                    },
-                }
-            })?;
-        }
+        check_sizes(&pairs, self.size)?;
         let first = self.pairs.len();
         self.train.extend(first..first + pairs.len());
         self.pairs.extend(pairs);
@@ -339,6 +309,16 @@ fn score(
         force_mae_n: force.finish().map(|m| m.overall.mae),
         force_pairs: force.len() as usize,
     })
+}
+
+/// Refuses pairs that are not all of `size`, naming the first that is not.
+fn check_sizes(pairs: &[TrainingPair], size: ImageSize) -> Result<(), FineTuneError> {
+    for (index, pair) in pairs.iter().enumerate() {
+        pair.labelled()
+            .check_size(size, index)
+            .map_err(|cause| FineTuneError::OtherSize { size, cause })?;
+    }
+    Ok(())
 }
 
 /// A one-element tensor's value on the host.
