@@ -28,9 +28,11 @@ cd "$dist"
 page_code=(hnet-studio-*_bg.wasm hnet-studio-*.js boot.js style-*.css index.html)
 weights=(assets/hnet-cpu.bpk)
 gpu=(hnet-gpu_bg.wasm hnet-gpu.js module-worker.js)
+cpu=(hnet-cpu_bg.wasm hnet-cpu.js)
 echo "release page: $dist"
 printf '  page code (wasm, JS, CSS, HTML): %s\n' "$(sizes "${page_code[@]}")"
 printf '  bundled weights:                 %s\n' "$(sizes "${weights[@]}")"
 printf '  every visitor (the two above):   %s\n' "$(sizes "${page_code[@]}" "${weights[@]}")"
+printf '  CPU workers, after the first estimate (one fetch, compiled per worker): %s\n' "$(sizes "${cpu[@]}")"
 printf '  WebGPU worker, when used:        %s\n' "$(sizes "${gpu[@]}")"
 printf '  a visitor on WebGPU (all):       %s\n' "$(sizes "${page_code[@]}" "${weights[@]}" "${gpu[@]}")"

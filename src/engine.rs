@@ -1,6 +1,7 @@
 //! The network in the page: H-Net with its weights on the chosen device, and inference on the
 //! stereo pair on screen.
 
+use std::cell::{Cell, RefCell};
 use std::collections::BTreeMap;
 use std::rc::Rc;
 
@@ -11,13 +12,14 @@ use hnet_model::catheter_entry::{
     CatheterEntry, EntryReading, EntrySetting, ReadEntryError, TurnError, read_predictions,
     turned_pairs,
 };
-use hnet_model::inference::{PredictError, StereoPair, StereoPrediction};
+use hnet_model::inference::{JoinViewsError, PredictError, StereoPair, StereoPrediction};
 use hnet_model::weights::{WeightsError, WeightsHeader};
 use hnet_model::{HNet, HNetConfig, HNetConfigError};
-use hnet_units::ImageSize;
+use hnet_units::{ImageSize, View};
 
 use crate::browser::{now_ms, yield_to_browser};
 use crate::compute::Backend;
+use crate::cpu_pool::{CpuPool, PoolError, WorkersStatus, pool_size};
 use crate::error_text::with_causes;
 use crate::force_reading::TrainingDomain;
 use crate::gpu_worker::{GpuNetwork, GpuWorker, GpuWorkerError};
@@ -43,7 +45,9 @@ pub enum WeightsOrigin {
 
 /// Where a loaded H-Net runs.
 enum Runner {
-    /// On the page's thread, on Burn's flex CPU backend (WebAssembly).
+    /// On Burn's flex CPU backend (WebAssembly): in the pool of CPU workers once it has started
+    /// ([`Engine::start_workers`]), on the page's thread before and without it. The page's copy
+    /// also joins the workers' views with the force head.
     Cpu(Box<HNet>),
     /// In the WebGPU worker ([`crate::gpu_worker`]), which holds its own copy of the network.
     WebGpu(GpuNetwork),
@@ -77,6 +81,10 @@ pub struct Engine {
     pub combination: Option<ForceCombination>,
     /// Why the file's facts could not be read, when they could not.
     pub facts_error: Option<String>,
+    /// The CPU workers that read its views, once started.
+    workers: RefCell<Option<Rc<CpuPool>>>,
+    /// Whether the workers were asked for.
+    workers_asked: Cell<bool>,
 }
 
 /// What H-Net says about one pair, at [`WORK_SIZE`].
@@ -103,6 +111,10 @@ pub struct Prediction {
     pub millis: f64,
     /// The backend it ran on.
     pub backend: &'static str,
+    /// CPU workers it was spread over (0: the page's thread, or WebGPU).
+    pub workers: usize,
+    /// Why a view was read again, when a CPU worker stopped while reading it.
+    pub redone: Option<String>,
 }
 
 impl Prediction {
@@ -167,6 +179,12 @@ pub enum EngineError {
     /// The WebGPU worker failed.
     #[error(transparent)]
     WebGpu(#[from] GpuWorkerError),
+    /// The CPU workers gave no reading.
+    #[error(transparent)]
+    Workers(#[from] PoolError),
+    /// The workers' views could not be joined into a pair.
+    #[error(transparent)]
+    Join(#[from] JoinViewsError),
 }
 
 impl Engine {
@@ -223,6 +241,8 @@ impl Engine {
             domain: None,
             combination: None,
             facts_error: None,
+            workers: RefCell::default(),
+            workers_asked: Cell::new(false),
         }
     }
 
@@ -278,7 +298,47 @@ impl Engine {
             domain: self.domain.clone(),
             combination: self.combination,
             facts_error: self.facts_error.clone(),
+            workers: RefCell::default(),
+            workers_asked: Cell::new(false),
         })
+    }
+
+    /// Starts the pool of CPU workers for this engine's network (once; nothing on WebGPU), and
+    /// reports its state to `on_change`. Until the pool is ready, and without it, the page's
+    /// thread runs H-Net.
+    pub fn start_workers(self: &Rc<Self>, on_change: impl Fn(WorkersStatus) + 'static) {
+        let Runner::Cpu(model) = &self.runner else {
+            return;
+        };
+        if self.workers_asked.replace(true) {
+            return;
+        }
+        let size = pool_size();
+        on_change(WorkersStatus::Starting(size));
+        let on_change: Rc<dyn Fn(WorkersStatus)> = Rc::new(on_change);
+        let engine = self.clone();
+        let pooled = model.pooled_per_view();
+        leptos::task::spawn_local(async move {
+            let report = on_change.clone();
+            let started = CpuPool::start(
+                size,
+                engine.weights.clone(),
+                engine.weights_name.clone(),
+                engine.input,
+                pooled,
+                Box::new(move |status| report(status)),
+            )
+            .await;
+            match started {
+                Ok(pool) => *engine.workers.borrow_mut() = Some(pool),
+                Err(e) => on_change(WorkersStatus::PageThread(with_causes(&e))),
+            }
+        });
+    }
+
+    /// The CPU workers, when they run.
+    fn running_workers(&self) -> Option<Rc<CpuPool>> {
+        self.workers.borrow().clone().filter(|pool| pool.can_read())
     }
 
     /// Runs H-Net on two [`WORK_SIZE`] RGB images, resizing them to the network's input and
@@ -302,12 +362,34 @@ impl Engine {
             view_a: &a,
             view_b: &b,
         };
+        let mut workers = 0;
+        let mut redone = None;
         let reading: EntryReading = match &self.runner {
-            Runner::Cpu(model) => {
-                model
-                    .predict_entry_async(pair, self.input, &Device::flex(), entry)
-                    .await?
-            }
+            Runner::Cpu(model) => match self.running_workers() {
+                Some(pool) => {
+                    workers = pool.running();
+                    let read = on_workers(model, &pool, &a, &b, self.input, entry).await;
+                    match read {
+                        Ok((reading, why)) => {
+                            redone = why;
+                            reading
+                        }
+                        // Every worker stopped: the page's thread reads the pair.
+                        Err(EngineError::Workers(PoolError::Stopped { .. })) => {
+                            workers = 0;
+                            model
+                                .predict_entry_async(pair, self.input, &Device::flex(), entry)
+                                .await?
+                        }
+                        Err(e) => return Err(e),
+                    }
+                }
+                None => {
+                    model
+                        .predict_entry_async(pair, self.input, &Device::flex(), entry)
+                        .await?
+                }
+            },
             Runner::WebGpu(network) => {
                 // The worker runs one pair per call: each turned copy in turn.
                 let turned = turned_pairs(&a, &b, self.input, entry)?;
@@ -330,8 +412,40 @@ impl Engine {
             no_catheter,
             millis,
             backend: self.backend.label(),
+            workers,
+            redone,
         })
     }
+}
+
+/// `view_a` and `view_b` (RGB at `size`) read under `entry` by the CPU workers: every view of
+/// every turned copy at once, each pair's views joined by `model`'s force head on the page's
+/// thread. Also says why a view was read again, when one was.
+async fn on_workers(
+    model: &HNet,
+    pool: &Rc<CpuPool>,
+    view_a: &[u8],
+    view_b: &[u8],
+    size: ImageSize,
+    entry: EntrySetting,
+) -> Result<(EntryReading, Option<String>), EngineError> {
+    let turned = turned_pairs(view_a, view_b, size, entry)?;
+    let reads = futures::future::join_all(turned.iter().flat_map(|t| {
+        [
+            pool.read_view(View::A, t.view_a.clone()),
+            pool.read_view(View::B, t.view_b.clone()),
+        ]
+    }))
+    .await;
+    let mut redone = None;
+    let mut predictions = Vec::with_capacity(turned.len());
+    let mut reads = reads.into_iter();
+    while let (Some(a), Some(b)) = (reads.next(), reads.next()) {
+        let (a, b) = (a?, b?);
+        redone = redone.or(a.redone).or(b.redone);
+        predictions.push(model.join_views(a.reading, b.reading, &Device::flex())?);
+    }
+    Ok((read_predictions(&turned, predictions, size)?, redone))
 }
 
 impl From<ReadEntryError> for EngineError {

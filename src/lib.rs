@@ -54,6 +54,8 @@ pub mod components;
 #[cfg(target_arch = "wasm32")]
 pub mod compute;
 #[cfg(target_arch = "wasm32")]
+pub mod cpu_pool;
+#[cfg(target_arch = "wasm32")]
 pub mod engine;
 #[cfg(target_arch = "wasm32")]
 pub mod gpu_worker;

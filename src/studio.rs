@@ -12,6 +12,7 @@ use leptos::prelude::*;
 use crate::catheter_3d::FitMasks;
 use crate::cine::CinePlayer;
 use crate::compute::BackendChoice;
+use crate::cpu_pool::WorkersStatus;
 use crate::engine::Prediction;
 use crate::error_text::with_causes;
 use crate::module_worker::ModuleWorker;
@@ -142,6 +143,8 @@ pub enum SourceTab {
 pub struct Studio {
     /// The network.
     pub model: RwSignal<ModelState, LocalStorage>,
+    /// The CPU workers that read the views, as the model bar shows them.
+    pub cpu_workers: RwSignal<WorkersStatus>,
     /// Which backend the user asked for.
     pub backend_choice: RwSignal<BackendChoice>,
     /// Through which edge the catheter enters the views H-Net reads (as trained: the bottom).
@@ -222,6 +225,7 @@ impl Studio {
     pub fn new() -> Self {
         Self {
             model: RwSignal::new_local(ModelState::Loading("Loading H-Net…".into())),
+            cpu_workers: RwSignal::new(WorkersStatus::NotUsed),
             backend_choice: RwSignal::new(BackendChoice::Auto),
             catheter_entry: RwSignal::new(EntrySetting::AS_TRAINED),
             workspace: RwSignal::new(Workspace::default()),

@@ -11,6 +11,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::force_label::ForceLabelRow;
 use crate::imaging::WORK_SIZE;
+/// The two views of a pair (one type for the page, the network and the twin).
+pub use hnet_units::View;
 
 /// Where a pair came from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -84,28 +86,6 @@ pub struct LabeledPair {
     /// [`export_splits`]).
     #[serde(default)]
     pub split: Option<Split>,
-}
-
-/// The two views.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-pub enum View {
-    /// View A (the frontal view of the default biplane).
-    A,
-    /// View B (the lateral view).
-    B,
-}
-
-impl View {
-    /// Both views, A first.
-    pub const BOTH: [View; 2] = [View::A, View::B];
-
-    /// `"A"` or `"B"`.
-    pub fn letter(self) -> &'static str {
-        match self {
-            View::A => "A",
-            View::B => "B",
-        }
-    }
 }
 
 impl LabeledPair {

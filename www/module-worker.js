@@ -1,9 +1,10 @@
-// The page's module workers, off the page's thread: `module-worker.js?module=hnet-gpu` runs H-Net
+// The page's module workers, off the page's thread: `module-worker.js?module=hnet-cpu` reads views
+// with H-Net on the CPU, one worker per core (crates/hnet-cpu); `?module=hnet-gpu` runs H-Net
 // on WebGPU (crates/hnet-gpu), `?module=hnet-tune` fine-tunes it on the CPU (crates/hnet-tune).
 // The page's side is src/module_worker.rs. Each message `{ id, call, args }` calls the module's
 // export `call`; the reply is `{ id, value }` or `{ id, error }`. A module that fails to load
 // answers every call with why.
-const MODULES = ["hnet-gpu", "hnet-tune"];
+const MODULES = ["hnet-cpu", "hnet-gpu", "hnet-tune"];
 const name = new URL(self.location.href).searchParams.get("module");
 
 const ready = MODULES.includes(name)

@@ -628,6 +628,42 @@ test("a twin pair in 3D: the catheter, the physics force beside H-Net's, the epi
   await page.close();
 });
 
+test("every core: one CPU worker per core reads the views as the page's thread does; without workers the page's thread runs H-Net and says why", async () => {
+  const { page, errors } = await openPage(context, server.url);
+  await waitForModel(page);
+  // The first estimate comes from the page's thread; the workers start after it.
+  await page.waitForSelector("#force-verdict", { timeout: 120_000 });
+  const onPageThread = await page.textContent("#force-table");
+  const cores = await page.evaluate(() => Math.min(8, navigator.hardwareConcurrency));
+  await page.waitForFunction((n) => document.querySelector("#cpu-workers").textContent.startsWith(`${n} (one per core`), cores, { timeout: 60_000 });
+  assert.equal(page.workers().filter((w) => w.url().includes("module=hnet-cpu")).length, cores);
+  // The same pair read again on the workers (a setting change clears the estimates): the same
+  // masks and force, to the digits shown.
+  await page.selectOption("#catheter-entry", "left");
+  await page.waitForFunction(() => !document.querySelector("#busy"));
+  await page.selectOption("#catheter-entry", "bottom");
+  await page.waitForFunction(() => / workers$/.test(document.querySelector("#inference-time").textContent) && !document.querySelector("#busy"), null, { timeout: 60_000 });
+  assert.equal(await page.textContent("#force-table"), onPageThread);
+  assert.deepEqual(errors, []);
+  await page.close();
+
+  // Workers whose module cannot be fetched, and a browser without workers: the page's thread.
+  for (const [setup, why] of [
+    [async (p) => p.route("**/hnet-cpu_bg.wasm", (route) => route.abort()), /^none: the page's thread, one core \(no CPU worker could be started: .+\)$/],
+    [async (p) => p.addInitScript(() => delete window.Worker), /^none: the page's thread, one core \(this browser runs no Web Workers\)$/],
+  ]) {
+    const page = await context.newPage();
+    await setup(page);
+    await page.goto(server.url);
+    await waitForModel(page);
+    await page.waitForSelector("#force-verdict", { timeout: 120_000 });
+    await page.waitForFunction(() => document.querySelector("#cpu-workers").textContent.startsWith("none"), null, { timeout: 60_000 });
+    assert.match(await page.textContent("#cpu-workers"), why);
+    assert.equal(await page.textContent("#force-table"), onPageThread);
+    await page.close();
+  }
+});
+
 test("a DICOM cine: sample, step, scrub, play, window/level, trace with cancel, CSV, keep a frame; bad files named, the cine kept", async () => {
   const { page, errors } = await openPage(context, server.url);
   await waitForModel(page);
@@ -691,11 +727,21 @@ test("a DICOM cine: sample, step, scrub, play, window/level, trace with cancel, 
   await page.waitForSelector("#cine-trace");
   assert.match(await page.textContent("#notice"), /trace stopped: \d+ of 24 frames traced|traced over 24 frames/);
   await page.click("#cine-window-reset");
+  await page.waitForFunction(() => !document.querySelector("#busy"));
   await page.click("#cine-trace");
   await page.waitForSelector("#trace-progress");
   await page.waitForFunction(() => document.querySelector("#force-trace").dataset.traced === "24", null, { timeout: 180_000 });
   assert.match(await page.textContent("#notice"), /tip force traced over 24 frames/);
   assert.equal(await page.locator("#force-trace path[data-series]").count(), 4);
+  // A CPU worker that dies mid-trace is replaced, and the views it held are read again by
+  // another: every frame is traced, and the trace says which were read again.
+  await page.click("#cine-trace");
+  await page.waitForSelector("#trace-progress");
+  const [worker] = page.workers().filter((w) => w.url().includes("module=hnet-cpu"));
+  await worker.evaluate(() => setTimeout(() => { throw new Error("this worker dies"); }, 0));
+  await page.waitForFunction(() => document.querySelector("#force-trace").dataset.traced === "24" && !document.querySelector("#busy"), null, { timeout: 180_000 });
+  assert.match(await page.textContent("#notice"), /tip force traced over 24 frames .*A CPU worker stopped \(Uncaught Error: this worker dies\) and was replaced: frames? [\d, ]+ read again/);
+  assert.match(await page.textContent("#cpu-workers"), /1 replaced after stopping/);
   const [csv] = await Promise.all([page.waitForEvent("download"), page.click("#cine-export-trace")]);
   assert.equal(csv.suggestedFilename(), "hnet-force-trace.csv");
   await csv.saveAs(join(files, "trace.csv"));

@@ -22,8 +22,10 @@ pub fn ModelBar() -> impl IntoView {
     let last_millis = move || {
         let id = studio.shown_id()?;
         studio.predictions.with(|p| {
-            p.get(&id)
-                .map(|p| format!("{:.0} ms on {}", p.millis, p.backend))
+            p.get(&id).map(|p| match p.workers {
+                0 => format!("{:.0} ms on {}", p.millis, p.backend),
+                n => format!("{:.0} ms on {}, {n} workers", p.millis, p.backend),
+            })
         })
     };
     let on_backend = move |ev: leptos::ev::Event| {
@@ -110,6 +112,14 @@ pub fn ModelBar() -> impl IntoView {
                                 {engine.check.clone().map(|check| view! {
                                     <dd id="backend-check" class="why">{format!("({check})")}</dd>
                                 })}
+                            </div>
+                            <div>
+                                <dt>"CPU workers"</dt>
+                                <dd id="cpu-workers" title="H-Net's views are read off the page's \
+                                    thread, one worker per core the browser reports (at most 8); \
+                                    a worker that stops is replaced and its views read again">
+                                    {move || studio.cpu_workers.get().text()}
+                                </dd>
                             </div>
                             <div><dt>"Parameters"</dt><dd id="params">{engine.params}</dd></div>
                             <div>

@@ -7,9 +7,11 @@ use super::{ModelState, Studio};
 use crate::browser::{download, now_ms};
 use crate::catheter_3d::{FitMasks, PairGeometry, PairMasks, reconstruct_pair};
 use crate::cine::CinePlayer;
+use crate::cpu_pool::WorkersStatus;
 use crate::engine::{Engine, Prediction};
 use crate::error_text::with_causes;
 use crate::workspace::{PairSource, View};
+use futures::StreamExt;
 use std::path::Path;
 
 use hnet_twin::model_facts::recorded_name;
@@ -137,10 +139,12 @@ impl Studio {
     }
 
     /// Runs H-Net over every frame of the cine, under the current windows, into its force
-    /// trace, one frame at a time, each frame's estimate made as the verdict makes it
-    /// ([`Studio::frame_estimate`]): the page stays responsive (each inference yields to the
-    /// browser first), the progress shows in [`Studio::trace_progress`], and
-    /// [`Studio::cancel_trace`] stops it after the frame in progress (what was traced stays).
+    /// trace, each frame's estimate made as the verdict makes it ([`Studio::frame_estimate`]).
+    /// As many frames are in flight as there are CPU workers (one on the page's thread or on
+    /// WebGPU), and the trace fills in as each frame is done; the cine keeps playing meanwhile.
+    /// The progress shows in [`Studio::trace_progress`], and [`Studio::cancel_trace`] stops it
+    /// after the frames in progress (what was traced stays). Frames whose view a stopped worker
+    /// left are read again by another, and the closing message names them.
     pub fn trace_cine(&self) {
         let ModelState::Ready(engine) = self.model.get_untracked() else {
             self.error("H-Net is not loaded yet: trace the force once it is");
@@ -166,7 +170,6 @@ impl Studio {
             ));
             return;
         }
-        self.stop_playback();
         let serial = self.cine_serial.get_untracked();
         self.cine.update(|c| {
             c.iter_mut()
@@ -176,65 +179,102 @@ impl Studio {
         self.trace_progress.set(Some((0, total)));
         self.busy
             .set(Some(format!("Tracing the tip force over {total} frames…")));
+        // Each frame is two views: one frame per worker keeps them all busy while the page
+        // joins the last frame's views and fits its rod.
+        let in_flight = match self.cpu_workers.get_untracked() {
+            WorkersStatus::Running { running, .. } => running.max(1),
+            _ => 1,
+        };
         let studio = *self;
         leptos::task::spawn_local(async move {
             let start = now_ms();
             let same_cine = || studio.cine_serial.get_untracked() == serial;
+            let stopped = || studio.trace_cancelled.get_untracked() || !same_cine();
+            let engine = &engine;
+            let frames = futures::stream::iter(0..total)
+                .map(|frame| async move {
+                    if stopped() {
+                        return (frame, None);
+                    }
+                    let views = studio.cine.with_untracked(|c| {
+                        let c = c.as_ref()?;
+                        Some((c.rgb(View::A, frame)?, c.rgb(View::B, frame)?))
+                    });
+                    let Some((a, b)) = views else {
+                        return (frame, None);
+                    };
+                    (frame, Some(engine.infer(&a, &b, entry).await))
+                })
+                .buffer_unordered(in_flight);
+            futures::pin_mut!(frames);
             let mut done = 0;
             // Frames with a force of H-Net's: under a search, a frame with a view read turned
             // has none.
             let mut traced = 0;
             let mut failure = None;
-            for frame in 0..total {
-                if studio.trace_cancelled.get_untracked() || !same_cine() {
-                    break;
-                }
-                let views = studio.cine.with_untracked(|c| {
-                    let c = c.as_ref()?;
-                    Some((c.rgb(View::A, frame)?, c.rgb(View::B, frame)?))
-                });
-                let Some((a, b)) = views else { break };
-                match engine.infer(&a, &b, entry).await {
+            // Frames read again after a worker stopped, and why the first one did.
+            let mut redone: Vec<usize> = Vec::new();
+            let mut redone_why = None;
+            while let Some((frame, result)) = frames.next().await {
+                match result {
+                    None => {}
                     // A frame read turned has no force of H-Net's to trace.
-                    Ok(prediction) if same_cine() => {
-                        if let Some(estimate) = studio.frame_estimate(&engine, frame, &prediction) {
+                    Some(Ok(prediction)) if same_cine() => {
+                        if let Some(why) = &prediction.redone {
+                            redone.push(frame);
+                            redone_why.get_or_insert_with(|| why.clone());
+                        }
+                        if let Some(estimate) = studio.frame_estimate(engine, frame, &prediction) {
                             studio.cine.update(|c| {
                                 c.iter_mut()
                                     .for_each(|c| c.record_estimate(frame, estimate))
                             });
                             traced += 1;
                         }
+                        done += 1;
+                        studio.trace_progress.set(Some((done, total)));
                     }
-                    Ok(_) => break,
-                    Err(e) => {
-                        failure = Some(format!(
-                            "H-Net failed on frame {}: {}",
-                            frame + 1,
-                            with_causes(&e)
-                        ));
-                        studio.leave_webgpu_after(&engine, &e);
-                        break;
+                    Some(Ok(_)) => {}
+                    Some(Err(e)) => {
+                        failure.get_or_insert_with(|| {
+                            studio.leave_webgpu_after(engine, &e);
+                            format!("H-Net failed on frame {}: {}", frame + 1, with_causes(&e))
+                        });
+                        // The frames in flight finish; no new one starts.
+                        studio.trace_cancelled.set(true);
                     }
                 }
-                done += 1;
-                studio.trace_progress.set(Some((done, total)));
             }
             studio.trace_progress.set(None);
             studio.busy.set(None);
             let seconds = (now_ms() - start) / 1000.0;
+            let redone_text = redone_why.map(|why| {
+                redone.sort_unstable();
+                let frames: Vec<String> = redone.iter().map(|f| (f + 1).to_string()).collect();
+                format!(
+                    ". A CPU worker stopped ({why}) and was replaced: frame{} {} read again",
+                    if frames.len() == 1 { "" } else { "s" },
+                    frames.join(", ")
+                )
+            });
+            let redone_text = redone_text.unwrap_or_default();
             match failure {
-                Some(text) => studio.error(format!("{text}; {done} of {total} frames traced")),
+                Some(text) => studio.error(format!(
+                    "{text}; {done} of {total} frames traced{redone_text}"
+                )),
                 None if !same_cine() => {}
                 None if done < total => studio.info(format!(
-                    "trace stopped: {done} of {total} frames traced in {seconds:.1} s"
+                    "trace stopped: {done} of {total} frames traced in {seconds:.1} s{redone_text}"
                 )),
                 None if traced < total => studio.info(format!(
                     "tip force traced over {traced} of {total} frames in {seconds:.1} s: the \
-                     other {} got no force (a view showed no catheter, or was read turned)",
+                     other {} got no force (a view showed no catheter, or was read \
+                     turned){redone_text}",
                     total - traced
                 )),
                 None => studio.info(format!(
-                    "tip force traced over {total} frames in {seconds:.1} s ({:.0} ms per frame)",
+                    "tip force traced over {total} frames in {seconds:.1} s ({:.0} ms per \
+                     frame){redone_text}",
                     seconds * 1000.0 / total.max(1) as f64
                 )),
             }

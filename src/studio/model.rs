@@ -9,6 +9,7 @@ use leptos::prelude::*;
 use super::Studio;
 use crate::bundled::{self, FetchError};
 use crate::compute::{self, Backend};
+use crate::cpu_pool::WorkersStatus;
 use crate::engine::{Engine, EngineError, Prediction, WeightsOrigin};
 use crate::error_text::with_causes;
 use crate::gpu_worker::GpuWorker;
@@ -42,6 +43,7 @@ impl Studio {
             .with_untracked(|d| d.clone())
             .or_else(|| self.workspace.with_untracked(|ws| ws.current().cloned()));
         let Some(pair) = shown else {
+            self.start_workers(&engine);
             return;
         };
         let studio = *self;
@@ -66,6 +68,9 @@ impl Studio {
                 }
             }
             studio.busy.set(None);
+            // The workers start once the first estimate is on screen, so that their start
+            // never delays it.
+            studio.start_workers(&engine);
             if studio.rerun.get_untracked() {
                 studio.rerun.set(false);
                 let current = studio.shown_id_untracked();
@@ -74,6 +79,22 @@ impl Studio {
                 {
                     studio.run_model();
                 }
+            }
+        });
+    }
+
+    /// Starts `engine`'s CPU workers (once) when it is the model the page runs, their state
+    /// shown in the model bar.
+    fn start_workers(&self, engine: &Rc<Engine>) {
+        if !self.uses(engine) {
+            return;
+        }
+        let studio = *self;
+        let this = Rc::downgrade(engine);
+        engine.start_workers(move |status| {
+            // A pool of weights the page has left says nothing about the page's.
+            if this.upgrade().is_some_and(|engine| studio.uses(&engine)) {
+                studio.cpu_workers.set(status);
             }
         });
     }
@@ -101,6 +122,7 @@ impl Studio {
             reason,
         ) {
             Ok(cpu) => {
+                self.cpu_workers.set(WorkersStatus::NotUsed);
                 self.model.set(ModelState::Ready(Rc::new(cpu)));
                 self.run_model();
             }
@@ -229,6 +251,7 @@ pub fn load_model(studio: Studio, weights: Option<(Rc<[u8]>, String, WeightsOrig
         match load_engine(studio, weights).await {
             Ok(engine) => {
                 let engine = Rc::new(engine);
+                studio.cpu_workers.set(WorkersStatus::NotUsed);
                 studio.model.set(ModelState::Ready(engine.clone()));
                 if name.is_some() {
                     studio.info(format!("Loaded {}", engine.weights_name));

@@ -7,9 +7,10 @@
 use alloc::vec::Vec;
 
 use burn::tensor::{DataError, Device, ExecutionError, Tensor, TensorData, Transaction};
-use hnet_units::ImageSize;
+use hnet_units::{ImageSize, View};
 
 use crate::model::{HNet, HNetOutput};
+use burn::tensor::activation::sigmoid;
 
 /// One stereo pair of 8-bit RGB images of the same size.
 #[derive(Debug, Clone, Copy)]
@@ -232,6 +233,151 @@ impl HNet {
         let read = self.forward_batch(pairs, size, device)?.execute_async();
         read_predictions(size, read.await)
     }
+}
+
+/// What one view's branch says about one image: its catheter probabilities and the pooled
+/// features it hands the force head. Two of them, joined by [`HNet::join_views`], make the
+/// pair's [`StereoPrediction`]: how the page reads a pair's views on two workers at once.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ViewReading {
+    /// Input size in pixels: the mask's size.
+    pub size: ImageSize,
+    /// Catheter probability per pixel, row-major.
+    pub mask: Vec<f32>,
+    /// The branch's global average pools `[(depth+1)·filters]` (the force head's half input).
+    pub pooled: Vec<f32>,
+}
+
+impl ViewReading {
+    /// The reading as one buffer: the mask (`size.pixels()` values), then the pooled features.
+    /// How the page's CPU workers hand a view to the page (crates/hnet-cpu).
+    pub fn to_packed(&self) -> Vec<f32> {
+        let mut values = Vec::with_capacity(self.mask.len() + self.pooled.len());
+        values.extend_from_slice(&self.mask);
+        values.extend_from_slice(&self.pooled);
+        values
+    }
+
+    /// The reading in a [`ViewReading::to_packed`] buffer of a view of `size` whose branch
+    /// pools `pooled` features; `None` when the buffer's length is not that.
+    pub fn from_packed(values: &[f32], size: ImageSize, pooled: usize) -> Option<Self> {
+        if values.len() != size.pixels() + pooled {
+            return None;
+        }
+        let (mask, pooled) = values.split_at(size.pixels());
+        Some(Self {
+            size,
+            mask: mask.to_vec(),
+            pooled: pooled.to_vec(),
+        })
+    }
+}
+
+/// Two view readings that do not make a pair.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "view A's reading ({size_a}, {pooled_a} pooled features) and view B's ({size_b}, {pooled_b}) \
+     do not make a pair for this network ({pooled} pooled features per view)"
+)]
+pub struct ViewsMismatch {
+    /// View A's mask size.
+    pub size_a: ImageSize,
+    /// View B's mask size.
+    pub size_b: ImageSize,
+    /// View A's pooled features.
+    pub pooled_a: usize,
+    /// View B's pooled features.
+    pub pooled_b: usize,
+    /// What the network's force head takes per view.
+    pub pooled: usize,
+}
+
+impl HNet {
+    /// Runs `view`'s branch on one 8-bit RGB image of `size` and reads its mask and pooled
+    /// features back, blocking until the device is done (the page's CPU workers).
+    pub fn read_view(
+        &self,
+        view: View,
+        image: &[u8],
+        size: ImageSize,
+        device: &Device,
+    ) -> Result<ViewReading, PredictError> {
+        let expected = size.pixels() * 3;
+        if image.len() != expected {
+            return Err(InputSizeError {
+                pair: 0,
+                view: view.letter(),
+                found: image.len(),
+                expected,
+            }
+            .into());
+        }
+        let mut planar = Vec::with_capacity(expected);
+        push_planar(image, &mut planar);
+        let input = Tensor::from_data(
+            TensorData::new(planar, [1, 3, size.height, size.width]),
+            device,
+        );
+        let branch = self.forward_view(view, input);
+        let read = Transaction::default()
+            .register(sigmoid(branch.mask_logits).reshape([1, -1]))
+            .register(branch.pooled)
+            .try_execute();
+        let mut outputs = read.map_err(ReadbackError::Device)?.into_iter().map(to_vec);
+        let mut next = || outputs.next().unwrap_or_else(|| Ok(Vec::new()));
+        Ok(ViewReading {
+            size,
+            mask: next()?,
+            pooled: next()?,
+        })
+    }
+
+    /// The pair's prediction from its two views' readings ([`HNet::read_view`]): their masks,
+    /// and the force head's tip force in newtons on both views' pooled features.
+    pub fn join_views(
+        &self,
+        a: ViewReading,
+        b: ViewReading,
+        device: &Device,
+    ) -> Result<StereoPrediction, JoinViewsError> {
+        let pooled = self.pooled_per_view();
+        if a.size != b.size || a.pooled.len() != pooled || b.pooled.len() != pooled {
+            return Err(JoinViewsError::Mismatch(ViewsMismatch {
+                size_a: a.size,
+                size_b: b.size,
+                pooled_a: a.pooled.len(),
+                pooled_b: b.pooled.len(),
+                pooled,
+            }));
+        }
+        let mut features = a.pooled;
+        features.extend_from_slice(&b.pooled);
+        let features = Tensor::from_data(TensorData::new(features, [1, 2 * pooled]), device);
+        let force = host_values(self.force_of_features(features))
+            .map_err(|e| JoinViewsError::Predict(e.into()))?;
+        let force = <[f32; 3]>::try_from(&force[..])
+            .map_err(|_| JoinViewsError::ForceValues(force.len()))?;
+        Ok(StereoPrediction {
+            size: a.size,
+            mask_a: a.mask,
+            mask_b: b.mask,
+            force,
+        })
+    }
+}
+
+/// Why two view readings gave no pair prediction.
+#[derive(Debug, thiserror::Error)]
+pub enum JoinViewsError {
+    /// The readings are not of this network's two views.
+    #[error(transparent)]
+    Mismatch(#[from] ViewsMismatch),
+    /// The force head could not be run.
+    #[error(transparent)]
+    Predict(#[from] PredictError),
+    /// The force head returned another number of values than `(Fx, Fy, Fz)`.
+    #[error("the force head returned {0} values, not (Fx, Fy, Fz)")]
+    ForceValues(usize),
 }
 
 /// Why a prediction failed.

@@ -19,7 +19,7 @@
 
 use alloc::vec::Vec;
 
-use hnet_units::ImageSize;
+use hnet_units::{ImageSize, View};
 use serde::{Deserialize, Serialize};
 
 use burn::config::Config;
@@ -237,6 +237,9 @@ impl UpBlock {
 pub struct SegmentationBranch {
     #[module(skip)]
     position_channels: bool,
+    /// Width of [`BranchOutput::pooled`]: `(depth+1)·filters`.
+    #[module(skip)]
+    pooled_width: usize,
     encoder: Vec<DoubleConv>,
     bottleneck: DoubleConv,
     decoder: Vec<UpBlock>,
@@ -266,6 +269,7 @@ impl SegmentationBranch {
             .collect();
         Self {
             position_channels: config.uses_position_channels(),
+            pooled_width: (config.depth + 1) * f,
             encoder,
             bottleneck: DoubleConv::new(f, f, device),
             decoder: (0..config.depth).map(|_| UpBlock::new(f, device)).collect(),
@@ -396,6 +400,11 @@ impl HNet {
         self
     }
 
+    /// Pooled features one view's branch hands the force head: `(depth+1)·filters`.
+    pub fn pooled_per_view(&self) -> usize {
+        self.segmentation.pooled_width
+    }
+
     /// Whether both views run through one set of encoder-decoder weights.
     pub fn shares_weights(&self) -> bool {
         self.segmentation_b.is_none()
@@ -439,18 +448,37 @@ impl HNet {
             Some(branch_b) => (self.segmentation.forward(view_a), branch_b.forward(view_b)),
         };
         let features = Tensor::cat(alloc::vec![a.pooled, b.pooled], 1);
-        let mut force = self.force.forward(features.clone());
-        if let Some(scale) = self.force_scale {
-            let device = force.device();
-            let row = |v: [f64; 3]| Tensor::<2>::from_floats([v.map(|x| x as f32)], &device);
-            force = force * row(scale.std_n) + row(scale.mean_n);
-        }
+        let force = self.force_of_features(features.clone());
         let output = HNetOutput {
             mask_logits_a: a.mask_logits,
             mask_logits_b: b.mask_logits,
             force,
         };
         (output, features)
+    }
+
+    /// One view's branch alone: `images` `[B, C, H, W]` of `view` through view A's branch, or
+    /// view B's own when weights are not shared. With [`HNet::force_of_features`] on both views'
+    /// pooled features it computes what [`HNet::forward`] does, one view at a time (how the
+    /// page spreads a pair over two workers).
+    pub fn forward_view(&self, view: View, images: Tensor<4>) -> BranchOutput {
+        match (view, &self.segmentation_b) {
+            (View::B, Some(branch_b)) => branch_b.forward(images),
+            _ => self.segmentation.forward(images),
+        }
+    }
+
+    /// The tip force `[B, 3]` in newtons from the force head's input: both views' pooled
+    /// features `[B, 2·(depth+1)·filters]`, view A's first (see
+    /// [`HNet::forward_with_features`]).
+    pub fn force_of_features(&self, features: Tensor<2>) -> Tensor<2> {
+        let mut force = self.force.forward(features);
+        if let Some(scale) = self.force_scale {
+            let device = force.device();
+            let row = |v: [f64; 3]| Tensor::<2>::from_floats([v.map(|x| x as f32)], &device);
+            force = force * row(scale.std_n) + row(scale.mean_n);
+        }
+        force
     }
 }
 

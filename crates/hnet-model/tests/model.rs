@@ -5,11 +5,13 @@ use burn::optim::{GradientsParams, RmsPropConfig};
 use burn::tensor::Gradients;
 use burn::tensor::{Device, Distribution, Tensor, Tolerance};
 use hnet_model::catheter_entry::{CatheterEntry, EntrySetting};
-use hnet_model::inference::{StereoPair, StereoPrediction, host_values, stereo_batch};
+use hnet_model::inference::{
+    JoinViewsError, StereoPair, StereoPrediction, ViewReading, host_values, stereo_batch,
+};
 use hnet_model::model::ForceScale;
 use hnet_model::predictor::{PairInput, Predictor};
 use hnet_model::{HNet, HNetConfig, HNetLossConfig};
-use hnet_units::ImageSize;
+use hnet_units::{ImageSize, View};
 
 /// A small network that still has the paper's structure (two pooling levels, 8 filters).
 fn small_config() -> HNetConfig {
@@ -147,6 +149,65 @@ fn predict_gives_each_pair_its_masks_and_force() {
     }];
     let err = model.predict(&short, size, &device).unwrap_err();
     assert!(err.to_string().starts_with("pair 0 view A: "), "{err}");
+}
+
+#[test]
+fn one_view_at_a_time_reads_the_pair_as_the_whole_network_does() {
+    // How the page spreads a pair over two workers: each view's branch apart, then the force
+    // head on both views' pooled features; with shared weights and without.
+    let device = Device::flex();
+    let size = ImageSize::new(32, 16);
+    let image = |seed: u8| -> Vec<u8> {
+        (0..size.pixels() * 3)
+            .map(|i| (i as u8).wrapping_mul(seed).wrapping_add(seed))
+            .collect()
+    };
+    let (view_a, view_b) = (image(3), image(7));
+    let pair = StereoPair {
+        view_a: &view_a,
+        view_b: &view_b,
+    };
+    for shared in [true, false] {
+        let model = small_config()
+            .with_image_size(size)
+            .with_share_weights(shared)
+            .init(&device)
+            .unwrap();
+        let whole = model.predict(&[pair], size, &device).unwrap().remove(0);
+        let a = model.read_view(View::A, &view_a, size, &device).unwrap();
+        let b = model.read_view(View::B, &view_b, size, &device).unwrap();
+        assert_eq!(a.pooled.len(), model.pooled_per_view());
+        // The packed form (the CPU workers') gives the reading back, and only for its shape.
+        let packed = a.to_packed();
+        let pooled = model.pooled_per_view();
+        assert_eq!(
+            ViewReading::from_packed(&packed, size, pooled).as_ref(),
+            Some(&a)
+        );
+        assert_eq!(ViewReading::from_packed(&packed[1..], size, pooled), None);
+        let joined = model.join_views(a.clone(), b.clone(), &device).unwrap();
+        let close = |x: &[f32], y: &[f32]| {
+            x.len() == y.len() && x.iter().zip(y).all(|(x, y)| (x - y).abs() < 1e-5)
+        };
+        assert!(close(&joined.mask_a, &whole.mask_a), "shared {shared}");
+        assert!(close(&joined.mask_b, &whole.mask_b), "shared {shared}");
+        assert!(close(&joined.force, &whole.force), "shared {shared}");
+        // A reading of another network's shape is refused, naming both views.
+        let mut short = b;
+        short.pooled.pop();
+        let refused = model.join_views(a, short, &device).unwrap_err();
+        assert!(matches!(refused, JoinViewsError::Mismatch(_)), "{refused}");
+        assert!(
+            refused.to_string().contains("view B's (32×16, 23)"),
+            "{refused}"
+        );
+    }
+    // A view of another size is refused, naming the view.
+    let model = small_config().with_image_size(size).init(&device).unwrap();
+    let refused = model
+        .read_view(View::B, &view_a[3..], size, &device)
+        .unwrap_err();
+    assert!(refused.to_string().contains("view B"), "{refused}");
 }
 
 #[test]

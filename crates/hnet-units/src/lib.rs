@@ -41,6 +41,37 @@ pub fn force_magnitude(force_n: [f32; 3]) -> f32 {
     force_n.iter().map(|f| f * f).sum::<f32>().sqrt()
 }
 
+/// One of the two simultaneous views of a biplane pair: what the page labels, the network reads
+/// (each through its segmentation branch) and the twin renders.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum View {
+    /// View A (the frontal view of the default biplane).
+    A,
+    /// View B (the lateral view).
+    B,
+}
+
+impl View {
+    /// Both views, A first.
+    pub const BOTH: [View; 2] = [View::A, View::B];
+
+    /// `"A"` or `"B"`.
+    pub fn letter(self) -> &'static str {
+        match self {
+            View::A => "A",
+            View::B => "B",
+        }
+    }
+
+    /// 0 for view A, 1 for view B: the view's place in a pair's arrays.
+    pub fn index(self) -> usize {
+        match self {
+            View::A => 0,
+            View::B => 1,
+        }
+    }
+}
+
 /// The size of an image, in pixels.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
 pub struct ImageSize {

@@ -1,0 +1,393 @@
+//! The page's pool of CPU workers: H-Net's views read off the page's thread, one worker per core
+//! the browser reports (crates/hnet-cpu, each in a [`ModuleWorker`]).
+//!
+//! The unit of work is one view of one pair ([`hnet_model::HNet::read_view`]): a pair's two
+//! views go to two workers at once, and a cine's frames keep every worker busy. The page joins a
+//! pair's views with the force head on its own thread ([`hnet_model::HNet::join_views`]).
+//!
+//! A worker that stops (its module trapped, the browser killed it, a call failed) is replaced by
+//! a fresh one with the same weights, and the views it was reading are read again by another
+//! worker; each such reading says so ([`PooledReading::redone`]). A view that fails twice fails
+//! with why. The pool needs no cross-origin isolation: workers share nothing and exchange
+//! buffers by message.
+
+use std::cell::{Cell, RefCell};
+use std::collections::VecDeque;
+use std::rc::Rc;
+
+use futures::channel::oneshot;
+use hnet_model::inference::ViewReading;
+use hnet_units::{ImageSize, View, with_causes};
+use js_sys::{Array, Float32Array, Reflect, Uint8Array};
+use wasm_bindgen::prelude::*;
+
+use crate::browser::JsError;
+use crate::module_worker::{ModuleWorker, ModuleWorkerError};
+
+/// The most workers the pool starts, whatever the browser reports: each holds its own copy of
+/// the network and its activations (about 60 MB at 224 px).
+pub const MAX_WORKERS: usize = 8;
+
+/// Times a view is read before its failure is reported: once, and once more by another worker
+/// after the first one stopped.
+const ATTEMPTS: u32 = 2;
+
+/// A worker, in words.
+const NAME: &str = "a CPU worker";
+
+/// Why the pool gave no reading.
+#[derive(Debug, thiserror::Error)]
+pub enum PoolError {
+    /// The browser runs no workers.
+    #[error("this browser runs no Web Workers")]
+    NoWorkers,
+    /// No worker could be started with the weights.
+    #[error("no CPU worker could be started")]
+    Start(#[source] ModuleWorkerError),
+    /// A view failed on two workers in turn.
+    #[error("view {view} failed on two CPU workers in turn")]
+    Read {
+        /// The view.
+        view: &'static str,
+        /// The last worker's failure.
+        #[source]
+        cause: ModuleWorkerError,
+    },
+    /// Every worker stopped and none could be started again.
+    #[error("every CPU worker stopped ({why})")]
+    Stopped {
+        /// Why the last one stopped.
+        why: String,
+    },
+}
+
+/// One view's reading, and why it was read again, if it was.
+#[derive(Debug, Clone)]
+pub struct PooledReading {
+    /// The view's mask and pooled features.
+    pub reading: ViewReading,
+    /// Why the first worker to read it gave no reading (it stopped), when another read it.
+    pub redone: Option<String>,
+}
+
+/// A view waiting for a worker.
+struct Task {
+    view: View,
+    image: Rc<[u8]>,
+    attempts: u32,
+    redone: Option<String>,
+    reply: oneshot::Sender<Result<PooledReading, PoolError>>,
+}
+
+/// A started worker with the network loaded.
+struct Member {
+    worker: ModuleWorker,
+    handle: u32,
+}
+
+impl Member {
+    /// A fresh worker with the weights `weights` (`name` names them in errors) loaded.
+    async fn start(weights: &[u8], name: &str) -> Result<Self, ModuleWorkerError> {
+        let worker = ModuleWorker::spawn("hnet-cpu", NAME)?;
+        worker.call("start", &Array::new(), &Array::new()).await?;
+        let bytes = Uint8Array::from(weights);
+        let args = Array::of2(&bytes, &JsValue::from_str(name));
+        let handle = worker
+            .call("load", &args, &Array::of1(&bytes.buffer()))
+            .await?
+            .as_f64()
+            .ok_or_else(|| ModuleWorkerError::Call {
+                worker: NAME,
+                call: "load",
+                cause: JsError::missing("the network's handle"),
+            })?;
+        Ok(Self {
+            worker,
+            handle: handle as u32,
+        })
+    }
+
+    /// `view`'s reading of `image` (RGB at `size`) by this worker's network, whose branch pools
+    /// `pooled` features. A failure stops the worker.
+    async fn read(
+        &self,
+        view: View,
+        image: &[u8],
+        size: ImageSize,
+        pooled: usize,
+    ) -> Result<ViewReading, ModuleWorkerError> {
+        let bytes = Uint8Array::from(image);
+        let args = Array::of3(
+            &JsValue::from(self.handle),
+            &JsValue::from(view.index() as u32),
+            &bytes,
+        );
+        let values = self
+            .worker
+            .call("read_view", &args, &Array::of1(&bytes.buffer()))
+            .await?
+            .dyn_into::<Float32Array>()
+            .map(|v| v.to_vec())
+            .unwrap_or_default();
+        ViewReading::from_packed(&values, size, pooled).ok_or_else(|| {
+            let why = format!(
+                "it returned {} values, not view {}'s reading at {size}",
+                values.len(),
+                view.letter()
+            );
+            self.worker.stop(&why);
+            ModuleWorkerError::Stopped { worker: NAME, why }
+        })
+    }
+}
+
+/// What the model bar says about the workers.
+#[derive(Debug, Clone, PartialEq)]
+pub enum WorkersStatus {
+    /// The page's thread runs H-Net (WebGPU is used, or nothing is loaded yet).
+    NotUsed,
+    /// Workers are being started; the page's thread runs H-Net meanwhile.
+    Starting(usize),
+    /// `running` workers read the views; `replaced` of them replaced a worker that stopped.
+    Running {
+        /// Workers running.
+        running: usize,
+        /// Workers started again after one stopped, since the weights were loaded.
+        replaced: usize,
+    },
+    /// The page's thread runs H-Net, one core, for this reason.
+    PageThread(String),
+}
+
+impl WorkersStatus {
+    /// The status in words.
+    pub fn text(&self) -> String {
+        match self {
+            Self::NotUsed => "–".into(),
+            Self::Starting(n) => format!("starting {n}…"),
+            Self::Running {
+                running,
+                replaced: 0,
+            } => format!("{running} (one per core)"),
+            Self::Running { running, replaced } => {
+                format!("{running} (one per core; {replaced} replaced after stopping)")
+            }
+            Self::PageThread(why) => format!("none: the page's thread, one core ({why})"),
+        }
+    }
+}
+
+/// The pool: a queue of views and the workers that read them.
+pub struct CpuPool {
+    weights: Rc<[u8]>,
+    name: String,
+    input: ImageSize,
+    pooled: usize,
+    /// One slot per worker; `None` while it is replaced, or once it could not be.
+    members: RefCell<Vec<Option<Rc<Member>>>>,
+    /// Slots whose worker waits for a view.
+    idle: RefCell<Vec<usize>>,
+    queue: RefCell<VecDeque<Task>>,
+    /// Workers being started again.
+    replacing: Cell<usize>,
+    /// Workers started again after one stopped.
+    replaced: Cell<usize>,
+    /// Called whenever a worker stops or comes back, for the model bar.
+    on_change: Box<dyn Fn(WorkersStatus)>,
+}
+
+/// The number of workers for this browser: the cores it reports, at most [`MAX_WORKERS`].
+pub fn pool_size() -> usize {
+    let cores = web_sys::window()
+        .map(|w| w.navigator().hardware_concurrency())
+        .filter(|n| n.is_finite() && *n >= 1.0)
+        .unwrap_or(1.0);
+    (cores as usize).clamp(1, MAX_WORKERS)
+}
+
+/// Whether the browser has the `Worker` constructor.
+fn has_workers() -> bool {
+    Reflect::has(&js_sys::global(), &JsValue::from_str("Worker")).unwrap_or(false)
+}
+
+impl CpuPool {
+    /// Starts `size` workers, each loading `weights` (`name` names them), for a network of input
+    /// `input` whose branch pools `pooled` features. The pool runs with the workers that
+    /// started; it fails only when none did.
+    pub async fn start(
+        size: usize,
+        weights: Rc<[u8]>,
+        name: String,
+        input: ImageSize,
+        pooled: usize,
+        on_change: Box<dyn Fn(WorkersStatus)>,
+    ) -> Result<Rc<Self>, PoolError> {
+        if !has_workers() {
+            return Err(PoolError::NoWorkers);
+        }
+        let started =
+            futures::future::join_all((0..size).map(|_| Member::start(&weights, &name))).await;
+        let mut members = Vec::with_capacity(size);
+        let mut failure = None;
+        for member in started {
+            match member {
+                Ok(member) => members.push(Some(Rc::new(member))),
+                Err(e) => failure = Some(e),
+            }
+        }
+        if members.is_empty() {
+            return Err(PoolError::Start(failure.unwrap_or(
+                ModuleWorkerError::Stopped {
+                    worker: NAME,
+                    why: "no worker was asked for".into(),
+                },
+            )));
+        }
+        let pool = Rc::new(Self {
+            weights,
+            name,
+            input,
+            pooled,
+            idle: RefCell::new((0..members.len()).rev().collect()),
+            members: RefCell::new(members),
+            queue: RefCell::default(),
+            replacing: Cell::new(0),
+            replaced: Cell::new(0),
+            on_change,
+        });
+        (pool.on_change)(pool.status());
+        Ok(pool)
+    }
+
+    /// The pool's state for the model bar.
+    pub fn status(&self) -> WorkersStatus {
+        if !self.can_read() {
+            return WorkersStatus::PageThread(
+                "every CPU worker stopped and none could be started again".into(),
+            );
+        }
+        WorkersStatus::Running {
+            running: self.running(),
+            replaced: self.replaced.get(),
+        }
+    }
+
+    /// Whether a worker runs, or one is being started again.
+    pub fn can_read(&self) -> bool {
+        self.running() > 0 || self.replacing.get() > 0
+    }
+
+    /// Workers running now.
+    pub fn running(&self) -> usize {
+        self.members.borrow().iter().flatten().count()
+    }
+
+    /// Reads `view` of one RGB image at the network's input size on the next free worker.
+    pub async fn read_view(
+        self: &Rc<Self>,
+        view: View,
+        image: Vec<u8>,
+    ) -> Result<PooledReading, PoolError> {
+        let (reply, answer) = oneshot::channel();
+        self.queue.borrow_mut().push_back(Task {
+            view,
+            image: image.into(),
+            attempts: 0,
+            redone: None,
+            reply,
+        });
+        self.pump();
+        answer.await.unwrap_or_else(|_| {
+            Err(PoolError::Stopped {
+                why: "the pool was dropped".into(),
+            })
+        })
+    }
+
+    /// Hands queued views to idle workers.
+    fn pump(self: &Rc<Self>) {
+        loop {
+            let Some(slot) = self.idle.borrow_mut().pop() else {
+                break;
+            };
+            let Some(task) = self.queue.borrow_mut().pop_front() else {
+                self.idle.borrow_mut().push(slot);
+                break;
+            };
+            let Some(member) = self.members.borrow()[slot].clone() else {
+                self.queue.borrow_mut().push_front(task);
+                continue;
+            };
+            let pool = self.clone();
+            leptos::task::spawn_local(async move { pool.run(slot, member, task).await });
+        }
+        // No worker left, none coming back: nothing queued will be read.
+        if !self.can_read() {
+            let why = "none could be started again".to_string();
+            for task in self.queue.borrow_mut().drain(..) {
+                task.reply
+                    .send(Err(PoolError::Stopped { why: why.clone() }))
+                    .ok();
+            }
+        }
+    }
+
+    /// `member` (in `slot`) reads `task`'s view; a worker that fails is replaced and the view
+    /// queued again, once.
+    async fn run(self: Rc<Self>, slot: usize, member: Rc<Member>, mut task: Task) {
+        let result = member
+            .read(task.view, &task.image, self.input, self.pooled)
+            .await;
+        match result {
+            Ok(reading) => {
+                task.reply
+                    .send(Ok(PooledReading {
+                        reading,
+                        redone: task.redone,
+                    }))
+                    .ok();
+                self.idle.borrow_mut().push(slot);
+            }
+            Err(cause) => {
+                task.attempts += 1;
+                if task.attempts >= ATTEMPTS {
+                    task.reply
+                        .send(Err(PoolError::Read {
+                            view: task.view.letter(),
+                            cause,
+                        }))
+                        .ok();
+                } else {
+                    task.redone = Some(match cause {
+                        ModuleWorkerError::Stopped { why, .. } => why,
+                        other => with_causes(&other),
+                    });
+                    self.queue.borrow_mut().push_front(task);
+                }
+                self.replace(slot);
+            }
+        }
+        self.pump();
+    }
+
+    /// Stops the worker of `slot` for good and starts a fresh one there.
+    fn replace(self: &Rc<Self>, slot: usize) {
+        if let Some(member) = self.members.borrow_mut()[slot].take() {
+            member.worker.stop("replaced after a failure");
+        }
+        self.replacing.set(self.replacing.get() + 1);
+        (self.on_change)(self.status());
+        let pool = self.clone();
+        leptos::task::spawn_local(async move {
+            let fresh = Member::start(&pool.weights, &pool.name).await;
+            pool.replacing.set(pool.replacing.get() - 1);
+            if let Ok(member) = fresh {
+                pool.members.borrow_mut()[slot] = Some(Rc::new(member));
+                pool.replaced.set(pool.replaced.get() + 1);
+                pool.idle.borrow_mut().push(slot);
+            }
+            (pool.on_change)(pool.status());
+            pool.pump();
+        });
+    }
+}
