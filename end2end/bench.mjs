@@ -5,6 +5,8 @@
 // Also the time to the first inference: from opening the page to the model loaded on the CPU, and
 // to the twin tab's first estimate; and the time from choosing the backend to its model ready
 // (for WebGPU: the worker started, the weights loaded and checked against the CPU).
+// And the twin sample cine's force trace (24 frames) on the CPU workers, alone and while the cine
+// plays (the playback's frame intervals).
 // Usage, after `trunk build`: node end2end/bench.mjs [runs]   (docs/benchmarks.md)
 // HNET_DIST=<folder> times another build (e.g. scripts/bundle-size.sh's release page).
 // HNET_WEIGHTS=<model.bpk> loads those weights through the model bar first (e.g. a 128 px model
@@ -63,6 +65,12 @@ try {
     await page.click("#tab-twin");
     await page.waitForSelector("#force-verdict", { timeout: 120_000 });
     const firstEstimateMs = performance.now() - opened;
+    // On the CPU the pool of workers starts after the first estimate: time the runs once it
+    // has settled (workers running, or the page's thread with its reason).
+    if (backend.includes("CPU")) {
+      await page.waitForFunction(() => /one per core|^none/.test(document.querySelector("#cpu-workers")?.textContent), null, { timeout: 60_000 });
+    }
+    const workers = (await page.$("#cpu-workers")) && (await page.textContent("#cpu-workers"));
     const times = [];
     for (let i = 0; i < runs; i++) {
       await page.waitForFunction(() => !document.querySelector("#busy"));
@@ -77,6 +85,7 @@ try {
       weights: await page.textContent("#weights"),
       input: await page.textContent("#input-size"),
       catheter_entry: entry || "the page's default",
+      cpu_workers: workers,
       runs,
       median_ms: times[Math.floor(times.length / 2)],
       min_ms: times[0],
@@ -85,6 +94,47 @@ try {
       switch_ms: Math.round(switchMs),
       webgpu_check: check,
       first_estimate_ms: Math.round(firstEstimateMs),
+    });
+    await page.close();
+  }
+  // The cine trace: the twin's 24-frame sample cine traced on the CPU (its workers settled),
+  // then traced again while it plays, the playback's frame intervals recorded.
+  {
+    const { page } = await openPage(context, server.url);
+    await waitForModel(page);
+    await page.selectOption("#backend-choice", "cpu");
+    await waitForModel(page);
+    await page.waitForFunction(() => /one per core|^none/.test(document.querySelector("#cpu-workers")?.textContent), null, { timeout: 60_000 });
+    await page.click("#tab-cine");
+    await page.click("#cine-sample");
+    await page.waitForSelector("#cine-source", { timeout: 60_000 });
+    const traced = async () => {
+      await page.waitForFunction(() => !document.querySelector("#busy"));
+      await page.click("#cine-trace");
+      await page.waitForFunction(() => !document.querySelector("#trace-progress") && !document.querySelector("#busy") && /traced over/.test(document.querySelector("#notice")?.textContent), null, { timeout: 300_000 });
+      return Number((await page.textContent("#notice")).match(/in ([\d.]+) s/)[1]);
+    };
+    const seconds = [];
+    for (let i = 0; i < Math.min(runs, 5); i++) seconds.push(await traced());
+    seconds.sort((a, b) => a - b);
+    // Playing while tracing: every change of the frame shown, timed in the page.
+    await page.evaluate(() => {
+      window.__frames = [];
+      new MutationObserver(() => window.__frames.push(performance.now())).observe(document.querySelector("#cine-frame"), { childList: true, characterData: true, subtree: true });
+    });
+    await page.click("#cine-play");
+    const whilePlaying = await traced();
+    await page.click("#cine-play");
+    const intervals = await page.evaluate(() => window.__frames.slice(1).map((t, i) => t - window.__frames[i]).sort((a, b) => a - b));
+    const at = (q) => Math.round(intervals[Math.min(intervals.length - 1, Math.floor(q * intervals.length))]);
+    results.push({
+      trace: "twin sample cine, 24 frame pairs, 224 px, on the CPU",
+      cpu_workers: await page.textContent("#cpu-workers"),
+      runs: seconds.length,
+      median_s: seconds[Math.floor(seconds.length / 2)],
+      min_s: seconds[0],
+      while_playing_s: whilePlaying,
+      playback_frame_interval_ms: { nominal: Math.round(1000 / 15), median: at(0.5), p95: at(0.95), max: at(1), frames: intervals.length + 1 },
     });
     await page.close();
   }

@@ -9,8 +9,8 @@ use burn::module::Module;
 use burn::tensor::Device;
 use hnet_model::architectures::{ModelSpec, StereoModel};
 use hnet_model::catheter_entry::{
-    CatheterEntry, EntryReading, EntrySetting, ReadEntryError, TurnError, read_predictions,
-    turned_pairs,
+    CatheterEntry, EntryReading, EntrySearch, EntrySetting, ReadEntryError, TurnError,
+    TurnedOutput, turn_clockwise, turned_pair,
 };
 use hnet_model::inference::{JoinViewsError, PredictError, StereoPair, StereoPrediction};
 use hnet_model::weights::{WeightsError, WeightsHeader};
@@ -391,13 +391,19 @@ impl Engine {
                 }
             },
             Runner::WebGpu(network) => {
-                // The worker runs one pair per call: each turned copy in turn.
-                let turned = turned_pairs(&a, &b, self.input, entry)?;
-                let mut predictions: Vec<StereoPrediction> = Vec::with_capacity(turned.len());
-                for t in &turned {
-                    predictions.push(network.infer(&t.view_a, &t.view_b, self.input).await?);
+                // The worker runs one pair per call: the first reading, then each further turn.
+                let read = async |edges: [CatheterEntry; 2]| -> Result<TurnedOutput, EngineError> {
+                    let t = turned_pair(&a, &b, self.input, edges)?;
+                    let prediction: StereoPrediction =
+                        network.infer(&t.view_a, &t.view_b, self.input).await?;
+                    Ok(TurnedOutput::from_prediction(edges, prediction))
+                };
+                let first = read(entry.first_reading()).await?;
+                let mut search = EntrySearch::new(entry, self.input, first);
+                for edges in search.further_pairs() {
+                    search.add_pair(read(edges).await?);
                 }
-                read_predictions(&turned, predictions, self.input)?
+                search.finish()?
             }
         };
         let millis = now_ms() - start;
@@ -418,9 +424,10 @@ impl Engine {
     }
 }
 
-/// `view_a` and `view_b` (RGB at `size`) read under `entry` by the CPU workers: every view of
-/// every turned copy at once, each pair's views joined by `model`'s force head on the page's
-/// thread. Also says why a view was read again, when one was.
+/// `view_a` and `view_b` (RGB at `size`) read under `entry` by the CPU workers: both views of
+/// the first reading at once, joined by `model`'s force head on the page's thread, then every
+/// further turn a view's search asks for at once. Also says why a view was read again, when
+/// one was.
 async fn on_workers(
     model: &HNet,
     pool: &Rc<CpuPool>,
@@ -429,23 +436,39 @@ async fn on_workers(
     size: ImageSize,
     entry: EntrySetting,
 ) -> Result<(EntryReading, Option<String>), EngineError> {
-    let turned = turned_pairs(view_a, view_b, size, entry)?;
-    let reads = futures::future::join_all(turned.iter().flat_map(|t| {
-        [
-            pool.read_view(View::A, t.view_a.clone()),
-            pool.read_view(View::B, t.view_b.clone()),
-        ]
-    }))
-    .await;
-    let mut redone = None;
-    let mut predictions = Vec::with_capacity(turned.len());
-    let mut reads = reads.into_iter();
-    while let (Some(a), Some(b)) = (reads.next(), reads.next()) {
-        let (a, b) = (a?, b?);
-        redone = redone.or(a.redone).or(b.redone);
-        predictions.push(model.join_views(a.reading, b.reading, &Device::flex())?);
+    let first = turned_pair(view_a, view_b, size, entry.first_reading())?;
+    let (a, b) = futures::join!(
+        pool.read_view(View::A, first.view_a),
+        pool.read_view(View::B, first.view_b)
+    );
+    let (a, b) = (a?, b?);
+    let mut redone = a.redone.or(b.redone);
+    let prediction = model.join_views(a.reading, b.reading, &Device::flex())?;
+    let mut search = EntrySearch::new(
+        entry,
+        size,
+        TurnedOutput::from_prediction(first.entry, prediction),
+    );
+    let mut further = Vec::new();
+    for (view, image) in [(View::A, view_a), (View::B, view_b)] {
+        for &edge in &search.further()[view.index()] {
+            let turned = turn_clockwise(image, size, 3, edge.quarter_turns())?;
+            further.push((view, edge, pool.read_view(view, turned)));
+        }
     }
-    Ok((read_predictions(&turned, predictions, size)?, redone))
+    let (asked, reads): (Vec<_>, Vec<_>) = further
+        .into_iter()
+        .map(|(view, edge, read)| ((view, edge), read))
+        .unzip();
+    for ((view, edge), read) in asked
+        .into_iter()
+        .zip(futures::future::join_all(reads).await)
+    {
+        let read = read?;
+        redone = redone.or(read.redone);
+        search.add(view, edge, read.reading.mask);
+    }
+    Ok((search.finish()?, redone))
 }
 
 impl From<ReadEntryError> for EngineError {

@@ -177,12 +177,15 @@ pub fn ModelBar() -> impl IntoView {
                 <label title="H-Net learned catheters that come up from the bottom of both views. \
                     For one that enters through another edge, each view is turned so that it does \
                     and its masks turned back; H-Net's force is then not read. Finding the edge \
-                    reads all four turns: four times the time.">
+                    reads both views as they are, and the other three turns only of a view whose \
+                    catheter does not reach its bottom edge; \u{201c}every turn\u{201d} reads all \
+                    four turns of both views: four times the time.">
                     "Catheter enters from "
                     <select id="catheter-entry" on:change=on_entry>
                         {[
                             ("bottom", "the bottom (as trained)"),
-                            ("auto", "find it (4× the time)"),
+                            ("auto", "find it"),
+                            ("every-turn", "find it, every turn (4× the time)"),
                             ("left", "the left"),
                             ("top", "the top"),
                             ("right", "the right"),

@@ -88,9 +88,10 @@ pub struct EvalArgs {
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=3))]
     turn_views: u8,
     /// The edge through which the catheter enters the views (`bottom`, `left`, `top`, `right`;
-    /// two, comma-separated, for views A and B), or `auto` to find it per view by reading all
-    /// four quarter turns (four times the work) and keeping the one with the most catheter
-    /// pixels. Each view is turned so that its catheter comes up from the bottom, as in training,
+    /// two, comma-separated, for views A and B), or `auto` to find it per view: read as it
+    /// is, and at the other three quarter turns when its mask does not reach the bottom edge,
+    /// keeping the turn with the most catheter pixels (`every-turn`: all four turns of every
+    /// view, four times the work). Each view is turned so that its catheter comes up from the bottom, as in training,
     /// and its masks turned back; the force head's estimate is kept only for pairs read as they
     /// are. Square networks that segment; nothing is saved into a run folder unless `bottom`.
     #[arg(long, default_value = "bottom", value_parser = parse_entry)]
@@ -200,6 +201,14 @@ pub struct EntryUse {
     pub setting: String,
     /// Views A and B read turned (entering through another edge than the bottom).
     pub views_read_turned: [usize; 2],
+    /// Views A and B read at the edge their catheter enters through, when the views were
+    /// turned by a known amount (`--turn-views`, or none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub views_placed_right: Option<[usize; 2]>,
+    /// Readings of views A and B the search took: the pairs' count when each view was read
+    /// once, four times it when read at every turn.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub view_readings: Option<[usize; 2]>,
     /// Pairs evaluated.
     pub pairs: usize,
 }
@@ -312,7 +321,7 @@ pub fn evaluate(
     }
     // Per pair, what the physics check reads: the predicted masks and force.
     let mut predicted: Vec<PairOutput> = Vec::new();
-    let views_read_turned = predict_entry(
+    let entry_counts = predict_entry(
         model,
         &pairs.items,
         batch_size,
@@ -462,10 +471,17 @@ pub fn evaluate(
                 .then(|| options.calibration.clone())
                 .flatten(),
             view_turns: turn.quarter_turns,
-            catheter_entry: options.entry.turns_views().then(|| EntryUse {
-                setting: options.entry.text(),
-                views_read_turned,
-                pairs: pairs.items.len(),
+            catheter_entry: options.entry.turns_views().then(|| {
+                // A view turned k quarter turns clockwise has its catheter entering through
+                // the edge that 4 - k more turns bring to the bottom.
+                let right = usize::from((4 - turn.quarter_turns % 4) % 4);
+                EntryUse {
+                    setting: options.entry.text(),
+                    views_read_turned: entry_counts.read_turned,
+                    views_placed_right: Some(entry_counts.kept_at.map(|kept| kept[right])),
+                    view_readings: Some(entry_counts.readings),
+                    pairs: pairs.items.len(),
+                }
             }),
             estimator: estimator.name().into(),
             catheter: options.catheter.clone(),

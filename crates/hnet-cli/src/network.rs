@@ -92,8 +92,19 @@ pub fn predict(
     Ok(())
 }
 
+/// How [`predict_entry`]'s views were read.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct EntryCounts {
+    /// Views A and B read turned (kept at another edge than the bottom).
+    pub read_turned: [usize; 2],
+    /// Views A and B kept at each edge, in [`CatheterEntry::ALL`]'s order.
+    pub kept_at: [[usize; 4]; 2],
+    /// Readings of views A and B the search took (one per view read once).
+    pub readings: [usize; 2],
+}
+
 /// [`predict`] with each pair's views read under `entry` (the command's `--catheter-entry`):
-/// see [`Predictor::predict_entry`]. Returns how many views A and B were read turned.
+/// see [`Predictor::predict_entry`]. Returns how the views were read.
 pub fn predict_entry(
     model: &Predictor,
     items: &[StereoItem],
@@ -101,8 +112,8 @@ pub fn predict_entry(
     device: &Device,
     entry: EntrySetting,
     mut visit: impl FnMut(&StereoItem, Option<[Vec<f32>; 2]>, Option<[f32; 3]>),
-) -> anyhow::Result<[usize; 2]> {
-    let mut read_turned_views = [0, 0];
+) -> anyhow::Result<EntryCounts> {
+    let mut counts = EntryCounts::default();
     for chunk in items.chunks(batch_size.max(1)) {
         let inputs: Vec<PairInput<'_>> = chunk.iter().map(input).collect();
         let outputs = model
@@ -118,11 +129,14 @@ pub fn predict_entry(
                 EntryError::Turn(error) => anyhow::Error::new(error),
             })?;
         for (item, read) in chunk.iter().zip(outputs) {
-            for (count, edge) in read_turned_views.iter_mut().zip(read.entry) {
-                *count += usize::from(edge != CatheterEntry::Bottom);
+            for view in 0..2 {
+                let edge = read.entry[view];
+                counts.read_turned[view] += usize::from(edge != CatheterEntry::Bottom);
+                counts.kept_at[view][usize::from(edge.quarter_turns())] += 1;
+                counts.readings[view] += read.readings[view];
             }
             visit(item, read.output.masks, read.output.force);
         }
     }
-    Ok(read_turned_views)
+    Ok(counts)
 }

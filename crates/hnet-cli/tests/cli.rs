@@ -373,7 +373,7 @@ fn every_baseline_trains_and_evaluates_in_the_same_harness() {
             assert_eq!(std::fs::read(runs.join("eval-test.json")).unwrap(), tables);
             // Turned a quarter clockwise, the catheter enters from the left: read for that edge,
             // the network sees the views as they were and its masks, turned back onto the turned
-            // labels, score as the untouched views' did. A search reads all four turns.
+            // labels, score as the untouched views' did.
             let untouched: serde_json::Value = serde_json::from_slice(&tables).unwrap();
             for (entry, read_turned) in [("left", Some(rows.len())), ("auto", None)] {
                 let out = eval_turned(&["--catheter-entry", entry]);
@@ -385,6 +385,10 @@ fn every_baseline_trains_and_evaluates_in_the_same_harness() {
                         read["catheter_entry"]["views_read_turned"],
                         serde_json::json!([n, n])
                     );
+                    // Read at the edge the turn took the catheter to, each view once.
+                    for counted in ["views_placed_right", "view_readings"] {
+                        assert_eq!(read["catheter_entry"][counted], serde_json::json!([n, n]));
+                    }
                     assert_eq!(read["segmentation"], untouched["segmentation"]);
                 }
             }

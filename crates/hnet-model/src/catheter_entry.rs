@@ -7,11 +7,15 @@
 //! docs/log/2026-12-01-training-on-the-twins-stream.md, "Turned at evaluation"). Turning a view by quarter turns so that its catheter
 //! enters from the bottom, and the masks back, reads such a view without retraining.
 //!
-//! When the edge is not known, [`EntrySetting::Search`] runs the four turns of both views and
-//! keeps, per view, the turn whose mask has the most catheter pixels: the shaft a turned view
-//! loses is most of the catheter (on 2,400 twin views the bundled model's upright turn had the
-//! most for all but 2; docs/log/2026-12-01-training-on-the-twins-stream.md, "Where the catheter
-//! enters").
+//! When the edge is not known, a search keeps, per view, the turn whose mask has the most
+//! catheter pixels: the shaft a turned view loses is most of the catheter (on 2,400 twin views
+//! the bundled model's upright turn had the most for all but 2;
+//! docs/log/2026-12-01-training-on-the-twins-stream.md, "Where the catheter enters").
+//! [`EntrySetting::Search`] reads both views as they are first and turns only a view whose mask
+//! does not reach the bottom edge ([`reaches_bottom`]): a catheter read as trained is a shaft
+//! that leaves the view through its bottom, so one pass settles most pairs.
+//! [`EntrySetting::EveryTurn`] reads every view at all four turns (four passes).
+//! [`EntrySearch`] holds one pair's search, for whoever runs the network.
 //!
 //! The force head learned the bench with both views as they are, so its force is kept only when
 //! both views were read untouched ([`EntryReading::force`]).
@@ -21,7 +25,7 @@
 use alloc::string::String;
 use alloc::vec::Vec;
 
-use hnet_units::ImageSize;
+use hnet_units::{ImageSize, View};
 
 use burn::tensor::Device;
 
@@ -80,9 +84,13 @@ impl CatheterEntry {
 pub enum EntrySetting {
     /// The edges of views A and B are known; each view is read once.
     Known([CatheterEntry; 2]),
+    /// The edges are not known: both views are read as they are, and a view whose mask does
+    /// not reach the bottom edge is read in the other three turns too; each view keeps the
+    /// turn whose mask has the most catheter pixels.
+    Search,
     /// The edges are not known: both views are read in all four turns (four times the work)
     /// and each keeps the turn whose mask has the most catheter pixels.
-    Search,
+    EveryTurn,
 }
 
 impl Default for EntrySetting {
@@ -95,13 +103,18 @@ impl EntrySetting {
     /// Both views entered from the bottom: the views are read as they are.
     pub const AS_TRAINED: Self = Self::Known([CatheterEntry::Bottom; 2]);
 
-    /// The entry edges of views A and B to read the pair with: one pair of edges when they are
-    /// known, all four (the same for both views) in a search.
-    pub fn candidates(self) -> Vec<[CatheterEntry; 2]> {
+    /// The entry edges of views A and B the pair is read with first: the known ones, or both
+    /// views as they are in a search.
+    pub fn first_reading(self) -> [CatheterEntry; 2] {
         match self {
-            Self::Known(entry) => alloc::vec![entry],
-            Self::Search => CatheterEntry::ALL.iter().map(|&e| [e, e]).collect(),
+            Self::Known(entry) => entry,
+            Self::Search | Self::EveryTurn => [CatheterEntry::Bottom; 2],
         }
+    }
+
+    /// Whether this setting searches for the edges.
+    pub fn searches(self) -> bool {
+        matches!(self, Self::Search | Self::EveryTurn)
     }
 
     /// Whether this setting reads anything but the views as they are.
@@ -112,15 +125,18 @@ impl EntrySetting {
     /// Whether this setting can keep the force head's force for a pair: not when it turns a
     /// view of every pair ([`EntryReading::force`]).
     pub fn can_read_force(self) -> bool {
-        self == Self::Search || !self.turns_views()
+        self.searches() || !self.turns_views()
     }
 
-    /// The setting a text names: `auto` (a search), one edge's [`CatheterEntry::name`] for both
-    /// views, or two comma-separated for views A and B (`bottom,left`).
+    /// The setting a text names: `auto` (a search), `every-turn` (a search at all four turns),
+    /// one edge's [`CatheterEntry::name`] for both views, or two comma-separated for views A and
+    /// B (`bottom,left`).
     pub fn from_text(text: &str) -> Option<Self> {
         let text = text.trim();
-        if text == "auto" {
-            return Some(Self::Search);
+        match text {
+            "auto" => return Some(Self::Search),
+            "every-turn" => return Some(Self::EveryTurn),
+            _ => {}
         }
         let mut edges = text.split(',').map(|e| CatheterEntry::from_name(e.trim()));
         let a = edges.next()??;
@@ -132,6 +148,7 @@ impl EntrySetting {
     pub fn text(self) -> String {
         match self {
             Self::Search => "auto".into(),
+            Self::EveryTurn => "every-turn".into(),
             Self::Known([a, b]) if a == b => a.name().into(),
             Self::Known([a, b]) => alloc::format!("{},{}", a.name(), b.name()),
         }
@@ -208,25 +225,18 @@ pub struct TurnedPair {
     pub view_b: Vec<u8>,
 }
 
-/// The pairs to run the network on for `view_a` and `view_b` (RGB images of `size`) under
-/// `setting`, one per [`EntrySetting::candidates`].
-pub fn turned_pairs(
+/// `view_a` and `view_b` (RGB images of `size`) turned for the entry edges `entry`.
+pub fn turned_pair(
     view_a: &[u8],
     view_b: &[u8],
     size: ImageSize,
-    setting: EntrySetting,
-) -> Result<Vec<TurnedPair>, TurnError> {
-    setting
-        .candidates()
-        .into_iter()
-        .map(|entry| {
-            Ok(TurnedPair {
-                entry,
-                view_a: turn_clockwise(view_a, size, 3, entry[0].quarter_turns())?,
-                view_b: turn_clockwise(view_b, size, 3, entry[1].quarter_turns())?,
-            })
-        })
-        .collect()
+    entry: [CatheterEntry; 2],
+) -> Result<TurnedPair, TurnError> {
+    Ok(TurnedPair {
+        entry,
+        view_a: turn_clockwise(view_a, size, 3, entry[0].quarter_turns())?,
+        view_b: turn_clockwise(view_b, size, 3, entry[1].quarter_turns())?,
+    })
 }
 
 /// The network's outputs for one [`TurnedPair`], in the turned frame.
@@ -276,44 +286,157 @@ fn catheter_pixels(mask: &[f32]) -> usize {
     mask.iter().filter(|&&p| p >= MASK_THRESHOLD).count()
 }
 
-/// Reads the outputs of one pair's [`turned_pairs`] (each of `size`): per view, the only output
-/// or, of several, the one with the most catheter pixels (the first of equals), turned back;
-/// the force of the output whose views were both read as they are. An error when a mask is not
-/// of `size`, or without outputs (no mask to turn back).
-pub fn read_turned(outputs: Vec<TurnedOutput>, size: ImageSize) -> Result<EntryReading, TurnError> {
-    let Some(first) = outputs.first() else {
-        return Err(TurnError {
-            size,
-            channels: 1,
-            found: 0,
-        });
+/// Whether a view's mask (catheter probabilities, row-major, of `size`), read as it is, enters
+/// through the bottom edge: its bottom rows (a band 1/32 of the side deep, at least one pixel)
+/// hold at least one catheter pixel per row, and no other edge's band holds more. The shaft of
+/// a catheter read as trained leaves the view through its bottom; a view read upright whose
+/// catheter enters elsewhere loses most of its shaft, and what is left seldom reaches the
+/// bottom more than the edge it enters through.
+pub fn reaches_bottom(mask: &[f32], size: ImageSize) -> bool {
+    let (width, height) = (size.width, size.height);
+    if width == 0 || height == 0 || mask.len() != width * height {
+        return false;
+    }
+    let band = (width.min(height) / 32).max(1);
+    let catheter = |row: usize, col: usize| usize::from(mask[row * width + col] >= MASK_THRESHOLD);
+    let rows = |from: usize| -> usize {
+        (from..from + band)
+            .map(|r| (0..width).map(|c| catheter(r, c)).sum::<usize>())
+            .sum()
     };
-    let mut best = [0usize; 2];
-    let mut most = [0, 1].map(|view| catheter_pixels(&first.masks[view]));
-    for (index, output) in outputs.iter().enumerate().skip(1) {
-        for view in 0..2 {
-            let pixels = catheter_pixels(&output.masks[view]);
-            if pixels > most[view] {
-                most[view] = pixels;
-                best[view] = index;
+    let cols = |from: usize| -> usize {
+        (from..from + band)
+            .map(|c| (0..height).map(|r| catheter(r, c)).sum::<usize>())
+            .sum()
+    };
+    let bottom = rows(height - band);
+    bottom >= band
+        && [rows(0), cols(0), cols(width - band)]
+            .iter()
+            .all(|&edge| edge <= bottom)
+}
+
+/// One pair's search for its views' entry edges under an [`EntrySetting`]: the first reading
+/// ([`EntrySetting::first_reading`]), then the turns [`EntrySearch::further`] asks for, per
+/// view. Whoever runs the network (the page's workers one view at a time, `hnet eval` in
+/// batches) feeds the readings in; [`EntrySearch::finish`] keeps per view the turn with the most
+/// catheter pixels (the first of equals: the first reading) and turns its mask back.
+#[derive(Debug, Clone)]
+pub struct EntrySearch {
+    size: ImageSize,
+    first: [CatheterEntry; 2],
+    further: [Vec<CatheterEntry>; 2],
+    /// Per view, its readings so far: the edge and the mask in the turned frame.
+    readings: [Vec<(CatheterEntry, Vec<f32>)>; 2],
+    /// The force head's estimate of the first reading.
+    force: Option<[f32; 3]>,
+}
+
+/// The edges a search reads a view at after reading it as it is.
+const OTHER_EDGES: [CatheterEntry; 3] = [
+    CatheterEntry::Right,
+    CatheterEntry::Top,
+    CatheterEntry::Left,
+];
+
+impl EntrySearch {
+    /// The search of one pair of views of `size` under `setting`, from the network's output
+    /// for the pair turned for `setting.first_reading()`.
+    pub fn new(setting: EntrySetting, size: ImageSize, first: TurnedOutput) -> Self {
+        let TurnedOutput {
+            entry,
+            masks: [mask_a, mask_b],
+            force,
+        } = first;
+        let further = [&mask_a, &mask_b].map(|mask| match setting {
+            EntrySetting::Known(_) => Vec::new(),
+            EntrySetting::EveryTurn => OTHER_EDGES.to_vec(),
+            EntrySetting::Search if reaches_bottom(mask, size) => Vec::new(),
+            EntrySetting::Search => OTHER_EDGES.to_vec(),
+        });
+        Self {
+            size,
+            first: entry,
+            further,
+            readings: [
+                alloc::vec![(entry[0], mask_a)],
+                alloc::vec![(entry[1], mask_b)],
+            ],
+            force,
+        }
+    }
+
+    /// The further edges each view is to be read at (view A's, view B's); none once the first
+    /// reading settles them.
+    pub fn further(&self) -> &[Vec<CatheterEntry>; 2] {
+        &self.further
+    }
+
+    /// The further readings as pairs, for a runner that reads pairs: each edge some view asks
+    /// for, both views turned for it ([`EntrySearch::add_pair`] keeps only the views that
+    /// asked).
+    pub fn further_pairs(&self) -> Vec<[CatheterEntry; 2]> {
+        OTHER_EDGES
+            .into_iter()
+            .filter(|edge| self.further.iter().any(|f| f.contains(edge)))
+            .map(|edge| [edge; 2])
+            .collect()
+    }
+
+    /// `view`'s mask read turned for `entry` (in the turned frame).
+    pub fn add(&mut self, view: View, entry: CatheterEntry, mask: Vec<f32>) {
+        self.readings[view.index()].push((entry, mask));
+    }
+
+    /// The network's output for the pair turned for `output.entry`: each view that asked for
+    /// its edge gets its mask.
+    pub fn add_pair(&mut self, output: TurnedOutput) {
+        let [mask_a, mask_b] = output.masks;
+        for (view, mask) in [(View::A, mask_a), (View::B, mask_b)] {
+            let entry = output.entry[view.index()];
+            if self.further[view.index()].contains(&entry) {
+                self.add(view, entry, mask);
             }
         }
     }
-    let entry = [outputs[best[0]].entry[0], outputs[best[1]].entry[1]];
-    let force = outputs
-        .iter()
-        .find(|o| o.entry == [CatheterEntry::Bottom; 2])
-        .and_then(|o| o.force)
-        .filter(|_| entry == [CatheterEntry::Bottom; 2]);
-    let back = |view: usize| {
-        let turns = entry[view].quarter_turns();
-        turn_clockwise(&outputs[best[view]].masks[view], size, 1, (4 - turns) % 4)
-    };
-    Ok(EntryReading {
-        masks: [back(0)?, back(1)?],
-        entry,
-        force,
-    })
+
+    /// What the search found: per view, the reading with the most catheter pixels (the first of
+    /// equals), turned back; the force head's estimate when both views were read, and kept, as
+    /// they are. An error when a mask is not of the search's size.
+    pub fn finish(self) -> Result<EntryReading, TurnError> {
+        let size = self.size;
+        let keep = |readings: [Vec<(CatheterEntry, Vec<f32>)>; 2]| {
+            readings.map(|readings| {
+                let mut best = 0;
+                let mut most = catheter_pixels(&readings[0].1);
+                for (index, (_, mask)) in readings.iter().enumerate().skip(1) {
+                    let pixels = catheter_pixels(mask);
+                    if pixels > most {
+                        (best, most) = (index, pixels);
+                    }
+                }
+                readings.into_iter().nth(best).unwrap_or_default()
+            })
+        };
+        let [(entry_a, mask_a), (entry_b, mask_b)] = keep(self.readings);
+        let entry = [entry_a, entry_b];
+        let back = |mask: &[f32], edge: CatheterEntry| {
+            turn_clockwise(mask, size, 1, (4 - edge.quarter_turns()) % 4)
+        };
+        let upright = [CatheterEntry::Bottom; 2];
+        Ok(EntryReading {
+            masks: [back(&mask_a, entry_a)?, back(&mask_b, entry_b)?],
+            entry,
+            force: self
+                .force
+                .filter(|_| entry == upright && self.first == upright),
+        })
+    }
+
+    /// Readings this search took per view so far (for the cost of a search).
+    pub fn readings(&self) -> [usize; 2] {
+        self.readings.each_ref().map(Vec::len)
+    }
 }
 
 /// Why a pair could not be read with its views turned.
@@ -328,9 +451,9 @@ pub enum ReadEntryError {
 }
 
 impl HNet {
-    /// [`HNet::predict_async`] for one pair (RGB images of `size`) under `setting`: its views
-    /// turned for each candidate edge, run as one batch, read back by [`read_turned`]. (`hnet
-    /// eval`, which runs every architecture, turns its batches with the same functions.)
+    /// [`HNet::predict_async`] for one pair (RGB images of `size`) under `setting`: the first
+    /// reading, then the further turns its [`EntrySearch`] asks for in one batch. (`hnet eval`,
+    /// which runs every architecture, searches its batches with the same [`EntrySearch`].)
     pub async fn predict_entry_async(
         &self,
         pair: StereoPair<'_>,
@@ -338,9 +461,43 @@ impl HNet {
         device: &Device,
         setting: EntrySetting,
     ) -> Result<EntryReading, ReadEntryError> {
-        let turned = turned_pairs(pair.view_a, pair.view_b, size, setting)?;
-        let predictions = self.predict_async(&as_pairs(&turned), size, device).await?;
-        Ok(read_predictions(&turned, predictions, size)?)
+        let first = turned_pair(pair.view_a, pair.view_b, size, setting.first_reading())?;
+        let output = self
+            .turned_outputs(core::slice::from_ref(&first), size, device)
+            .await?
+            .pop()
+            .ok_or(TurnError {
+                size,
+                channels: 1,
+                found: 0,
+            })?;
+        let mut search = EntrySearch::new(setting, size, output);
+        let further = search
+            .further_pairs()
+            .into_iter()
+            .map(|entry| turned_pair(pair.view_a, pair.view_b, size, entry))
+            .collect::<Result<Vec<_>, _>>()?;
+        if !further.is_empty() {
+            for output in self.turned_outputs(&further, size, device).await? {
+                search.add_pair(output);
+            }
+        }
+        Ok(search.finish()?)
+    }
+
+    /// The network's outputs for `turned` (images of `size`), run as one batch.
+    async fn turned_outputs(
+        &self,
+        turned: &[TurnedPair],
+        size: ImageSize,
+        device: &Device,
+    ) -> Result<Vec<TurnedOutput>, PredictError> {
+        let predictions = self.predict_async(&as_pairs(turned), size, device).await?;
+        Ok(turned
+            .iter()
+            .zip(predictions)
+            .map(|(t, p)| TurnedOutput::from_prediction(t.entry, p))
+            .collect())
     }
 }
 
@@ -353,20 +510,6 @@ pub fn as_pairs(turned: &[TurnedPair]) -> Vec<StereoPair<'_>> {
             view_b: &t.view_b,
         })
         .collect()
-}
-
-/// [`read_turned`] of the network's `predictions` of `turned`, in the same order.
-pub fn read_predictions(
-    turned: &[TurnedPair],
-    predictions: Vec<StereoPrediction>,
-    size: ImageSize,
-) -> Result<EntryReading, TurnError> {
-    let outputs = turned
-        .iter()
-        .zip(predictions)
-        .map(|(t, p)| TurnedOutput::from_prediction(t.entry, p))
-        .collect();
-    read_turned(outputs, size)
 }
 
 #[cfg(test)]
@@ -406,7 +549,7 @@ mod tests {
             assert_eq!(CatheterEntry::ALL[e.quarter_turns() as usize], e);
         }
         assert_eq!(CatheterEntry::from_name("sideways"), None);
-        for text in ["auto", "left", "bottom,top"] {
+        for text in ["auto", "every-turn", "left", "bottom,top"] {
             assert_eq!(EntrySetting::from_text(text).unwrap().text(), text);
         }
         assert_eq!(
@@ -418,30 +561,39 @@ mod tests {
         }
     }
 
-    /// A mask of `SIZE` with a catheter down the left column (the bottom-left pixel included).
-    fn left_column() -> Vec<f32> {
-        (0..9).map(|i| if i % 3 == 0 { 0.9 } else { 0.1 }).collect()
+    /// A mask of `SIZE` with a catheter down the middle column, from the top edge to the
+    /// bottom one.
+    fn middle_column() -> Vec<f32> {
+        (0..9).map(|i| if i % 3 == 1 { 0.9 } else { 0.1 }).collect()
+    }
+
+    /// The network's output for a pair turned for `entry` (both views).
+    fn output(entry: CatheterEntry, a: &[f32], b: &[f32]) -> TurnedOutput {
+        TurnedOutput {
+            entry: [entry; 2],
+            masks: [a.to_vec(), b.to_vec()],
+            force: Some([0.1, 0.2, 0.3]),
+        }
     }
 
     #[test]
     fn a_search_keeps_per_view_the_turn_with_the_most_catheter_and_turns_it_back() {
-        let found = left_column();
+        let found = middle_column();
         let lost = alloc::vec![0.1f32; 9];
-        let output = |entry: CatheterEntry, a: &[f32], b: &[f32]| TurnedOutput {
-            entry: [entry; 2],
-            masks: [a.to_vec(), b.to_vec()],
-            force: Some([0.1, 0.2, 0.3]),
-        };
         // View A reads best as it is, view B turned for a left entry (its mask then in the
         // turned frame).
         let turned_found = turn_clockwise(&found, SIZE, 1, 3).unwrap();
-        let outputs = alloc::vec![
+        let mut search = EntrySearch::new(
+            EntrySetting::EveryTurn,
+            SIZE,
             output(CatheterEntry::Bottom, &found, &lost),
-            output(CatheterEntry::Right, &lost, &lost),
-            output(CatheterEntry::Top, &lost, &lost),
-            output(CatheterEntry::Left, &lost, &turned_found),
-        ];
-        let reading = read_turned(outputs, SIZE).unwrap();
+        );
+        assert_eq!(search.further_pairs().len(), 3);
+        search.add_pair(output(CatheterEntry::Right, &lost, &lost));
+        search.add_pair(output(CatheterEntry::Top, &lost, &lost));
+        search.add_pair(output(CatheterEntry::Left, &lost, &turned_found));
+        assert_eq!(search.readings(), [4, 4]);
+        let reading = search.finish().unwrap();
         assert_eq!(reading.entry, [CatheterEntry::Bottom, CatheterEntry::Left]);
         assert_eq!(reading.masks, [found.clone(), found.clone()]);
         // A turned view: the force head's estimate is left out.
@@ -449,13 +601,63 @@ mod tests {
         assert_eq!(reading.force, None);
 
         // Ties keep the views as they are, with the force.
-        let outputs = CatheterEntry::ALL
-            .map(|e| output(e, &found, &found))
-            .to_vec();
-        let reading = read_turned(outputs, SIZE).unwrap();
+        let mut search = EntrySearch::new(
+            EntrySetting::EveryTurn,
+            SIZE,
+            output(CatheterEntry::Bottom, &found, &found),
+        );
+        for edge in OTHER_EDGES {
+            search.add_pair(output(edge, &found, &found));
+        }
+        let reading = search.finish().unwrap();
         assert_eq!(reading.entry, [CatheterEntry::Bottom; 2]);
         assert_eq!(reading.force, Some([0.1, 0.2, 0.3]));
-        assert!(read_turned(Vec::new(), SIZE).is_err());
+    }
+
+    #[test]
+    fn a_search_turns_only_a_view_whose_mask_does_not_reach_the_bottom() {
+        let found = middle_column();
+        assert!(reaches_bottom(&found, SIZE));
+        // A catheter down the left column reaches the bottom, but the left edge more.
+        let left: Vec<f32> = (0..9).map(|i| if i % 3 == 0 { 0.9 } else { 0.0 }).collect();
+        assert!(!reaches_bottom(&left, SIZE));
+        // A catheter in the top row only: its view is read in the other three turns.
+        let top: Vec<f32> = (0..9).map(|i| if i < 3 { 0.9 } else { 0.0 }).collect();
+        assert!(!reaches_bottom(&top, SIZE));
+        assert!(!reaches_bottom(&top[..2], SIZE));
+        let mut search = EntrySearch::new(
+            EntrySetting::Search,
+            SIZE,
+            output(CatheterEntry::Bottom, &found, &top),
+        );
+        assert_eq!(search.further(), &[Vec::new(), OTHER_EDGES.to_vec()]);
+        // View B read turned for a top entry finds the whole catheter; view A's further
+        // readings are not asked for, and a pair's output only gives B its mask.
+        let whole = alloc::vec![0.9f32; 9];
+        search.add_pair(output(CatheterEntry::Top, &whole, &whole));
+        search.add(View::B, CatheterEntry::Right, top.clone());
+        assert_eq!(search.readings(), [1, 3]);
+        let reading = search.finish().unwrap();
+        assert_eq!(reading.entry, [CatheterEntry::Bottom, CatheterEntry::Top]);
+        assert_eq!(reading.masks[0], found);
+        assert_eq!(reading.force, None);
+        // Known edges are read once.
+        let known = EntrySearch::new(
+            EntrySetting::Known([CatheterEntry::Left; 2]),
+            SIZE,
+            output(CatheterEntry::Left, &top, &top),
+        );
+        assert!(known.further_pairs().is_empty());
+        let reading = known.finish().unwrap();
+        assert_eq!(reading.entry, [CatheterEntry::Left; 2]);
+        assert_eq!(reading.force, None);
+        // A mask of another size cannot be turned back.
+        let wrong = EntrySearch::new(
+            EntrySetting::Search,
+            SIZE,
+            output(CatheterEntry::Bottom, &found[..4], &found),
+        );
+        assert!(wrong.finish().is_err());
     }
 
     #[test]
@@ -470,15 +672,12 @@ mod tests {
         assert!(!setting.can_read_force());
         assert!(EntrySetting::AS_TRAINED.can_read_force());
         assert!(EntrySetting::Search.can_read_force());
-        let pairs = turned_pairs(&a, &b, SIZE, setting).unwrap();
-        assert_eq!(pairs.len(), 1);
-        assert_eq!(pairs[0].view_a, a);
-        assert_eq!(pairs[0].view_b, turn_clockwise(&b, SIZE, 3, 2).unwrap());
-        assert_eq!(
-            turned_pairs(&a, &b, SIZE, EntrySetting::Search)
-                .unwrap()
-                .len(),
-            4
-        );
+        let pair = turned_pair(&a, &b, SIZE, setting.first_reading()).unwrap();
+        assert_eq!(pair.view_a, a);
+        assert_eq!(pair.view_b, turn_clockwise(&b, SIZE, 3, 2).unwrap());
+        for search in [EntrySetting::Search, EntrySetting::EveryTurn] {
+            assert!(search.searches() && search.can_read_force());
+            assert_eq!(search.first_reading(), [CatheterEntry::Bottom; 2]);
+        }
     }
 }

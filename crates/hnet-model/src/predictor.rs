@@ -17,7 +17,7 @@ use hnet_units::ImageSize;
 
 use crate::architectures::{ModelSpec, StereoModel};
 use crate::catheter_entry::{
-    CatheterEntry, EntrySetting, TurnError, TurnedOutput, read_turned, turn_clockwise,
+    CatheterEntry, EntrySearch, EntrySetting, TurnError, TurnedOutput, turned_pair,
 };
 use crate::inference::{InputSizeError, PredictError, ReadbackError, push_mask, push_planar};
 use crate::weights::{WeightsError, WeightsHeader};
@@ -107,6 +107,8 @@ pub struct EntryOutput {
     pub output: PairOutput,
     /// The entry edge kept for views A and B.
     pub entry: [CatheterEntry; 2],
+    /// Readings of views A and B the search took: 1 when a view was read once.
+    pub readings: [usize; 2],
 }
 
 impl Predictor {
@@ -272,6 +274,7 @@ impl Predictor {
         let bottom = |output| EntryOutput {
             output,
             entry: [CatheterEntry::Bottom; 2],
+            readings: [1, 1],
         };
         if !entry.turns_views() {
             return Ok(self
@@ -287,48 +290,69 @@ impl Predictor {
         if !size.is_square() {
             return Err(EntryError::NotSquare(size));
         }
-        let mut outputs: Vec<Vec<TurnedOutput>> = vec![Vec::new(); pairs.len()];
-        for candidate in entry.candidates() {
-            let turn = |view: &[u8], edge: CatheterEntry| {
-                turn_clockwise(view, size, 3, edge.quarter_turns())
-            };
+        // Every pair's first reading in one batch, then each further edge's pairs in one.
+        let run = |edges: &[[CatheterEntry; 2]], pairs: &[&PairInput<'_>]| {
             let turned = pairs
                 .iter()
-                .map(|pair| {
-                    Ok((
-                        turn(pair.view_a, candidate[0])?,
-                        turn(pair.view_b, candidate[1])?,
-                    ))
-                })
+                .zip(edges)
+                .map(|(pair, edge)| turned_pair(pair.view_a, pair.view_b, size, *edge))
                 .collect::<Result<Vec<_>, TurnError>>()?;
             let inputs: Vec<PairInput<'_>> = turned
                 .iter()
-                .map(|(a, b)| PairInput {
-                    view_a: a,
-                    view_b: b,
+                .map(|t| PairInput {
+                    view_a: &t.view_a,
+                    view_b: &t.view_b,
                     masks: None,
                 })
                 .collect();
-            for (kept, output) in outputs.iter_mut().zip(self.predict(&inputs, device)?) {
-                if let Some(masks) = output.masks {
-                    kept.push(TurnedOutput {
-                        entry: candidate,
-                        masks,
+            let outputs = self.predict(&inputs, device)?;
+            Ok::<_, EntryError>(
+                edges
+                    .iter()
+                    .zip(outputs)
+                    .map(|(edge, output)| TurnedOutput {
+                        entry: *edge,
+                        masks: output.masks.unwrap_or_default(),
                         force: output.force,
-                    });
-                }
+                    })
+                    .collect::<Vec<_>>(),
+            )
+        };
+        let all: Vec<&PairInput<'_>> = pairs.iter().collect();
+        let first = vec![entry.first_reading(); pairs.len()];
+        let mut searches: Vec<EntrySearch> = run(&first, &all)?
+            .into_iter()
+            .map(|output| EntrySearch::new(entry, size, output))
+            .collect();
+        for edge in [
+            CatheterEntry::Right,
+            CatheterEntry::Top,
+            CatheterEntry::Left,
+        ] {
+            let asking: Vec<usize> = (0..pairs.len())
+                .filter(|&i| searches[i].further_pairs().contains(&[edge; 2]))
+                .collect();
+            if asking.is_empty() {
+                continue;
+            }
+            let chosen: Vec<&PairInput<'_>> = asking.iter().map(|&i| &pairs[i]).collect();
+            let outputs = run(&vec![[edge; 2]; asking.len()], &chosen)?;
+            for (i, output) in asking.into_iter().zip(outputs) {
+                searches[i].add_pair(output);
             }
         }
-        outputs
+        searches
             .into_iter()
-            .map(|outputs| {
-                let reading = read_turned(outputs, size)?;
+            .map(|search| {
+                let readings = search.readings();
+                let reading = search.finish()?;
                 Ok(EntryOutput {
                     output: PairOutput {
                         masks: Some(reading.masks),
                         force: reading.force,
                     },
                     entry: reading.entry,
+                    readings,
                 })
             })
             .collect()

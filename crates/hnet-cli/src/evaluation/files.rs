@@ -160,12 +160,23 @@ pub fn markdown(e: &Evaluation) -> String {
     );
     if let Some(entry) = &e.catheter_entry {
         let [a, b] = entry.views_read_turned;
-        let _ = writeln!(
+        let _ = write!(
             s,
             "Catheter entry `{}`: of {} pairs, {a} views A and {b} views B read turned (the \
-             force head's estimate left out for their pairs)\n",
+             force head's estimate left out for their pairs)",
             entry.setting, entry.pairs
         );
+        if let Some([a, b]) = entry.views_placed_right {
+            let _ = write!(
+                s,
+                "; {a} views A and {b} views B read at their catheter's edge"
+            );
+        }
+        if let Some([a, b]) = entry.view_readings {
+            let per_view = (a + b) as f64 / (2 * entry.pairs.max(1)) as f64;
+            let _ = write!(s, "; {per_view:.2} readings per view");
+        }
+        let _ = writeln!(s, "\n");
     }
     if let Some(f) = &e.force {
         let _ = writeln!(s, "Table I: tip force, {} pairs (N, N², N)\n", f.samples);
