@@ -11,6 +11,7 @@
 // HNET_DIST=<folder> times another build (e.g. scripts/bundle-size.sh's release page).
 // HNET_WEIGHTS=<model.bpk> loads those weights through the model bar first (e.g. a 128 px model
 // from `hnet train`), so that the page's time for another network size is measured.
+// HNET_NO_WORKERS=1 deletes window.Worker first: the page's thread alone, one core.
 // HNET_BACKENDS=cpu times the CPU path only (the software WebGPU adapter takes seconds a run).
 // HNET_CATHETER_ENTRY=<value of the model bar's "Catheter enters from": bottom, auto, left, ...>
 // times H-Net with that setting (auto, "find it", reads each pair at its four quarter turns);
@@ -36,6 +37,9 @@ function backends() {
 }
 const server = await serveDist();
 const context = await launchBrowser();
+// HNET_NO_WORKERS=1: a browser without Web Workers, so H-Net runs on the page's thread (the
+// single-core path, to compare with the workers in the same build).
+if (process.env.HNET_NO_WORKERS === "1") await context.addInitScript(() => delete window.Worker);
 const results = [];
 try {
   for (const choice of backends()) {

@@ -5,7 +5,8 @@
 //! views go to two workers at once, and a cine's frames keep every worker busy. The page joins a
 //! pair's views with the force head on its own thread ([`hnet_model::HNet::join_views`]).
 //!
-//! A worker that stops (its module trapped, the browser killed it, a call failed) is replaced by
+//! A worker that stops (its module trapped, the browser killed it, a call failed, no answer
+//! within a minute) is replaced by
 //! a fresh one with the same weights, and the views it was reading are read again by another
 //! worker; each such reading says so ([`PooledReading::redone`]). A view that fails twice fails
 //! with why. The pool needs no cross-origin isolation: workers share nothing and exchange
@@ -22,7 +23,7 @@ use js_sys::{Array, Float32Array, Reflect, Uint8Array};
 use wasm_bindgen::prelude::*;
 
 use crate::browser::JsError;
-use crate::module_worker::{ModuleWorker, ModuleWorkerError};
+use crate::module_worker::{ModuleWorker, ModuleWorkerError, within};
 
 /// The most workers the pool starts, whatever the browser reports: each holds its own copy of
 /// the network and its activations (about 60 MB at 224 px).
@@ -34,6 +35,10 @@ const ATTEMPTS: u32 = 2;
 
 /// A worker, in words.
 const NAME: &str = "a CPU worker";
+
+/// How long a worker may take to read one view before it counts as stopped, seconds: a view at
+/// 224 px takes about a tenth of a second (docs/benchmarks.md).
+const VIEW_TIMEOUT_S: i32 = 60;
 
 /// Why the pool gave no reading.
 #[derive(Debug, thiserror::Error)]
@@ -122,10 +127,19 @@ impl Member {
             &JsValue::from(view.index() as u32),
             &bytes,
         );
-        let values = self
-            .worker
-            .call("read_view", &args, &Array::of1(&bytes.buffer()))
-            .await?
+        // A worker that never answers (hung, or killed without an error event) counts as
+        // stopped after VIEW_TIMEOUT_S.
+        let reply = within(
+            self.worker
+                .send("read_view", &args, &Array::of1(&bytes.buffer()))?,
+            VIEW_TIMEOUT_S,
+            &format!("no answer within {VIEW_TIMEOUT_S} s"),
+        );
+        let answer = self.worker.reply("read_view", reply).await;
+        if let Err(e) = &answer {
+            self.worker.stop(&with_causes(e));
+        }
+        let values = answer?
             .dyn_into::<Float32Array>()
             .map(|v| v.to_vec())
             .unwrap_or_default();

@@ -11,7 +11,7 @@ use js_sys::{Array, Float32Array, Promise, Uint8Array};
 use wasm_bindgen::prelude::*;
 
 use crate::browser::JsError;
-use crate::module_worker::{ModuleWorker, ModuleWorkerError};
+use crate::module_worker::{ModuleWorker, ModuleWorkerError, within};
 
 /// How long the worker may take to start: to fetch and compile its module (2.4 MB gzipped,
 /// docs/benchmarks.md) and set WebGPU up, seconds. A browser whose WebGPU never answers would
@@ -62,8 +62,11 @@ impl GpuWorker {
                 let worker = Rc::new(Self {
                     worker: ModuleWorker::spawn("hnet-gpu", NAME)?,
                 });
-                let started =
-                    within_start_time(worker.worker.send("start", &Array::new(), &Array::new())?);
+                let started = within(
+                    worker.worker.send("start", &Array::new(), &Array::new())?,
+                    START_TIMEOUT_S,
+                    &format!("it did not start within {START_TIMEOUT_S} s"),
+                );
                 SHARED.set(Some((worker.clone(), started.clone())));
                 (worker, started)
             }
@@ -164,21 +167,4 @@ impl Drop for GpuNetwork {
         let args = Array::of1(&JsValue::from(self.handle));
         self.worker.worker.post("unload", &args);
     }
-}
-
-/// `started`, or a rejection once [`START_TIMEOUT_S`] have passed without its settling.
-fn within_start_time(started: Promise) -> Promise {
-    let timeout = Promise::new(&mut |_, reject| {
-        let error = js_sys::Error::new(&format!("it did not start within {START_TIMEOUT_S} s"));
-        if let Some(window) = web_sys::window() {
-            window
-                .set_timeout_with_callback_and_timeout_and_arguments_1(
-                    &reject,
-                    START_TIMEOUT_S * 1000,
-                    &error,
-                )
-                .ok();
-        }
-    });
-    Promise::race(&Array::of2(&started, &timeout))
 }

@@ -256,3 +256,22 @@ fn stop(pending: &RefCell<Pending>, stopped: &RefCell<Option<String>>, why: &str
         reject.call1(&JsValue::NULL, &js_sys::Error::new(why)).ok();
     }
 }
+
+/// `reply`, or a rejection saying `why` once `seconds` have passed without its settling: a
+/// worker that never answers (hung, or gone without an error event) would otherwise leave its
+/// caller waiting for ever.
+pub fn within(reply: Promise, seconds: i32, why: &str) -> Promise {
+    let timeout = Promise::new(&mut |_, reject| {
+        let error = js_sys::Error::new(why);
+        if let Some(window) = web_sys::window() {
+            window
+                .set_timeout_with_callback_and_timeout_and_arguments_1(
+                    &reject,
+                    seconds * 1000,
+                    &error,
+                )
+                .ok();
+        }
+    });
+    Promise::race(&Array::of2(&reply, &timeout))
+}
