@@ -31,6 +31,7 @@ OPSET = 18
 # burn-pack: magic (4 bytes), version (2), metadata length (4), CBOR metadata, then the tensors'
 # bytes from the next 256-byte boundary (burn-pack's base.rs).
 HEADER = 10
+IR_VERSION = 10
 ALIGNMENT = 256
 
 
@@ -134,6 +135,8 @@ def build(tensors, config):
         inits)
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)],
                               producer_name="hnet-studio bench/onnx_hnet.py")
+    # ONNX Runtime Web 1.30 reads IR versions up to 10 and onnx 1.23 writes 14 by default.
+    model.ir_version = IR_VERSION
     onnx.checker.check_model(model)
     return model
 
