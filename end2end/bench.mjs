@@ -72,9 +72,9 @@ try {
     // On the CPU the pool of workers starts after the first estimate: time the runs once it
     // has settled (workers running, or the page's thread with its reason).
     if (backend.includes("CPU")) {
-      await page.waitForFunction(() => /one per core|^none/.test(document.querySelector("#cpu-workers")?.textContent), null, { timeout: 60_000 });
+      await page.waitForFunction(() => /one per core|no workers:/.test(document.querySelector("#cpu-workers")?.title), null, { timeout: 60_000 });
     }
-    const workers = (await page.$("#cpu-workers")) && (await page.textContent("#cpu-workers"));
+    const workers = (await page.$("#cpu-workers")) && (await page.getAttribute("#cpu-workers", "title"));
     const times = [];
     for (let i = 0; i < runs; i++) {
       await page.waitForFunction(() => !document.querySelector("#busy"));
@@ -108,7 +108,7 @@ try {
     await waitForModel(page);
     await page.selectOption("#backend-choice", "cpu");
     await waitForModel(page);
-    await page.waitForFunction(() => /one per core|^none/.test(document.querySelector("#cpu-workers")?.textContent), null, { timeout: 60_000 });
+    await page.waitForFunction(() => /one per core|no workers:/.test(document.querySelector("#cpu-workers")?.title), null, { timeout: 60_000 });
     await page.click("#tab-cine");
     await page.click("#cine-sample");
     await page.waitForSelector("#cine-source", { timeout: 60_000 });
@@ -133,7 +133,7 @@ try {
     const at = (q) => Math.round(intervals[Math.min(intervals.length - 1, Math.floor(q * intervals.length))]);
     results.push({
       trace: "twin sample cine, 24 frame pairs, 224 px, on the CPU",
-      cpu_workers: await page.textContent("#cpu-workers"),
+      cpu_workers: await page.getAttribute("#cpu-workers", "title"),
       runs: seconds.length,
       median_s: seconds[Math.floor(seconds.length / 2)],
       min_s: seconds[0],

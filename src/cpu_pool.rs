@@ -174,19 +174,28 @@ pub enum WorkersStatus {
 }
 
 impl WorkersStatus {
+    /// The status in two words, for the model bar (its [`WorkersStatus::text`] in the title).
+    pub fn short(&self) -> String {
+        match self {
+            Self::Running { running, .. } => format!("{running} workers"),
+            Self::Starting(_) => "starting workers".into(),
+            Self::NotUsed | Self::PageThread(_) => "no workers".into(),
+        }
+    }
+
     /// The status in words.
     pub fn text(&self) -> String {
         match self {
-            Self::NotUsed => "–".into(),
-            Self::Starting(n) => format!("starting {n}…"),
+            Self::NotUsed => "no workers".into(),
+            Self::Starting(n) => format!("starting {n} workers…"),
             Self::Running {
                 running,
                 replaced: 0,
-            } => format!("{running} (one per core)"),
+            } => format!("{running} workers, one per core"),
             Self::Running { running, replaced } => {
-                format!("{running} (one per core; {replaced} replaced after stopping)")
+                format!("{running} workers, one per core; {replaced} replaced after stopping")
             }
-            Self::PageThread(why) => format!("none: the page's thread, one core ({why})"),
+            Self::PageThread(why) => format!("no workers: the page's thread, one core; {why}"),
         }
     }
 }

@@ -635,7 +635,7 @@ test("every core: one CPU worker per core reads the views as the page's thread d
   await page.waitForSelector("#force-verdict", { timeout: 120_000 });
   const onPageThread = await page.textContent("#force-table");
   const cores = await page.evaluate(() => Math.min(8, navigator.hardwareConcurrency));
-  await page.waitForFunction((n) => document.querySelector("#cpu-workers").textContent.startsWith(`${n} (one per core`), cores, { timeout: 60_000 });
+  await page.waitForFunction((n) => document.querySelector("#cpu-workers").title.startsWith(`${n} workers, one per core`), cores, { timeout: 60_000 });
   assert.equal(page.workers().filter((w) => w.url().includes("module=hnet-cpu")).length, cores);
   // The same pair read again on the workers (a setting change clears the estimates): the same
   // masks and force, to the digits shown.
@@ -649,16 +649,17 @@ test("every core: one CPU worker per core reads the views as the page's thread d
 
   // Workers whose module cannot be fetched, and a browser without workers: the page's thread.
   for (const [setup, why] of [
-    [async (p) => p.route("**/hnet-cpu_bg.wasm", (route) => route.abort()), /^none: the page's thread, one core \(no CPU worker could be started: .+\)$/],
-    [async (p) => p.addInitScript(() => delete window.Worker), /^none: the page's thread, one core \(this browser runs no Web Workers\)$/],
+    [async (p) => p.route("**/hnet-cpu_bg.wasm", (route) => route.abort()), /^no workers: the page's thread, one core; no CPU worker could be started: .+\. H-Net's views/],
+    [async (p) => p.addInitScript(() => delete window.Worker), /^no workers: the page's thread, one core; this browser runs no Web Workers\. H-Net's views/],
   ]) {
     const page = await context.newPage();
     await setup(page);
     await page.goto(server.url);
     await waitForModel(page);
     await page.waitForSelector("#force-verdict", { timeout: 120_000 });
-    await page.waitForFunction(() => document.querySelector("#cpu-workers").textContent.startsWith("none"), null, { timeout: 60_000 });
-    assert.match(await page.textContent("#cpu-workers"), why);
+    await page.waitForFunction(() => document.querySelector("#cpu-workers").title.startsWith("no workers:"), null, { timeout: 60_000 });
+    assert.match(await page.getAttribute("#cpu-workers", "title"), why);
+    assert.equal(await page.textContent("#cpu-workers"), "(no workers)");
     assert.equal(await page.textContent("#force-table"), onPageThread);
     await page.close();
   }
@@ -741,7 +742,7 @@ test("a DICOM cine: sample, step, scrub, play, window/level, trace with cancel, 
   await worker.evaluate(() => setTimeout(() => { throw new Error("this worker dies"); }, 0));
   await page.waitForFunction(() => document.querySelector("#force-trace").dataset.traced === "24" && !document.querySelector("#busy"), null, { timeout: 180_000 });
   assert.match(await page.textContent("#notice"), /tip force traced over 24 frames .*A CPU worker stopped \(Uncaught Error: this worker dies\) and was replaced: frames? [\d, ]+ read again/);
-  assert.match(await page.textContent("#cpu-workers"), /1 replaced after stopping/);
+  assert.match(await page.getAttribute("#cpu-workers", "title"), /1 replaced after stopping/);
   const [csv] = await Promise.all([page.waitForEvent("download"), page.click("#cine-export-trace")]);
   assert.equal(csv.suggestedFilename(), "hnet-force-trace.csv");
   await csv.saveAs(join(files, "trace.csv"));

@@ -10,6 +10,7 @@ use hnet_model::catheter_entry::EntrySetting;
 use crate::browser::{read_file, take_picked_file};
 use crate::catheter_calibration;
 use crate::compute::BackendChoice;
+use crate::cpu_pool::WorkersStatus;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
 use crate::studio::{ModelState, Studio, load_model};
@@ -112,14 +113,20 @@ pub fn ModelBar() -> impl IntoView {
                                 {engine.check.clone().map(|check| view! {
                                     <dd id="backend-check" class="why">{format!("({check})")}</dd>
                                 })}
-                            </div>
-                            <div>
-                                <dt>"CPU workers"</dt>
-                                <dd id="cpu-workers" title="H-Net's views are read off the page's \
-                                    thread, one worker per core the browser reports (at most 8); \
-                                    a worker that stops is replaced and its views read again">
-                                    {move || studio.cpu_workers.get().text()}
-                                </dd>
+                                {move || {
+                                    let workers = studio.cpu_workers.get();
+                                    (workers != WorkersStatus::NotUsed).then(|| {
+                                        let (short, text) = (workers.short(), workers.text());
+                                        view! {
+                                            <dd id="cpu-workers" class="why" title=format!(
+                                                "{text}. H-Net's views are read off the page's \
+                                                 thread, one worker per core the browser \
+                                                 reports (at most 8); a worker that stops is \
+                                                 replaced and its views read again"
+                                            )>{format!("({short})")}</dd>
+                                        }
+                                    })
+                                }}
                             </div>
                             <div><dt>"Parameters"</dt><dd id="params">{engine.params}</dd></div>
                             <div>
@@ -178,14 +185,14 @@ pub fn ModelBar() -> impl IntoView {
                     For one that enters through another edge, each view is turned so that it does \
                     and its masks turned back; H-Net's force is then not read. Finding the edge \
                     reads both views as they are, and the other three turns only of a view whose \
-                    catheter does not reach its bottom edge; \u{201c}every turn\u{201d} reads all \
+                    catheter does not reach its bottom edge; \u{201c}find it, 4 turns\u{201d} reads all \
                     four turns of both views: four times the time.">
                     "Catheter enters from "
                     <select id="catheter-entry" on:change=on_entry>
                         {[
                             ("bottom", "the bottom (as trained)"),
                             ("auto", "find it"),
-                            ("every-turn", "find it, every turn (4× the time)"),
+                            ("every-turn", "find it, 4 turns"),
                             ("left", "the left"),
                             ("top", "the top"),
                             ("right", "the right"),
