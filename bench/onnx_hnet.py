@@ -9,7 +9,9 @@ after the weights' force scale). Weights not shared between the views are not su
 
 With --check DATASET, also runs the model in ONNX Runtime (Python) on the dataset's first pairs
 and prints their forces next to `hnet eval --predictions`'s, so that the export can be checked
-against our own network (bench/README.md).
+against our own network (bench/README.md). With --time RUNS, times ONNX Runtime's inference per
+pair on `--threads` threads as `hnet bench model --weights` times ours: from two RGB byte images
+to the masks and force in host memory, after one warm-up run.
 
 Needs numpy, onnx and cbor2 (and onnxruntime and pillow for --check); no PyTorch.
 
@@ -160,17 +162,58 @@ def check(model_path, dataset, pairs):
                           "catheter_pixels_a": int((mask_a >= 0.5).sum())}))
 
 
+def time_inference(model_path, runs, threads):
+    """Mean and median seconds per pair of ONNX Runtime (Python, CPU) over `runs` runs."""
+    import time
+
+    import onnxruntime
+
+    options = onnxruntime.SessionOptions()
+    options.intra_op_num_threads = threads
+    options.inter_op_num_threads = 1
+    options.graph_optimization_level = onnxruntime.GraphOptimizationLevel.ORT_ENABLE_ALL
+    session = onnxruntime.InferenceSession(model_path, options, providers=["CPUExecutionProvider"])
+    _, _, height, width = session.get_inputs()[0].shape
+    # A mid-grey pair, as `hnet bench model` reads.
+    pixels = np.full((height, width, 3), 128, dtype=np.uint8)
+
+    def tensor(image):
+        return np.ascontiguousarray((image.astype(np.float32) / 255).transpose(2, 0, 1)[None])
+
+    def run():
+        return session.run(None, {"view_a": tensor(pixels), "view_b": tensor(pixels)})
+
+    run()
+    times = []
+    for _ in range(runs):
+        start = time.perf_counter()
+        run()
+        times.append(time.perf_counter() - start)
+    print(json.dumps({"runtime": f"onnxruntime {onnxruntime.__version__}", "threads": threads,
+                      "size": width, "runs": runs,
+                      "infer_pair_s": sum(times) / runs,
+                      "infer_pair_median_s": float(np.median(times))}))
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("weights", help="an H-Net weights file (.bpk)")
     parser.add_argument("onnx", help="where to write the ONNX model")
     parser.add_argument("--check", metavar="DATASET", help="run it on a dataset's first pairs")
     parser.add_argument("--pairs", type=int, default=3)
+    parser.add_argument("--size", type=int,
+                        help="write the network for square images of this side (pixels) instead "
+                             "of the size the file records (the weights fit any size)")
+    parser.add_argument("--time", metavar="RUNS", type=int,
+                        help="time ONNX Runtime's inference per pair over RUNS runs")
+    parser.add_argument("--threads", type=int, default=2, help="ONNX Runtime's threads for --time")
     args = parser.parse_args()
     tensors, meta = read_bpk(args.weights)
     if meta.get("hnet.architecture") != "hnet":
         raise SystemExit(f"{args.weights}: holds {meta.get('hnet.architecture')}, not H-Net")
     config = json.loads(meta["hnet.config"])
+    if args.size:
+        config["image_size"] = {"width": args.size, "height": args.size}
     model = build(tensors, config)
     onnx.save(model, args.onnx)
     params = sum(t.size for t in tensors.values())
@@ -179,6 +222,8 @@ def main():
           f"{side['width']}x{side['height']} pair, opset {OPSET}")
     if args.check:
         check(args.onnx, args.check, args.pairs)
+    if args.time:
+        time_inference(args.onnx, args.time, args.threads)
 
 
 if __name__ == "__main__":

@@ -329,7 +329,9 @@ test("bad input gets a clear message and loses nothing", async () => {
   // A CSV with a value far outside a catheter's range is refused by line and value.
   await writeFile(join(files, "grams.csv"), `id,fx,fy,fz\n${newest},15,0,-20\n`);
   await page.setInputFiles("#label-import", join(files, "grams.csv"));
-  await page.waitForSelector('#notice[data-kind="error"]');
+  // The refused `abc` may still be the notice: wait for this file's own.
+  await page.waitForFunction(() => /grams\.csv/.test(document.querySelector("#notice")?.textContent));
+  assert.equal(await page.getAttribute("#notice", "data-kind"), "error");
   assert.match(await page.textContent("#notice"), /grams\.csv, line 2: the force of `pair-\d+` is refused: \|F\| = 25\.000 N/);
 
   // Deleting asks first, and can be undone.
@@ -636,7 +638,10 @@ test("every core: one CPU worker per core reads the views as the page's thread d
   const onPageThread = await page.textContent("#force-table");
   const cores = await page.evaluate(() => Math.min(8, navigator.hardwareConcurrency));
   await page.waitForFunction((n) => document.querySelector("#cpu-workers").title.startsWith(`${n} workers, one per core`), cores, { timeout: 60_000 });
-  assert.equal(page.workers().filter((w) => w.url().includes("module=hnet-cpu")).length, cores);
+  // Playwright learns of each worker by an event of its own, which may come after the title.
+  const cpuWorkers = () => page.workers().filter((w) => w.url().includes("module=hnet-cpu")).length;
+  for (let waited = 0; cpuWorkers() < cores && waited < 10_000; waited += 100) await page.waitForTimeout(100);
+  assert.equal(cpuWorkers(), cores);
   // The same pair read again on the workers (a setting change clears the estimates): the same
   // masks and force, to the digits shown.
   await page.selectOption("#catheter-entry", "left");

@@ -1,6 +1,6 @@
 //! `hnet bench`: throughput measurements recorded in docs/benchmarks.md.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
@@ -59,13 +59,20 @@ struct ModelBench {
     /// Whose convolution kernels flex runs.
     #[arg(long, value_enum, default_value = "project")]
     kernels: Kernels,
-    /// Image side in pixels.
-    #[arg(long, default_value_t = 64)]
-    size: usize,
+    /// Image side in pixels [default: 64, or the size `--weights` records].
+    #[arg(long)]
+    size: Option<usize>,
+    /// Times the network in this H-Net weights file (e.g. `assets/hnet-cpu.bpk`), its settings
+    /// (position channels, force scale) and weights included: the very network
+    /// `bench/onnx_hnet.py` exports for ONNX Runtime. At another `--size`, the same architecture
+    /// freshly initialised (the time does not depend on the weights' values). Without it, a
+    /// freshly initialised default H-Net.
+    #[arg(long)]
+    weights: Option<PathBuf>,
     /// Pairs per training batch.
     #[arg(long, default_value_t = 32)]
     batch: usize,
-    /// Timed training steps (after one warm-up step).
+    /// Timed training steps (after one warm-up step); 0 times inference only.
     #[arg(long, default_value_t = 5)]
     steps: usize,
     /// Timed inferences (after one warm-up).
@@ -84,7 +91,8 @@ struct ModelResult {
     size: usize,
     batch: usize,
     threads: usize,
-    train_step_s: f64,
+    /// Seconds per training step; `None` with `--steps 0`.
+    train_step_s: Option<f64>,
     infer_pair_s: f64,
 }
 
@@ -92,66 +100,101 @@ fn model(args: &ModelBench) -> anyhow::Result<()> {
     use burn::module::Module;
     use burn::optim::{GradientsParams, RmsPropConfig};
     use burn::tensor::{Distribution, Tensor};
+    use hnet_model::predictor::PairInput;
     use hnet_model::{HNetConfig, HNetLossConfig};
 
     args.kernels.select();
     let mut results = Vec::new();
     for backend in &args.backend {
         let device = backend.device()?;
+        let loaded = args
+            .weights
+            .as_deref()
+            .map(|path| crate::network::load_weights(path, None, &device))
+            .transpose()?;
+        let config = match &loaded {
+            Some(predictor) => match &predictor.spec {
+                hnet_model::architectures::ModelSpec::Hnet(config) => config.clone(),
+                other => anyhow::bail!(
+                    "weights file '{}' holds a `{}` network: `hnet bench model` times H-Net",
+                    args.weights.as_deref().unwrap_or(Path::new("")).display(),
+                    other.name()
+                ),
+            },
+            None => HNetConfig::new().with_image_size(ImageSize::square(args.size.unwrap_or(64))),
+        };
+        let config = match args.size {
+            Some(side) => config.with_image_size(ImageSize::square(side)),
+            None => config,
+        };
+        let size = config.image_size;
+        // The file's own network, when it is the size timed.
+        let loaded = loaded.filter(|predictor| predictor.image_size == size);
         let train_device = device.clone().autodiff();
-        let config = HNetConfig::new().with_image_size(ImageSize::square(args.size));
         let mut net = config.init(&train_device)?;
         let params = net.num_params();
-        let loss = HNetLossConfig::new().init();
-        let mut optimizer = RmsPropConfig::new()
-            .with_alpha(0.9)
-            .with_momentum(0.0)
-            .with_epsilon(1e-7)
-            .init();
-        let shape = [args.batch, 3, args.size, args.size];
-        let mask = [args.batch, 1, args.size, args.size];
-        let a = Tensor::random(shape, Distribution::Default, &train_device);
-        let b = Tensor::random(shape, Distribution::Default, &train_device);
-        let ma = Tensor::random(mask, Distribution::Bernoulli(0.1), &train_device);
-        let mb = Tensor::random(mask, Distribution::Bernoulli(0.1), &train_device);
-        let f = Tensor::random(
-            [args.batch, 3],
-            Distribution::Uniform(-0.4, 0.4),
-            &train_device,
-        );
-        let mut step = |net: hnet_model::HNet| {
-            let out = net.forward(a.clone(), b.clone());
-            let terms = loss.forward(&out, ma.clone(), mb.clone(), f.clone());
-            let grads = GradientsParams::from_grads(terms.total.backward(), &net);
-            let net = optimizer.step(1e-4, net, grads);
-            // Wait for the device so that the time is the step's.
-            let _ = terms.total.into_scalar::<f32>();
-            net
-        };
-        net = step(net);
-        let start = Instant::now();
-        for _ in 0..args.steps {
+        let train_step_s = if args.steps > 0 {
+            let loss = HNetLossConfig::new().init();
+            let mut optimizer = RmsPropConfig::new()
+                .with_alpha(0.9)
+                .with_momentum(0.0)
+                .with_epsilon(1e-7)
+                .init();
+            let shape = [args.batch, 3, size.height, size.width];
+            let mask = [args.batch, 1, size.height, size.width];
+            let a = Tensor::random(shape, Distribution::Default, &train_device);
+            let b = Tensor::random(shape, Distribution::Default, &train_device);
+            let ma = Tensor::random(mask, Distribution::Bernoulli(0.1), &train_device);
+            let mb = Tensor::random(mask, Distribution::Bernoulli(0.1), &train_device);
+            let f = Tensor::random(
+                [args.batch, 3],
+                Distribution::Uniform(-0.4, 0.4),
+                &train_device,
+            );
+            let mut step = |net: hnet_model::HNet| {
+                let out = net.forward(a.clone(), b.clone());
+                let terms = loss.forward(&out, ma.clone(), mb.clone(), f.clone());
+                let grads = GradientsParams::from_grads(terms.total.backward(), &net);
+                let net = optimizer.step(1e-4, net, grads);
+                // Wait for the device so that the time is the step's.
+                let _ = terms.total.into_scalar::<f32>();
+                net
+            };
             net = step(net);
-        }
-        let train_step_s = start.elapsed().as_secs_f64() / args.steps as f64;
+            let start = Instant::now();
+            for _ in 0..args.steps {
+                net = step(net);
+            }
+            Some(start.elapsed().as_secs_f64() / args.steps as f64)
+        } else {
+            None
+        };
 
-        let net = net.valid();
-        let pixels = vec![128u8; args.size * args.size * 3];
-        let pair = [hnet_model::inference::StereoPair {
-            view_a: &pixels,
-            view_b: &pixels,
-        }];
-        net.predict(&pair, ImageSize::square(args.size), &device)?;
-        let start = Instant::now();
-        for _ in 0..args.runs {
-            net.predict(&pair, ImageSize::square(args.size), &device)?;
-        }
-        let infer_pair_s = start.elapsed().as_secs_f64() / args.runs as f64;
+        // One mid-grey pair, from bytes to the masks and force in host memory.
+        let pixels = vec![128u8; size.pixels() * 3];
+        let infer_pair_s = match &loaded {
+            Some(predictor) => {
+                let pair = [PairInput {
+                    view_a: &pixels,
+                    view_b: &pixels,
+                    masks: None,
+                }];
+                time_runs(args.runs, || predictor.predict(&pair, &device).map(drop))?
+            }
+            None => {
+                let net = net.valid();
+                let pair = [hnet_model::inference::StereoPair {
+                    view_a: &pixels,
+                    view_b: &pixels,
+                }];
+                time_runs(args.runs, || net.predict(&pair, size, &device).map(drop))?
+            }
+        };
         results.push(ModelResult {
             backend: backend.name(),
             kernels: args.kernels,
             params,
-            size: args.size,
+            size: size.width,
             batch: args.batch,
             threads: rayon::current_num_threads(),
             train_step_s,
@@ -162,21 +205,36 @@ fn model(args: &ModelBench) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&results)?);
     } else {
         for r in &results {
+            let step = r
+                .train_step_s
+                .map_or_else(|| "not timed".to_string(), |s| format!("{:.1} ms", s * 1e3));
             println!(
-                "{} ({:?} kernels): H-Net ({} parameters) at {}x{}: training step (batch {}) {:.1} ms, inference per stereo pair {:.1} ms, {} threads",
+                "{} ({:?} kernels): H-Net ({} parameters) at {}x{}: training step (batch {}) {step}, inference per stereo pair {:.1} ms, {} threads",
                 r.backend,
                 r.kernels,
                 r.params,
                 r.size,
                 r.size,
                 r.batch,
-                r.train_step_s * 1e3,
                 r.infer_pair_s * 1e3,
                 r.threads
             );
         }
     }
     Ok(())
+}
+
+/// Mean seconds per call of `run` over `runs` calls, after one warm-up call.
+fn time_runs<E: std::error::Error + Send + Sync + 'static>(
+    runs: usize,
+    mut run: impl FnMut() -> Result<(), E>,
+) -> anyhow::Result<f64> {
+    run()?;
+    let start = Instant::now();
+    for _ in 0..runs {
+        run()?;
+    }
+    Ok(start.elapsed().as_secs_f64() / runs.max(1) as f64)
 }
 
 #[derive(clap::Args, Debug)]
