@@ -105,6 +105,7 @@ impl TwinControls {
             base_azimuth_deg: 0.0,
             base_roll_deg: 90.0,
             plate: self.paper_bench,
+            wall_normal: None,
         }
     }
 

@@ -11,9 +11,9 @@
 //! The suite covers the catheter off its catalogue values, the base anywhere within the page's
 //! ranges, C-arm header errors (angles, distances, the two planes' isocentres apart), motion
 //! between the two planes' exposures, imaging (low-dose noise, blur, scatter and veiling glare,
-//! the display's grey curve) and real radiograph backgrounds. Not yet simulated (the twin has no
-//! model of them): a stiffer tip-electrode segment, a base held in a sheath, friction at the
-//! contact, and a catheter foreshortened towards one source; docs/results.md lists them as open.
+//! the display's grey curve), real radiograph backgrounds, and a rod the fit does not model: a
+//! rigid tip electrode, a base held in a sheath, the force applied on the tip's surface with
+//! friction; and a catheter foreshortened towards one source.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -25,7 +25,7 @@ use hnet_twin::carm::HeaderError;
 use hnet_twin::catalogue::{BENCH_CATHETER, CatalogueCatheter};
 use hnet_twin::dataset::Split;
 use hnet_twin::render::XRayDetector;
-use hnet_twin::scene::{Modality, SceneSampling};
+use hnet_twin::scene::{BaseLean, Modality, SceneSampling, Sheath};
 use serde::Serialize;
 
 use crate::backend::BackendChoice;
@@ -220,6 +220,53 @@ fn suite() -> Vec<MismatchSet> {
             XRayDetector {
                 display_gamma: 0.6,
                 ..detector()
+            },
+        ),
+        // Added after the sets above, so that theirs keep their seeds.
+        set(
+            "tip-electrode",
+            "the 3.5 mm platinum-iridium tip electrode rigid (50 times the shaft's EI) where the \
+             fit bends the shaft to its end: every ablation catheter has one, 3.5-8 mm long",
+            SceneSampling {
+                tip_electrode_stiffness: 50.0,
+                ..bench()
+            },
+        ),
+        set(
+            "sheath",
+            "the catheter leaves a sheath whose last 20 mm stand free (sheath and catheter \
+             together 4 times the catheter's EI) where the fit clamps it at the sheath's end: \
+             a catheter through a steerable sheath, the sheath's end turning under the load",
+            SceneSampling {
+                sheath: Some(Sheath {
+                    free_length_mm: 20.0,
+                    stiffness_factor: 4.0,
+                }),
+                ..bench()
+            },
+        ),
+        set(
+            "tip-contact",
+            "the force applied where the tip's rounded end touches a wall (up to 1.7 mm off the \
+             centreline's end, a tip moment the fit does not model), the wall's normal anywhere \
+             within the friction cone of the force (μ 0.3: a wet polymer or metal tip on \
+             endocardium, 0.1-0.5)",
+            SceneSampling {
+                contact_friction: Some(0.3),
+                ..bench()
+            },
+        ),
+        set(
+            "foreshortened",
+            "the fixture leant 45° towards plane A's source, so that plane A sees the flexible \
+             section at 71 % of its length and its bend partly in depth: a catheter pointing at \
+             one of the tubes, as in a view chosen for another structure",
+            SceneSampling {
+                base_lean: Some(BaseLean {
+                    tilt_deg: 45.0,
+                    azimuth_deg: 0.0,
+                }),
+                ..bench()
             },
         ),
     ]

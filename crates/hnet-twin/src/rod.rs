@@ -14,7 +14,10 @@
 //! m' = -p' × n                       (moment balance)
 //! ```
 //!
-//! with `p(0)`, `R(0)` given (clamped base) and `m(L) = 0` (no moment at the tip). The unknown base
+//! with `p(0)`, `R(0)` given (clamped base) and `m(L) = R(L) o × F` at the tip (none when the force
+//! acts on the centreline's end, `o = 0`; a contact on the tip's rounded surface sits off it).
+//! `K` may be stiffer over stretches of the rod ([`StiffSegment`]: a metal tip electrode, the end
+//! of a sheath). The unknown base
 //! moment `m(0)` is found by shooting: RK4 integration along `s` and Newton's method on
 //! `m(L)(m(0)) = 0` with a finite-difference Jacobian and a backtracking line search; large loads
 //! are approached by load continuation. A solve that does not reach the tolerance is an error,
@@ -53,6 +56,26 @@ pub struct RodConfig {
     pub steps: usize,
     /// Newton iterations allowed per load step.
     pub max_newton_iterations: usize,
+    /// Stretches stiffer than the rest (none: uniform, what every estimate assumes).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub stiff_segments: Vec<StiffSegment>,
+    /// Where the tip force acts, relative to the centreline's end in the tip's cross-section
+    /// frame (x, y across, z along the tangent), mm. Zero (the default, what every estimate
+    /// assumes): on the end itself, no tip moment.
+    #[serde(default, skip_serializing_if = "Vec3::is_zero")]
+    pub tip_load_offset_mm: Vec3,
+}
+
+/// A stretch of the rod whose bending and torsional stiffness are `factor` times the rest's: a
+/// platinum-iridium tip electrode, or the end of a sheath the catheter runs through.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct StiffSegment {
+    /// Arc length where it begins, mm from the base.
+    pub from_mm: f64,
+    /// Arc length where it ends, mm from the base.
+    pub to_mm: f64,
+    /// Its stiffness over the rest's.
+    pub factor: f64,
 }
 
 impl Default for RodConfig {
@@ -73,6 +96,8 @@ impl Default for RodConfig {
             gravity_m_per_s2: None,
             steps: 200,
             max_newton_iterations: 40,
+            stiff_segments: Vec::new(),
+            tip_load_offset_mm: Vec3::ZERO,
         }
     }
 }
@@ -131,7 +156,38 @@ impl RodConfig {
                 "pre-curvature, density and gravity must be finite".into(),
             ));
         }
+        for segment in &self.stiff_segments {
+            let StiffSegment {
+                from_mm,
+                to_mm,
+                factor,
+            } = *segment;
+            if !(0.0 <= from_mm && from_mm < to_mm && to_mm <= self.length_mm)
+                || !(factor.is_finite() && factor > 0.0)
+            {
+                return Err(RodError::InvalidConfig(format!(
+                    "stiff segment {from_mm}-{to_mm} mm (x{factor}) must lie within the rod's \
+                     {} mm and stiffen it by a positive factor",
+                    self.length_mm
+                )));
+            }
+        }
+        if !self.tip_load_offset_mm.0.iter().all(|v| v.is_finite()) {
+            return Err(RodError::InvalidConfig(
+                "tip_load_offset_mm must be finite".into(),
+            ));
+        }
         Ok(())
+    }
+
+    /// How much stiffer than the rest the rod is at arc length `s` (mm): the product of the
+    /// factors of the segments holding `s` (1 outside them).
+    fn stiffness_factor(&self, s: f64) -> f64 {
+        self.stiff_segments
+            .iter()
+            .filter(|segment| segment.from_mm <= s && s < segment.to_mm)
+            .map(|segment| segment.factor)
+            .product()
     }
 
     /// Weight per length in N/mm in the world frame (zero without gravity).
@@ -197,6 +253,24 @@ impl RodShape {
     pub fn translated(&self, offset_mm: Vec3) -> Self {
         Self {
             points_mm: self.points_mm.iter().map(|&p| p + offset_mm).collect(),
+            ..self.clone()
+        }
+    }
+
+    /// The part from arc length `arc_mm` to the tip, its arc lengths counted from there (the
+    /// first point kept is the first at or beyond `arc_mm`).
+    pub fn distal_from(&self, arc_mm: f64) -> Self {
+        let first = self
+            .arc_mm
+            .iter()
+            .position(|&s| s >= arc_mm - 1e-9)
+            .unwrap_or(self.arc_mm.len().saturating_sub(2))
+            .min(self.arc_mm.len().saturating_sub(2));
+        let start = self.arc_mm[first];
+        Self {
+            arc_mm: self.arc_mm[first..].iter().map(|s| s - start).collect(),
+            points_mm: self.points_mm[first..].to_vec(),
+            tangents: self.tangents[first..].to_vec(),
             ..self.clone()
         }
     }
@@ -273,10 +347,11 @@ impl Problem<'_> {
         let tangent = rotation.column(2);
         let n = self.tip_force + self.weight * (self.config.length_mm - s);
         let m_body = rotation.transpose() * y.m;
+        let factor = self.config.stiffness_factor(s);
         let u = Vec3::new(
-            m_body[0] / self.stiffness[0],
-            m_body[1] / self.stiffness[1],
-            m_body[2] / self.stiffness[2],
+            m_body[0] / (factor * self.stiffness[0]),
+            m_body[1] / (factor * self.stiffness[1]),
+            m_body[2] / (factor * self.stiffness[2]),
         ) + self.config.intrinsic_curvature(s);
         Derivative {
             p: tangent,
@@ -285,16 +360,15 @@ impl Problem<'_> {
         }
     }
 
-    /// Integrates from the base with base moment `m0`; returns the tip moment and, if asked, the
-    /// centreline.
+    /// Integrates from the base with base moment `m0`; returns what the tip's moment lacks of the
+    /// tip load's and, if asked, the centreline.
     fn shoot(&self, m0: Vec3, record: bool) -> (Vec3, Option<RodShape>) {
-        let (m, _, shape) = self.integrate(m0, record);
-        (m, shape)
+        let shot = self.integrate(m0, record);
+        (shot.tip_moment_lack, shot.shape)
     }
 
-    /// Integrates from the base with base moment `m0`; returns the tip moment, the tip position
-    /// and, if asked, the centreline.
-    fn integrate(&self, m0: Vec3, record: bool) -> (Vec3, Vec3, Option<RodShape>) {
+    /// Integrates from the base with base moment `m0`.
+    fn integrate(&self, m0: Vec3, record: bool) -> Shot {
         let steps = self.config.steps;
         let h = self.config.length_mm / steps as f64;
         let mut y = State {
@@ -332,8 +406,28 @@ impl Problem<'_> {
             y.q = Quat(y.q).normalized().0;
             push(&mut shape, s + h, &y);
         }
-        (y.m, y.p, shape)
+        let tip_frame = Quat(y.q).to_matrix();
+        let offset = tip_frame * self.config.tip_load_offset_mm;
+        Shot {
+            tip_moment_lack: y.m - offset.cross(self.tip_force),
+            tip_mm: y.p,
+            tip_frame,
+            shape,
+        }
     }
+}
+
+/// One integration from the base.
+struct Shot {
+    /// What the tip's moment lacks of the tip load's, N·mm (zero when the boundary condition
+    /// holds).
+    tip_moment_lack: Vec3,
+    /// The tip's position, mm.
+    tip_mm: Vec3,
+    /// The tip's frame (columns: the cross-section's axes and the tangent).
+    tip_frame: Mat3,
+    /// The centreline, when asked for.
+    shape: Option<RodShape>,
 }
 
 /// Solves `a x = b` for a 3x3 system by Gaussian elimination with partial pivoting.
@@ -502,6 +596,21 @@ pub fn solve(config: &RodConfig, base: &RodBase, tip_force_n: Vec3) -> Result<Ro
     })
 }
 
+/// The frame of the rod's tip under no tip load (columns: the cross-section's x and y axes and
+/// the tangent, world frame).
+pub fn rest_tip_frame(config: &RodConfig, base: &RodBase) -> Result<Mat3, RodError> {
+    let rest = solve(config, base, Vec3::ZERO)?;
+    let ei = config.bending_stiffness_n_mm2();
+    let problem = Problem {
+        config,
+        base,
+        tip_force: Vec3::ZERO,
+        weight: config.weight_per_mm(),
+        stiffness: Vec3::new(ei, ei, config.torsional_stiffness_n_mm2()),
+    };
+    Ok(problem.integrate(rest.base_moment_n_mm, false).tip_frame)
+}
+
 /// A rod whose tip is held: [`solve_held`]'s solution.
 #[derive(Debug, Clone, PartialEq)]
 pub struct HeldRod {
@@ -547,8 +656,8 @@ pub fn solve_held(
             weight,
             stiffness,
         };
-        let (m, p, _) = problem.integrate(m0, false);
-        let miss = p - target;
+        let shot = problem.integrate(m0, false);
+        let (m, miss) = (shot.tip_moment_lack, shot.tip_mm - target);
         SVector::<f64, 6>::from_column_slice(&[
             m[0] / moment_scale,
             m[1] / moment_scale,
@@ -617,7 +726,7 @@ pub fn solve_held(
         weight,
         stiffness,
     };
-    let mut shape = problem.integrate(m0, true).2.expect("recorded");
+    let mut shape = problem.integrate(m0, true).shape.expect("recorded");
     shape.newton_iterations = iterations;
     shape.residual_n_mm = r.fixed_rows::<3>(0).norm() * moment_scale;
     Ok(HeldRod {
@@ -781,6 +890,77 @@ mod tests {
                 Vec3::new(f64::NAN, 0.0, 0.0)
             ),
             Err(RodError::InvalidConfig(_))
+        ));
+    }
+
+    #[test]
+    fn stiff_segments_and_an_offset_tip_load_are_what_they_say() {
+        let config = beam();
+        let ei = config.bending_stiffness_n_mm2();
+        let l = config.length_mm;
+        let f = 0.01 * ei / (l * l);
+        let base = RodBase::default();
+        // One segment over the whole rod is a rod that much stiffer.
+        let whole = RodConfig {
+            stiff_segments: vec![StiffSegment {
+                from_mm: 0.0,
+                to_mm: l,
+                factor: 3.0,
+            }],
+            ..config.clone()
+        };
+        let stiffer = config.clone().with_bending_stiffness(3.0 * ei);
+        let load = Vec3::new(f, 0.0, 0.0);
+        let (a, b) = (
+            solve(&whole, &base, load).unwrap().tip_mm(),
+            solve(&stiffer, &base, load).unwrap().tip_mm(),
+        );
+        assert!((a - b).norm() < 1e-9, "{a:?} {b:?}");
+        // A rigid last tenth: the flexible nine tenths' deflection at their end (a = 0.9 L,
+        // loaded by F and the moment F (L - a)), carried on straight at their end's slope.
+        let rigid_tip = RodConfig {
+            stiff_segments: vec![StiffSegment {
+                from_mm: 0.9 * l,
+                to_mm: l,
+                factor: 1e6,
+            }],
+            ..config.clone()
+        };
+        let a = 0.9 * l;
+        let deflection = f * a.powi(3) / (3.0 * ei) + f * (l - a) * a * a / (2.0 * ei);
+        let slope = f * a * a / (2.0 * ei) + f * (l - a) * a / ei;
+        let expected = deflection + slope * (l - a);
+        let tip = solve(&rigid_tip, &base, load).unwrap().tip_mm();
+        assert!(
+            relative_error(tip.x(), expected) < 0.02,
+            "rigid tip: {} mm, beam theory {expected} mm",
+            tip.x()
+        );
+        // A push along the rod applied r off its axis bends it as the moment r F does: M L²/2EI.
+        let r = 1.0;
+        let eccentric = RodConfig {
+            tip_load_offset_mm: Vec3::new(r, 0.0, 0.0),
+            ..config.clone()
+        };
+        let tip = solve(&eccentric, &base, Vec3::new(0.0, 0.0, -f))
+            .unwrap()
+            .tip_mm();
+        let expected = r * f * l * l / (2.0 * ei);
+        assert!(
+            relative_error(tip.x().abs(), expected) < 0.02 && tip.y().abs() < 1e-9,
+            "eccentric push: {tip:?}, M L²/2EI = {expected} mm"
+        );
+        let outside = RodConfig {
+            stiff_segments: vec![StiffSegment {
+                from_mm: 0.5 * l,
+                to_mm: 2.0 * l,
+                factor: 2.0,
+            }],
+            ..config
+        };
+        assert!(matches!(
+            solve(&outside, &base, load),
+            Err(RodError::InvalidConfig(message)) if message.contains("stiff segment")
         ));
     }
 }

@@ -7,7 +7,7 @@
 use rand::{Rng, RngExt};
 use serde::{Deserialize, Serialize};
 
-use crate::rod::{RodBase, RodConfig};
+use crate::rod::{self, RodBase, RodConfig, RodError, StiffSegment};
 use crate::rod_fit::{BasePrior, PRIOR_CORRELATED_POINTS};
 use crate::sensor_plate::{PlateContact, SensorPlate};
 use crate::vec3::{Mat3, Vec3};
@@ -105,10 +105,67 @@ pub struct SceneSampling {
     /// them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub plate: Option<SensorPlate>,
+    /// The fixture's axis leant away from cranial: the nominal pose the base's jitter and tilt
+    /// are drawn about. None (the default): cranial.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub base_lean: Option<BaseLean>,
+    /// How much stiffer than the shaft the tip electrode is over its length (the catheter
+    /// design's `tip_electrode_mm`): a platinum-iridium shell. 1 (the default, what every
+    /// estimate assumes): the shaft's stiffness to the tip.
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub tip_electrode_stiffness: f64,
+    /// The catheter leaves a sheath rather than a clamp. None (the default, what every estimate
+    /// assumes): clamped at the base.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sheath: Option<Sheath>,
+    /// The tip force acts where the tip's rounded electrode touches a wall, with this Coulomb
+    /// friction coefficient, instead of on the centreline's end: a tip moment. None (the
+    /// default, what every estimate assumes): no tip moment.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contact_friction: Option<f64>,
+}
+
+/// A lean of the fixture's axis: `tilt_deg` away from cranial (+z), the tilt turned
+/// `azimuth_deg` about z. Tilt 0 leans nowhere; azimuth 0 leans towards -y, the source of the
+/// frontal C-arm (`CArm::cardiac(0, 0, _)`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct BaseLean {
+    /// Degrees from cranial.
+    pub tilt_deg: f64,
+    /// Degrees about z.
+    pub azimuth_deg: f64,
+}
+
+impl BaseLean {
+    /// The rotation taking the cranial axis to the leant one.
+    pub fn rotation(&self) -> Mat3 {
+        Mat3::rotation(Vec3::Z, self.azimuth_deg.to_radians())
+            * Mat3::rotation(Vec3::X, self.tilt_deg.to_radians())
+    }
+}
+
+/// A sheath the catheter runs through: its last `free_length_mm` stand free of whatever holds
+/// it (a septum, a vessel), and the catheter inside makes that stretch `stiffness_factor` times
+/// as stiff as the catheter alone. The base the estimates assume is the sheath's end at rest;
+/// under load it moves and turns.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Sheath {
+    /// Free length, mm.
+    pub free_length_mm: f64,
+    /// Stiffness of sheath and catheter together over the catheter's.
+    pub stiffness_factor: f64,
 }
 
 fn is_zero(v: &f64) -> bool {
     *v == 0.0
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+fn is_one(v: &f64) -> bool {
+    *v == 1.0
 }
 
 impl Default for SceneSampling {
@@ -132,6 +189,10 @@ impl SceneSampling {
             base_roll_deg: [90.0, 90.0],
             exposure_motion_mm: 0.0,
             plate: None,
+            base_lean: None,
+            tip_electrode_stiffness: 1.0,
+            sheath: None,
+            contact_friction: None,
         }
     }
 
@@ -192,7 +253,7 @@ impl SceneSampling {
     /// The unloaded scene at the nominal pose: the lower end of each catheter range, the nominal
     /// base pointing cranially, the roll at the middle of its range (see [`Self::nominal_base`]).
     pub fn nominal_scene(&self) -> SceneParams {
-        SceneParams {
+        let mut scene = SceneParams {
             tip_force_n: Vec3::ZERO,
             bending_stiffness_n_m2: self.bending_stiffness_n_m2[0],
             length_mm: self.length_mm[0],
@@ -202,7 +263,12 @@ impl SceneSampling {
             base_azimuth_deg: 0.0,
             base_roll_deg: 0.5 * (self.base_roll_deg[0] + self.base_roll_deg[1]),
             plate: None,
+            wall_normal: None,
+        };
+        if let Some(lean) = self.base_lean {
+            scene.set_base_frame(lean.rotation() * scene.base_frame());
         }
+        scene
     }
 
     /// The names [`Self::preset`] takes.
@@ -255,6 +321,10 @@ pub struct SceneParams {
     /// from pressing the tip against it (the paper's bench).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub plate: Option<PlateContact>,
+    /// The outward normal of the wall the tip presses on, when the force acts where the tip's
+    /// rounded electrode touches it ([`SceneSampling::contact_friction`]), world frame.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wall_normal: Option<Vec3>,
 }
 
 impl SceneParams {
@@ -264,6 +334,22 @@ impl SceneParams {
         Mat3::rotation(Vec3::Z, self.base_azimuth_deg.to_radians())
             * Mat3::rotation(Vec3::X, self.base_tilt_deg.to_radians())
             * Mat3::rotation(Vec3::Z, self.base_roll_deg.to_radians())
+    }
+
+    /// Sets the base's tilt, azimuth and roll to those of the rotation `frame` (its z-x-z
+    /// Euler angles, as [`Self::base_frame`] composes them).
+    pub fn set_base_frame(&mut self, frame: Mat3) {
+        let m = frame.0;
+        let tilt = m[2][2].clamp(-1.0, 1.0).acos();
+        if tilt.sin() < 1e-12 {
+            // About the z axis only: the tilt's azimuth and the roll are one turn.
+            self.base_azimuth_deg = 0.0;
+            self.base_roll_deg = m[1][0].atan2(m[0][0]).to_degrees();
+        } else {
+            self.base_azimuth_deg = m[0][2].atan2(-m[1][2]).to_degrees();
+            self.base_roll_deg = m[2][0].atan2(m[2][1]).to_degrees();
+        }
+        self.base_tilt_deg = tilt.to_degrees();
     }
 
     /// The rod to solve: `template` with this scene's length, stiffness and pre-curvature.
@@ -325,7 +411,40 @@ impl SceneSampling {
         if !self.base_position_mm.0.iter().all(|v| v.is_finite()) {
             return Err("base_position_mm must be finite".into());
         }
+        if !(self.tip_electrode_stiffness.is_finite() && self.tip_electrode_stiffness > 0.0) {
+            return Err("tip_electrode_stiffness must be a positive factor".into());
+        }
+        if let Some(sheath) = self.sheath
+            && !(sheath.free_length_mm.is_finite()
+                && (0.0..=200.0).contains(&sheath.free_length_mm)
+                && sheath.stiffness_factor.is_finite()
+                && sheath.stiffness_factor > 0.0)
+        {
+            return Err(
+                "sheath.free_length_mm must be within 0-200 mm and sheath.stiffness_factor a \
+                 positive factor"
+                    .into(),
+            );
+        }
+        if let Some(friction) = self.contact_friction
+            && !(friction.is_finite() && (0.0..=2.0).contains(&friction))
+        {
+            return Err(format!("contact_friction {friction} must be between 0 and 2"));
+        }
+        if let Some(lean) = self.base_lean
+            && !(lean.azimuth_deg.is_finite() && (0.0..=90.0).contains(&lean.tilt_deg))
+        {
+            return Err("base_lean.tilt_deg must be within 0-90° and its azimuth finite".into());
+        }
         match &self.plate {
+            Some(_) if self.contact_friction.is_some() => Err(
+                "contact_friction is for a free tip force: a sensor plate (plate) sets its own \
+                 friction"
+                    .into(),
+            ),
+            Some(_) if self.base_lean.is_some() => {
+                Err("base_lean cannot be combined with a sensor plate (plate)".into())
+            }
             Some(plate) => plate.check(self.length_mm[0]),
             None => Ok(()),
         }
@@ -406,10 +525,21 @@ impl SceneSampling {
                 self.base_jitter_mm
             ));
         }
-        if scene.base_tilt_deg > self.base_tilt_deg + 1e-6 {
+        // The tilt from the fixture's axis (cranial unless leant).
+        let fixture_axis = self
+            .base_lean
+            .map_or(Vec3::Z, |lean| lean.rotation().column(2));
+        let tilt = scene
+            .base_frame()
+            .column(2)
+            .dot(fixture_axis)
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees();
+        if tilt > self.base_tilt_deg + 1e-6 {
             departures.push(format!(
-                "the base tilted {:.0}° (trained within {:.0}°)",
-                scene.base_tilt_deg, self.base_tilt_deg
+                "the base tilted {tilt:.0}° (trained within {:.0}°)",
+                self.base_tilt_deg
             ));
         }
         let roll = if self.plate.is_some() {
@@ -419,6 +549,7 @@ impl SceneSampling {
         }
         .rem_euclid(360.0);
         if self.base_roll_deg[1] - self.base_roll_deg[0] < 360.0
+            && self.base_lean.is_none()
             && outside(roll, self.base_roll_deg)
         {
             departures.push(format!(
@@ -454,7 +585,11 @@ impl SceneSampling {
             base_azimuth_deg,
             base_roll_deg,
             plate: None,
+            wall_normal: None,
         };
+        if let Some(lean) = self.base_lean {
+            params.set_base_frame(lean.rotation() * params.base_frame());
+        }
         // Pressed against a plate: the actuators are drawn, the force is solved for later.
         // The fixture holds the pre-curve's plane where the bench put it: the roll is counted
         // from the tilt's azimuth (`base_frame` turns the section by both).
@@ -473,7 +608,74 @@ impl SceneSampling {
         let e2 = axis.cross(e1);
         let direction = -axis * cos_theta + (e1 * phi.cos() + e2 * phi.sin()) * sin_theta;
         params.tip_force_n = direction * uniform(rng, self.force_magnitude_n);
+        // A wall whose normal lies within the friction cone about the force (Coulomb: the
+        // tangential part at most μ times the normal part), drawn only for such sets so that
+        // the others keep their draws.
+        if let Some(friction) = self.contact_friction {
+            let angle = friction.atan() * rng.random::<f64>();
+            let phi = std::f64::consts::TAU * rng.random::<f64>();
+            let e1 = direction.any_perpendicular();
+            let e2 = direction.cross(e1);
+            let across = e1 * phi.cos() + e2 * phi.sin();
+            params.wall_normal = Some(direction * angle.cos() + across * angle.sin());
+        }
         params
+    }
+
+    /// The rod as simulated, with what the estimates do not model (the tip electrode's
+    /// stiffness, the sheath, the contact on the tip's surface) added to `rod` and `base`, the
+    /// clamped rod of [`SceneParams::rod`]. Also returns the sheath's free length (mm), the arc
+    /// length where the catheter's flexible section begins (0 without a sheath).
+    pub fn rod_as_simulated(
+        &self,
+        scene: &SceneParams,
+        rod: RodConfig,
+        base: RodBase,
+        tip_electrode_mm: f64,
+    ) -> Result<(RodConfig, RodBase, f64), RodError> {
+        let (mut rod, mut base) = (rod, base);
+        let mut sheath_mm = 0.0;
+        if let Some(sheath) = self.sheath.filter(|sheath| sheath.free_length_mm > 0.0) {
+            sheath_mm = sheath.free_length_mm;
+            base.position_mm -= base.orientation.column(2) * sheath_mm;
+            rod.length_mm += sheath_mm;
+            rod.precurve_start_mm += sheath_mm;
+            rod.steps = (rod.steps as f64 * rod.length_mm / (rod.length_mm - sheath_mm)).ceil()
+                as usize;
+            for segment in &mut rod.stiff_segments {
+                segment.from_mm += sheath_mm;
+                segment.to_mm += sheath_mm;
+            }
+            rod.stiff_segments.push(StiffSegment {
+                from_mm: 0.0,
+                to_mm: sheath_mm,
+                factor: sheath.stiffness_factor,
+            });
+        }
+        if self.tip_electrode_stiffness != 1.0 && tip_electrode_mm > 0.0 {
+            let length = rod.length_mm;
+            rod.stiff_segments.push(StiffSegment {
+                from_mm: (length - tip_electrode_mm).max(sheath_mm),
+                to_mm: length,
+                factor: self.tip_electrode_stiffness,
+            });
+        }
+        if let Some(wall_normal) = scene.wall_normal {
+            // The contact sits where the unloaded tip's rounded end first touched the wall (the
+            // point whose outward normal faces it), and stays there on the electrode as the
+            // load builds (friction holds it).
+            let frame = rod::rest_tip_frame(&rod, &base)?;
+            let radius = 0.5 * rod.diameter_mm;
+            let facing = frame.transpose() * -wall_normal.normalized();
+            // On the dome (the half facing forwards), else on its rim.
+            let on_surface = if facing.z() >= 0.0 {
+                facing
+            } else {
+                Vec3::new(facing.x(), facing.y(), 0.0).normalized()
+            };
+            rod.tip_load_offset_mm = (on_surface - Vec3::Z) * radius;
+        }
+        Ok((rod, base, sheath_mm))
     }
 }
 
@@ -662,6 +864,117 @@ mod tests {
             Some(SceneSampling::varied())
         );
         assert_eq!(SceneSampling::preset("other"), None);
+    }
+
+    #[test]
+    fn unmodelled_mechanics_and_a_leant_fixture_change_the_catheter_as_set() {
+        // The base's angles read back from its frame.
+        let mut scene = SceneSampling::bench().nominal_scene();
+        for (tilt, azimuth, roll) in [
+            (0.0, 0.0, 30.0),
+            (45.0, 0.0, 90.0),
+            (20.0, 130.0, -60.0),
+            (170.0, -40.0, 10.0),
+        ] {
+            (scene.base_tilt_deg, scene.base_azimuth_deg, scene.base_roll_deg) =
+                (tilt, azimuth, roll);
+            let mut read = scene;
+            read.set_base_frame(scene.base_frame());
+            let (a, b) = (scene.base_frame().0, read.base_frame().0);
+            assert!(
+                (0..9).all(|i| (a[i / 3][i % 3] - b[i / 3][i % 3]).abs() < 1e-9),
+                "{tilt} {azimuth} {roll}"
+            );
+        }
+        // Leant 45° towards the frontal C-arm's source (-y); its draws are its own.
+        let leant = SceneSampling {
+            base_lean: Some(BaseLean {
+                tilt_deg: 45.0,
+                azimuth_deg: 0.0,
+            }),
+            ..SceneSampling::bench()
+        };
+        let half = std::f64::consts::FRAC_1_SQRT_2;
+        let axis = leant.nominal_scene().base_frame().column(2);
+        assert!((axis - Vec3::new(0.0, -half, half)).norm() < 1e-9, "{axis:?}");
+        let drawn = leant.sample(&mut sample_rng(3, 0));
+        assert!(leant.departures(&drawn).is_empty());
+        assert!(!SceneSampling::bench().departures(&drawn).is_empty());
+
+        let mut config = TwinConfig::new(Modality::Xray2, 64);
+        let backgrounds = Backgrounds::phantom(&config.views);
+        let plain = generate(&config, &backgrounds, 7, 3).unwrap();
+        let flexible = |s: &StereoSample| *s.shape.arc_mm.last().unwrap();
+        let with = |config: &mut TwinConfig, scene: SceneSampling| {
+            config.scene = scene;
+            generate(config, &backgrounds, 7, 3).unwrap()
+        };
+        // A rigid tip electrode: the same draw, another shape.
+        let rigid = with(
+            &mut config,
+            SceneSampling {
+                tip_electrode_stiffness: 50.0,
+                ..SceneSampling::bench()
+            },
+        );
+        assert_eq!(rigid.params, plain.params);
+        assert!((rigid.shape.tip_mm() - plain.shape.tip_mm()).norm() > 1e-3);
+        // A sheath: its end (the record's base) moves under the load; the record keeps the
+        // flexible section, the views show the sheath too.
+        let sheathed = with(
+            &mut config,
+            SceneSampling {
+                sheath: Some(Sheath {
+                    free_length_mm: 20.0,
+                    stiffness_factor: 4.0,
+                }),
+                ..SceneSampling::bench()
+            },
+        );
+        assert_eq!(sheathed.params, plain.params);
+        assert!((flexible(&sheathed) - flexible(&plain)).abs() < 1e-6);
+        let moved = (sheathed.shape.points_mm[0] - plain.shape.points_mm[0]).norm();
+        assert!(moved > 1e-3 && moved < 10.0, "the sheath's end moved {moved} mm");
+        assert_ne!(sheathed.views[0].mask, plain.views[0].mask);
+        // A contact on the tip's surface: the wall within the friction cone, the same force.
+        let touching = with(
+            &mut config,
+            SceneSampling {
+                contact_friction: Some(0.3),
+                ..SceneSampling::bench()
+            },
+        );
+        assert_eq!(touching.params.tip_force_n, plain.params.tip_force_n);
+        let wall = touching.params.wall_normal.unwrap();
+        let force = touching.params.tip_force_n.normalized();
+        assert!(wall.dot(force).clamp(-1.0, 1.0).acos() <= 0.3f64.atan() + 1e-9);
+        assert!((touching.shape.tip_mm() - plain.shape.tip_mm()).norm() > 1e-4);
+        // Settings that cannot be are refused by name.
+        for (scene, name) in [
+            (
+                SceneSampling {
+                    tip_electrode_stiffness: 0.0,
+                    ..SceneSampling::bench()
+                },
+                "tip_electrode_stiffness",
+            ),
+            (
+                SceneSampling {
+                    contact_friction: Some(-1.0),
+                    ..SceneSampling::bench()
+                },
+                "contact_friction",
+            ),
+            (
+                SceneSampling {
+                    contact_friction: Some(0.3),
+                    ..SceneSampling::paper_bench()
+                },
+                "contact_friction",
+            ),
+        ] {
+            assert!(scene.check().unwrap_err().contains(name), "{name}");
+        }
     }
 
     #[test]

@@ -63,6 +63,11 @@ impl Vec3 {
         if n > 0.0 { self / n } else { self }
     }
 
+    /// Whether every component is zero.
+    pub fn is_zero(&self) -> bool {
+        self.0 == [0.0; 3]
+    }
+
     /// Largest absolute component.
     pub fn max_abs(self) -> f64 {
         self.0.iter().fold(0.0f64, |m, v| m.max(v.abs()))

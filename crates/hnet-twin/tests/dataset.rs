@@ -542,9 +542,10 @@ mod properties {
             [finite(), finite(), finite()],
             vec3(),
             [finite(), finite(), finite()],
+            proptest::option::of(vec3()),
         )
             .prop_map(
-                |(tip_force_n, [ei, length, curvature], base, [tilt, azimuth, roll])| SceneParams {
+                |(tip_force_n, [ei, length, curvature], base, [tilt, azimuth, roll], wall)| SceneParams {
                     tip_force_n,
                     bending_stiffness_n_m2: ei,
                     length_mm: length,
@@ -554,6 +555,7 @@ mod properties {
                     base_azimuth_deg: azimuth,
                     base_roll_deg: roll,
                     plate: None,
+                    wall_normal: wall,
                 },
             );
         (

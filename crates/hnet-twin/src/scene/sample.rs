@@ -423,6 +423,19 @@ pub fn generate(
     for dropped_draws in 0..MAX_DRAWS {
         let mut params = config.scene.sample(&mut rng);
         let (rod_config, base) = params.rod(&config.rod);
+        let simulated = config.scene.rod_as_simulated(
+            &params,
+            rod_config,
+            base,
+            config.catheter.tip_electrode_mm,
+        );
+        let (rod_config, base, sheath_mm) = match simulated {
+            Ok(simulated) => simulated,
+            Err(e) => {
+                last = Some(ContactError::from(e));
+                continue;
+            }
+        };
         let solved = match (&plate, params.plate.as_mut()) {
             (Some((plate, nominal_base, nominal_rest)), Some(contact)) => {
                 let pose = plate.pose(nominal_base, nominal_rest, contact);
@@ -435,15 +448,18 @@ pub fn generate(
             _ => rod::solve(&rod_config, &base, params.tip_force_n).map_err(ContactError::from),
         };
         match solved {
-            Ok(shape) => {
+            Ok(drawn) => {
+                // What the views show (a sheath's free end included); the record keeps the
+                // flexible section.
+                let shape = drawn.distal_from(sheath_mm);
                 // View B's exposure may come after the catheter moved (drawn only then, so
                 // that sets without motion are unchanged).
                 let motion = config.scene.exposure_motion_mm;
                 let moved = (motion > 0.0).then(|| {
                     let mut shift = || motion * (2.0 * rng.random::<f64>() - 1.0);
-                    shape.translated(Vec3::new(shift(), shift(), shift()))
+                    drawn.translated(Vec3::new(shift(), shift(), shift()))
                 });
-                let shapes = [&shape, moved.as_ref().unwrap_or(&shape)];
+                let shapes = [&drawn, moved.as_ref().unwrap_or(&drawn)];
                 let views = [(&config.views.a, 0usize, 'A'), (&config.views.b, 1, 'B')].map(
                     |(view, i, name)| -> Result<ViewSample, TwinError> {
                         let background = if config.modality.is_xray() {
