@@ -1,7 +1,7 @@
 //! The catheter in 3D and its physics-checked tip force, for the pair on screen: each view's mask
-//! gives a centreline ([`hnet_twin::centreline`]), the two are matched along epipolar lines and
-//! triangulated ([`hnet_twin::reconstruction`]), and the twin's Kirchhoff rod is fitted to the
-//! result ([`hnet_twin::rod_fit`]); its tip force is the physics estimate shown beside H-Net's.
+//! gives a centreline ([`hnet_twin::reconstruction::centreline`]), the two are matched along epipolar lines and
+//! triangulated ([`hnet_twin::reconstruction::epipolar`]), and the twin's Kirchhoff rod is fitted to the
+//! result ([`hnet_twin::reconstruction::rod_fit`]); its tip force is the physics estimate shown beside H-Net's.
 //!
 //! Where the numbers come from:
 //!
@@ -27,16 +27,16 @@
 //! The 3D drawing's own geometry is here too ([`CArmSketch`], [`force_arrow_mm`]); its camera is
 //! [`crate::orbit_camera`].
 
-use hnet_twin::carm::{Biplane, CArm, CameraMatrix};
-use hnet_twin::catalogue::{BENCH_CATHETER, CatalogueCatheter, StiffnessCalibration, catalogue};
-use hnet_twin::centreline::{CentrelineError, Mask};
-use hnet_twin::physics_force::{
+use hnet_twin::simulator::carm::{Biplane, CArm, CameraMatrix};
+use hnet_twin::reconstruction::catalogue::{BENCH_CATHETER, CatalogueCatheter, StiffnessCalibration, catalogue};
+use hnet_twin::reconstruction::centreline::{CentrelineError, Mask};
+use hnet_twin::reconstruction::physics_force::{
     MAX_FIT_RMS_MM, PhysicsError, PhysicsEstimate, PhysicsSetup, physics_estimate,
 };
-use hnet_twin::reconstruction::{EpipolarGeometry, ReconstructionError, clip_line};
-use hnet_twin::rod::{RodBase, RodConfig};
-use hnet_twin::rod_fit::RodFitError;
-use hnet_twin::scene::{NominalBase, SceneParams, SceneSampling};
+use hnet_twin::reconstruction::epipolar::{EpipolarGeometry, ReconstructionError, clip_line};
+use hnet_twin::simulator::rod::{RodBase, RodConfig};
+use hnet_twin::reconstruction::rod_fit::RodFitError;
+use hnet_twin::simulator::scene::{NominalBase, SceneParams, SceneSampling};
 
 use crate::imaging::WORK_SIZE;
 use crate::twin_live::TwinControls;
@@ -625,7 +625,7 @@ mod tests {
             crate::force_reading::tests::bench_domain().estimate(hnet, c.for_combination());
         assert_eq!(
             combined.kind,
-            hnet_twin::physics_force::EstimateKind::Combined
+            hnet_twin::reconstruction::physics_force::EstimateKind::Combined
         );
         let labeled = run(&twin(TwinControls::default())).unwrap();
         assert_eq!(labeled.for_combination(), None);

@@ -2,11 +2,11 @@
 //! page holds whose force label was measured (or typed, imported, simulated; never one copied
 //! from a model's estimate, which would fit the model to itself), each pair's physics estimate
 //! read as the 3D step reads it. The rule is `hnet calibrate`'s
-//! ([`hnet_twin::catalogue::calibrate_stiffness`]): too few pairs, unloaded pairs or pairs one
+//! ([`hnet_twin::reconstruction::catalogue::calibrate_stiffness`]): too few pairs, unloaded pairs or pairs one
 //! stiffness cannot explain are refused, saying why. The scale then multiplies the stiffness the
 //! page assumes ([`crate::catheter_3d::PairGeometry::of`]).
 
-use hnet_twin::catalogue::{
+use hnet_twin::reconstruction::catalogue::{
     BENCH_CATHETER, CalibrationError, StiffnessCalibration, calibrate_stiffness, catalogue,
 };
 
@@ -116,7 +116,7 @@ pub fn describe(calibration: &StiffnessCalibration) -> String {
 mod tests {
     use super::*;
     use crate::twin_live::XrayBackground;
-    use hnet_twin::label_origin::LabelOrigin;
+    use hnet_twin::dataset::label_origin::LabelOrigin;
 
     /// Twin pairs of a catheter 30 % stiffer than the catalogue's, labelled with their true
     /// force: the scale comes out near 1.3, and a model's estimate as a label is never used.

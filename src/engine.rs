@@ -25,7 +25,7 @@ use crate::force_reading::TrainingDomain;
 use crate::gpu_worker::{GpuNetwork, GpuWorker, GpuWorkerError};
 use crate::imaging::{WORK_SIZE, rescale_mask, rescale_rgb};
 use hnet_twin::model_facts::ModelFacts;
-use hnet_twin::physics_force::ForceCombination;
+use hnet_twin::reconstruction::physics_force::ForceCombination;
 
 /// Input size of the untrained network the page falls back to when it ships no weights, pixels.
 pub const FALLBACK_INPUT: usize = 64;

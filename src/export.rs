@@ -1,7 +1,7 @@
 //! The labeled pairs as a dataset zip, in exactly the format `hnet train` reads
 //! (`docs/dataset-format.md`), built with the twin crate's [`DatasetArchive`].
 
-use hnet_twin::archive::{ArchiveError, DatasetArchive};
+use hnet_twin::dataset::archive::{ArchiveError, DatasetArchive};
 use hnet_twin::dataset::{DatasetHeader, ImageRef, ManifestRow, Split};
 use hnet_units::ImageSize;
 
@@ -115,7 +115,7 @@ fn describe(pair: &LabeledPair) -> (Vec<(String, String)>, serde_json::Value) {
             views,
             missing_geometry,
         } => {
-            let view = |carm: &hnet_twin::carm::CArm, missing: &[String]| {
+            let view = |carm: &hnet_twin::simulator::carm::CArm, missing: &[String]| {
                 serde_json::json!({
                     "carm": carm,
                     "camera_matrix": carm.camera_matrix(),
@@ -282,7 +282,7 @@ mod tests {
     use super::*;
     use crate::twin_live::{TwinControls, XrayBackground};
     use crate::workspace::Workspace;
-    use hnet_twin::label_origin::LabelOrigin;
+    use hnet_twin::dataset::label_origin::LabelOrigin;
 
     #[test]
     fn complete_pairs_export_and_incomplete_ones_are_listed() {
@@ -474,7 +474,7 @@ mod tests {
 pub(crate) mod properties {
     use super::*;
     use crate::imaging::properties::cases;
-    use hnet_twin::label_origin::LabelOrigin;
+    use hnet_twin::dataset::label_origin::LabelOrigin;
     use proptest::prelude::*;
 
     /// Deterministic pixels from a seed (random bytes per case would be slow to shrink).

@@ -6,10 +6,10 @@
 use std::collections::BTreeMap;
 
 use hnet_model::fine_tune::{EpochReport, HeldBackScores};
-use hnet_twin::carm::{Biplane, CArm};
-use hnet_twin::label_origin::LabelFilter;
+use hnet_twin::simulator::carm::{Biplane, CArm};
+use hnet_twin::dataset::label_origin::LabelFilter;
 use hnet_twin::model_facts::{FineTuneRecord, ForceDomain, fine_tuned_provenance};
-use hnet_twin::scene::{Backgrounds, TwinConfig, TwinError, generate};
+use hnet_twin::simulator::scene::{Backgrounds, TwinConfig, TwinError, generate};
 use hnet_units::ImageSize;
 
 use crate::imaging::WORK_SIZE;
@@ -231,7 +231,7 @@ pub fn seconds_left(elapsed_s: f64, done: usize, total: usize) -> Option<f64> {
 mod tests {
     use super::*;
     use crate::workspace::{PairSource, View};
-    use hnet_twin::label_origin::LabelOrigin;
+    use hnet_twin::dataset::label_origin::LabelOrigin;
     use hnet_twin::model_facts::FACTS_KEY;
 
     fn pair(id: &str, painted: bool, force: Option<([f32; 3], LabelOrigin)>) -> LabeledPair {
@@ -306,8 +306,8 @@ mod tests {
     fn reference_pairs_come_from_the_weights_own_twin_domain() {
         let domain = ForceDomain {
             data: "bench".into(),
-            modality: hnet_twin::scene::Modality::Xray2,
-            scenes: hnet_twin::scene::SceneSampling::bench(),
+            modality: hnet_twin::simulator::scene::Modality::Xray2,
+            scenes: hnet_twin::simulator::scene::SceneSampling::bench(),
             views_deg: [[0.0, 0.0], [90.0, 0.0]],
             phantom_backgrounds: true,
         };

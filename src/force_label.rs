@@ -3,8 +3,8 @@
 //! `manifest.csv` included) with where each came from.
 
 use hnet_twin::dataset::implausible_tip_force;
-use hnet_twin::force_table::{ForceTableError, read_force_table};
-use hnet_twin::label_origin::LabelOrigin;
+use hnet_twin::dataset::force_table::{ForceTableError, read_force_table};
+use hnet_twin::dataset::label_origin::LabelOrigin;
 
 /// Why a force-label file cannot be used: the file, and what is wrong in it (with the line,
 /// when it is one line's fault).
@@ -37,7 +37,7 @@ pub enum TypedForceError {
 }
 
 /// Reads one typed force component in newtons (`axis` names it in the message), by the rule of
-/// [`hnet_twin::force_table::parse_newtons`].
+/// [`hnet_twin::dataset::force_table::parse_newtons`].
 pub fn parse_newtons(axis: &str, text: &str) -> Result<f32, TypedForceError> {
     let trimmed = text.trim();
     if trimmed.is_empty() {
@@ -45,7 +45,7 @@ pub fn parse_newtons(axis: &str, text: &str) -> Result<f32, TypedForceError> {
             axis: axis.to_string(),
         });
     }
-    hnet_twin::force_table::parse_newtons(trimmed)
+    hnet_twin::dataset::force_table::parse_newtons(trimmed)
         .map(|v| v as f32)
         // A finite f64 beyond f32's range (1e39) would become an infinite label.
         .filter(|v| v.is_finite())

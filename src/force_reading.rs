@@ -3,11 +3,11 @@
 //! weights were trained on; and whether H-Net's estimate and the physics estimate (the rod fitted
 //! to the catheter in 3D, [`crate::catheter_3d`]) disagree beyond what their errors explain.
 
-use hnet_twin::carm::Biplane;
-use hnet_twin::centreline::{CentrelineSettings, Mask, catheter_seen};
+use hnet_twin::simulator::carm::Biplane;
+use hnet_twin::reconstruction::centreline::{CentrelineSettings, Mask, catheter_seen};
 use hnet_twin::model_facts::{ForceDomain, ModelFacts};
-use hnet_twin::physics_force::{ForceCombination, TipForceEstimate};
-use hnet_twin::scene::{Modality, SceneParams};
+use hnet_twin::reconstruction::physics_force::{ForceCombination, TipForceEstimate};
+use hnet_twin::simulator::scene::{Modality, SceneParams};
 
 use crate::workspace::{LabeledPair, PairSource};
 use hnet_units::force_magnitude as magnitude;
@@ -285,7 +285,7 @@ pub const PHYSICS_FORCE_ERROR_N: f32 = 0.032;
 /// fitted to the bundled weights' own masks rather than exact ones: 0.00400, 0.00307 and
 /// 0.00631 over the 475 of 480 fresh bench pairs that gave one (`hnet eval` on
 /// `data/xray2-bench-224-s33`, docs/results.md, "Force without the twin's answers"; the fit
-/// holds the force to pushing, `hnet_twin::rod_fit::RodFitSettings::pushing_only`). This is how
+/// holds the force to pushing, `hnet_twin::reconstruction::rod_fit::RodFitSettings::pushing_only`). This is how
 /// the page reads a pair without label masks, or any pair with the rod fitted to H-Net's masks.
 pub const PHYSICS_FORCE_MSE_FROM_HNET_MASKS_N2: [f32; 3] = [0.00400, 0.00307, 0.00631];
 
@@ -343,7 +343,7 @@ impl Disagreement {
 pub(crate) mod tests {
     use super::*;
     use crate::twin_live::{TwinControls, XrayBackground};
-    use hnet_twin::physics_force::EstimateKind;
+    use hnet_twin::reconstruction::physics_force::EstimateKind;
 
     fn twin(controls: TwinControls) -> LabeledPair {
         controls
@@ -359,7 +359,7 @@ pub(crate) mod tests {
             domain: ForceDomain {
                 data: "xray2-bench-224-s7".into(),
                 modality: Modality::Xray2,
-                scenes: hnet_twin::scene::SceneSampling::bench(),
+                scenes: hnet_twin::simulator::scene::SceneSampling::bench(),
                 views_deg: [[0.0, 0.0], [90.0, 0.0]],
                 phantom_backgrounds: true,
             },

@@ -1,8 +1,8 @@
 //! Pixels in the page: decoding what the user drops, the working resolution, and geometry drawn
 //! over the views (tip estimate, force arrows).
 
-use hnet_twin::carm::CArm;
-use hnet_twin::raster::GreyImage;
+use hnet_twin::simulator::carm::CArm;
+use hnet_twin::simulator::raster::GreyImage;
 use hnet_twin::vec3::Vec3;
 
 /// Side of the square images the page labels and exports, pixels (the paper's input size). The
@@ -141,7 +141,7 @@ pub fn rescale_mask(mask: &[f32], from: usize, to: usize) -> Vec<f32> {
         data: mask.to_vec(),
     };
     image
-        .crop_resampled(hnet_twin::raster::Rect([0.0, 0.0, 1.0, 1.0]), to, to)
+        .crop_resampled(hnet_twin::simulator::raster::Rect([0.0, 0.0, 1.0, 1.0]), to, to)
         .data
 }
 

@@ -3,7 +3,7 @@
 //! that at 0°/0° the 3D view looks as view A does and at 90°/0° as the lateral view B), zooms,
 //! and projects world points (mm) to canvas pixels orthographically or in perspective.
 
-use hnet_twin::carm::CArm;
+use hnet_twin::simulator::carm::CArm;
 use hnet_twin::vec3::{Mat3, Vec3};
 
 /// How depth is drawn.

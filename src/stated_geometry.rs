@@ -3,7 +3,7 @@
 //! it, the 3D step reads the pair with its real C-arms and its reprojection error checks
 //! something; without it the page assumes its default biplane and says so.
 
-use hnet_twin::carm::{Biplane, CArm};
+use hnet_twin::simulator::carm::{Biplane, CArm};
 use hnet_units::ImageSize;
 
 use crate::imaging::WORK_SIZE;

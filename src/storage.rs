@@ -16,7 +16,7 @@ use crate::browser::JsError;
 pub use crate::stored_pair::DamagedRecord;
 use crate::stored_pair::{self, IMAGE_KEYS, METADATA_KEY};
 use crate::workspace::LabeledPair;
-use hnet_twin::catalogue::StiffnessCalibration;
+use hnet_twin::reconstruction::catalogue::StiffnessCalibration;
 
 const DATABASE: &str = "hnet-studio";
 /// The database's version: 2 added the store of fine-tuned weights.

@@ -7,7 +7,7 @@
 //! tests, as well as in the browser.
 
 use hnet_twin::dataset::{ImageRef, Split, encode_png};
-use hnet_twin::label_origin::LabelOrigin;
+use hnet_twin::dataset::label_origin::LabelOrigin;
 
 use crate::imaging::WORK_SIZE;
 use crate::workspace::{LabeledPair, PairSource};

@@ -21,8 +21,8 @@ use crate::storage::{self, KeptWeights};
 use crate::twin_live::{TwinControls, XrayBackground};
 use crate::workspace::{LabeledPair, RemovedPair, Tool, View, Workspace};
 use hnet_model::catheter_entry::EntrySetting;
-use hnet_twin::catalogue::StiffnessCalibration;
-use hnet_twin::sensor_plate::ContactError;
+use hnet_twin::reconstruction::catalogue::StiffnessCalibration;
+use hnet_twin::simulator::sensor_plate::ContactError;
 
 mod catheter;
 mod cine;

@@ -2,14 +2,14 @@
 //! synthetic X-ray background composer. Every image comes from `hnet-twin`, the same code
 //! `hnet simulate` runs; only the choice of parameters is the user's.
 
-use hnet_twin::carm::{Biplane, CArm};
-use hnet_twin::raster::{GreyImage, Rect};
-use hnet_twin::rod;
-use hnet_twin::scene::{
+use hnet_twin::simulator::carm::{Biplane, CArm};
+use hnet_twin::simulator::raster::{GreyImage, Rect};
+use hnet_twin::simulator::rod;
+use hnet_twin::simulator::scene::{
     Modality, PAPER_BENCH, SceneParams, SceneSampling, TwinConfig, render_view,
 };
-use hnet_twin::sensor_plate::{self, ContactError, ContactState, PlateContact};
-use hnet_twin::synthetic_xray::{Anatomy, BackgroundSource, PatchLayout, PatchRule, compose};
+use hnet_twin::simulator::sensor_plate::{self, ContactError, ContactState, PlateContact};
+use hnet_twin::simulator::synthetic_xray::{Anatomy, BackgroundSource, PatchLayout, PatchRule, compose};
 use hnet_twin::vec3::Vec3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -190,7 +190,7 @@ impl TwinControls {
         pair.mask_b = binary(&views[1].mask);
         pair.masks_labeled = true;
         pair.force_n = Some(force_n);
-        pair.force_origin = hnet_twin::label_origin::LabelOrigin::Simulated;
+        pair.force_origin = hnet_twin::dataset::label_origin::LabelOrigin::Simulated;
         Ok(pair)
     }
 }

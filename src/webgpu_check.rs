@@ -8,7 +8,7 @@
 //! summation orders: about 10⁻⁵ on masks and forces here) and far below what a wrong kernel or
 //! stale buffer gives.
 
-use hnet_twin::sensor_plate::ContactError;
+use hnet_twin::simulator::sensor_plate::ContactError;
 
 use crate::twin_live::{TwinControls, XrayBackground};
 use crate::workspace::LabeledPair;

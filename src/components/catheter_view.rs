@@ -23,7 +23,7 @@ use crate::keymap::{self, Command, Scope, scope_help};
 use crate::orbit_camera::{OrbitCamera, Projection};
 use crate::studio::{CatheterReading, Studio};
 use crate::workspace::{LabeledPair, PairSource};
-use hnet_twin::carm::Biplane;
+use hnet_twin::simulator::carm::Biplane;
 
 /// Side of the 3D canvas, canvas pixels.
 const SIDE: f64 = 400.0;

@@ -84,7 +84,7 @@ pub fn Composer() -> impl IntoView {
         background.with(|bg| {
             let (_, size) = placement(bg);
             let (w, h) = (size[0].round() as usize, size[1].round() as usize);
-            let region = hnet_twin::raster::Rect([0.0, 0.0, 1.0, 1.0]);
+            let region = hnet_twin::simulator::raster::Rect([0.0, 0.0, 1.0, 1.0]);
             (
                 bg.source.name.clone(),
                 w,

@@ -13,8 +13,8 @@ use crate::error_text::with_causes;
 use crate::force_label::{implausible_label, parse_force_labels, parse_newtons};
 use crate::force_reading::{ABLATION_BAND_N, BandPosition, Disagreement, Verdict};
 use crate::studio::{CatheterReading, ModelState, Studio};
-use hnet_twin::label_origin::LabelOrigin;
-use hnet_twin::physics_force::{EstimateKind, TipForceEstimate};
+use hnet_twin::dataset::label_origin::LabelOrigin;
+use hnet_twin::reconstruction::physics_force::{EstimateKind, TipForceEstimate};
 use hnet_units::force_magnitude as magnitude;
 
 /// Full scale of the magnitude gauge, newtons.

@@ -9,7 +9,7 @@ use wasm_bindgen::JsCast;
 use crate::cine::CinePlayer;
 use crate::force_reading::ABLATION_BAND_N;
 use crate::studio::Studio;
-use hnet_twin::physics_force::EstimateKind;
+use hnet_twin::reconstruction::physics_force::EstimateKind;
 use hnet_units::force_magnitude;
 
 /// The plot's size in SVG units, and its margins (left, right, top, bottom).

@@ -2,9 +2,9 @@
 //! ([`CinePanel`]), or the live digital twin with its sliders; and the synthetic X-ray background
 //! composer.
 
-use hnet_twin::carm::{SECONDARY_DEG, VIEW_A_PRIMARY_DEG, VIEW_B_PRIMARY_DEG};
-use hnet_twin::scene::Modality;
-use hnet_twin::sensor_plate::PlateContact;
+use hnet_twin::simulator::carm::{SECONDARY_DEG, VIEW_A_PRIMARY_DEG, VIEW_B_PRIMARY_DEG};
+use hnet_twin::simulator::scene::Modality;
+use hnet_twin::simulator::sensor_plate::PlateContact;
 use leptos::prelude::*;
 
 use crate::browser::{PickedFileError, files, read_file_with, take_picked_file, take_picked_files};

@@ -1,7 +1,7 @@
 //! The two views side by side: the images with H-Net's masks and the label masks overlaid, the
 //! tip force as arrows, and the brush, eraser, zoom and pan that correct the labels.
 
-use hnet_twin::carm::CArm;
+use hnet_twin::simulator::carm::CArm;
 use leptos::prelude::*;
 use wasm_bindgen::{Clamped, JsCast};
 

@@ -4,7 +4,7 @@
 
 use leptos::prelude::*;
 
-use hnet_twin::carm::Biplane;
+use hnet_twin::simulator::carm::Biplane;
 
 use crate::catheter_3d::default_views;
 use crate::error_text::with_causes;

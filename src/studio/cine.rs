@@ -15,7 +15,7 @@ use futures::StreamExt;
 use std::path::Path;
 
 use hnet_twin::model_facts::recorded_name;
-use hnet_twin::physics_force::TipForceEstimate;
+use hnet_twin::reconstruction::physics_force::TipForceEstimate;
 
 impl Studio {
     /// Loads a cine in place of the previous one: playback and any trace stop, its first frame

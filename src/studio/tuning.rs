@@ -24,7 +24,7 @@ use crate::module_worker::{ModuleWorker, ModuleWorkerError};
 use crate::storage::{self, KeptWeights};
 use hnet_twin::model_facts::ForceDomain;
 use hnet_twin::model_facts::ModelFacts;
-use hnet_twin::scene::TwinError;
+use hnet_twin::simulator::scene::TwinError;
 
 /// The kept weights' file name.
 pub const KEPT_NAME: &str = "hnet-fine-tuned.bpk";

@@ -5,18 +5,18 @@
 //! Each pair's catheter is read blind from its label masks (or, with `--weights`, a network's)
 //! ([`PhysicsSetup::blind`]: the catalogue catheter, the base fitted from its nominal pose, the
 //! C-arms from the pair's recorded geometry), and one stiffness scale is fitted to the measured forces
-//! ([`hnet_twin::catalogue::calibrate_stiffness`]; why one scale is all images leave open is in
+//! ([`hnet_twin::reconstruction::catalogue::calibrate_stiffness`]; why one scale is all images leave open is in
 //! that module). The result is a catheter file that `hnet eval --catheter` reads.
 
 use std::path::PathBuf;
 
 use anyhow::Context;
-use hnet_twin::catalogue::{BENCH_CATHETER, CatalogueCatheter, calibrate_stiffness};
-use hnet_twin::centreline::Mask;
+use hnet_twin::reconstruction::catalogue::{BENCH_CATHETER, CatalogueCatheter, calibrate_stiffness};
+use hnet_twin::reconstruction::centreline::Mask;
 use hnet_twin::dataset::Dataset;
-use hnet_twin::files::write_atomically;
-use hnet_twin::physics_force::{PhysicsSetup, physics_estimate};
-use hnet_twin::simulate::{blind_cameras, nominal_base, read_pair_carms};
+use hnet_twin::dataset::files::write_atomically;
+use hnet_twin::reconstruction::physics_force::{PhysicsSetup, physics_estimate};
+use hnet_twin::dataset::simulate::{blind_cameras, nominal_base, read_pair_carms};
 use rayon::prelude::*;
 
 use crate::backend::BackendChoice;

@@ -8,7 +8,7 @@ use anyhow::{Context, anyhow, bail};
 use hnet_model::HNetLossConfig;
 use hnet_model::architectures::ModelSpec;
 use hnet_model::weights::ConfigProblem;
-use hnet_twin::label_origin::LabelFilter;
+use hnet_twin::dataset::label_origin::LabelFilter;
 use hnet_units::ImageSize;
 use serde::{Deserialize, Serialize};
 
@@ -102,7 +102,7 @@ pub struct TrainingConfig {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub init_weights: Option<PathBuf>,
     /// The force labels the force head learns from, by where they came from
-    /// ([`hnet_twin::label_origin`]): `all`, or origins separated by commas (`measured,typed`).
+    /// ([`hnet_twin::dataset::label_origin`]): `all`, or origins separated by commas (`measured,typed`).
     /// Every origin but a model's estimates when absent, so that a network never learns its
     /// own guesses unless asked to. A pair whose label is left out still trains the masks.
     /// `hnet train --labels` sets it.

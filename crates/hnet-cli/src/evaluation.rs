@@ -25,12 +25,12 @@ use crate::data::StereoSplit;
 use crate::network::{load_run, load_weights, predict_entry};
 use crate::physics_check::{self, BlindEstimator, Estimator, MaskOrigin, PhysicsEvaluation};
 use crate::run_dir::RunDir;
-use hnet_twin::carm::HeaderError;
-use hnet_twin::catalogue::{BENCH_CATHETER, CatalogueCatheter};
+use hnet_twin::simulator::carm::HeaderError;
+use hnet_twin::reconstruction::catalogue::{BENCH_CATHETER, CatalogueCatheter};
 use hnet_twin::model_facts::{
     ForceDomain, MeasuredCombination, MeasuredForce, ModelFacts, recorded_name,
 };
-use hnet_twin::simulate::nominal_base;
+use hnet_twin::dataset::simulate::nominal_base;
 
 #[derive(clap::Args, Debug)]
 #[command(group(clap::ArgGroup::new("model").required(true).args(["run", "weights"])))]
@@ -705,7 +705,7 @@ fn record_facts(
         .net
         .to_weights_bytes(&model.spec, &provenance)
         .with_context(|| format!("weights file '{}'", path.display()))?;
-    hnet_twin::files::write_atomically(path, &bytes)
+    hnet_twin::dataset::files::write_atomically(path, &bytes)
         .with_context(|| format!("cannot write '{}'", path.display()))?;
     eprintln!("facts recorded in {}", path.display());
     Ok(())

@@ -181,7 +181,7 @@ pub fn run(args: &FineTuneArgs) -> anyhow::Result<()> {
     let bytes = run
         .best_weights(&provenance)?
         .context("no best epoch to write")?;
-    hnet_twin::files::write_atomically(&args.out, &bytes)
+    hnet_twin::dataset::files::write_atomically(&args.out, &bytes)
         .with_context(|| format!("cannot write '{}'", args.out.display()))?;
     eprintln!(
         "best epoch {} ({:?}); weights in {} after {:.0} s",

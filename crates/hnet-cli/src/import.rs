@@ -4,8 +4,8 @@
 use std::path::PathBuf;
 
 use anyhow::bail;
-use hnet_twin::import::{ImportOptions, MaskThreshold, import_recordings};
-use hnet_twin::label_origin::LabelOrigin;
+use hnet_twin::dataset::import::{ImportOptions, MaskThreshold, import_recordings};
+use hnet_twin::dataset::label_origin::LabelOrigin;
 
 use crate::progress;
 

@@ -14,13 +14,13 @@ use hnet_twin::dataset::{
     DatasetError, DatasetHeader, DatasetWriter, ImageRef, ManifestRow, assign_splits, resized,
     sample_files,
 };
-use hnet_twin::force_table::{ForceRow, read_force_table};
-use hnet_twin::import::{recording_mask, row_origin};
+use hnet_twin::dataset::force_table::{ForceRow, read_force_table};
+use hnet_twin::dataset::import::{recording_mask, row_origin};
 use hnet_units::ImageSize;
 use serde_json::json;
 
 use crate::cine::{grey_pair, open_cine};
-use crate::import::ImportArgs;
+use crate::dataset::import::ImportArgs;
 use crate::progress;
 
 /// The forces CSV's key column for DICOM: the frame number, from 1.

@@ -21,18 +21,18 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use burn::tensor::Device;
 use hnet_model::metrics::ForceMetrics;
-use hnet_twin::carm::HeaderError;
-use hnet_twin::catalogue::{BENCH_CATHETER, CatalogueCatheter};
+use hnet_twin::simulator::carm::HeaderError;
+use hnet_twin::reconstruction::catalogue::{BENCH_CATHETER, CatalogueCatheter};
 use hnet_twin::dataset::Split;
-use hnet_twin::render::XRayDetector;
-use hnet_twin::scene::{BaseLean, Modality, SceneSampling, Sheath};
+use hnet_twin::simulator::render::XRayDetector;
+use hnet_twin::simulator::scene::{BaseLean, Modality, SceneSampling, Sheath};
 use serde::Serialize;
 
 use crate::backend::BackendChoice;
 use crate::evaluation::{EvalOptions, Evaluation, evaluate};
 use crate::network::load_weights;
 use crate::physics_check::MaskOrigin;
-use crate::simulate::{Scenes, SimulateArgs};
+use crate::dataset::simulate::{Scenes, SimulateArgs};
 
 /// `hnet study mismatch`.
 #[derive(clap::Args, Debug)]
@@ -389,7 +389,7 @@ pub fn run(args: &MismatchArgs) -> anyhow::Result<()> {
     let mut rows = Vec::new();
     for (index, set) in &suite {
         let data = args.out.join(set.name);
-        crate::simulate::run(&SimulateArgs {
+        crate::dataset::simulate::run(&SimulateArgs {
             modality: Modality::Xray2,
             samples: args.samples,
             size: model.image_size.width,

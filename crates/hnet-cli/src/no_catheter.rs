@@ -14,18 +14,18 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use anyhow::Context;
-use hnet_twin::centreline::{
+use hnet_twin::reconstruction::centreline::{
     CentrelineSettings, MAX_CATHETER_SHARE, MIN_CATHETER_SHARE, Mask, catheter_seen,
 };
 use hnet_twin::dataset::{Dataset, Split, resized};
-use hnet_twin::scene::{Modality, TwinConfig, render_empty_xray_view, sample_rng};
-use hnet_twin::synthetic_xray::BackgroundSource;
+use hnet_twin::simulator::scene::{Modality, TwinConfig, render_empty_xray_view, sample_rng};
+use hnet_twin::simulator::synthetic_xray::BackgroundSource;
 use rand::RngExt;
 
 use crate::backend::BackendChoice;
 use crate::data::{StereoItem, StereoSplit};
 use crate::network::{load_weights, predict};
-use crate::simulate::background_files;
+use crate::dataset::simulate::background_files;
 
 /// `hnet study no-catheter`.
 #[derive(clap::Args, Debug)]
@@ -92,7 +92,7 @@ pub fn run(args: &NoCatheterArgs) -> anyhow::Result<()> {
     let phantom = [&twin.views.a, &twin.views.b].map(|view| BackgroundSource::phantom(view, 512));
     let radiographs: Vec<BackgroundSource> = background_files(&args.backgrounds)?
         .iter()
-        .map(|path| crate::simulate::load_radiograph(path))
+        .map(|path| crate::dataset::simulate::load_radiograph(path))
         .collect::<anyhow::Result<_>>()?;
     let empty_views = |name: &str, source_of: &dyn Fn(usize, usize) -> BackgroundSource| {
         (0..args.pairs)
@@ -221,7 +221,7 @@ pub fn run(args: &NoCatheterArgs) -> anyhow::Result<()> {
     }
     let _ = writeln!(
         report,
-        "\nThe rule (`hnet_twin::centreline::catheter_seen`): {:.2} % to {:.0} % of the view's \
+        "\nThe rule (`hnet_twin::reconstruction::centreline::catheter_seen`): {:.2} % to {:.0} % of the view's \
          pixels read as catheter, in one blob long enough for a catheter.",
         MIN_CATHETER_SHARE * 100.0,
         MAX_CATHETER_SHARE * 100.0

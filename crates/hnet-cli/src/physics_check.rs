@@ -1,6 +1,6 @@
 //! `hnet eval`'s physics check: each simulated pair's catheter reconstructed in 3D from its masks
 //! (the true ones, and the network's) and the tip force of the twin's rod fitted to it
-//! ([`hnet_twin::physics_force`]), against the pair's record: the reconstruction's distance from
+//! ([`hnet_twin::reconstruction::physics_force`]), against the pair's record: the reconstruction's distance from
 //! the true centreline, and Table I of the physics force beside the network's on the same pairs.
 //!
 //! The fit reads the masks with an [`Estimator`]: **blind** (the default) assumes a catalogue
@@ -13,16 +13,16 @@ use std::fmt::Write as _;
 use std::time::Instant;
 
 use hnet_model::metrics::{AXES, ForceAccumulator, ForceMetrics};
-use hnet_twin::carm::HeaderError;
-use hnet_twin::catalogue::CatalogueCatheter;
-use hnet_twin::centreline::Mask;
+use hnet_twin::simulator::carm::HeaderError;
+use hnet_twin::reconstruction::catalogue::CatalogueCatheter;
+use hnet_twin::reconstruction::centreline::Mask;
 use hnet_twin::dataset::Dataset;
-use hnet_twin::physics_force::{CalibrationPair, ForceCombination, PhysicsSetup, physics_estimate};
-use hnet_twin::render::PROXIMAL_SHAFT_MM;
-use hnet_twin::rod;
-use hnet_twin::rod_fit::distances_to_rod;
-use hnet_twin::scene::NominalBase;
-use hnet_twin::simulate::{SampleRecord, read_sample_record};
+use hnet_twin::reconstruction::physics_force::{CalibrationPair, ForceCombination, PhysicsSetup, physics_estimate};
+use hnet_twin::simulator::render::PROXIMAL_SHAFT_MM;
+use hnet_twin::simulator::rod;
+use hnet_twin::reconstruction::rod_fit::distances_to_rod;
+use hnet_twin::simulator::scene::NominalBase;
+use hnet_twin::dataset::simulate::{SampleRecord, read_sample_record};
 use hnet_twin::vec3::Vec3;
 use hnet_units::ImageSize;
 use rayon::prelude::*;
@@ -184,7 +184,7 @@ impl PhysicsEvaluation {
 pub struct PhysicsForce {
     /// The tip force, N.
     pub force_n: [f32; 3],
-    /// Its standard error from the fit ([`hnet_twin::rod_fit::RodFit::force_sd_n`]), N.
+    /// Its standard error from the fit ([`hnet_twin::reconstruction::rod_fit::RodFit::force_sd_n`]), N.
     pub sd_n: Option<[f32; 3]>,
 }
 
@@ -419,8 +419,8 @@ pub fn markdown(checks: &[PhysicsEvaluation]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use hnet_twin::scene::{Backgrounds, Modality, TwinConfig};
-    use hnet_twin::simulate::simulate_dataset;
+    use hnet_twin::simulator::scene::{Backgrounds, Modality, TwinConfig};
+    use hnet_twin::dataset::simulate::simulate_dataset;
 
     /// Bench pairs whose true masks stand in for a network's, its force the truth 0.05 N off on
     /// every axis: each fitted pair gets its physics force and standard error, and the combined

@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use hnet_twin::dataset::Split;
-use hnet_twin::files::write_atomically;
+use hnet_twin::dataset::files::write_atomically;
 use serde::{Deserialize, Serialize};
 
 use crate::config::TrainingConfig;

@@ -4,16 +4,16 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use hnet_twin::import::is_image_file;
-use hnet_twin::off_bench::OffBench;
-use hnet_twin::raster::GreyImage;
-use hnet_twin::render::XRayDetector;
-use hnet_twin::scene::{Backgrounds, MaskSource, Modality, PAPER_BENCH, SceneSampling, TwinConfig};
-use hnet_twin::shard::{Shard, merge_shards};
-use hnet_twin::simulate::{
+use hnet_twin::dataset::import::is_image_file;
+use hnet_twin::simulator::off_bench::OffBench;
+use hnet_twin::simulator::raster::GreyImage;
+use hnet_twin::simulator::render::XRayDetector;
+use hnet_twin::simulator::scene::{Backgrounds, MaskSource, Modality, PAPER_BENCH, SceneSampling, TwinConfig};
+use hnet_twin::dataset::shard::{Shard, merge_shards};
+use hnet_twin::dataset::simulate::{
     OFF_BENCH_VIEWS, Part, simulate_dataset_part, simulate_off_bench_dataset,
 };
-use hnet_twin::synthetic_xray::BackgroundSource;
+use hnet_twin::simulator::synthetic_xray::BackgroundSource;
 
 use crate::progress;
 

@@ -518,7 +518,7 @@ fn export_best(
     // Atomically (a temporary file beside it, renamed over it): a failed write leaves the
     // previous model.bpk, and the checkpoints, as they were.
     let model_file = run.model_file();
-    hnet_twin::files::write_atomically(&model_file, &bytes).map_err(|e| {
+    hnet_twin::dataset::files::write_atomically(&model_file, &bytes).map_err(|e| {
         anyhow::anyhow!(
             "cannot write '{}': {e}\n{}",
             model_file.display(),

@@ -7,7 +7,7 @@ use common::{config_json, hnet, model_json, scratch, succeeds, train};
 use hnet_studio::export::{DATASET_NAME, dataset_zip};
 use hnet_studio::twin_live::{TwinControls, XrayBackground};
 use hnet_studio::workspace::Workspace;
-use hnet_twin::label_origin::LabelOrigin;
+use hnet_twin::dataset::label_origin::LabelOrigin;
 
 #[test]
 fn the_page_export_trains_and_evaluates() {

@@ -16,7 +16,7 @@
 //! can say which geometry is assumed.
 
 use dicom_dictionary_std::tags;
-use hnet_twin::carm::CArm;
+use hnet_twin::simulator::carm::CArm;
 use hnet_units::ImageSize;
 
 use crate::attributes::{DicomObject, numbers};

@@ -7,7 +7,7 @@
 //! - [`Frames`] and [`WindowLevel`]: the modality LUT (Rescale Slope/Intercept) and the VOI LUT
 //!   (the first Window Center/Width, else the frame's range) to 8-bit grey, as pure functions.
 //! - [`HeaderGeometry`]: Positioner angles, source distances and Imager Pixel Spacing as the
-//!   twin's [`hnet_twin::carm::CArm`], listing the attributes that were missing
+//!   twin's [`hnet_twin::simulator::carm::CArm`], listing the attributes that were missing
 //!   ([`GeometryTag`]) and filled from the plane's default.
 //! - [`pair_frames`]: plane A's frames with plane B's, checked against their frame times;
 //!   [`BiplaneCine`]: both planes and their pairs, with what the user must be told.

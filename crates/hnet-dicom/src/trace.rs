@@ -11,7 +11,7 @@
 
 use std::fmt::Write as _;
 
-use hnet_twin::physics_force::TipForceEstimate;
+use hnet_twin::reconstruction::physics_force::TipForceEstimate;
 use hnet_units::force_magnitude;
 
 /// The trace's header line.
@@ -66,7 +66,7 @@ pub fn trace_csv<'a>(points: impl IntoIterator<Item = &'a TracePoint>, weights: 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use hnet_twin::physics_force::EstimateKind;
+    use hnet_twin::reconstruction::physics_force::EstimateKind;
 
     #[test]
     fn frames_count_from_one_and_missing_times_stay_empty() {

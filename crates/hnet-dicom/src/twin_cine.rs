@@ -1,12 +1,12 @@
 //! Biplane XA cines rendered by the digital twin, with their true tip forces: the tests' DICOM
 //! input and the page's sample cine, written by the project itself (never downloaded data).
 
-use hnet_twin::carm::{Biplane, CArm};
-use hnet_twin::rod;
-use hnet_twin::scene::{
+use hnet_twin::simulator::carm::{Biplane, CArm};
+use hnet_twin::simulator::rod;
+use hnet_twin::simulator::scene::{
     Backgrounds, Modality, TwinConfig, TwinError, ViewPixels, generate, render_view, sample_rng,
 };
-use hnet_twin::synthetic_xray::PatchLayout;
+use hnet_twin::simulator::synthetic_xray::PatchLayout;
 use hnet_units::ImageSize;
 
 use crate::frames::Monochrome;

@@ -8,7 +8,7 @@ use dicom_core::{DataElement, Tag, VR, dicom_value};
 use dicom_dictionary_std::{tags, uids};
 use dicom_object::meta::FileMetaTableBuilder;
 use dicom_object::{FileDicomObject, InMemDicomObject};
-use hnet_twin::carm::CArm;
+use hnet_twin::simulator::carm::CArm;
 use hnet_units::ImageSize;
 
 use crate::frames::{ModalityLut, Monochrome};

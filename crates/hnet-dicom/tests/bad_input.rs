@@ -147,7 +147,7 @@ mod properties {
         read_cine_file, twin_cine, write_xa, xa_object,
     };
     use hnet_mutations::{Edit, cases, edits, mutate_near_start};
-    use hnet_twin::carm::CArm;
+    use hnet_twin::simulator::carm::CArm;
     use hnet_units::ImageSize;
     use proptest::prelude::*;
 

@@ -9,8 +9,8 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::physics_force::ForceCombination;
-use crate::scene::{Modality, SceneSampling};
+use crate::reconstruction::physics_force::ForceCombination;
+use crate::simulator::scene::{Modality, SceneSampling};
 
 /// The provenance entry that holds a weights file's [`ModelFacts`].
 pub const FACTS_KEY: &str = "facts";

@@ -4,18 +4,18 @@ use std::collections::BTreeMap;
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use hnet_twin::carm::triangulate;
+use hnet_twin::simulator::carm::triangulate;
 use hnet_twin::dataset::{Dataset, LoadedPair, Split};
-use hnet_twin::import::{ImportOptions, MaskThreshold, import_recordings};
-use hnet_twin::off_bench::OffBench;
-use hnet_twin::raster::GreyImage;
-use hnet_twin::scene::{Backgrounds, Modality, TwinConfig};
-use hnet_twin::shard::{Shard, merge_shards};
-use hnet_twin::simulate::{
+use hnet_twin::dataset::import::{ImportOptions, MaskThreshold, import_recordings};
+use hnet_twin::simulator::off_bench::OffBench;
+use hnet_twin::simulator::raster::GreyImage;
+use hnet_twin::simulator::scene::{Backgrounds, Modality, TwinConfig};
+use hnet_twin::dataset::shard::{Shard, merge_shards};
+use hnet_twin::dataset::simulate::{
     OFF_BENCH_VIEWS, Part, read_sample_record, simulate_dataset, simulate_dataset_part,
     simulate_off_bench_dataset,
 };
-use hnet_twin::synthetic_xray::BackgroundSource;
+use hnet_twin::simulator::synthetic_xray::BackgroundSource;
 
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("hnet-twin-{name}-{}", std::process::id()));
@@ -185,7 +185,7 @@ fn a_simulated_dataset_reads_back_with_splits_masks_and_geometry() {
     // A pair rendered on the fly (training's stream) is the pair read back from the files.
     let index: u64 = row.id.parse().unwrap();
     let backgrounds = Backgrounds::phantom(&config.views);
-    let sample = hnet_twin::scene::generate(&config, &backgrounds, 5, index).unwrap();
+    let sample = hnet_twin::simulator::scene::generate(&config, &backgrounds, 5, index).unwrap();
     let small = hnet_units::ImageSize::square(32);
     assert_eq!(LoadedPair::from_sample(&sample, 64, small), resized);
 
@@ -267,7 +267,7 @@ fn import_options(a: PathBuf, b: PathBuf, forces: PathBuf, out: PathBuf) -> Impo
         size: None,
         skip_bad: false,
         seed: 1,
-        label_origin: hnet_twin::label_origin::LabelOrigin::Measured,
+        label_origin: hnet_twin::dataset::label_origin::LabelOrigin::Measured,
     }
 }
 
@@ -288,7 +288,7 @@ fn recordings_import_into_the_same_format_with_thresholded_masks() {
     // The forces table does not say where its labels came from: the import's option does.
     assert_eq!(
         row.label_origin(),
-        Ok(hnet_twin::label_origin::LabelOrigin::Measured)
+        Ok(hnet_twin::dataset::label_origin::LabelOrigin::Measured)
     );
     let pair = dataset.load_pair(row, None).unwrap();
     // The dark bar is the mask.
@@ -385,17 +385,17 @@ mod properties {
     use std::path::Path;
 
     use hnet_mutations::{cases, edits, mutate};
-    use hnet_twin::carm::CArm;
+    use hnet_twin::simulator::carm::CArm;
     use hnet_twin::dataset::{
         Dataset, DatasetHeader, HEADER_FILE, MANIFEST_FILE, ManifestRow, SAMPLES_DIR, Split,
         header_json, manifest_csv, parse_manifest, record_path,
     };
-    use hnet_twin::force_table::{parse_newtons, read_force_table};
-    use hnet_twin::raster::Rect;
-    use hnet_twin::rod::RodConfig;
-    use hnet_twin::scene::SceneParams;
-    use hnet_twin::simulate::{SampleRecord, ViewRecord, read_sample_record};
-    use hnet_twin::synthetic_xray::{Anatomy, PatchLayout};
+    use hnet_twin::dataset::force_table::{parse_newtons, read_force_table};
+    use hnet_twin::simulator::raster::Rect;
+    use hnet_twin::simulator::rod::RodConfig;
+    use hnet_twin::simulator::scene::SceneParams;
+    use hnet_twin::dataset::simulate::{SampleRecord, ViewRecord, read_sample_record};
+    use hnet_twin::simulator::synthetic_xray::{Anatomy, PatchLayout};
     use hnet_twin::vec3::Vec3;
     use hnet_units::ImageSize;
     use proptest::prelude::*;

@@ -4,13 +4,13 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
-use hnet_twin::scene::{Modality, TwinConfig};
-use hnet_twin::simulate::simulate_dataset;
+use hnet_twin::simulator::scene::{Modality, TwinConfig};
+use hnet_twin::dataset::simulate::simulate_dataset;
 use hnet_units::ImageSize;
 use serde::Serialize;
 
 use crate::backend::BackendChoice;
-use crate::simulate::{backgrounds, parse_modality};
+use crate::dataset::simulate::{backgrounds, parse_modality};
 
 mod layers;
 

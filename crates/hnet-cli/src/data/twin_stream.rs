@@ -22,16 +22,16 @@ use burn::data::dataloader::{DataLoader, DataLoaderIterator};
 use burn::data::dataset::{Dataset as BurnDataset, DatasetError};
 use burn::tensor::Device;
 use hnet_twin::dataset::{Dataset, LoadedPair, SquareSymmetry};
-use hnet_twin::off_bench::OffBench;
-use hnet_twin::render::DetectorRanges;
-use hnet_twin::scene::{Backgrounds, SceneSampling, TwinConfig, generate, sample_rng};
-use hnet_twin::simulate::OFF_BENCH_VIEWS;
+use hnet_twin::simulator::off_bench::OffBench;
+use hnet_twin::simulator::render::DetectorRanges;
+use hnet_twin::simulator::scene::{Backgrounds, SceneSampling, TwinConfig, generate, sample_rng};
+use hnet_twin::dataset::simulate::OFF_BENCH_VIEWS;
 use hnet_units::ImageSize;
 use rand::RngExt;
 use serde::{Deserialize, Serialize};
 
 use super::StereoItem;
-use crate::simulate::radiographs;
+use crate::dataset::simulate::radiographs;
 
 /// Settings of a training stream (`stream` in a training config).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -75,7 +75,7 @@ pub struct OffBenchConfig {
     #[serde(default = "half")]
     pub radiograph_fraction: f64,
     /// The catheters and poses off-bench pairs draw (every field of a
-    /// [`hnet_twin::scene::SceneSampling`]); the twin's `varied` preset when absent.
+    /// [`hnet_twin::simulator::scene::SceneSampling`]); the twin's `varied` preset when absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scenes: Option<SceneSampling>,
     /// Each off-bench view, image and mask together, carried by one of the square's eight
@@ -380,8 +380,8 @@ mod tests {
     use crate::data::{StereoBatcher, StereoItem};
     use burn::data::dataloader::DataLoaderBuilder;
     use hnet_model::training::TrainingBatch;
-    use hnet_twin::scene::Modality;
-    use hnet_twin::simulate::simulate_dataset;
+    use hnet_twin::simulator::scene::Modality;
+    use hnet_twin::dataset::simulate::simulate_dataset;
 
     fn dataset(name: &str, seed: u64) -> Dataset {
         let root = std::env::temp_dir().join(format!("hnet-stream-{name}-{}", std::process::id()));

@@ -28,7 +28,7 @@ pub struct PairPrediction {
     #[serde(default)]
     pub physics: Option<[f32; 3]>,
     /// Its fit's standard error per axis, N (a relative measure; see
-    /// `hnet_twin::rod_fit::RodFit::force_sd_n`).
+    /// `hnet_twin::reconstruction::rod_fit::RodFit::force_sd_n`).
     #[serde(default)]
     pub physics_sd: Option<[f32; 3]>,
     /// The network's force combined with the physics estimate, N, when a combination was
@@ -39,7 +39,7 @@ pub struct PairPrediction {
     #[serde(default)]
     pub combined_sd: Option<[f32; 3]>,
     /// Half the width of its 90 % interval per axis, N (split-conformal, calibrated with the
-    /// combination: [`hnet_twin::physics_force::ForceCombination::interval_90_n`]).
+    /// combination: [`hnet_twin::reconstruction::physics_force::ForceCombination::interval_90_n`]).
     #[serde(default)]
     pub combined_90: Option<[f32; 3]>,
     /// Catheter IoU of the pair's predicted masks in views A and B, when the network segments

@@ -9,9 +9,9 @@ fn io(path: &Path, e: std::io::Error) -> DatasetError {
     DatasetError::caused_by(path, "cannot be read or written", e)
 }
 
-/// Writes `bytes` to `path` atomically ([`crate::files::write_atomically`]).
+/// Writes `bytes` to `path` atomically ([`crate::dataset::files::write_atomically`]).
 fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), DatasetError> {
-    crate::files::write_atomically(path, bytes).map_err(|e| io(path, e))
+    crate::dataset::files::write_atomically(path, bytes).map_err(|e| io(path, e))
 }
 
 /// Whether the file at `path` is a PNG that was written to its end.
@@ -340,15 +340,15 @@ impl LoadedPair {
     }
 
     /// A twin sample rendered at `rendered` pixels as [`Dataset::load_pair`] would read it
-    /// back from the files [`crate::simulate::simulated_sample_files`] writes (lossless
+    /// back from the files [`crate::dataset::simulate::simulated_sample_files`] writes (lossless
     /// PNG), at `size`: training on samples made on the fly sees the same pixels as
     /// training on a simulated dataset.
     pub fn from_sample(
-        sample: &crate::scene::StereoSample,
+        sample: &crate::simulator::scene::StereoSample,
         rendered: usize,
         size: ImageSize,
     ) -> Self {
-        use crate::scene::ViewPixels;
+        use crate::simulator::scene::ViewPixels;
         let side = rendered as u32;
         let view = |pixels: &ViewPixels| -> image::DynamicImage {
             match pixels {

@@ -16,9 +16,9 @@
 use rand::{Rng, RngExt};
 use serde::{Deserialize, Serialize};
 
-use crate::carm::CArm;
-use crate::phantom::Thorax;
-use crate::raster::{GreyImage, Rect};
+use crate::simulator::carm::CArm;
+use crate::simulator::phantom::Thorax;
+use crate::simulator::raster::{GreyImage, Rect};
 
 /// The anatomical regions the generator crops around.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]

@@ -1,21 +1,21 @@
 //! From a stereo pair's two masks to the catheter in 3D and its physics-checked tip force, in one
 //! call that `hnet eval`, the page and the tests share: a centreline in each view
-//! ([`crate::centreline`]), their epipolar matching and triangulation
-//! ([`crate::reconstruction`]), and the twin's rod fitted to the result ([`crate::rod_fit`]).
+//! ([`crate::reconstruction::centreline`]), their epipolar matching and triangulation
+//! ([`crate::reconstruction::epipolar`]), and the twin's rod fitted to the result ([`crate::reconstruction::rod_fit`]).
 
 use serde::{Deserialize, Serialize};
 
-use crate::carm::CameraMatrix;
-use crate::catalogue::CatalogueCatheter;
-use crate::centreline::{
+use crate::simulator::carm::CameraMatrix;
+use crate::reconstruction::catalogue::CatalogueCatheter;
+use crate::reconstruction::centreline::{
     Centreline, CentrelineError, CentrelineSettings, Mask, extract_centreline,
 };
-use crate::reconstruction::{
+use crate::reconstruction::epipolar::{
     Reconstruction, ReconstructionError, ReconstructionSettings, proximal_hint_px, reconstruct,
 };
-use crate::rod::{RodBase, RodConfig};
-use crate::rod_fit::{RodFit, RodFitError, RodFitSettings, fit_rod_to_reconstruction};
-use crate::scene::NominalBase;
+use crate::simulator::rod::{RodBase, RodConfig};
+use crate::reconstruction::rod_fit::{RodFit, RodFitError, RodFitSettings, fit_rod_to_reconstruction};
+use crate::simulator::scene::NominalBase;
 
 /// What the masks are read with: both views' cameras, the catheter as the rod model knows it,
 /// and how each step works.
@@ -136,7 +136,7 @@ pub enum PhysicsError {
     },
 }
 
-/// How many standard deviations of a [`crate::rod_fit::BasePrior`] a fitted base may lie from
+/// How many standard deviations of a [`crate::reconstruction::rod_fit::BasePrior`] a fitted base may lie from
 /// the nominal pose (per component of its offset, or in tilt) before its force is refused.
 pub const MAX_BASE_SDS: f64 = 4.0;
 
@@ -222,7 +222,7 @@ const NORMAL_MEDIAN_ABS: f64 = 0.674_489_75;
 /// How one network's tip force and the physics estimate from its own masks are weighed against
 /// each other: on each axis, each by the inverse of its error variance. The network's error is
 /// one number per axis; the physics estimate's is the rod fit's own standard error
-/// ([`crate::rod_fit::RodFit::force_sd_n`]) times [`Self::physics_sd_scale`], so it differs from
+/// ([`crate::reconstruction::rod_fit::RodFit::force_sd_n`]) times [`Self::physics_sd_scale`], so it differs from
 /// pair to pair with how much the reconstructed shape says about the force.
 ///
 /// Both are measured on calibration pairs the estimates are not evaluated on
@@ -527,7 +527,7 @@ pub fn conformal_quantile(scores: &mut [f64], level: f64) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::reconstruction::tests::bench_sample;
+    use crate::reconstruction::epipolar::tests::bench_sample;
 
     #[test]
     fn conformal_intervals_cover_what_they_promise() {
@@ -684,8 +684,8 @@ mod tests {
     /// little where the shape decides (exact masks fit within hundredths of a millimetre).
     #[test]
     fn a_twin_pair_read_blind_gives_its_force_back() {
-        use crate::catalogue::{BENCH_CATHETER, CatalogueCatheter};
-        use crate::scene::SceneSampling;
+        use crate::reconstruction::catalogue::{BENCH_CATHETER, CatalogueCatheter};
+        use crate::simulator::scene::SceneSampling;
         let catheter = CatalogueCatheter::find(BENCH_CATHETER).unwrap();
         let nominal = SceneSampling::bench().nominal_base();
         for index in 0..3 {

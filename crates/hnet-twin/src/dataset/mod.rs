@@ -1,10 +1,14 @@
 //! The on-disk dataset format (version 1), shared by `hnet simulate`, `hnet import`, the browser
-//! app's export and the training loader.
+//! app's export and the training loader; with what reads and writes it: [`force_table`] (force
+//! tables in CSV, for imports and the page's labels), [`label_origin`] (where each force label
+//! came from), [`archive`] (the page's export as one file), and natively [`simulate`] (the twin's
+//! pairs written as a dataset, and their records), [`shard`] (a simulation in parts and their
+//! merge), [`import`] (image folders) and [`files`] (atomic writes).
 //!
 //! ```text
 //! DIR/dataset.json            header: format, version, image size, where the data came from
 //! DIR/manifest.csv            one row per stereo pair: id,split,fx,fy,fz[,parameters...]
-//!                             (label_origin and its estimate's weights: crate::label_origin)
+//!                             (label_origin and its estimate's weights: crate::dataset::label_origin)
 //! DIR/samples/<id>_view_a.png view A image (8-bit grey or RGB)
 //! DIR/samples/<id>_view_b.png view B image
 //! DIR/samples/<id>_mask_a.png view A catheter mask (8-bit, 255 = catheter; soft edges allowed)
@@ -28,7 +32,7 @@ use std::path::{Path, PathBuf};
 use hnet_units::ImageSize;
 use serde::{Deserialize, Serialize};
 
-use crate::label_origin::{LabelOrigin, UnknownOrigin};
+use crate::dataset::label_origin::{LabelOrigin, UnknownOrigin};
 
 /// `format` field of `dataset.json`.
 pub const FORMAT: &str = "hnet-dataset";
@@ -185,7 +189,7 @@ impl ManifestRow {
     }
 
     /// Where its force label came from: [`LabelOrigin::Unrecorded`] when the manifest has no
-    /// [`label_origin::ORIGIN_COLUMN`](crate::label_origin::ORIGIN_COLUMN) (older datasets).
+    /// [`label_origin::ORIGIN_COLUMN`](crate::dataset::label_origin::ORIGIN_COLUMN) (older datasets).
     pub fn label_origin(&self) -> Result<LabelOrigin, UnknownOrigin> {
         LabelOrigin::from_columns(|name| self.column(name))
     }
@@ -462,6 +466,18 @@ pub fn header_json(header: &DatasetHeader) -> Vec<u8> {
 
 #[cfg(not(target_arch = "wasm32"))]
 mod folder;
+
+pub mod archive;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod files;
+pub mod force_table;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod import;
+pub mod label_origin;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod shard;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod simulate;
 
 #[cfg(not(target_arch = "wasm32"))]
 pub use folder::{Dataset, DatasetWriter, LoadedPair};

@@ -7,9 +7,9 @@
 use rand::{Rng, RngExt};
 use serde::{Deserialize, Serialize};
 
-use crate::rod::{self, RodBase, RodConfig, RodError, StiffSegment};
-use crate::rod_fit::{BasePrior, PRIOR_CORRELATED_POINTS};
-use crate::sensor_plate::{PlateContact, SensorPlate};
+use crate::simulator::rod::{self, RodBase, RodConfig, RodError, StiffSegment};
+use crate::reconstruction::rod_fit::{BasePrior, PRIOR_CORRELATED_POINTS};
+use crate::simulator::sensor_plate::{PlateContact, SensorPlate};
 use crate::vec3::{Mat3, Vec3};
 
 mod sample;
@@ -70,7 +70,7 @@ impl Modality {
 ///
 /// - [`SceneSampling::paper_bench`]: the bench as the paper recorded it, framed close up
 ///   ([`TwinConfig::paper_bench`]): the same catheter and fixture, its tip pressed against a
-///   sensor plate moved by two actuators ([`crate::sensor_plate`]). The force is not drawn: it
+///   sensor plate moved by two actuators ([`crate::simulator::sensor_plate`]). The force is not drawn: it
 ///   is read from the rod solved with its tip held by the plate.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SceneSampling {
@@ -683,8 +683,8 @@ impl SceneSampling {
 mod tests {
     use super::sample::grey_of;
     use super::*;
-    use crate::render::XRayDetector;
-    use crate::sensor_plate;
+    use crate::simulator::render::XRayDetector;
+    use crate::simulator::sensor_plate;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 

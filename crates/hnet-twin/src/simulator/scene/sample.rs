@@ -1,6 +1,6 @@
 //! A complete stereo sample of a scene: the twin's settings ([`TwinConfig`]), both views
 //! rendered with their masks, and [`generate`], which draws a scene, solves its catheter and
-//! renders it. Re-exported by [`crate::scene`].
+//! renders it. Re-exported by [`crate::simulator::scene`].
 
 use hnet_units::ImageSize;
 use rand::{Rng, RngExt, SeedableRng};
@@ -8,13 +8,13 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::{Modality, SceneParams, SceneSampling};
-use crate::carm::{Biplane, CArm, CameraMatrix};
-use crate::catheter::CatheterDesign;
-use crate::raster::{GreyImage, RgbImage};
-use crate::render::{self, TubeRaster, XRayDetector};
-use crate::rod::{self, RodConfig, RodError, RodShape};
-use crate::sensor_plate::{self, ContactError};
-use crate::synthetic_xray::{self, Anatomy, BackgroundSource, PatchLayout, PatchRule};
+use crate::simulator::carm::{Biplane, CArm, CameraMatrix};
+use crate::simulator::catheter::CatheterDesign;
+use crate::simulator::raster::{GreyImage, RgbImage};
+use crate::simulator::render::{self, TubeRaster, XRayDetector};
+use crate::simulator::rod::{self, RodConfig, RodError, RodShape};
+use crate::simulator::sensor_plate::{self, ContactError};
+use crate::simulator::synthetic_xray::{self, Anatomy, BackgroundSource, PatchLayout, PatchRule};
 use crate::vec3::Vec3;
 
 /// How the masks are made.

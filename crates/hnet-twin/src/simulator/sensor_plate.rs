@@ -14,7 +14,7 @@
 //!   two coordinates on the plate.
 //!
 //! Both are solved as the rod's boundary-value problem with the tip held
-//! ([`crate::rod::solve_held`]: the base moment and the three contact unknowns together). A final state is taken as path independent (a monotonic press,
+//! ([`crate::simulator::rod::solve_held`]: the base moment and the three contact unknowns together). A final state is taken as path independent (a monotonic press,
 //! then a monotonic slide), and the contact is a point at the end of the centreline (the tip's
 //! rounding and the plate's compliance are left out). A solve that does not converge, a shaft that
 //! would cross the plate or a contact that would pull are errors, never a wrong shape.
@@ -26,7 +26,7 @@ use nalgebra::{Matrix3, Vector3};
 use rand::{Rng, RngExt};
 use serde::{Deserialize, Serialize};
 
-use crate::rod::{self, RodBase, RodConfig, RodError, RodShape};
+use crate::simulator::rod::{self, RodBase, RodConfig, RodError, RodShape};
 use crate::vec3::Vec3;
 
 /// The sensor plate and its two actuators: the settings of a set.
@@ -540,7 +540,7 @@ fn slip_guess(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::SceneSampling;
+    use crate::simulator::scene::SceneSampling;
 
     fn bench_rod() -> (RodConfig, RodBase, RodShape, SensorPlate) {
         let sampling = SceneSampling::paper_bench();
@@ -655,7 +655,7 @@ mod tests {
         let (_, nominal_base) = sampling.nominal_scene().rod(&RodConfig::default());
         let (config, base, rest, plate) = bench_rod();
         assert_eq!(base, nominal_base);
-        let mut rng = crate::scene::sample_rng(1, 0);
+        let mut rng = crate::simulator::scene::sample_rng(1, 0);
         let mut forces = Vec::new();
         let draws = 40;
         for _ in 0..draws {

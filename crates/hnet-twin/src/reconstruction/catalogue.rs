@@ -2,21 +2,21 @@
 //! their nominal mechanics, and catheter files (`catheter.json`) that hold one such entry,
 //! possibly calibrated from pairs labelled with a measured force ([`calibrate_stiffness`]).
 //!
-//! A blind estimate ([`crate::physics_force::PhysicsSetup::blind`]) never reads a pair's own
+//! A blind estimate ([`crate::reconstruction::physics_force::PhysicsSetup::blind`]) never reads a pair's own
 //! record: it assumes the catheter named here, and fits the base pose from a nominal one. The
 //! entries are the twin's own catheters, named as a maker's data sheet would name them; they are
 //! not measured data of commercial catheters.
 //!
 //! **Why the stiffness is calibrated and not fitted per pair.** Without gravity the rod's
 //! equilibrium depends on the tip force and the bending stiffness only through `F/EI`
-//! ([`crate::rod_fit`] refuses to fit both), so images alone cannot tell a stiff catheter under a
+//! ([`crate::reconstruction::rod_fit`] refuses to fit both), so images alone cannot tell a stiff catheter under a
 //! large force from a soft one under a small force. A few pairs with a measured force fix the
 //! ratio: the force the images give under the nominal stiffness, scaled by `EI/EI_nominal`, is
 //! the true force, so one scale fitted by least squares calibrates the catheter.
 
 use serde::{Deserialize, Serialize};
 
-use crate::rod::RodConfig;
+use crate::simulator::rod::RodConfig;
 
 /// One catheter as a data sheet gives it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

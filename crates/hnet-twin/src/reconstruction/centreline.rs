@@ -1,6 +1,6 @@
 //! The catheter's centreline in one view, with sub-pixel precision, from its mask.
 //!
-//! Pixel convention (the same as [`crate::render`] and [`crate::carm::CArm::project`]): pixel
+//! Pixel convention (the same as [`crate::simulator::render`] and [`crate::simulator::carm::CArm::project`]): pixel
 //! `(x, y)` of a row-major `width x height` mask covers `[x, x+1) x [y, y+1)` and its value sits at
 //! its centre `(x + 0.5, y + 0.5)`; points are `[u, v]` = `[column, row]` in pixels.
 //!
@@ -542,11 +542,11 @@ mod tests {
     use super::*;
     use std::ops::Range;
 
-    use crate::carm::CArm;
-    use crate::catheter::CatheterDesign;
-    use crate::raster::to_byte;
-    use crate::render::{PROXIMAL_SHAFT_MM, rasterize_catheter};
-    use crate::rod::{RodBase, RodConfig, RodShape, solve};
+    use crate::simulator::carm::CArm;
+    use crate::simulator::catheter::CatheterDesign;
+    use crate::simulator::raster::to_byte;
+    use crate::simulator::render::{PROXIMAL_SHAFT_MM, rasterize_catheter};
+    use crate::simulator::rod::{RodBase, RodConfig, RodShape, solve};
     use crate::vec3::{Mat3, Vec3};
 
     /// Sets the pixels `xs` × `ys` of a mask `width` pixels wide to `value`.

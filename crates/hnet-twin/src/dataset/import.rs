@@ -15,9 +15,9 @@ use crate::dataset::{
     DatasetError, DatasetHeader, DatasetWriter, ImageRef, ManifestRow, assign_splits,
     image_size_of, is_valid_id, resized, sample_files,
 };
-use crate::force_table::{ForceRow, ForceTableError, read_force_table};
-use crate::label_origin::LabelOrigin;
-use crate::scene::{luma, otsu_threshold, threshold_mask};
+use crate::dataset::force_table::{ForceRow, ForceTableError, read_force_table};
+use crate::dataset::label_origin::LabelOrigin;
+use crate::simulator::scene::{luma, otsu_threshold, threshold_mask};
 
 /// How masks are made from the recorded images.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -61,7 +61,7 @@ pub struct ImportOptions {
     /// Seed of the 80/10/10 split.
     pub seed: u64,
     /// Where the forces came from, for rows whose table does not say (its `label_origin`
-    /// column, [`crate::label_origin`]).
+    /// column, [`crate::dataset::label_origin`]).
     pub label_origin: LabelOrigin,
 }
 

@@ -1,9 +1,9 @@
 //! The physics-checked force: the tip force under which the twin's Kirchhoff rod takes the shape
 //! of a reconstructed 3D centreline.
 //!
-//! **Model.** The rod of [`crate::rod`] (its [`RodConfig`] and clamped [`RodBase`] from a
+//! **Model.** The rod of [`crate::simulator::rod`] (its [`RodConfig`] and clamped [`RodBase`] from a
 //! dataset's record or the page's settings) solved under a tip force `F`, with the straight
-//! proximal shaft behind its base that the twin draws ([`crate::render::PROXIMAL_SHAFT_MM`]):
+//! proximal shaft behind its base that the twin draws ([`crate::simulator::render::PROXIMAL_SHAFT_MM`]):
 //! the reconstruction starts where the catheter enters both images, usually on that shaft.
 //!
 //! **Residuals.** The offsets of the reconstructed points from the model curve, in two stages:
@@ -29,7 +29,7 @@
 //! **Uncertainty.** [`RodFit::force_sd_n`]: the standard error of the force from the Jacobian
 //! and the residual at the solution (`s² (JᵀJ)⁻¹`, other unknowns marginalised). The
 //! centreline's points are not independent, so it ranks pairs by how much their shape says
-//! about the force rather than giving the error itself; [`crate::physics_force`] scales it on
+//! about the force rather than giving the error itself; [`crate::reconstruction::physics_force`] scales it on
 //! calibration pairs.
 //!
 //! **Unknowns.** The force (three components, N), and as options the base position (offset, mm),
@@ -53,9 +53,9 @@ use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationRe
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 use serde::{Deserialize, Serialize};
 
-use crate::reconstruction::Reconstruction;
-use crate::render::PROXIMAL_SHAFT_MM;
-use crate::rod::{self, RodBase, RodConfig, RodError, RodShape};
+use crate::reconstruction::epipolar::Reconstruction;
+use crate::simulator::render::PROXIMAL_SHAFT_MM;
+use crate::simulator::rod::{self, RodBase, RodConfig, RodError, RodShape};
 use crate::vec3::{Mat3, Vec3};
 
 /// What is fitted and how.
@@ -482,11 +482,11 @@ pub fn fit_rod_to_reconstruction(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::reconstruction::tests::{
+    use crate::reconstruction::epipolar::tests::{
         bench_sample, distance_to_truth, errors_to_truth, mask_centreline, reconstruct_true_masks,
     };
-    use crate::reconstruction::{ReconstructionSettings, reconstruct};
-    use crate::scene::{SceneParams, SceneSampling, sample_rng};
+    use crate::reconstruction::epipolar::{ReconstructionSettings, reconstruct};
+    use crate::simulator::scene::{SceneParams, SceneSampling, sample_rng};
 
     /// A bench scene's rod, its base and its solved shape.
     fn bench_rod(index: u64) -> (SceneParams, RodConfig, RodBase, RodShape) {
@@ -725,7 +725,7 @@ mod tests {
     #[test]
     #[ignore = "a measurement: run it in release and read its output"]
     fn measure_reconstruction_and_fit_on_bench_pairs() {
-        use crate::scene::{Modality, SceneSampling, TwinConfig};
+        use crate::simulator::scene::{Modality, SceneSampling, TwinConfig};
         use rand::{RngExt, SeedableRng};
 
         let bench = TwinConfig::new(Modality::Xray2, 224);
@@ -863,7 +863,7 @@ mod tests {
     /// assumes (from the true ones), and the fit's settings.
     type Case<'a> = (
         &'a str,
-        &'a crate::scene::TwinConfig,
+        &'a crate::simulator::scene::TwinConfig,
         &'a dyn Fn(&[u8]) -> Vec<u8>,
         &'a dyn Fn(RodConfig, RodBase) -> (RodConfig, RodBase),
         RodFitSettings,
@@ -871,7 +871,7 @@ mod tests {
 
     fn measure(case: &Case<'_>, pairs: u64) {
         let (_, config, degrade, assume, settings) = case;
-        use crate::scene::{Backgrounds, generate};
+        use crate::simulator::scene::{Backgrounds, generate};
         use std::time::{Duration, Instant};
 
         let size = config.image_size;

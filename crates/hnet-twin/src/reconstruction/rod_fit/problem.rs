@@ -255,7 +255,7 @@ impl Problem<'_> {
     /// and Jacobian are scaled by `1/√n` here, which cancels). The contact constraint's row is
     /// left out: this is what the shape says about the force. Points along a centreline are not
     /// independent (they are 1 px apart and their errors are smooth), so it is a relative
-    /// measure; [`crate::physics_force::ForceCombination`] scales it on calibration pairs.
+    /// measure; [`crate::reconstruction::physics_force::ForceCombination`] scales it on calibration pairs.
     pub(super) fn force_standard_error(&self) -> Option<Vec3> {
         let at = self.layout.force?;
         let shape_rows = self.shape_rows();

@@ -1,7 +1,7 @@
 //! The catheter in 3D from its centrelines in two views: epipolar matching and triangulation.
 //!
 //! Each view's 3x4 camera matrix `P` (world millimetres to pixels, as saved with every sample,
-//! see [`crate::carm::CArm::camera_matrix`]) is checked (finite, rank 3, a finite centre) and the
+//! see [`crate::simulator::carm::CArm::camera_matrix`]) is checked (finite, rank 3, a finite centre) and the
 //! two must have distinct centres. The fundamental matrix `F = [e_B]× P_B P_A⁺` then maps a point
 //! of view A to its epipolar line in view B.
 //!
@@ -23,7 +23,7 @@
 //! wrongly.
 //!
 //! **Triangulation.** Each matched pair is triangulated by the direct linear transform
-//! ([`crate::carm::triangulate`]); its residual is the root mean square reprojection error over
+//! ([`crate::simulator::carm::triangulate`]); its residual is the root mean square reprojection error over
 //! the two views, in pixels. The 3D curve is resampled at equal arc-length steps.
 //!
 //! nalgebra provides the small linear algebra (singular values for the rank check, the
@@ -32,9 +32,9 @@
 use nalgebra::{Matrix3, Matrix3x4, Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
-use crate::carm::{CameraMatrix, triangulate};
-use crate::centreline::Centreline;
-use crate::rod::RodBase;
+use crate::simulator::carm::{CameraMatrix, triangulate};
+use crate::reconstruction::centreline::Centreline;
+use crate::simulator::rod::RodBase;
 use crate::vec3::Vec3;
 
 /// How two centrelines are matched and triangulated.
@@ -278,7 +278,7 @@ pub fn project(p: &CameraMatrix, point_mm: Vec3) -> Option<[f64; 2]> {
 
 /// Where a view sees the catheter's shaft come from: the projection of a point 50 mm behind the
 /// rod's clamped base along its axis (`None` when that point is not in front of the view). As
-/// [`crate::centreline::CentrelineSettings::proximal_hint_px`] it picks the proximal end of a
+/// [`crate::reconstruction::centreline::CentrelineSettings::proximal_hint_px`] it picks the proximal end of a
 /// catheter whose mask touches the image border twice (its tip leaving the image too).
 pub fn proximal_hint_px(camera: &CameraMatrix, base: &RodBase) -> Option<[f64; 2]> {
     let behind = base.position_mm - base.orientation.column(2) * 50.0;
@@ -541,11 +541,11 @@ pub fn reconstruct(
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::carm::{Biplane, CArm};
-    use crate::centreline::{CentrelineError, CentrelineSettings, Mask, extract_centreline};
-    use crate::render::PROXIMAL_SHAFT_MM;
-    use crate::rod::RodShape;
-    use crate::scene::{Backgrounds, Modality, StereoSample, TwinConfig, generate};
+    use crate::simulator::carm::{Biplane, CArm};
+    use crate::reconstruction::centreline::{CentrelineError, CentrelineSettings, Mask, extract_centreline};
+    use crate::simulator::render::PROXIMAL_SHAFT_MM;
+    use crate::simulator::rod::RodShape;
+    use crate::simulator::scene::{Backgrounds, Modality, StereoSample, TwinConfig, generate};
 
     /// Bench XRay-2 sample `index` at `size` px, and its twin settings.
     pub(crate) fn bench_sample(size: usize, seed: u64, index: u64) -> (TwinConfig, StereoSample) {
@@ -583,13 +583,13 @@ pub(crate) mod tests {
 
     /// Distance from `p` to the true centreline (the flexible section and its proximal shaft).
     pub(crate) fn distance_to_truth(shape: &RodShape, p: Vec3) -> f64 {
-        crate::rod_fit::distances_to_rod(shape, PROXIMAL_SHAFT_MM, &[p])[0]
+        crate::reconstruction::rod_fit::distances_to_rod(shape, PROXIMAL_SHAFT_MM, &[p])[0]
     }
 
     /// How far `r` is from the true catheter `shape`: the mean distance of its points and the
     /// distance of its last point from the true tip, mm.
     pub(crate) fn errors_to_truth(r: &Reconstruction, shape: &RodShape) -> (f64, f64) {
-        let distances = crate::rod_fit::distances_to_rod(shape, PROXIMAL_SHAFT_MM, &r.points_mm);
+        let distances = crate::reconstruction::rod_fit::distances_to_rod(shape, PROXIMAL_SHAFT_MM, &r.points_mm);
         let mean = distances.iter().sum::<f64>() / distances.len() as f64;
         (mean, (r.last_mm() - shape.tip_mm()).norm())
     }
@@ -648,8 +648,8 @@ pub(crate) mod tests {
     #[test]
     fn the_shaft_comes_from_below_the_base() {
         let params =
-            crate::scene::SceneSampling::bench().sample(&mut crate::scene::sample_rng(1, 0));
-        let (_, base) = params.rod(&crate::rod::RodConfig::default());
+            crate::simulator::scene::SceneSampling::bench().sample(&mut crate::simulator::scene::sample_rng(1, 0));
+        let (_, base) = params.rod(&crate::simulator::rod::RodConfig::default());
         for view in Biplane::cardiac(64).views() {
             let hint = proximal_hint_px(&view.camera_matrix(), &base).unwrap();
             // The base points cranially, so the shaft comes from the image's bottom edge.
@@ -666,7 +666,7 @@ pub(crate) mod tests {
                 [q.u, q.v]
             })
             .collect();
-        let arc_px = crate::centreline::arc_lengths(&points_px);
+        let arc_px = crate::reconstruction::centreline::arc_lengths(&points_px);
         Centreline {
             points_px,
             arc_px,
@@ -718,7 +718,7 @@ pub(crate) mod tests {
             "{err}"
         );
         // Two views 3° apart see a curved catheter consistently, but give it no reliable depth.
-        let near = crate::carm::CArm::cardiac(3.0, 0.0, 128);
+        let near = crate::simulator::carm::CArm::cardiac(3.0, 0.0, 128);
         let curve: Vec<Vec3> = (0..40)
             .map(|k| {
                 let t = k as f64 / 39.0;

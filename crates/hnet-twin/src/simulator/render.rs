@@ -9,11 +9,11 @@
 use hnet_units::ImageSize;
 use rand::{Rng, RngExt};
 
-use crate::carm::CArm;
-use crate::catheter::CatheterDesign;
-use crate::noise::Noise;
-use crate::raster::{GreyImage, RgbImage};
-use crate::rod::RodShape;
+use crate::simulator::carm::CArm;
+use crate::simulator::catheter::CatheterDesign;
+use crate::simulator::noise::Noise;
+use crate::simulator::raster::{GreyImage, RgbImage};
+use crate::simulator::rod::RodShape;
 
 /// The catheter as seen by one view.
 #[derive(Debug, Clone, PartialEq)]
@@ -498,7 +498,7 @@ pub fn mask_centroid(coverage: &[f32], width: usize) -> Option<[f64; 2]> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rod::{RodBase, RodConfig, solve};
+    use crate::simulator::rod::{RodBase, RodConfig, solve};
     use crate::vec3::Vec3;
     use rand::SeedableRng;
 

@@ -2,7 +2,7 @@
 //! clavicles as analytic shapes, projected with the C-arm geometry into a radiograph.
 //!
 //! It stands in for a chest X-ray file so that the app and the default dataset need no outside
-//! image. Coordinates are the world frame of [`crate::carm`] (mm, `x` left, `y` anterior, `z`
+//! image. Coordinates are the world frame of [`crate::simulator::carm`] (mm, `x` left, `y` anterior, `z`
 //! cranial, isocentre in the heart). Each shape adds its attenuation relative to the tissue it
 //! displaces (lungs are negative: air replaces soft tissue); values are effective linear
 //! attenuation coefficients at about 60 keV, in 1/mm.
@@ -10,8 +10,8 @@
 use hnet_units::ImageSize;
 use serde::{Deserialize, Serialize};
 
-use crate::carm::CArm;
-use crate::raster::GreyImage;
+use crate::simulator::carm::CArm;
+use crate::simulator::raster::GreyImage;
 use crate::vec3::{Mat3, Vec3};
 
 #[derive(Debug, Clone, Copy)]

@@ -9,21 +9,21 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
-use crate::carm::{CArm, CameraMatrix, HeaderError};
-use crate::catalogue::CatalogueCatheter;
+use crate::simulator::carm::{CArm, CameraMatrix, HeaderError};
+use crate::reconstruction::catalogue::CatalogueCatheter;
 use crate::dataset::{
     Dataset, DatasetError, DatasetHeader, DatasetWriter, ImageRef, ManifestRow, Split,
     assign_splits, sample_files,
 };
-use crate::off_bench::OffBench;
-use crate::physics_force::PhysicsSetup;
-use crate::rod::RodConfig;
-use crate::scene::{
+use crate::simulator::off_bench::OffBench;
+use crate::reconstruction::physics_force::PhysicsSetup;
+use crate::simulator::rod::RodConfig;
+use crate::simulator::scene::{
     Backgrounds, NominalBase, SceneParams, SceneSampling, StereoSample, TwinConfig, generate,
     sample_rng,
 };
-use crate::shard::Shard;
-use crate::synthetic_xray::PatchLayout;
+use crate::dataset::shard::Shard;
+use crate::simulator::synthetic_xray::PatchLayout;
 use crate::vec3::Vec3;
 
 /// The id of sample `index`.
@@ -140,7 +140,7 @@ pub struct SampleRecord {
 }
 
 impl SampleRecord {
-    /// What [`crate::physics_force::physics_estimate`] needs to read this pair's masks at `size`
+    /// What [`crate::reconstruction::physics_force::physics_estimate`] needs to read this pair's masks at `size`
     /// (the dataset's size, or the size they were resized to, in either direction): both views'
     /// cameras scaled to that size, and the rod and base exactly as simulated.
     pub fn physics_setup(&self, size: ImageSize) -> PhysicsSetup {
@@ -276,7 +276,7 @@ pub fn read_pair_carms(dataset: &Dataset, id: &str) -> Result<[CArm; 2], Dataset
 }
 
 /// The base pose a blind estimate starts from for pairs of `dataset`: the nominal pose of the
-/// scenes it was simulated with ([`crate::scene::SceneSampling::nominal_base`]), or of the
+/// scenes it was simulated with ([`crate::simulator::scene::SceneSampling::nominal_base`]), or of the
 /// twin's bench for other datasets.
 pub fn nominal_base(dataset: &Dataset) -> NominalBase {
     dataset
@@ -309,7 +309,7 @@ pub enum SimulationError {
     Dataset(#[from] DatasetError),
     /// A sample could not be made.
     #[error(transparent)]
-    Twin(#[from] crate::scene::TwinError),
+    Twin(#[from] crate::simulator::scene::TwinError),
 }
 
 /// Generates `samples` stereo pairs into `out` (or completes an interrupted generation there).
@@ -328,7 +328,7 @@ pub fn simulate_dataset(
 }
 
 /// Which pairs a run writes: part `shard` of a simulation of `samples` pairs seeded `seed`
-/// ([`crate::shard`]: the parts' union, merged, is byte for byte the whole dataset).
+/// ([`crate::dataset::shard`]: the parts' union, merged, is byte for byte the whole dataset).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Part {
     /// Pairs of the whole simulation.

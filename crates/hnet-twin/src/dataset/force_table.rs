@@ -1,12 +1,12 @@
 //! Tables of tip forces in CSV, as people write them: a header naming a key column (a pair's id,
 //! or an image's name) and the columns `fx`, `fy`, `fz` in newtons, in any order and case, with
-//! other columns ignored but `label_origin` ([`crate::label_origin`]). The one reader behind
+//! other columns ignored but `label_origin` ([`crate::dataset::label_origin`]). The one reader behind
 //! `hnet import`'s forces file and the page's force labels (the dataset's own `manifest.csv` has
 //! its own, stricter reader in [`crate::dataset`]).
 
 use std::sync::Arc;
 
-use crate::label_origin::LabelOrigin;
+use crate::dataset::label_origin::LabelOrigin;
 
 /// The force columns, in the order of the force's components.
 pub const FORCE_COLUMNS: [&str; 3] = ["fx", "fy", "fz"];
@@ -20,7 +20,7 @@ pub struct ForceRow {
     pub key: String,
     /// Tip force `(Fx, Fy, Fz)`, newtons.
     pub force_n: [f64; 3],
-    /// Where it came from, when the table says ([`crate::label_origin::ORIGIN_COLUMN`]);
+    /// Where it came from, when the table says ([`crate::dataset::label_origin::ORIGIN_COLUMN`]);
     /// [`LabelOrigin::Unrecorded`] otherwise.
     pub origin: LabelOrigin,
 }

@@ -1,5 +1,5 @@
 //! Pairs drawn off the bench: any catheter and base pose the [`SceneSampling::varied`] preset
-//! draws, seen from any C-arm angles the page lets a user set ([`crate::carm::VIEW_A_PRIMARY_DEG`]
+//! draws, seen from any C-arm angles the page lets a user set ([`crate::simulator::carm::VIEW_A_PRIMARY_DEG`]
 //! and the ranges beside it), on the thorax phantom rendered from about those angles or on chest
 //! radiographs. What the shipped network's masks must hold on; the shape no longer follows from
 //! the force alone (a stiffer catheter bends less), so such pairs teach masks, not force.
@@ -9,11 +9,11 @@ use std::sync::Mutex;
 
 use rand::RngExt;
 
-use crate::carm::{Biplane, CArm, SECONDARY_DEG, VIEW_A_PRIMARY_DEG, VIEW_B_PRIMARY_DEG};
-use crate::scene::{
+use crate::simulator::carm::{Biplane, CArm, SECONDARY_DEG, VIEW_A_PRIMARY_DEG, VIEW_B_PRIMARY_DEG};
+use crate::simulator::scene::{
     Backgrounds, SceneSampling, StereoSample, TwinConfig, TwinError, generate, sample_rng,
 };
-use crate::synthetic_xray::BackgroundSource;
+use crate::simulator::synthetic_xray::BackgroundSource;
 
 /// Step of the grid of C-arm angles at which the thorax phantom is rendered, degrees: a view
 /// takes the phantom of the nearest grid angles (a background only has to look like a thorax
@@ -128,12 +128,12 @@ impl OffBench {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::Modality;
+    use crate::simulator::scene::Modality;
 
     /// A small flat radiograph: rendering the phantom at 512 px takes seconds in a debug build
     /// (the phantom path runs in the training stream's test).
     fn flat_radiograph() -> BackgroundSource {
-        BackgroundSource::chest_radiograph("flat", crate::raster::GreyImage::filled(64, 64, 0.5))
+        BackgroundSource::chest_radiograph("flat", crate::simulator::raster::GreyImage::filled(64, 64, 0.5))
     }
 
     #[test]
