@@ -27,15 +27,17 @@
 //! The 3D drawing's own geometry is here too ([`CArmSketch`], [`force_arrow_mm`]); its camera is
 //! [`crate::orbit_camera`].
 
-use hnet_twin::simulator::carm::{Biplane, CArm, CameraMatrix};
-use hnet_twin::reconstruction::catalogue::{BENCH_CATHETER, CatalogueCatheter, StiffnessCalibration, catalogue};
+use hnet_twin::reconstruction::catalogue::{
+    BENCH_CATHETER, CatalogueCatheter, StiffnessCalibration, catalogue,
+};
 use hnet_twin::reconstruction::centreline::{CentrelineError, Mask};
+use hnet_twin::reconstruction::epipolar::{EpipolarGeometry, ReconstructionError, clip_line};
 use hnet_twin::reconstruction::physics_force::{
     MAX_FIT_RMS_MM, PhysicsError, PhysicsEstimate, PhysicsSetup, physics_estimate,
 };
-use hnet_twin::reconstruction::epipolar::{EpipolarGeometry, ReconstructionError, clip_line};
-use hnet_twin::simulator::rod::{RodBase, RodConfig};
 use hnet_twin::reconstruction::rod_fit::RodFitError;
+use hnet_twin::simulator::carm::{Biplane, CArm, CameraMatrix};
+use hnet_twin::simulator::rod::{RodBase, RodConfig};
 use hnet_twin::simulator::scene::{NominalBase, SceneParams, SceneSampling};
 
 use crate::imaging::WORK_SIZE;

@@ -11,8 +11,8 @@ use hnet_dicom::{
     BiplaneCine, DicomError, PairingError, Plane, PlaneSeries, TracePoint, WindowLevel,
     read_cine_file, trace_csv, twin_push_cine, write_xa,
 };
-use hnet_twin::simulator::carm::Biplane;
 use hnet_twin::reconstruction::physics_force::TipForceEstimate;
+use hnet_twin::simulator::carm::Biplane;
 use hnet_twin::simulator::scene::TwinError;
 use hnet_units::ImageSize;
 
@@ -444,7 +444,10 @@ mod tests {
         }
         ws.set_force(
             &id,
-            Some(([0.1, 0.0, 0.0], hnet_twin::dataset::label_origin::LabelOrigin::Typed)),
+            Some((
+                [0.1, 0.0, 0.0],
+                hnet_twin::dataset::label_origin::LabelOrigin::Typed,
+            )),
         );
         let export = crate::export::dataset_zip(&ws.pairs).unwrap();
         let mut zip = zip::ZipArchive::new(std::io::Cursor::new(&export.zip[..])).unwrap();

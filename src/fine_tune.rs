@@ -6,9 +6,9 @@
 use std::collections::BTreeMap;
 
 use hnet_model::fine_tune::{EpochReport, HeldBackScores};
-use hnet_twin::simulator::carm::{Biplane, CArm};
 use hnet_twin::dataset::label_origin::LabelFilter;
 use hnet_twin::model_facts::{FineTuneRecord, ForceDomain, fine_tuned_provenance};
+use hnet_twin::simulator::carm::{Biplane, CArm};
 use hnet_twin::simulator::scene::{Backgrounds, TwinConfig, TwinError, generate};
 use hnet_units::ImageSize;
 

@@ -2,8 +2,8 @@
 //! plausibility rule, and a CSV of labels (`id,fx,fy,fz[,label_origin]`, a dataset's
 //! `manifest.csv` included) with where each came from.
 
-use hnet_twin::dataset::implausible_tip_force;
 use hnet_twin::dataset::force_table::{ForceTableError, read_force_table};
+use hnet_twin::dataset::implausible_tip_force;
 use hnet_twin::dataset::label_origin::LabelOrigin;
 
 /// Why a force-label file cannot be used: the file, and what is wrong in it (with the line,

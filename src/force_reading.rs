@@ -3,10 +3,10 @@
 //! weights were trained on; and whether H-Net's estimate and the physics estimate (the rod fitted
 //! to the catheter in 3D, [`crate::catheter_3d`]) disagree beyond what their errors explain.
 
-use hnet_twin::simulator::carm::Biplane;
-use hnet_twin::reconstruction::centreline::{CentrelineSettings, Mask, catheter_seen};
 use hnet_twin::model_facts::{ForceDomain, ModelFacts};
+use hnet_twin::reconstruction::centreline::{CentrelineSettings, Mask, catheter_seen};
 use hnet_twin::reconstruction::physics_force::{ForceCombination, TipForceEstimate};
+use hnet_twin::simulator::carm::Biplane;
 use hnet_twin::simulator::scene::{Modality, SceneParams};
 
 use crate::workspace::{LabeledPair, PairSource};

@@ -141,7 +141,11 @@ pub fn rescale_mask(mask: &[f32], from: usize, to: usize) -> Vec<f32> {
         data: mask.to_vec(),
     };
     image
-        .crop_resampled(hnet_twin::simulator::raster::Rect([0.0, 0.0, 1.0, 1.0]), to, to)
+        .crop_resampled(
+            hnet_twin::simulator::raster::Rect([0.0, 0.0, 1.0, 1.0]),
+            to,
+            to,
+        )
         .data
 }
 

@@ -6,8 +6,8 @@
 //! Kept apart from the IndexedDB calls so that the format is tested natively, with property
 //! tests, as well as in the browser.
 
-use hnet_twin::dataset::{ImageRef, Split, encode_png};
 use hnet_twin::dataset::label_origin::LabelOrigin;
+use hnet_twin::dataset::{ImageRef, Split, encode_png};
 
 use crate::imaging::WORK_SIZE;
 use crate::workspace::{LabeledPair, PairSource};

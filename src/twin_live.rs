@@ -9,7 +9,9 @@ use hnet_twin::simulator::scene::{
     Modality, PAPER_BENCH, SceneParams, SceneSampling, TwinConfig, render_view,
 };
 use hnet_twin::simulator::sensor_plate::{self, ContactError, ContactState, PlateContact};
-use hnet_twin::simulator::synthetic_xray::{Anatomy, BackgroundSource, PatchLayout, PatchRule, compose};
+use hnet_twin::simulator::synthetic_xray::{
+    Anatomy, BackgroundSource, PatchLayout, PatchRule, compose,
+};
 use hnet_twin::vec3::Vec3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

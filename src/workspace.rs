@@ -4,9 +4,9 @@
 //! Images and masks are square, [`WORK_SIZE`] pixels per side, row-major; pixel `(x, y)` covers
 //! `[x, x+1) x [y, y+1)` in image coordinates (origin at the top-left corner, `y` down).
 
-use hnet_twin::simulator::carm::Biplane;
-use hnet_twin::dataset::{Split, next_split};
 use hnet_twin::dataset::label_origin::LabelOrigin;
+use hnet_twin::dataset::{Split, next_split};
+use hnet_twin::simulator::carm::Biplane;
 use serde::{Deserialize, Serialize};
 
 use crate::force_label::ForceLabelRow;

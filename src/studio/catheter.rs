@@ -12,8 +12,8 @@ use crate::catheter_calibration;
 use crate::error_text::with_causes;
 use crate::storage;
 use crate::workspace::Workspace;
-use hnet_twin::simulator::carm::Biplane;
 use hnet_twin::reconstruction::catalogue::StiffnessCalibration;
+use hnet_twin::simulator::carm::Biplane;
 
 /// The catheter in 3D of one pair, as the page computed it ([`Studio::reconstruct_shown`]).
 #[derive(Debug, Clone, PartialEq)]

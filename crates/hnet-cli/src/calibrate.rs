@@ -11,12 +11,14 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use hnet_twin::reconstruction::catalogue::{BENCH_CATHETER, CatalogueCatheter, calibrate_stiffness};
-use hnet_twin::reconstruction::centreline::Mask;
 use hnet_twin::dataset::Dataset;
 use hnet_twin::dataset::files::write_atomically;
-use hnet_twin::reconstruction::physics_force::{PhysicsSetup, physics_estimate};
 use hnet_twin::dataset::simulate::{blind_cameras, nominal_base, read_pair_carms};
+use hnet_twin::reconstruction::catalogue::{
+    BENCH_CATHETER, CatalogueCatheter, calibrate_stiffness,
+};
+use hnet_twin::reconstruction::centreline::Mask;
+use hnet_twin::reconstruction::physics_force::{PhysicsSetup, physics_estimate};
 use rayon::prelude::*;
 
 use crate::backend::BackendChoice;

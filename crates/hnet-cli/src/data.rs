@@ -15,8 +15,8 @@ use burn::data::dataloader::batcher::Batcher;
 use burn::data::dataset::{Dataset as BurnDataset, DatasetError};
 use burn::tensor::Device;
 use hnet_model::training::{LabelledPair, TrainingBatch};
-use hnet_twin::dataset::{Dataset, LoadedPair, ManifestRow, Split, SquareSymmetry};
 use hnet_twin::dataset::label_origin::LabelFilter;
+use hnet_twin::dataset::{Dataset, LoadedPair, ManifestRow, Split, SquareSymmetry};
 use hnet_units::ImageSize;
 use rayon::prelude::*;
 

@@ -25,12 +25,12 @@ use crate::data::StereoSplit;
 use crate::network::{load_run, load_weights, predict_entry};
 use crate::physics_check::{self, BlindEstimator, Estimator, MaskOrigin, PhysicsEvaluation};
 use crate::run_dir::RunDir;
-use hnet_twin::simulator::carm::HeaderError;
-use hnet_twin::reconstruction::catalogue::{BENCH_CATHETER, CatalogueCatheter};
+use hnet_twin::dataset::simulate::nominal_base;
 use hnet_twin::model_facts::{
     ForceDomain, MeasuredCombination, MeasuredForce, ModelFacts, recorded_name,
 };
-use hnet_twin::dataset::simulate::nominal_base;
+use hnet_twin::reconstruction::catalogue::{BENCH_CATHETER, CatalogueCatheter};
+use hnet_twin::simulator::carm::HeaderError;
 
 #[derive(clap::Args, Debug)]
 #[command(group(clap::ArgGroup::new("model").required(true).args(["run", "weights"])))]

@@ -10,12 +10,12 @@ use std::collections::HashSet;
 
 use anyhow::{Context, bail};
 use hnet_dicom::PlaneGeometry;
+use hnet_twin::dataset::force_table::{ForceRow, read_force_table};
+use hnet_twin::dataset::import::{recording_mask, row_origin};
 use hnet_twin::dataset::{
     DatasetError, DatasetHeader, DatasetWriter, ImageRef, ManifestRow, assign_splits, resized,
     sample_files,
 };
-use hnet_twin::dataset::force_table::{ForceRow, read_force_table};
-use hnet_twin::dataset::import::{recording_mask, row_origin};
 use hnet_units::ImageSize;
 use serde_json::json;
 

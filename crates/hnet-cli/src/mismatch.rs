@@ -21,18 +21,18 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use burn::tensor::Device;
 use hnet_model::metrics::ForceMetrics;
-use hnet_twin::simulator::carm::HeaderError;
-use hnet_twin::reconstruction::catalogue::{BENCH_CATHETER, CatalogueCatheter};
 use hnet_twin::dataset::Split;
+use hnet_twin::reconstruction::catalogue::{BENCH_CATHETER, CatalogueCatheter};
+use hnet_twin::simulator::carm::HeaderError;
 use hnet_twin::simulator::render::XRayDetector;
 use hnet_twin::simulator::scene::{BaseLean, Modality, SceneSampling, Sheath};
 use serde::Serialize;
 
 use crate::backend::BackendChoice;
+use crate::dataset::simulate::{Scenes, SimulateArgs};
 use crate::evaluation::{EvalOptions, Evaluation, evaluate};
 use crate::network::load_weights;
 use crate::physics_check::MaskOrigin;
-use crate::dataset::simulate::{Scenes, SimulateArgs};
 
 /// `hnet study mismatch`.
 #[derive(clap::Args, Debug)]

@@ -14,18 +14,18 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use anyhow::Context;
+use hnet_twin::dataset::{Dataset, Split, resized};
 use hnet_twin::reconstruction::centreline::{
     CentrelineSettings, MAX_CATHETER_SHARE, MIN_CATHETER_SHARE, Mask, catheter_seen,
 };
-use hnet_twin::dataset::{Dataset, Split, resized};
 use hnet_twin::simulator::scene::{Modality, TwinConfig, render_empty_xray_view, sample_rng};
 use hnet_twin::simulator::synthetic_xray::BackgroundSource;
 use rand::RngExt;
 
 use crate::backend::BackendChoice;
 use crate::data::{StereoItem, StereoSplit};
-use crate::network::{load_weights, predict};
 use crate::dataset::simulate::background_files;
+use crate::network::{load_weights, predict};
 
 /// `hnet study no-catheter`.
 #[derive(clap::Args, Debug)]

@@ -13,16 +13,18 @@ use std::fmt::Write as _;
 use std::time::Instant;
 
 use hnet_model::metrics::{AXES, ForceAccumulator, ForceMetrics};
-use hnet_twin::simulator::carm::HeaderError;
+use hnet_twin::dataset::Dataset;
+use hnet_twin::dataset::simulate::{SampleRecord, read_sample_record};
 use hnet_twin::reconstruction::catalogue::CatalogueCatheter;
 use hnet_twin::reconstruction::centreline::Mask;
-use hnet_twin::dataset::Dataset;
-use hnet_twin::reconstruction::physics_force::{CalibrationPair, ForceCombination, PhysicsSetup, physics_estimate};
+use hnet_twin::reconstruction::physics_force::{
+    CalibrationPair, ForceCombination, PhysicsSetup, physics_estimate,
+};
+use hnet_twin::reconstruction::rod_fit::distances_to_rod;
+use hnet_twin::simulator::carm::HeaderError;
 use hnet_twin::simulator::render::PROXIMAL_SHAFT_MM;
 use hnet_twin::simulator::rod;
-use hnet_twin::reconstruction::rod_fit::distances_to_rod;
 use hnet_twin::simulator::scene::NominalBase;
-use hnet_twin::dataset::simulate::{SampleRecord, read_sample_record};
 use hnet_twin::vec3::Vec3;
 use hnet_units::ImageSize;
 use rayon::prelude::*;
@@ -419,8 +421,8 @@ pub fn markdown(checks: &[PhysicsEvaluation]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use hnet_twin::simulator::scene::{Backgrounds, Modality, TwinConfig};
     use hnet_twin::dataset::simulate::simulate_dataset;
+    use hnet_twin::simulator::scene::{Backgrounds, Modality, TwinConfig};
 
     /// Bench pairs whose true masks stand in for a network's, its force the truth 0.05 N off on
     /// every axis: each fitted pair gets its physics force and standard error, and the combined

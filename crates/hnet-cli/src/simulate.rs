@@ -5,13 +5,15 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use hnet_twin::dataset::import::is_image_file;
-use hnet_twin::simulator::off_bench::OffBench;
-use hnet_twin::simulator::raster::GreyImage;
-use hnet_twin::simulator::render::XRayDetector;
-use hnet_twin::simulator::scene::{Backgrounds, MaskSource, Modality, PAPER_BENCH, SceneSampling, TwinConfig};
 use hnet_twin::dataset::shard::{Shard, merge_shards};
 use hnet_twin::dataset::simulate::{
     OFF_BENCH_VIEWS, Part, simulate_dataset_part, simulate_off_bench_dataset,
+};
+use hnet_twin::simulator::off_bench::OffBench;
+use hnet_twin::simulator::raster::GreyImage;
+use hnet_twin::simulator::render::XRayDetector;
+use hnet_twin::simulator::scene::{
+    Backgrounds, MaskSource, Modality, PAPER_BENCH, SceneSampling, TwinConfig,
 };
 use hnet_twin::simulator::synthetic_xray::BackgroundSource;
 

@@ -11,14 +11,14 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use hnet_dicom::{Plane, TracePoint, trace_csv};
-use hnet_twin::simulator::carm::Biplane;
-use hnet_twin::reconstruction::catalogue::{BENCH_CATHETER, CatalogueCatheter};
-use hnet_twin::reconstruction::centreline::{CentrelineSettings, Mask, catheter_seen};
 use hnet_twin::dataset::LoadedPair;
 use hnet_twin::model_facts::{ModelFacts, recorded_name};
+use hnet_twin::reconstruction::catalogue::{BENCH_CATHETER, CatalogueCatheter};
+use hnet_twin::reconstruction::centreline::{CentrelineSettings, Mask, catheter_seen};
 use hnet_twin::reconstruction::physics_force::{
     EstimateKind, ForceCombination, PhysicsSetup, TipForceEstimate, physics_estimate,
 };
+use hnet_twin::simulator::carm::Biplane;
 use hnet_twin::simulator::scene::SceneSampling;
 
 use crate::backend::BackendChoice;
@@ -141,8 +141,11 @@ pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
     }
     bar.finish_and_clear();
     let weights_name = recorded_name(&args.weights);
-    hnet_twin::dataset::files::write_atomically(&args.out, trace_csv(&trace, &weights_name).as_bytes())
-        .with_context(|| format!("cannot write {}", args.out.display()))?;
+    hnet_twin::dataset::files::write_atomically(
+        &args.out,
+        trace_csv(&trace, &weights_name).as_bytes(),
+    )
+    .with_context(|| format!("cannot write {}", args.out.display()))?;
     let count = |kind| {
         trace
             .iter()

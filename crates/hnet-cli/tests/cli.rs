@@ -571,7 +571,8 @@ fn bad_input_gets_a_clear_error_naming_the_file() {
     assert_eq!(header["source"]["twin"]["scene"]["base_tilt_deg"], 70.0);
     // The paper's bench: a plate that starts through the unloaded tip is refused, naming the
     // setting, before anything is written; its own preset simulates, the contact in the manifest.
-    let mut bench = serde_json::to_value(hnet_twin::simulator::scene::SceneSampling::paper_bench()).unwrap();
+    let mut bench =
+        serde_json::to_value(hnet_twin::simulator::scene::SceneSampling::paper_bench()).unwrap();
     bench["plate"]["standoff_mm"] = (-1.0).into();
     let through = dir.join("through.json");
     std::fs::write(&through, bench.to_string()).unwrap();

@@ -4,17 +4,17 @@ use std::collections::BTreeMap;
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use hnet_twin::simulator::carm::triangulate;
-use hnet_twin::dataset::{Dataset, LoadedPair, Split};
 use hnet_twin::dataset::import::{ImportOptions, MaskThreshold, import_recordings};
-use hnet_twin::simulator::off_bench::OffBench;
-use hnet_twin::simulator::raster::GreyImage;
-use hnet_twin::simulator::scene::{Backgrounds, Modality, TwinConfig};
 use hnet_twin::dataset::shard::{Shard, merge_shards};
 use hnet_twin::dataset::simulate::{
     OFF_BENCH_VIEWS, Part, read_sample_record, simulate_dataset, simulate_dataset_part,
     simulate_off_bench_dataset,
 };
+use hnet_twin::dataset::{Dataset, LoadedPair, Split};
+use hnet_twin::simulator::carm::triangulate;
+use hnet_twin::simulator::off_bench::OffBench;
+use hnet_twin::simulator::raster::GreyImage;
+use hnet_twin::simulator::scene::{Backgrounds, Modality, TwinConfig};
 use hnet_twin::simulator::synthetic_xray::BackgroundSource;
 
 fn scratch(name: &str) -> PathBuf {
@@ -385,16 +385,16 @@ mod properties {
     use std::path::Path;
 
     use hnet_mutations::{cases, edits, mutate};
-    use hnet_twin::simulator::carm::CArm;
+    use hnet_twin::dataset::force_table::{parse_newtons, read_force_table};
+    use hnet_twin::dataset::simulate::{SampleRecord, ViewRecord, read_sample_record};
     use hnet_twin::dataset::{
         Dataset, DatasetHeader, HEADER_FILE, MANIFEST_FILE, ManifestRow, SAMPLES_DIR, Split,
         header_json, manifest_csv, parse_manifest, record_path,
     };
-    use hnet_twin::dataset::force_table::{parse_newtons, read_force_table};
+    use hnet_twin::simulator::carm::CArm;
     use hnet_twin::simulator::raster::Rect;
     use hnet_twin::simulator::rod::RodConfig;
     use hnet_twin::simulator::scene::SceneParams;
-    use hnet_twin::dataset::simulate::{SampleRecord, ViewRecord, read_sample_record};
     use hnet_twin::simulator::synthetic_xray::{Anatomy, PatchLayout};
     use hnet_twin::vec3::Vec3;
     use hnet_units::ImageSize;
@@ -545,17 +545,19 @@ mod properties {
             proptest::option::of(vec3()),
         )
             .prop_map(
-                |(tip_force_n, [ei, length, curvature], base, [tilt, azimuth, roll], wall)| SceneParams {
-                    tip_force_n,
-                    bending_stiffness_n_m2: ei,
-                    length_mm: length,
-                    precurvature_per_mm: curvature,
-                    base_position_mm: base,
-                    base_tilt_deg: tilt,
-                    base_azimuth_deg: azimuth,
-                    base_roll_deg: roll,
-                    plate: None,
-                    wall_normal: wall,
+                |(tip_force_n, [ei, length, curvature], base, [tilt, azimuth, roll], wall)| {
+                    SceneParams {
+                        tip_force_n,
+                        bending_stiffness_n_m2: ei,
+                        length_mm: length,
+                        precurvature_per_mm: curvature,
+                        base_position_mm: base,
+                        base_tilt_deg: tilt,
+                        base_azimuth_deg: azimuth,
+                        base_roll_deg: roll,
+                        plate: None,
+                        wall_normal: wall,
+                    }
                 },
             );
         (

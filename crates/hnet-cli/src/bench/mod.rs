@@ -4,8 +4,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
-use hnet_twin::simulator::scene::{Modality, TwinConfig};
 use hnet_twin::dataset::simulate::simulate_dataset;
+use hnet_twin::simulator::scene::{Modality, TwinConfig};
 use hnet_units::ImageSize;
 use serde::Serialize;
 

@@ -21,11 +21,11 @@ use anyhow::{Context, bail};
 use burn::data::dataloader::{DataLoader, DataLoaderIterator};
 use burn::data::dataset::{Dataset as BurnDataset, DatasetError};
 use burn::tensor::Device;
+use hnet_twin::dataset::simulate::OFF_BENCH_VIEWS;
 use hnet_twin::dataset::{Dataset, LoadedPair, SquareSymmetry};
 use hnet_twin::simulator::off_bench::OffBench;
 use hnet_twin::simulator::render::DetectorRanges;
 use hnet_twin::simulator::scene::{Backgrounds, SceneSampling, TwinConfig, generate, sample_rng};
-use hnet_twin::dataset::simulate::OFF_BENCH_VIEWS;
 use hnet_units::ImageSize;
 use rand::RngExt;
 use serde::{Deserialize, Serialize};
@@ -380,8 +380,8 @@ mod tests {
     use crate::data::{StereoBatcher, StereoItem};
     use burn::data::dataloader::DataLoaderBuilder;
     use hnet_model::training::TrainingBatch;
-    use hnet_twin::simulator::scene::Modality;
     use hnet_twin::dataset::simulate::simulate_dataset;
+    use hnet_twin::simulator::scene::Modality;
 
     fn dataset(name: &str, seed: u64) -> Dataset {
         let root = std::env::temp_dir().join(format!("hnet-stream-{name}-{}", std::process::id()));

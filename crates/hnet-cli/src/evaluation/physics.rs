@@ -3,10 +3,10 @@
 
 use burn::tensor::Device;
 use hnet_model::predictor::{PairOutput, Predictor};
-use hnet_twin::reconstruction::centreline::Mask;
-use hnet_twin::dataset::{Dataset, Split};
-use hnet_twin::reconstruction::physics_force::{ForceCombination, MIN_CALIBRATION_PAIRS};
 use hnet_twin::dataset::simulate::SampleRecord;
+use hnet_twin::dataset::{Dataset, Split};
+use hnet_twin::reconstruction::centreline::Mask;
+use hnet_twin::reconstruction::physics_force::{ForceCombination, MIN_CALIBRATION_PAIRS};
 
 use crate::data::{StereoItem, StereoSplit};
 use crate::network::predict;

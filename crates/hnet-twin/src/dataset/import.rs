@@ -11,12 +11,12 @@ use std::path::{Path, PathBuf};
 use hnet_units::ImageSize;
 use serde_json::json;
 
+use crate::dataset::force_table::{ForceRow, ForceTableError, read_force_table};
+use crate::dataset::label_origin::LabelOrigin;
 use crate::dataset::{
     DatasetError, DatasetHeader, DatasetWriter, ImageRef, ManifestRow, assign_splits,
     image_size_of, is_valid_id, resized, sample_files,
 };
-use crate::dataset::force_table::{ForceRow, ForceTableError, read_force_table};
-use crate::dataset::label_origin::LabelOrigin;
 use crate::simulator::scene::{luma, otsu_threshold, threshold_mask};
 
 /// How masks are made from the recorded images.

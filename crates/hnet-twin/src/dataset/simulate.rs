@@ -9,20 +9,20 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
-use crate::simulator::carm::{CArm, CameraMatrix, HeaderError};
-use crate::reconstruction::catalogue::CatalogueCatheter;
+use crate::dataset::shard::Shard;
 use crate::dataset::{
     Dataset, DatasetError, DatasetHeader, DatasetWriter, ImageRef, ManifestRow, Split,
     assign_splits, sample_files,
 };
-use crate::simulator::off_bench::OffBench;
+use crate::reconstruction::catalogue::CatalogueCatheter;
 use crate::reconstruction::physics_force::PhysicsSetup;
+use crate::simulator::carm::{CArm, CameraMatrix, HeaderError};
+use crate::simulator::off_bench::OffBench;
 use crate::simulator::rod::RodConfig;
 use crate::simulator::scene::{
     Backgrounds, NominalBase, SceneParams, SceneSampling, StereoSample, TwinConfig, generate,
     sample_rng,
 };
-use crate::dataset::shard::Shard;
 use crate::simulator::synthetic_xray::PatchLayout;
 use crate::vec3::Vec3;
 

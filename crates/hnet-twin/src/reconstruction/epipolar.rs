@@ -32,8 +32,8 @@
 use nalgebra::{Matrix3, Matrix3x4, Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 
-use crate::simulator::carm::{CameraMatrix, triangulate};
 use crate::reconstruction::centreline::Centreline;
+use crate::simulator::carm::{CameraMatrix, triangulate};
 use crate::simulator::rod::RodBase;
 use crate::vec3::Vec3;
 
@@ -541,8 +541,10 @@ pub fn reconstruct(
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use crate::reconstruction::centreline::{
+        CentrelineError, CentrelineSettings, Mask, extract_centreline,
+    };
     use crate::simulator::carm::{Biplane, CArm};
-    use crate::reconstruction::centreline::{CentrelineError, CentrelineSettings, Mask, extract_centreline};
     use crate::simulator::render::PROXIMAL_SHAFT_MM;
     use crate::simulator::rod::RodShape;
     use crate::simulator::scene::{Backgrounds, Modality, StereoSample, TwinConfig, generate};
@@ -589,7 +591,11 @@ pub(crate) mod tests {
     /// How far `r` is from the true catheter `shape`: the mean distance of its points and the
     /// distance of its last point from the true tip, mm.
     pub(crate) fn errors_to_truth(r: &Reconstruction, shape: &RodShape) -> (f64, f64) {
-        let distances = crate::reconstruction::rod_fit::distances_to_rod(shape, PROXIMAL_SHAFT_MM, &r.points_mm);
+        let distances = crate::reconstruction::rod_fit::distances_to_rod(
+            shape,
+            PROXIMAL_SHAFT_MM,
+            &r.points_mm,
+        );
         let mean = distances.iter().sum::<f64>() / distances.len() as f64;
         (mean, (r.last_mm() - shape.tip_mm()).norm())
     }
@@ -647,8 +653,8 @@ pub(crate) mod tests {
 
     #[test]
     fn the_shaft_comes_from_below_the_base() {
-        let params =
-            crate::simulator::scene::SceneSampling::bench().sample(&mut crate::simulator::scene::sample_rng(1, 0));
+        let params = crate::simulator::scene::SceneSampling::bench()
+            .sample(&mut crate::simulator::scene::sample_rng(1, 0));
         let (_, base) = params.rod(&crate::simulator::rod::RodConfig::default());
         for view in Biplane::cardiac(64).views() {
             let hint = proximal_hint_px(&view.camera_matrix(), &base).unwrap();

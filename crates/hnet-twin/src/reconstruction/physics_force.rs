@@ -5,7 +5,6 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::simulator::carm::CameraMatrix;
 use crate::reconstruction::catalogue::CatalogueCatheter;
 use crate::reconstruction::centreline::{
     Centreline, CentrelineError, CentrelineSettings, Mask, extract_centreline,
@@ -13,8 +12,11 @@ use crate::reconstruction::centreline::{
 use crate::reconstruction::epipolar::{
     Reconstruction, ReconstructionError, ReconstructionSettings, proximal_hint_px, reconstruct,
 };
+use crate::reconstruction::rod_fit::{
+    RodFit, RodFitError, RodFitSettings, fit_rod_to_reconstruction,
+};
+use crate::simulator::carm::CameraMatrix;
 use crate::simulator::rod::{RodBase, RodConfig};
-use crate::reconstruction::rod_fit::{RodFit, RodFitError, RodFitSettings, fit_rod_to_reconstruction};
 use crate::simulator::scene::NominalBase;
 
 /// What the masks are read with: both views' cameras, the catheter as the rod model knows it,

@@ -9,7 +9,9 @@ use std::sync::Mutex;
 
 use rand::RngExt;
 
-use crate::simulator::carm::{Biplane, CArm, SECONDARY_DEG, VIEW_A_PRIMARY_DEG, VIEW_B_PRIMARY_DEG};
+use crate::simulator::carm::{
+    Biplane, CArm, SECONDARY_DEG, VIEW_A_PRIMARY_DEG, VIEW_B_PRIMARY_DEG,
+};
 use crate::simulator::scene::{
     Backgrounds, SceneSampling, StereoSample, TwinConfig, TwinError, generate, sample_rng,
 };
@@ -133,7 +135,10 @@ mod tests {
     /// A small flat radiograph: rendering the phantom at 512 px takes seconds in a debug build
     /// (the phantom path runs in the training stream's test).
     fn flat_radiograph() -> BackgroundSource {
-        BackgroundSource::chest_radiograph("flat", crate::simulator::raster::GreyImage::filled(64, 64, 0.5))
+        BackgroundSource::chest_radiograph(
+            "flat",
+            crate::simulator::raster::GreyImage::filled(64, 64, 0.5),
+        )
     }
 
     #[test]

@@ -7,8 +7,8 @@
 use rand::{Rng, RngExt};
 use serde::{Deserialize, Serialize};
 
-use crate::simulator::rod::{self, RodBase, RodConfig, RodError, StiffSegment};
 use crate::reconstruction::rod_fit::{BasePrior, PRIOR_CORRELATED_POINTS};
+use crate::simulator::rod::{self, RodBase, RodConfig, RodError, StiffSegment};
 use crate::simulator::sensor_plate::{PlateContact, SensorPlate};
 use crate::vec3::{Mat3, Vec3};
 
@@ -429,7 +429,9 @@ impl SceneSampling {
         if let Some(friction) = self.contact_friction
             && !(friction.is_finite() && (0.0..=2.0).contains(&friction))
         {
-            return Err(format!("contact_friction {friction} must be between 0 and 2"));
+            return Err(format!(
+                "contact_friction {friction} must be between 0 and 2"
+            ));
         }
         if let Some(lean) = self.base_lean
             && !(lean.azimuth_deg.is_finite() && (0.0..=90.0).contains(&lean.tilt_deg))
@@ -640,8 +642,8 @@ impl SceneSampling {
             base.position_mm -= base.orientation.column(2) * sheath_mm;
             rod.length_mm += sheath_mm;
             rod.precurve_start_mm += sheath_mm;
-            rod.steps = (rod.steps as f64 * rod.length_mm / (rod.length_mm - sheath_mm)).ceil()
-                as usize;
+            rod.steps =
+                (rod.steps as f64 * rod.length_mm / (rod.length_mm - sheath_mm)).ceil() as usize;
             for segment in &mut rod.stiff_segments {
                 segment.from_mm += sheath_mm;
                 segment.to_mm += sheath_mm;
@@ -876,8 +878,11 @@ mod tests {
             (20.0, 130.0, -60.0),
             (170.0, -40.0, 10.0),
         ] {
-            (scene.base_tilt_deg, scene.base_azimuth_deg, scene.base_roll_deg) =
-                (tilt, azimuth, roll);
+            (
+                scene.base_tilt_deg,
+                scene.base_azimuth_deg,
+                scene.base_roll_deg,
+            ) = (tilt, azimuth, roll);
             let mut read = scene;
             read.set_base_frame(scene.base_frame());
             let (a, b) = (scene.base_frame().0, read.base_frame().0);
@@ -896,7 +901,10 @@ mod tests {
         };
         let half = std::f64::consts::FRAC_1_SQRT_2;
         let axis = leant.nominal_scene().base_frame().column(2);
-        assert!((axis - Vec3::new(0.0, -half, half)).norm() < 1e-9, "{axis:?}");
+        assert!(
+            (axis - Vec3::new(0.0, -half, half)).norm() < 1e-9,
+            "{axis:?}"
+        );
         let drawn = leant.sample(&mut sample_rng(3, 0));
         assert!(leant.departures(&drawn).is_empty());
         assert!(!SceneSampling::bench().departures(&drawn).is_empty());
@@ -934,7 +942,10 @@ mod tests {
         assert_eq!(sheathed.params, plain.params);
         assert!((flexible(&sheathed) - flexible(&plain)).abs() < 1e-6);
         let moved = (sheathed.shape.points_mm[0] - plain.shape.points_mm[0]).norm();
-        assert!(moved > 1e-3 && moved < 10.0, "the sheath's end moved {moved} mm");
+        assert!(
+            moved > 1e-3 && moved < 10.0,
+            "the sheath's end moved {moved} mm"
+        );
         assert_ne!(sheathed.views[0].mask, plain.views[0].mask);
         // A contact on the tip's surface: the wall within the friction cone, the same force.
         let touching = with(
