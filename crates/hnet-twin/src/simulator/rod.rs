@@ -258,7 +258,8 @@ impl RodShape {
     }
 
     /// The part from arc length `arc_mm` to the tip, its arc lengths counted from there (the
-    /// first point kept is the first at or beyond `arc_mm`).
+    /// first point kept is the first at or beyond `arc_mm`). Its base moment stays the one at
+    /// the whole rod's base.
     pub fn distal_from(&self, arc_mm: f64) -> Self {
         let first = self
             .arc_mm
@@ -341,13 +342,14 @@ struct Problem<'a> {
 }
 
 impl Problem<'_> {
-    fn derivative(&self, s: f64, y: &State) -> Derivative {
+    /// The state's derivative at arc length `s`, where the rod is `factor` times as stiff as
+    /// its base stiffness.
+    fn derivative(&self, s: f64, y: &State, factor: f64) -> Derivative {
         let q = Quat(y.q);
         let rotation = q.to_matrix();
         let tangent = rotation.column(2);
         let n = self.tip_force + self.weight * (self.config.length_mm - s);
         let m_body = rotation.transpose() * y.m;
-        let factor = self.config.stiffness_factor(s);
         let u = Vec3::new(
             m_body[0] / (factor * self.stiffness[0]),
             m_body[1] / (factor * self.stiffness[1]),
@@ -394,10 +396,13 @@ impl Problem<'_> {
         push(&mut shape, 0.0, &y);
         for i in 0..steps {
             let s = i as f64 * h;
-            let k1 = self.derivative(s, &y);
-            let k2 = self.derivative(s + h / 2.0, &y.advanced(&k1, h / 2.0));
-            let k3 = self.derivative(s + h / 2.0, &y.advanced(&k2, h / 2.0));
-            let k4 = self.derivative(s + h, &y.advanced(&k3, h));
+            // One stiffness per step, the one at its middle: a stiff segment that starts or
+            // ends on a step boundary then covers exactly its steps.
+            let factor = self.config.stiffness_factor(s + h / 2.0);
+            let k1 = self.derivative(s, &y, factor);
+            let k2 = self.derivative(s + h / 2.0, &y.advanced(&k1, h / 2.0), factor);
+            let k3 = self.derivative(s + h / 2.0, &y.advanced(&k2, h / 2.0), factor);
+            let k4 = self.derivative(s + h, &y.advanced(&k3, h), factor);
             y.p += (k1.p + k2.p * 2.0 + k3.p * 2.0 + k4.p) * (h / 6.0);
             y.m += (k1.m + k2.m * 2.0 + k3.m * 2.0 + k4.m) * (h / 6.0);
             for j in 0..4 {
