@@ -20,7 +20,7 @@ use hnet_units::ImageSize;
 use serde_json::json;
 
 use crate::cine::{grey_pair, open_cine};
-use crate::dataset::import::ImportArgs;
+use crate::import::ImportArgs;
 use crate::progress;
 
 /// The forces CSV's key column for DICOM: the frame number, from 1.

@@ -29,10 +29,10 @@ use hnet_twin::simulator::scene::{BaseLean, Modality, SceneSampling, Sheath};
 use serde::Serialize;
 
 use crate::backend::BackendChoice;
-use crate::dataset::simulate::{Scenes, SimulateArgs};
 use crate::evaluation::{EvalOptions, Evaluation, evaluate};
 use crate::network::load_weights;
 use crate::physics_check::MaskOrigin;
+use crate::simulate::{Scenes, SimulateArgs};
 
 /// `hnet study mismatch`.
 #[derive(clap::Args, Debug)]
@@ -389,7 +389,7 @@ pub fn run(args: &MismatchArgs) -> anyhow::Result<()> {
     let mut rows = Vec::new();
     for (index, set) in &suite {
         let data = args.out.join(set.name);
-        crate::dataset::simulate::run(&SimulateArgs {
+        crate::simulate::run(&SimulateArgs {
             modality: Modality::Xray2,
             samples: args.samples,
             size: model.image_size.width,

@@ -24,8 +24,8 @@ use rand::RngExt;
 
 use crate::backend::BackendChoice;
 use crate::data::{StereoItem, StereoSplit};
-use crate::dataset::simulate::background_files;
 use crate::network::{load_weights, predict};
+use crate::simulate::background_files;
 
 /// `hnet study no-catheter`.
 #[derive(clap::Args, Debug)]
@@ -92,7 +92,7 @@ pub fn run(args: &NoCatheterArgs) -> anyhow::Result<()> {
     let phantom = [&twin.views.a, &twin.views.b].map(|view| BackgroundSource::phantom(view, 512));
     let radiographs: Vec<BackgroundSource> = background_files(&args.backgrounds)?
         .iter()
-        .map(|path| crate::dataset::simulate::load_radiograph(path))
+        .map(|path| crate::simulate::load_radiograph(path))
         .collect::<anyhow::Result<_>>()?;
     let empty_views = |name: &str, source_of: &dyn Fn(usize, usize) -> BackgroundSource| {
         (0..args.pairs)

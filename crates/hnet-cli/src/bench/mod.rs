@@ -10,7 +10,7 @@ use hnet_units::ImageSize;
 use serde::Serialize;
 
 use crate::backend::BackendChoice;
-use crate::dataset::simulate::{backgrounds, parse_modality};
+use crate::simulate::{backgrounds, parse_modality};
 
 mod layers;
 

@@ -31,7 +31,7 @@ use rand::RngExt;
 use serde::{Deserialize, Serialize};
 
 use super::StereoItem;
-use crate::dataset::simulate::radiographs;
+use crate::simulate::radiographs;
 
 /// Settings of a training stream (`stream` in a training config).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

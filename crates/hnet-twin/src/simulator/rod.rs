@@ -162,9 +162,8 @@ impl RodConfig {
                 to_mm,
                 factor,
             } = *segment;
-            if !(0.0 <= from_mm && from_mm < to_mm && to_mm <= self.length_mm)
-                || !(factor.is_finite() && factor > 0.0)
-            {
+            let within = 0.0 <= from_mm && from_mm < to_mm && to_mm <= self.length_mm;
+            if !(within && factor.is_finite() && factor > 0.0) {
                 return Err(RodError::InvalidConfig(format!(
                     "stiff segment {from_mm}-{to_mm} mm (x{factor}) must lie within the rod's \
                      {} mm and stiffen it by a positive factor",

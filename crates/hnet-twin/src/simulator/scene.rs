@@ -649,7 +649,7 @@ impl SceneSampling {
             let step_mm = rod.length_mm / rod.steps as f64;
             let sheath_steps = (sheath.free_length_mm / step_mm).round().max(1.0) as usize;
             sheath_mm = sheath_steps as f64 * step_mm;
-            base.position_mm -= base.orientation.column(2) * sheath_mm;
+            base.position_mm = base.position_mm - base.orientation.column(2) * sheath_mm;
             rod.length_mm += sheath_mm;
             rod.precurve_start_mm += sheath_mm;
             rod.steps += sheath_steps;
