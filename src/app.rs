@@ -17,23 +17,33 @@ use crate::components::{
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
 use crate::storage;
-use crate::studio::{Studio, install_reconstruction, load_model};
+use crate::studio::{Notices, Stores, Studio, install_reconstruction, load_model};
 use crate::workspace::Workspace;
 
 /// The page.
 #[component]
 pub fn App() -> impl IntoView {
-    let studio = Studio::new();
-    provide_context(studio);
+    let stores = Stores::new();
+    let Stores {
+        notices,
+        pairs,
+        network,
+        display,
+        twin,
+        cine,
+        tuning,
+        shown_prediction: prediction,
+    } = stores;
+    let studio = stores.studio();
     // The catheter calibrated on an earlier visit.
     leptos::task::spawn_local(async move {
         match storage::load_calibration().await {
             Ok(calibration) => {
-                if calibration.is_some() && studio.calibration.get_untracked().is_none() {
-                    studio.calibration.set(calibration);
+                if calibration.is_some() && twin.calibration.get_untracked().is_none() {
+                    twin.calibration.set(calibration);
                 }
             }
-            Err(e) => studio.error(format!(
+            Err(e) => notices.error(format!(
                 "The kept catheter calibration could not be read ({}): the stiffness the page assumes is used",
                 with_causes(&e)
             )),
@@ -50,13 +60,13 @@ pub fn App() -> impl IntoView {
                         WeightsOrigin::FineTuned,
                     )
                 });
-                studio.kept.set(Some(std::rc::Rc::new(kept)));
+                tuning.kept.set(Some(std::rc::Rc::new(kept)));
                 load_model(studio, chosen);
             }
             Ok(None) => load_model(studio, None),
             Err(e) => {
                 load_model(studio, None);
-                studio.error(format!(
+                notices.error(format!(
                     "The kept fine-tuned weights could not be read ({}): the bundled weights are used",
                     with_causes(&e)
                 ));
@@ -65,12 +75,12 @@ pub fn App() -> impl IntoView {
     });
     leptos::task::spawn_local(async move {
         match storage::load_pairs().await {
-            Ok((pairs, damaged)) => {
-                if !pairs.is_empty() {
+            Ok((saved, damaged)) => {
+                if !saved.is_empty() {
                     // Pairs added while storage was being read stay, after the restored ones.
-                    studio.workspace.update(|ws| {
+                    pairs.workspace.update(|ws| {
                         let added = std::mem::take(&mut ws.pairs);
-                        let mut restored = Workspace::from_pairs(pairs);
+                        let mut restored = Workspace::from_pairs(saved);
                         for pair in added {
                             if restored.pair(&pair.id).is_none() {
                                 restored.add(pair);
@@ -82,14 +92,14 @@ pub fn App() -> impl IntoView {
                 }
                 // A first screen that starts somewhere: with nothing saved, a twin pair is on
                 // screen at once, with H-Net's masks, force and 3D view once the model is ready.
-                if studio.workspace.with_untracked(|ws| ws.pairs.is_empty())
-                    && studio.draft.with_untracked(Option::is_none)
+                if pairs.workspace.with_untracked(|ws| ws.pairs.is_empty())
+                    && pairs.draft.with_untracked(Option::is_none)
                 {
                     studio.render_twin();
                     studio.run_model();
                 }
                 if !damaged.is_empty() {
-                    studio.error(format!(
+                    notices.error(format!(
                         "{} saved pair(s) could not be read: {}",
                         damaged.len(),
                         damaged
@@ -100,13 +110,13 @@ pub fn App() -> impl IntoView {
                     ));
                 }
             }
-            Err(e) => studio.error(format!(
+            Err(e) => notices.error(format!(
                 "saved pairs could not be read: {}",
                 with_causes(&e)
             )),
         }
     });
-    install_shortcuts(studio);
+    install_shortcuts(studio, pairs, display);
     install_reconstruction(studio);
 
     view! {
@@ -119,23 +129,23 @@ pub fn App() -> impl IntoView {
                 " (" <a href="https://github.com/hnet-studio/hnet-studio/blob/main/docs/clinicians.md"
                     target="_blank" rel="noopener">"what the force can and cannot tell"</a> ")."
             </p>
-            <ModelBar/>
+            <ModelBar network=network twin=twin tuning=tuning notices=notices prediction=prediction studio=studio/>
         </header>
-        <NoticeBar/>
+        <NoticeBar notices=notices studio=studio/>
         <main class="studio">
             <aside class="sources">
-                <Sources/>
+                <Sources pairs=pairs network=network display=display twin=twin cine=cine notices=notices studio=studio/>
             </aside>
             <section class="work">
-                <StereoView/>
+                <StereoView pairs=pairs network=network display=display twin=twin notices=notices prediction=prediction studio=studio/>
                 // The cine's force trace, as wide as the views, while a cine is loaded.
-                {move || studio.cine.with(Option::is_some).then(|| view! { <ForceTracePlot/> })}
-                <ForcePanel/>
-                <CatheterView/>
+                {move || cine.player.with(Option::is_some).then(|| view! { <ForceTracePlot cine=cine studio=studio/> })}
+                <ForcePanel pairs=pairs network=network twin=twin notices=notices prediction=prediction studio=studio/>
+                <CatheterView pairs=pairs twin=twin notices=notices prediction=prediction studio=studio/>
             </section>
             <aside class="pairs">
-                <PairList/>
-                <FineTunePanel/>
+                <PairList pairs=pairs notices=notices studio=studio/>
+                <FineTunePanel tuning=tuning pairs=pairs notices=notices studio=studio/>
                 <Shortcuts/>
             </aside>
         </main>
@@ -144,14 +154,13 @@ pub fn App() -> impl IntoView {
 
 /// The latest message, and the busy state.
 #[component]
-fn NoticeBar() -> impl IntoView {
-    let studio = expect_context::<Studio>();
+fn NoticeBar(notices: Notices, studio: Studio) -> impl IntoView {
     view! {
         <div class="notices">
-            {move || studio.busy.get().map(|b| view! {
+            {move || notices.busy.get().map(|b| view! {
                 <p class="busy" id="busy" role="status"><span class="spinner"></span>{b}</p>
             })}
-            {move || studio.notice.get().map(|n| view! {
+            {move || notices.notice.get().map(|n| view! {
                 <p class="notice" id="notice" role=if n.error { "alert" } else { "status" }
                     data-kind=if n.error { "error" } else { "info" }>
                     <span>{n.text}</span>
@@ -161,7 +170,7 @@ fn NoticeBar() -> impl IntoView {
                         </button>
                     })}
                     <button class="close" title="Dismiss" aria-label="Dismiss this message"
-                        on:click=move |_| studio.notice.set(None)>
+                        on:click=move |_| notices.notice.set(None)>
                         "×"
                     </button>
                 </p>

@@ -19,9 +19,10 @@ use crate::catheter_3d::{
 };
 use crate::components::stereo_view::{ESTIMATE_ARROW, TRUE_ARROW, context_2d, draw_arrow};
 use crate::components::upload_geometry::UploadGeometry;
+use crate::engine::Prediction;
 use crate::keymap::{self, Command, Scope, scope_help};
 use crate::orbit_camera::{OrbitCamera, Projection};
-use crate::studio::{CatheterReading, Studio};
+use crate::studio::{CatheterReading, Notices, PairStore, Studio, TwinStore};
 use crate::workspace::{LabeledPair, PairSource};
 use hnet_twin::simulator::carm::Biplane;
 
@@ -138,25 +139,25 @@ fn capitalised(text: &str) -> String {
 
 /// The 3D view with its legend and summary.
 #[component]
-pub fn CatheterView() -> impl IntoView {
-    let studio = expect_context::<Studio>();
+pub fn CatheterView(
+    pairs: PairStore,
+    twin: TwinStore,
+    notices: Notices,
+    /// H-Net's prediction of the pair on screen.
+    prediction: Memo<Option<Prediction>>,
+    studio: Studio,
+) -> impl IntoView {
     let canvas = NodeRef::<leptos::html::Canvas>::new();
     let drag = StoredValue::new(None::<[f64; 2]>);
     // The reading of the pair on screen (an older pair's is not shown).
     let reading = Memo::new(move |_| {
-        let id = studio.shown_id()?;
-        studio
-            .catheter
+        let id = pairs.shown_id()?;
+        twin.catheter
             .with(|c| c.as_ref().filter(|c| c.id == id).cloned())
     });
-    let estimate = move || {
-        let id = studio.shown_id()?;
-        studio
-            .predictions
-            .with(|p| p.get(&id).and_then(|p| p.force_n))
-    };
+    let estimate = move || prediction.with(|p| p.as_ref().and_then(|p| p.force_n));
     let truth = move || {
-        studio.with_shown(|p| match &p?.source {
+        pairs.with_shown(|p| match &p?.source {
             PairSource::Twin {
                 true_force_n,
                 tip_mm,
@@ -174,7 +175,7 @@ pub fn CatheterView() -> impl IntoView {
         ctx.set_fill_style_str("#15181c");
         ctx.fill_rect(0.0, 0.0, SIDE, SIDE);
         ctx.set_font("12px sans-serif");
-        let orbit = studio.orbit.get();
+        let orbit = twin.orbit.get();
         let (estimate, truth) = (estimate(), truth());
         reading.with(|reading| {
             let Some(reading) = reading else { return };
@@ -194,7 +195,7 @@ pub fn CatheterView() -> impl IntoView {
         });
     });
 
-    let rotate = move |yaw: f64, pitch: f64| studio.orbit.update(|o| *o = o.rotated(yaw, pitch));
+    let rotate = move |yaw: f64, pitch: f64| twin.orbit.update(|o| *o = o.rotated(yaw, pitch));
     let on_down = move |ev: web_sys::PointerEvent| {
         if ev.button() != 0 {
             return;
@@ -217,7 +218,7 @@ pub fn CatheterView() -> impl IntoView {
     let on_wheel = move |ev: web_sys::WheelEvent| {
         ev.prevent_default();
         let factor = (-ev.delta_y() * 0.002).exp();
-        studio.orbit.update(|o| *o = o.zoomed(factor));
+        twin.orbit.update(|o| *o = o.zoomed(factor));
     };
     let on_key = move |ev: web_sys::KeyboardEvent| {
         let control = ev.ctrl_key() || ev.meta_key();
@@ -235,15 +236,15 @@ pub fn CatheterView() -> impl IntoView {
             Command::Right => rotate(step, 0.0),
             Command::Up => rotate(0.0, -step),
             Command::Down => rotate(0.0, step),
-            Command::Grow => studio.orbit.update(|o| *o = o.zoomed(1.25)),
-            Command::Shrink => studio.orbit.update(|o| *o = o.zoomed(0.8)),
-            Command::ResetView => studio.orbit.update(|o| {
+            Command::Grow => twin.orbit.update(|o| *o = o.zoomed(1.25)),
+            Command::Shrink => twin.orbit.update(|o| *o = o.zoomed(0.8)),
+            Command::ResetView => twin.orbit.update(|o| {
                 *o = OrbitCamera {
                     projection: o.projection,
                     ..OrbitCamera::default()
                 }
             }),
-            Command::ToggleProjection => studio.orbit.update(|o| *o = o.toggled_projection()),
+            Command::ToggleProjection => twin.orbit.update(|o| *o = o.toggled_projection()),
             _ => return,
         }
         ev.prevent_default();
@@ -274,7 +275,7 @@ pub fn CatheterView() -> impl IntoView {
         })
     };
     let orbit_text = move || {
-        let o = studio.orbit.get();
+        let o = twin.orbit.get();
         format!(
             "{:+.0}° / {:+.0}° · {:.1}× · {}",
             o.yaw_deg,
@@ -293,7 +294,7 @@ pub fn CatheterView() -> impl IntoView {
     // A memo: the form resets only when another upload is shown or its geometry changes, not on
     // every workspace update (a stroke, a label).
     let upload = Memo::new(move |_| {
-        studio.with_shown(|p| match p {
+        pairs.with_shown(|p| match p {
             Some(LabeledPair {
                 id,
                 source: PairSource::Upload { views, .. },
@@ -304,7 +305,7 @@ pub fn CatheterView() -> impl IntoView {
     });
     let on_state = Callback::new(move |(id, views): (String, Option<Biplane>)| {
         // Stating an upload's C-arms labels it: a draft upload is kept first.
-        let Some(id) = (if studio.showing_draft() {
+        let Some(id) = (if pairs.showing_draft() {
             studio.labeled_pair_id()
         } else {
             Some(id)
@@ -312,14 +313,14 @@ pub fn CatheterView() -> impl IntoView {
             return;
         };
         let stated = views.is_some();
-        studio.edit(|ws| ws.set_upload_views(&id, views).then_some(id.clone()));
-        studio.info(if stated {
+        pairs.edit(|ws| ws.set_upload_views(&id, views).then_some(id.clone()));
+        notices.info(if stated {
             format!("{id}: C-arm geometry stated; the catheter is reconstructed with it")
         } else {
             format!("{id}: back to the default C-arms (assumed)")
         });
     });
-    let on_error = Callback::new(move |text: String| studio.error(text));
+    let on_error = Callback::new(move |text: String| notices.error(text));
 
     view! {
         <section class="catheter-3d" aria-labelledby="catheter-3d-title">
@@ -354,7 +355,7 @@ pub fn CatheterView() -> impl IntoView {
                 "Fit the rod to "
                 <select id="fit-masks" on:change=move |ev| {
                     if let Some(choice) = FitMasks::from_value(&event_target_value(&ev)) {
-                        studio.fit_masks.set(choice);
+                        twin.fit_masks.set(choice);
                     }
                 }>
                     {[
@@ -364,7 +365,7 @@ pub fn CatheterView() -> impl IntoView {
                         (FitMasks::Hnet, "H-Net's masks"),
                     ].into_iter().map(|(choice, text)| view! {
                         <option value=choice.value()
-                            selected=move || studio.fit_masks.get() == choice>{text}</option>
+                            selected=move || twin.fit_masks.get() == choice>{text}</option>
                     }).collect_view()}
                 </select>
             </label>

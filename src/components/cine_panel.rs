@@ -8,7 +8,9 @@ use crate::browser::{download, files, read_file, take_picked_files, yield_to_bro
 use crate::cine::{CinePlayer, GivenFile, SAMPLE_FILES, read_plane, sample_files};
 use crate::error_text::with_causes;
 use crate::keymap::{Command, tooltip};
-use crate::studio::{PointerTool, Studio};
+use crate::studio::{
+    CineStore, DisplaySettings, NetworkStore, Notices, PairStore, PointerTool, Studio,
+};
 use hnet_dicom::{Plane, PlaneSeries};
 
 /// Reads the bytes of `picked` files; the error names the file.
@@ -31,6 +33,7 @@ type PickedPlanes = [Option<PlaneSeries>; 2];
 /// loaded stays.
 async fn read_into(
     studio: Studio,
+    notices: Notices,
     planes: RwSignal<PickedPlanes, LocalStorage>,
     plane: Plane,
     picked: Vec<web_sys::File>,
@@ -39,16 +42,16 @@ async fn read_into(
     let given = match read_all(picked).await {
         Ok(given) => given,
         Err(text) => {
-            studio.error(text);
+            notices.error(text);
             return;
         }
     };
-    studio
+    notices
         .busy
         .set(Some(format!("Reading plane {}…", plane.name())));
     yield_to_browser().await;
     let read = read_plane(plane, given);
-    studio.busy.set(None);
+    notices.busy.set(None);
     match read {
         Ok(series) => {
             let name = series.source.clone();
@@ -65,9 +68,9 @@ async fn read_into(
             match both.flatten() {
                 Some((a, b)) => match CinePlayer::of_planes(a, b) {
                     Ok(player) => studio.load_cine(player),
-                    Err(e) => studio.error(with_causes(&e)),
+                    Err(e) => notices.error(with_causes(&e)),
                 },
-                None => studio.info(format!(
+                None => notices.info(format!(
                     "plane {}: {name}, {frames} frames; now give plane {}",
                     plane.name(),
                     ["B", "A"][slot]
@@ -76,61 +79,67 @@ async fn read_into(
         }
         Err(e) => {
             planes.try_update(|p| p[slot] = None);
-            studio.error(with_causes(&e));
+            notices.error(with_causes(&e));
         }
     }
 }
 
 /// Loads the twin's sample cine through the same reader as any file.
-fn load_sample(studio: Studio) {
+fn load_sample(studio: Studio, notices: Notices) {
     leptos::task::spawn_local(async move {
-        studio
+        notices
             .busy
             .set(Some("Writing a sample cine with the twin…".into()));
         yield_to_browser().await;
         let loaded = sample_files().and_then(|[a, b]| CinePlayer::read(vec![a], vec![b]));
-        studio.busy.set(None);
+        notices.busy.set(None);
         match loaded {
             Ok(player) => studio.load_cine(player),
-            Err(e) => studio.error(with_causes(&e)),
+            Err(e) => notices.error(with_causes(&e)),
         }
     });
 }
 
 /// Offers the sample cine's two files as downloads.
-fn download_sample(studio: Studio) {
+fn download_sample(notices: Notices) {
     match sample_files() {
         Ok(planes) => {
             for (name, bytes) in planes {
                 if let Err(e) = download(&name, &bytes, "application/dicom") {
-                    studio.error(with_causes(&e));
+                    notices.error(with_causes(&e));
                     return;
                 }
             }
-            studio.info(format!("saved {} and {}", SAMPLE_FILES[0], SAMPLE_FILES[1]));
+            notices.info(format!("saved {} and {}", SAMPLE_FILES[0], SAMPLE_FILES[1]));
         }
-        Err(e) => studio.error(with_causes(&e)),
+        Err(e) => notices.error(with_causes(&e)),
     }
 }
 
 /// The cine tab: loading, then the player.
 #[component]
-pub fn CinePanel() -> impl IntoView {
-    let studio = expect_context::<Studio>();
+pub fn CinePanel(
+    cine: CineStore,
+    pairs: PairStore,
+    network: NetworkStore,
+    display: DisplaySettings,
+    notices: Notices,
+    studio: Studio,
+) -> impl IntoView {
     let planes = RwSignal::new_local([None::<PlaneSeries>, None::<PlaneSeries>]);
     let dragging = RwSignal::new(false);
     // A memo: the player is built when a cine is loaded, not again at every frame or trace step.
-    let loaded = Memo::new(move |_| studio.has_cine());
+    let loaded = Memo::new(move |_| cine.loaded());
     let pick = move |plane: Plane| {
         move |ev: leptos::ev::Event| {
             let picked = take_picked_files(&ev);
-            leptos::task::spawn_local(read_into(studio, planes, plane, picked));
+            leptos::task::spawn_local(read_into(studio, notices, planes, plane, picked));
         }
     };
     // Two files dropped or picked together: one plane each, the first by name plane A.
     let both = move |mut picked: Vec<web_sys::File>| {
         if picked.len() != 2 {
-            studio.error(format!(
+            notices.error(format!(
                 "a biplane cine is two series: give two multi-frame files together (the first by \
                  name is plane A), or each plane's files with its own button; {} file{} given",
                 picked.len(),
@@ -142,8 +151,8 @@ pub fn CinePanel() -> impl IntoView {
         let b = picked.pop().into_iter().collect();
         let a = picked;
         leptos::task::spawn_local(async move {
-            read_into(studio, planes, Plane::A, a).await;
-            read_into(studio, planes, Plane::B, b).await;
+            read_into(studio, notices, planes, Plane::A, a).await;
+            read_into(studio, notices, planes, Plane::B, b).await;
         });
     };
     let on_drop = move |ev: leptos::ev::DragEvent| {
@@ -184,11 +193,11 @@ pub fn CinePanel() -> impl IntoView {
                     <input id="dicom-both" type="file" multiple accept=".dcm,application/dicom,*/*"
                         on:change=move |ev| both(take_picked_files(&ev))/>
                 </label>
-                <button id="cine-sample" on:click=move |_| load_sample(studio)
+                <button id="cine-sample" on:click=move |_| load_sample(studio, notices)
                     title="A catheter pushed against the wall and released, rendered by the twin and written as two XA files">
                     "Sample cine from the twin"
                 </button>
-                <button id="cine-sample-download" class="link" on:click=move |_| download_sample(studio)>
+                <button id="cine-sample-download" class="link" on:click=move |_| download_sample(notices)>
                     "Save the sample as DICOM"
                 </button>
             </div>
@@ -197,27 +206,32 @@ pub fn CinePanel() -> impl IntoView {
                  datasets and force traces carry no patient name, ID, birth date, accession \
                  number or institution: only pixels, the C-arm geometry and frame times are kept."
             </p>
-            {move || loaded.get().then(|| view! { <CinePlayerControls/> })}
+            {move || loaded.get().then(|| view! { <CinePlayerControls cine=cine pairs=pairs network=network display=display studio=studio/> })}
         </div>
     }
 }
 
 /// The player, the windows and the trace of the loaded cine.
 #[component]
-fn CinePlayerControls() -> impl IntoView {
-    let studio = expect_context::<Studio>();
-    let cine = studio.cine;
+fn CinePlayerControls(
+    cine: CineStore,
+    pairs: PairStore,
+    network: NetworkStore,
+    display: DisplaySettings,
+    studio: Studio,
+) -> impl IntoView {
+    let player = cine.player;
     let read =
-        move |f: fn(&CinePlayer) -> String| cine.with(|c| c.as_ref().map(f).unwrap_or_default());
-    let count = move || cine.with(|c| c.as_ref().map_or(0, CinePlayer::frame_count));
-    let frame = move || cine.with(|c| c.as_ref().map_or(0, |c| c.frame));
-    let traced = move || cine.with(|c| c.as_ref().map_or(0, |c| c.trace().len()));
+        move |f: fn(&CinePlayer) -> String| player.with(|c| c.as_ref().map(f).unwrap_or_default());
+    let count = move || player.with(|c| c.as_ref().map_or(0, CinePlayer::frame_count));
+    let frame = move || player.with(|c| c.as_ref().map_or(0, |c| c.frame));
+    let traced = move || player.with(|c| c.as_ref().map_or(0, |c| c.trace().len()));
     // A memo: the buttons below are rebuilt when tracing starts or ends, not at every frame.
-    let tracing = Memo::new(move |_| studio.trace_progress.get().is_some());
+    let tracing = Memo::new(move |_| cine.trace_progress.get().is_some());
     let on_scrub = move |ev: leptos::ev::Event| {
         if let Ok(frame) = event_target_value(&ev).parse::<usize>() {
-            studio.stop_playback();
-            cine.update(|c| c.iter_mut().for_each(|c| c.seek(frame)));
+            cine.stop_playback();
+            player.update(|c| c.iter_mut().for_each(|c| c.seek(frame)));
             studio.show_cine_frame();
         }
     };
@@ -229,16 +243,16 @@ fn CinePlayerControls() -> impl IntoView {
                 1000.0 / c.frame_interval_ms()
             ))}</p>
             <ul class="cine-notes" id="cine-notes">
-                {move || cine.with(|c| c.as_ref().map(|c| c.notes.clone()).unwrap_or_default())
+                {move || player.with(|c| c.as_ref().map(|c| c.notes.clone()).unwrap_or_default())
                     .into_iter().map(|n| view! { <li>{n}</li> }).collect_view()}
             </ul>
             <div class="actions transport">
                 <button id="cine-previous" title=tooltip("Previous frame", Command::PreviousFrame)
                     on:click=move |_| studio.step_cine(-1)>"◀︎ Frame"</button>
                 <button id="cine-play" class="primary" title=tooltip("Play or pause", Command::PlayPause)
-                    aria-pressed=move || studio.playing.get().to_string()
+                    aria-pressed=move || cine.playing.get().to_string()
                     on:click=move |_| studio.toggle_play()>
-                    {move || if studio.playing.get() { "Pause" } else { "Play" }}
+                    {move || if cine.playing.get() { "Pause" } else { "Play" }}
                 </button>
                 <button id="cine-next" title=tooltip("Next frame", Command::NextFrame)
                     on:click=move |_| studio.step_cine(1)>"Frame ▶︎"</button>
@@ -255,14 +269,14 @@ fn CinePlayerControls() -> impl IntoView {
             </label>
             <div class="actions">
                 <button id="tool-window" class="tool"
-                    aria-pressed=move || (studio.tool.get() == PointerTool::WindowLevel).to_string()
+                    aria-pressed=move || (display.tool.get() == PointerTool::WindowLevel).to_string()
                     title=tooltip("Window/level: drag on a view", Command::WindowLevel)
-                    on:click=move |_| studio.tool.set(PointerTool::WindowLevel)>"Window/level"</button>
+                    on:click=move |_| display.tool.set(PointerTool::WindowLevel)>"Window/level"</button>
                 <button id="cine-window-reset" on:click=move |_| studio.reset_windows()>"Header windows"</button>
                 <label title="A drag on either view changes both planes' windows">
                     <input id="cine-link-windows" type="checkbox"
-                        prop:checked=move || studio.link_windows.get()
-                        on:change=move |ev| studio.link_windows.set(event_target_checked(&ev))/>
+                        prop:checked=move || cine.link_windows.get()
+                        on:change=move |ev| cine.link_windows.set(event_target_checked(&ev))/>
                     " Both planes"
                 </label>
                 <output id="cine-windows">{move || read(|c| format!(
@@ -273,23 +287,23 @@ fn CinePlayerControls() -> impl IntoView {
             <div class="actions">
                 {move || if tracing.get() {
                     view! {
-                        <button id="cine-trace-cancel" on:click=move |_| studio.cancel_trace()>"Stop"</button>
+                        <button id="cine-trace-cancel" on:click=move |_| cine.cancel_trace()>"Stop"</button>
                     }.into_any()
                 } else {
                     view! {
                         <button id="cine-trace" class="primary"
-                            disabled=move || !matches!(studio.model.get(), crate::studio::ModelState::Ready(_))
+                            disabled=move || !matches!(network.model.get(), crate::studio::ModelState::Ready(_))
                             on:click=move |_| studio.trace_cine()>"Trace the force over all frames"</button>
                     }.into_any()
                 }}
-                {move || studio.trace_progress.get().map(|(done, total)| view! {
+                {move || cine.trace_progress.get().map(|(done, total)| view! {
                     <progress id="trace-progress" max=total value=done
                         aria-label="Frames traced"></progress>
                     <output>{format!("{done} / {total}")}</output>
                 })}
                 <button id="cine-export-trace" disabled=move || traced() == 0 || tracing.get()
                     on:click=move |_| studio.export_trace()>"Export trace (CSV)"</button>
-                <button id="cine-keep" disabled=move || !studio.showing_draft()
+                <button id="cine-keep" disabled=move || !pairs.showing_draft()
                     title="Keep this frame as a labeled pair (label its masks and force, then export)"
                     on:click=move |_| studio.keep_draft()>"Keep this frame"</button>
             </div>

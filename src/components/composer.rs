@@ -11,7 +11,7 @@ use crate::components::on_slider;
 use crate::error_text::with_causes;
 use crate::imaging::decode_radiograph;
 use crate::keymap::{self, Command, Scope};
-use crate::studio::Studio;
+use crate::studio::{Notices, Studio, TwinStore};
 use crate::twin_live::{XrayBackground, XrayStyle};
 
 /// Side of the radiograph canvas, canvas pixels.
@@ -71,9 +71,8 @@ fn draw_grid(ctx: &web_sys::CanvasRenderingContext2d, rect: [f64; 4], grid: usiz
 
 /// The composer.
 #[component]
-pub fn Composer() -> impl IntoView {
-    let studio = expect_context::<Studio>();
-    let background = studio.background;
+pub fn Composer(twin: TwinStore, notices: Notices, studio: Studio) -> impl IntoView {
+    let background = twin.background;
     let source_canvas = NodeRef::<leptos::html::Canvas>::new();
     let previews = [
         NodeRef::<leptos::html::Canvas>::new(),
@@ -153,7 +152,7 @@ pub fn Composer() -> impl IntoView {
     };
     // A new background makes a new twin pair: render it and run H-Net on it.
     let rerender = move || {
-        if studio.twin.with_untracked(|t| t.modality.is_xray()) {
+        if twin.controls.with_untracked(|t| t.modality.is_xray()) {
             studio.render_twin();
             studio.run_model();
         }
@@ -246,15 +245,15 @@ pub fn Composer() -> impl IntoView {
                     bg.seed = seed;
                     background.set(bg);
                     rerender();
-                    studio.info(format!("{} is the background source", file.name()));
+                    notices.info(format!("{} is the background source", file.name()));
                 }
-                Err(e) => studio.error(with_causes(&e)),
+                Err(e) => notices.error(with_causes(&e)),
             }
         });
     };
     let set_style = move |style: XrayStyle| {
         background.update(|bg| bg.style = style);
-        studio.twin.update(|t| {
+        twin.controls.update(|t| {
             if t.modality.is_xray() {
                 t.modality = style.modality();
             }
@@ -316,7 +315,7 @@ pub fn Composer() -> impl IntoView {
                                 background.update(|bg| bg.seed = seed);
                                 rerender();
                             } else {
-                                studio.error("the seed is a whole number ≥ 0");
+                                notices.error("the seed is a whole number ≥ 0");
                             }
                         }/>
                 </label>

@@ -9,14 +9,20 @@ use hnet_model::fine_tune::{FineTuneSettings, HeldBackScores};
 use crate::browser::download;
 use crate::error_text::with_causes;
 use crate::fine_tune::REHEARSAL_PAIRS;
-use crate::studio::{KEPT_NAME, Studio, TuningProgress, TuningResult, TuningState};
+use crate::studio::{
+    KEPT_NAME, Notices, PairStore, Studio, TuningProgress, TuningResult, TuningState, TuningStore,
+};
 
 /// The panel.
 #[component]
-pub fn FineTunePanel() -> impl IntoView {
-    let studio = expect_context::<Studio>();
+pub fn FineTunePanel(
+    tuning: TuningStore,
+    pairs: PairStore,
+    notices: Notices,
+    studio: Studio,
+) -> impl IntoView {
     let labelled = move || {
-        studio.workspace.with(|ws| {
+        pairs.workspace.with(|ws| {
             let complete = ws.pairs.iter().filter(|p| p.masks_complete()).count();
             (complete, ws.pairs.len())
         })
@@ -36,7 +42,7 @@ pub fn FineTunePanel() -> impl IntoView {
     view! {
         <section id="fine-tune" class="fine-tune" aria-live="polite">
             <h2 title=about>"Fine-tune on my pairs"</h2>
-            {move || match studio.tuning.get() {
+            {move || match tuning.state.get() {
                 TuningState::Idle => {
                     let (complete, all) = labelled();
                     view! {
@@ -76,14 +82,14 @@ pub fn FineTunePanel() -> impl IntoView {
                 TuningState::Running(progress) => running(studio, progress).into_any(),
                 TuningState::Ended(result) => ended(studio, result).into_any(),
             }}
-            {move || studio.kept.get().map(|kept| {
+            {move || tuning.kept.get().map(|kept| {
                 let bytes = kept.bytes.clone();
                 view! {
                     <p class="hint" id="tune-kept">
                         {format!("Kept in this browser: {} ", kept.name)}
                         <button class="link" id="tune-download" on:click=move |_| {
                             if let Err(e) = download(KEPT_NAME, &bytes, "application/octet-stream") {
-                                studio.error(with_causes(&e));
+                                notices.error(with_causes(&e));
                             }
                         }>"Download"</button>
                     </p>

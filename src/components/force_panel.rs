@@ -8,11 +8,14 @@ use leptos::prelude::*;
 
 use crate::browser::{read_file_with, take_picked_file};
 use crate::bundled::BUNDLED_FORCE_CAVEAT;
+use crate::engine::Prediction;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
 use crate::force_label::{implausible_label, parse_force_labels, parse_newtons};
 use crate::force_reading::{ABLATION_BAND_N, BandPosition, Disagreement, Verdict};
-use crate::studio::{CatheterReading, ModelState, Studio};
+use crate::studio::{
+    CatheterReading, ModelState, NetworkStore, Notices, PairStore, Studio, TwinStore,
+};
 use hnet_twin::dataset::label_origin::LabelOrigin;
 use hnet_twin::reconstruction::physics_force::{EstimateKind, TipForceEstimate};
 use hnet_units::force_magnitude as magnitude;
@@ -23,10 +26,14 @@ const AXES: [&str; 3] = ["Fx", "Fy", "Fz"];
 
 /// `read` of the reconstruction of the pair on screen, if it was made from the masks the rod is
 /// now to be fitted to (a reading from before the choice changed is not shown).
-fn shown_reading<T>(studio: Studio, read: impl FnOnce(&CatheterReading) -> Option<T>) -> Option<T> {
-    let id = studio.shown_id()?;
-    let fit_masks = studio.fit_masks.get();
-    studio.catheter.with(|r| {
+fn shown_reading<T>(
+    pairs: PairStore,
+    twin: TwinStore,
+    read: impl FnOnce(&CatheterReading) -> Option<T>,
+) -> Option<T> {
+    let id = pairs.shown_id()?;
+    let fit_masks = twin.fit_masks.get();
+    twin.catheter.with(|r| {
         r.as_ref()
             .filter(|r| r.id == id && r.fit_masks == fit_masks)
             .and_then(read)
@@ -35,28 +42,30 @@ fn shown_reading<T>(studio: Studio, read: impl FnOnce(&CatheterReading) -> Optio
 
 /// The force panel.
 #[component]
-pub fn ForcePanel() -> impl IntoView {
-    let studio = expect_context::<Studio>();
-    let estimate = move || {
-        let id = studio.shown_id()?;
-        studio
-            .predictions
-            .with(|p| p.get(&id).and_then(|p| p.force_n))
-    };
-    let truth = move || studio.with_shown(|p| p.and_then(|p| p.true_force()));
+pub fn ForcePanel(
+    pairs: PairStore,
+    network: NetworkStore,
+    twin: TwinStore,
+    notices: Notices,
+    /// H-Net's prediction of the pair on screen.
+    prediction: Memo<Option<Prediction>>,
+    studio: Studio,
+) -> impl IntoView {
+    let estimate = move || prediction.with(|p| p.as_ref().and_then(|p| p.force_n));
+    let truth = move || pairs.with_shown(|p| p.and_then(|p| p.true_force()));
     // The physics estimate of the pair on screen, if its catheter was reconstructed.
-    let physics = move || shown_reading(studio, |r| Some(r.result.as_ref().ok()?.force_f32()));
-    let physics_masks = move || shown_reading(studio, |r| Some(r.result.as_ref().ok()?.masks));
+    let physics = move || shown_reading(pairs, twin, |r| Some(r.result.as_ref().ok()?.force_f32()));
+    let physics_masks = move || shown_reading(pairs, twin, |r| Some(r.result.as_ref().ok()?.masks));
     // What the loaded weights' force was trained on and how far off it is, when their file
     // records it (hnet_twin::model_facts).
     let domain = move || {
-        studio.model.with(|m| match m {
+        network.model.with(|m| match m {
             ModelState::Ready(e) => e.domain.clone(),
             _ => None,
         })
     };
     let bundled = move || {
-        studio
+        network
             .model
             .with(|m| matches!(m, ModelState::Ready(e) if e.origin == WeightsOrigin::Bundled))
     };
@@ -64,7 +73,7 @@ pub fn ForcePanel() -> impl IntoView {
     // combined with the physics estimate where the rod was fitted to H-Net's masks, else H-Net's
     // alone; without recorded facts, H-Net's with no interval.
     let combination = move || {
-        studio.model.with(|m| match m {
+        network.model.with(|m| match m {
             ModelState::Ready(e) => e.combination,
             _ => None,
         })
@@ -72,18 +81,18 @@ pub fn ForcePanel() -> impl IntoView {
     let reading = move || -> Option<TipForceEstimate> {
         let e = estimate()?;
         Some(match combination() {
-            Some(c) => c.estimate(e, shown_reading(studio, |r| r.physics_for(e))),
+            Some(c) => c.estimate(e, shown_reading(pairs, twin, |r| r.physics_for(e))),
             None => TipForceEstimate::uncalibrated(e),
         })
     };
     // H-Net's own interval, for its row of the table.
     let head_interval = move || Some(combination()?.head_interval_90_n());
-    let label = move || studio.with_shown(|p| p.and_then(|p| p.force_n));
+    let label = move || pairs.with_shown(|p| p.and_then(|p| p.force_n));
     // The label being typed, per axis, exactly as typed. The fields show the pair's label when
     // another pair is shown or its label changes, and are never rewritten while typing (a
     // rewrite moves the caret: typing `0.12` used to leave `120`).
     let typed = RwSignal::new([String::new(), String::new(), String::new()]);
-    let shown_label = Memo::new(move |_| (studio.shown_id(), label()));
+    let shown_label = Memo::new(move |_| (pairs.shown_id(), label()));
     let field_text = RwSignal::new([String::new(), String::new(), String::new()]);
     // A typed label far outside a catheter's range, waiting for the user's confirmation.
     let implausible = RwSignal::new(None::<([f32; 3], String)>);
@@ -102,7 +111,7 @@ pub fn ForcePanel() -> impl IntoView {
             return;
         };
         let force = label.as_ref().map(|(f, _)| *f);
-        studio.edit(|ws| ws.set_force(&id, label).then_some(id.clone()));
+        pairs.edit(|ws| ws.set_force(&id, label).then_some(id.clone()));
         // Also when the label was already this value, the fields drop what was being typed.
         show(force);
     };
@@ -110,7 +119,7 @@ pub fn ForcePanel() -> impl IntoView {
     // (the export says so, and `hnet train` leaves it out unless asked).
     let estimate_label = move || {
         let force = estimate()?;
-        let weights = studio.model.with(|m| match m {
+        let weights = network.model.with(|m| match m {
             ModelState::Ready(e) => Some(e.weights_name.clone()),
             _ => None,
         })?;
@@ -123,7 +132,7 @@ pub fn ForcePanel() -> impl IntoView {
         ))
     };
     let origin = move || {
-        studio.with_shown(|p| {
+        pairs.with_shown(|p| {
             p.filter(|p| p.force_n.is_some())
                 .map(|p| p.force_origin.describe())
         })
@@ -131,7 +140,7 @@ pub fn ForcePanel() -> impl IntoView {
     let save = move |force: [f32; 3]| {
         implausible.set(None);
         set_label(Some((force, LabelOrigin::Typed)));
-        studio.info(format!(
+        notices.info(format!(
             "force label saved: ({:+.3}, {:+.3}, {:+.3}) N",
             force[0], force[1], force[2]
         ));
@@ -143,7 +152,7 @@ pub fn ForcePanel() -> impl IntoView {
             match parse_newtons(AXES[axis], text) {
                 Ok(v) => force[axis] = v,
                 Err(e) => {
-                    studio.error(with_causes(&e));
+                    notices.error(with_causes(&e));
                     return;
                 }
             }
@@ -161,23 +170,23 @@ pub fn ForcePanel() -> impl IntoView {
             match read_file_with(&file, parse_force_labels).await {
                 Ok(labels) => {
                     let mut result = (0, Vec::new());
-                    studio
+                    pairs
                         .workspace
                         .update(|ws| result = ws.apply_force_labels(&labels));
                     let ids: Vec<String> = labels.iter().map(|(id, ..)| id.clone()).collect();
-                    studio.persist_metadata(&ids);
+                    pairs.persist_metadata(&ids);
                     let (applied, unknown) = result;
                     if unknown.is_empty() {
-                        studio.info(format!("{}: {applied} force label(s) applied", file.name()));
+                        notices.info(format!("{}: {applied} force label(s) applied", file.name()));
                     } else {
-                        studio.error(format!(
+                        notices.error(format!(
                             "{}: {applied} force label(s) applied; no pair has the id(s) {}",
                             file.name(),
                             unknown.join(", ")
                         ));
                     }
                 }
-                Err(e) => studio.error(with_causes(&e)),
+                Err(e) => notices.error(with_causes(&e)),
             }
         });
     };
@@ -185,7 +194,7 @@ pub fn ForcePanel() -> impl IntoView {
     // The verdict says no more than the estimate's intervals and the training data support.
     let verdict_text = move |estimate: TipForceEstimate| {
         let domain = domain();
-        studio.with_shown(|pair| {
+        pairs.with_shown(|pair| {
             pair.map(|pair| {
                 let verdict = Verdict::of(&estimate, domain.as_ref(), pair);
                 (
@@ -295,8 +304,7 @@ pub fn ForcePanel() -> impl IntoView {
                 </tbody>
             </table>
             {move || {
-                let id = studio.shown_id()?;
-                let why = studio.predictions.with(|p| p.get(&id).and_then(|p| p.force_left_out()))?;
+                let why = prediction.with(|p| p.as_ref().and_then(|p| p.force_left_out()))?;
                 Some(view! { <p id="force-left-out" class="why">{why}</p> })
             }}
             {move || match (estimate(), physics()) {
@@ -340,7 +348,7 @@ pub fn ForcePanel() -> impl IntoView {
                         </label>
                     }).collect_view()}
                     <button id="label-save" type="submit" class="primary"
-                        disabled=move || studio.shown_id().is_none()>"Save label"</button>
+                        disabled=move || pairs.shown_id().is_none()>"Save label"</button>
                 </form>
                 {move || implausible.get().map(|(force, why)| view! {
                     <div class="confirm" id="label-confirm" role="alertdialog" aria-labelledby="label-confirm-text">

@@ -8,7 +8,7 @@ use wasm_bindgen::JsCast;
 
 use crate::cine::CinePlayer;
 use crate::force_reading::ABLATION_BAND_N;
-use crate::studio::Studio;
+use crate::studio::{CineStore, Studio};
 use hnet_twin::reconstruction::physics_force::EstimateKind;
 use hnet_units::force_magnitude;
 
@@ -146,9 +146,8 @@ impl Plot {
 
 /// The trace plot.
 #[component]
-pub fn ForceTracePlot() -> impl IntoView {
-    let studio = expect_context::<Studio>();
-    let plot = Memo::new(move |_| studio.cine.with(|c| c.as_ref().map(Plot::of)));
+pub fn ForceTracePlot(cine: CineStore, studio: Studio) -> impl IntoView {
+    let plot = Memo::new(move |_| cine.player.with(|c| c.as_ref().map(Plot::of)));
     let svg = NodeRef::<leptos::svg::Svg>::new();
     let on_click = move |ev: web_sys::MouseEvent| {
         let (Some(svg), Some(p)) = (svg.get_untracked(), plot.get_untracked()) else {

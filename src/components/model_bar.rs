@@ -11,19 +11,28 @@ use crate::browser::{read_file, take_picked_file};
 use crate::catheter_calibration;
 use crate::compute::BackendChoice;
 use crate::cpu_pool::WorkersStatus;
+use crate::engine::Prediction;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
-use crate::studio::{ModelState, Studio, load_model};
+use crate::studio::{
+    ModelState, NetworkStore, Notices, Studio, TuningStore, TwinStore, load_model,
+};
 use hnet_twin::model_facts::FACTS_KEY;
 
 /// The model bar.
 #[component]
-pub fn ModelBar() -> impl IntoView {
-    let studio = expect_context::<Studio>();
+pub fn ModelBar(
+    network: NetworkStore,
+    twin: TwinStore,
+    tuning: TuningStore,
+    notices: Notices,
+    /// H-Net's prediction of the pair on screen.
+    prediction: Memo<Option<Prediction>>,
+    studio: Studio,
+) -> impl IntoView {
     let last_millis = move || {
-        let id = studio.shown_id()?;
-        studio.predictions.with(|p| {
-            p.get(&id).map(|p| match p.workers {
+        prediction.with(|p| {
+            p.as_ref().map(|p| match p.workers {
                 0 => format!("{:.0} ms on {}", p.millis, p.backend),
                 n => format!("{:.0} ms on {}, {n} workers", p.millis, p.backend),
             })
@@ -31,9 +40,9 @@ pub fn ModelBar() -> impl IntoView {
     };
     let on_backend = move |ev: leptos::ev::Event| {
         let choice = BackendChoice::from_value(&event_target_value(&ev));
-        studio.backend_choice.set(choice);
+        network.backend_choice.set(choice);
         // The same weights on the other device.
-        let weights = match studio.model.get_untracked() {
+        let weights = match network.model.get_untracked() {
             ModelState::Ready(engine) => Some((
                 engine.weights.clone(),
                 engine.weights_name.clone(),
@@ -47,9 +56,9 @@ pub fn ModelBar() -> impl IntoView {
         let Some(entry) = EntrySetting::from_text(&event_target_value(&ev)) else {
             return;
         };
-        studio.catheter_entry.set(entry);
+        network.catheter_entry.set(entry);
         // Every prediction was read with the previous setting.
-        studio.predictions.update(|p| p.clear());
+        network.predictions.update(|p| p.clear());
         studio.run_model();
     };
     let on_weights = move |ev: leptos::ev::Event| {
@@ -62,14 +71,14 @@ pub fn ModelBar() -> impl IntoView {
                     studio,
                     Some((Rc::<[u8]>::from(bytes), file.name(), WeightsOrigin::File)),
                 ),
-                Err(e) => studio.error(with_causes(&e)),
+                Err(e) => notices.error(with_causes(&e)),
             }
         });
     };
 
     view! {
         <section id="model-status" class="model-bar" aria-live="polite">
-            {move || match studio.model.get() {
+            {move || match network.model.get() {
                 ModelState::Loading(text) => view! {
                     <p data-state="loading"><span class="spinner"></span>{text}</p>
                 }.into_any(),
@@ -114,7 +123,7 @@ pub fn ModelBar() -> impl IntoView {
                                     <dd id="backend-check" class="why">{format!("({check})")}</dd>
                                 })}
                                 {move || {
-                                    let workers = studio.cpu_workers.get();
+                                    let workers = network.cpu_workers.get();
                                     (workers != WorkersStatus::NotUsed).then(|| {
                                         let (short, text) = (workers.short(), workers.text());
                                         view! {
@@ -147,15 +156,15 @@ pub fn ModelBar() -> impl IntoView {
                             </div>
                             <div>
                                 <dt>"Catheter"</dt>
-                                <dd id="catheter-calibration">{move || match studio.calibration.get() {
+                                <dd id="catheter-calibration">{move || match twin.calibration.get() {
                                     Some(c) => catheter_calibration::describe(&c),
                                     None => "as the page assumes it (not calibrated)".to_string(),
                                 }}</dd>
-                                {move || studio.calibration.get().map(|_| view! {
+                                {move || twin.calibration.get().map(|_| view! {
                                     <dd><button id="catheter-calibration-reset" class="link"
                                         on:click=move |_| {
                                             studio.set_calibration(None);
-                                            studio.info("catheter calibration cleared: the stiffness the page assumes");
+                                            notices.info("catheter calibration cleared: the stiffness the page assumes");
                                         }>"Clear"</button></dd>
                                 })}
                             </div>
@@ -177,7 +186,7 @@ pub fn ModelBar() -> impl IntoView {
                             (BackendChoice::Cpu, "CPU"),
                         ].into_iter().map(|(choice, text)| view! {
                             <option value=choice.value()
-                                selected=move || studio.backend_choice.get() == choice>{text}</option>
+                                selected=move || network.backend_choice.get() == choice>{text}</option>
                         }).collect_view()}
                     </select>
                 </label>
@@ -198,13 +207,13 @@ pub fn ModelBar() -> impl IntoView {
                             ("right", "the right"),
                         ].into_iter().map(|(value, text)| view! {
                             <option value=value selected=move || {
-                                studio.catheter_entry.get().text() == value
+                                network.catheter_entry.get().text() == value
                             }>{text}</option>
                         }).collect_view()}
                     </select>
                 </label>
-                {move || studio.kept.get().map(|kept| {
-                    let fine_tuned = move || studio.model.with(|m| {
+                {move || tuning.kept.get().map(|kept| {
+                    let fine_tuned = move || network.model.with(|m| {
                         matches!(m, ModelState::Ready(e) if e.origin == WeightsOrigin::FineTuned)
                     });
                     view! {

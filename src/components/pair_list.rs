@@ -6,15 +6,14 @@ use leptos::prelude::*;
 use crate::browser::{download, yield_to_browser};
 use crate::error_text::with_causes;
 use crate::export::{DATASET_NAME, ExportBuilder};
-use crate::studio::Studio;
+use crate::studio::{Notices, PairStore, Studio};
 use crate::workspace::PairSource;
 
 /// The pair list.
 #[component]
-pub fn PairList() -> impl IntoView {
-    let studio = expect_context::<Studio>();
+pub fn PairList(pairs: PairStore, notices: Notices, studio: Studio) -> impl IntoView {
     let rows = move || {
-        studio.workspace.with(|ws| {
+        pairs.workspace.with(|ws| {
             ws.pairs
                 .iter()
                 .enumerate()
@@ -25,29 +24,29 @@ pub fn PairList() -> impl IntoView {
                         matches!(p.source, PairSource::Twin { .. }),
                         p.masks_complete(),
                         p.force_n.is_some(),
-                        ws.current == Some(i) && !studio.showing_draft(),
+                        ws.current == Some(i) && !pairs.showing_draft(),
                     )
                 })
                 .collect::<Vec<_>>()
         })
     };
     let complete = move || {
-        studio
+        pairs
             .workspace
             .with(|ws| ws.pairs.iter().filter(|p| p.is_complete()).count())
     };
     let export = move |_| {
         // Complete pairs without a split get theirs now and keep it from then on.
         let mut assigned = Vec::new();
-        studio.workspace.update(|ws| assigned = ws.assign_splits());
-        studio.persist_metadata(&assigned);
-        let planned = studio
+        pairs.workspace.update(|ws| assigned = ws.assign_splits());
+        pairs.persist_metadata(&assigned);
+        let planned = pairs
             .workspace
             .with_untracked(|ws| ExportBuilder::new(&ws.pairs));
         let mut builder = match planned {
             Ok(builder) => builder,
             Err(e) => {
-                studio.error(with_causes(&e));
+                notices.error(with_causes(&e));
                 return;
             }
         };
@@ -56,26 +55,26 @@ pub fn PairList() -> impl IntoView {
             // Pair by pair, letting the browser repaint and take input every few pairs.
             for (index, id) in ids.iter().enumerate() {
                 if index % 8 == 0 {
-                    studio.busy.set(Some(format!(
+                    notices.busy.set(Some(format!(
                         "Exporting pair {} of {}…",
                         index + 1,
                         ids.len()
                     )));
                     yield_to_browser().await;
                 }
-                let added = studio
+                let added = pairs
                     .workspace
                     .with_untracked(|ws| builder.add(index, ws.pair(id)));
                 if let Err(e) = added {
-                    studio.busy.set(None);
-                    studio.error(with_causes(&e));
+                    notices.busy.set(None);
+                    notices.error(with_causes(&e));
                     return;
                 }
             }
-            studio.busy.set(Some("Writing the zip…".into()));
+            notices.busy.set(Some("Writing the zip…".into()));
             yield_to_browser().await;
             let result = builder.finish();
-            studio.busy.set(None);
+            notices.busy.set(None);
             match result {
                 Ok(export) => {
                     let name = format!("{DATASET_NAME}.zip");
@@ -93,15 +92,15 @@ pub fn PairList() -> impl IntoView {
                             }
                             match export.split_warning() {
                                 Some(warning) => {
-                                    studio.error(format!("{text}. Warning: {warning}"))
+                                    notices.error(format!("{text}. Warning: {warning}"))
                                 }
-                                None => studio.info(text),
+                                None => notices.info(text),
                             }
                         }
-                        Err(e) => studio.error(with_causes(&e)),
+                        Err(e) => notices.error(with_causes(&e)),
                     }
                 }
-                Err(e) => studio.error(with_causes(&e)),
+                Err(e) => notices.error(with_causes(&e)),
             }
         });
     };
@@ -109,7 +108,7 @@ pub fn PairList() -> impl IntoView {
     // screen, so it is withdrawn when another pair is shown.
     let confirming = RwSignal::new(false);
     let current_id = Memo::new(move |_| {
-        studio
+        pairs
             .workspace
             .with(|ws| ws.current().map(|p| p.id.clone()))
     });
@@ -126,8 +125,8 @@ pub fn PairList() -> impl IntoView {
                 <For each=rows key=|r| r.clone() let:r>
                     <li class:current=r.5 data-id=r.1.clone()>
                         <button class="pair" on:click=move |_| {
-                            studio.draft.set(None);
-                            studio.workspace.update(|ws| ws.select(r.0));
+                            pairs.draft.set(None);
+                            pairs.workspace.update(|ws| ws.select(r.0));
                             studio.run_model();
                         }>
                             <span class="id">{r.1.clone()}</span>
@@ -140,20 +139,20 @@ pub fn PairList() -> impl IntoView {
             </ol>
             <div class="actions">
                 <button id="export" class="primary"
-                    disabled=move || complete() == 0 || studio.busy.get().is_some() on:click=export>
+                    disabled=move || complete() == 0 || notices.busy.get().is_some() on:click=export>
                     {move || format!("Export {} complete pair(s) (.zip)", complete())}
                 </button>
                 <button id="calibrate-catheter"
                     title="Fits the catheter's stiffness to the pairs' measured force labels (not H-Net's estimates), each read as the 3D view reads it; at least 3 pairs"
-                    disabled=move || studio.workspace.with(|ws| ws.pairs.iter().all(|p| p.force_n.is_none()))
+                    disabled=move || pairs.workspace.with(|ws| ws.pairs.iter().all(|p| p.force_n.is_none()))
                     on:click=move |_| studio.calibrate_catheter()>
                     "Calibrate this catheter from labelled pairs"
                 </button>
-                <button id="delete-pair" disabled=move || current_id.with(Option::is_none) || studio.showing_draft()
+                <button id="delete-pair" disabled=move || current_id.with(Option::is_none) || pairs.showing_draft()
                     aria-expanded=move || confirming.get().to_string()
                     on:click=move |_| confirming.set(true)>"Delete pair…"</button>
             </div>
-            {move || current_id.get().filter(|_| confirming.get() && !studio.showing_draft()).map(|id| view! {
+            {move || current_id.get().filter(|_| confirming.get() && !pairs.showing_draft()).map(|id| view! {
                 <div class="confirm" id="delete-confirm" role="alertdialog" aria-labelledby="delete-question">
                     <p id="delete-question">{format!("Delete {id} with its masks and force label?")}</p>
                     <button id="delete-confirm-yes" class="danger" on:click=move |_| {

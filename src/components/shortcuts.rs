@@ -4,31 +4,31 @@
 use leptos::prelude::*;
 
 use crate::keymap::{Command, KEYMAP, Scope, command};
-use crate::studio::{PointerTool, Studio};
+use crate::studio::{DisplaySettings, PairStore, PointerTool, Studio};
 
 /// Carries out a page-wide command.
-fn execute(studio: Studio, command: Command) {
+fn execute(studio: Studio, pairs: PairStore, display: DisplaySettings, command: Command) {
     match command {
         Command::RunModel => studio.run_model(),
         Command::AcceptMasks => studio.accept_predicted_masks(),
-        Command::Brush => studio.tool.set(PointerTool::Brush),
-        Command::Eraser => studio.tool.set(PointerTool::Eraser),
-        Command::Pan => studio.tool.set(PointerTool::Pan),
-        Command::WindowLevel => studio.tool.set(PointerTool::WindowLevel),
+        Command::Brush => display.tool.set(PointerTool::Brush),
+        Command::Eraser => display.tool.set(PointerTool::Eraser),
+        Command::Pan => display.tool.set(PointerTool::Pan),
+        Command::WindowLevel => display.tool.set(PointerTool::WindowLevel),
         Command::PlayPause => studio.toggle_play(),
         Command::NextFrame => studio.step_cine(1),
         Command::PreviousFrame => studio.step_cine(-1),
-        Command::SmallerBrush => studio.brush_radius.update(|r| *r = (*r - 0.5).max(1.0)),
-        Command::LargerBrush => studio.brush_radius.update(|r| *r = (*r + 0.5).min(20.0)),
+        Command::SmallerBrush => display.brush_radius.update(|r| *r = (*r - 0.5).max(1.0)),
+        Command::LargerBrush => display.brush_radius.update(|r| *r = (*r + 0.5).min(20.0)),
         Command::Undo => studio.undo_redo(false),
         Command::Redo => studio.undo_redo(true),
-        Command::ToggleMasks => studio.show_prediction.update(|s| *s = !*s),
-        Command::ToggleLabels => studio.show_label.update(|s| *s = !*s),
-        Command::FitViews => studio.fit_views(),
+        Command::ToggleMasks => display.show_prediction.update(|s| *s = !*s),
+        Command::ToggleLabels => display.show_label.update(|s| *s = !*s),
+        Command::FitViews => display.fit_views(),
         Command::NextPair | Command::PreviousPair => {
-            studio.draft.set(None);
+            pairs.draft.set(None);
             let step = if command == Command::NextPair { 1 } else { -1 };
-            studio.workspace.update(|ws| ws.step(step));
+            pairs.workspace.update(|ws| ws.step(step));
             studio.run_model();
         }
         // Keys of focused elements, handled there.
@@ -46,7 +46,7 @@ fn execute(studio: Studio, command: Command) {
 }
 
 /// Listens to the keyboard on the whole page (not while typing in a field).
-pub fn install_shortcuts(studio: Studio) {
+pub fn install_shortcuts(studio: Studio, pairs: PairStore, display: DisplaySettings) {
     let handle = window_event_listener(leptos::ev::keydown, move |ev: web_sys::KeyboardEvent| {
         // Enter opens a focused file picker as Space does (Chromium opens it on Space only).
         if ev.key() == "Enter"
@@ -79,7 +79,7 @@ pub fn install_shortcuts(studio: Studio) {
         let control = ev.ctrl_key() || ev.meta_key();
         if let Some(command) = command(Scope::Page, &ev.key(), control, ev.shift_key()) {
             ev.prevent_default();
-            execute(studio, command);
+            execute(studio, pairs, display, command);
         }
     });
     // The page lives as long as the listener.

@@ -14,7 +14,9 @@ use crate::components::on_slider;
 use crate::error_text::with_causes;
 use crate::imaging::{ImageError, WORK_SIZE, decode_to_rgb};
 use crate::keymap::{self, Command, Scope};
-use crate::studio::{SourceTab, Studio};
+use crate::studio::{
+    CineStore, DisplaySettings, NetworkStore, Notices, PairStore, SourceTab, Studio, TwinStore,
+};
 use crate::twin_live::{DEFAULT_PLATE, TwinControls};
 use crate::workspace::{LabeledPair, PairSource};
 
@@ -31,16 +33,23 @@ const TABS: [(SourceTab, &str, &str); 4] = [
 /// stop, the arrow keys (and Home, End) move the focus between the tabs, Enter or Space opens
 /// the focused one.
 #[component]
-pub fn Sources() -> impl IntoView {
-    let studio = expect_context::<Studio>();
-    let tab = studio.tab;
+pub fn Sources(
+    pairs: PairStore,
+    network: NetworkStore,
+    display: DisplaySettings,
+    twin: TwinStore,
+    cine: CineStore,
+    notices: Notices,
+    studio: Studio,
+) -> impl IntoView {
+    let tab = display.tab;
     let select = move |which: SourceTab| {
         tab.set(which);
-        studio.stop_playback();
+        cine.stop_playback();
         if which == SourceTab::Background {
             // Show the catheter on the background being composed.
-            let xray = studio.background.with_untracked(|bg| bg.style.modality());
-            studio.twin.update(|t| t.modality = xray);
+            let xray = twin.background.with_untracked(|bg| bg.style.modality());
+            twin.controls.update(|t| t.modality = xray);
         }
         match which {
             SourceTab::Images => {}
@@ -91,10 +100,12 @@ pub fn Sources() -> impl IntoView {
         <div class="tab-panel" id="source-panel" role="tabpanel"
             aria-labelledby=move || TABS.iter().find(|t| t.0 == tab.get()).map_or("", |t| t.1)>
             {move || match tab.get() {
-                SourceTab::Images => view! { <UploadPair/> }.into_any(),
-                SourceTab::Cine => view! { <CinePanel/> }.into_any(),
-                SourceTab::Twin => view! { <TwinSliders/> }.into_any(),
-                SourceTab::Background => view! { <Composer/> }.into_any(),
+                SourceTab::Images => view! { <UploadPair pairs=pairs notices=notices studio=studio/> }.into_any(),
+                SourceTab::Cine => view! {
+                    <CinePanel cine=cine pairs=pairs network=network display=display notices=notices studio=studio/>
+                }.into_any(),
+                SourceTab::Twin => view! { <TwinSliders twin=twin pairs=pairs studio=studio/> }.into_any(),
+                SourceTab::Background => view! { <Composer twin=twin notices=notices studio=studio/> }.into_any(),
             }}
         </div>
     }
@@ -113,8 +124,8 @@ async fn decode_view(file: &web_sys::File) -> Result<PickedView, PickedFileError
 
 /// Shows the pair of two decoded views as a draft and runs H-Net on it: it joins the pairs when
 /// the user labels it or keeps it, so that images only looked at never fill the list.
-fn add_upload(studio: Studio, [a, b]: [PickedView; 2]) {
-    let id = studio.workspace.with_untracked(|ws| ws.next_id());
+fn add_upload(studio: Studio, pairs: PairStore, notices: Notices, [a, b]: [PickedView; 2]) {
+    let id = pairs.workspace.with_untracked(|ws| ws.next_id());
     let loaded = format!(
         "{} and {} loaded: label the pair or keep it to add it to your pairs",
         a.0, b.0
@@ -129,16 +140,16 @@ fn add_upload(studio: Studio, [a, b]: [PickedView; 2]) {
         a.1,
         b.1,
     );
-    studio.info(loaded);
+    notices.info(loaded);
     studio.show_draft(pair);
 }
 
 /// Reads two image files (dropped or picked together) into a pair, the first by name as view
 /// A. Every problem names its file; nothing is added unless both images are good.
-fn load_files(studio: Studio, mut picked: Vec<web_sys::File>) {
+fn load_files(studio: Studio, pairs: PairStore, notices: Notices, mut picked: Vec<web_sys::File>) {
     leptos::task::spawn_local(async move {
         if picked.len() != 2 {
-            studio.error(format!(
+            notices.error(format!(
                 "a stereo pair is two images (view A and view B); {} file{} given",
                 picked.len(),
                 if picked.len() == 1 { " was" } else { "s were" }
@@ -149,18 +160,17 @@ fn load_files(studio: Studio, mut picked: Vec<web_sys::File>) {
         let views = match (decode_view(&picked[0]).await, decode_view(&picked[1]).await) {
             (Ok(a), Ok(b)) => [a, b],
             (Err(e), _) | (_, Err(e)) => {
-                studio.error(with_causes(&e));
+                notices.error(with_causes(&e));
                 return;
             }
         };
-        add_upload(studio, views);
+        add_upload(studio, pairs, notices, views);
     });
 }
 
 /// Two file pickers and a drop zone.
 #[component]
-fn UploadPair() -> impl IntoView {
-    let studio = expect_context::<Studio>();
+fn UploadPair(pairs: PairStore, notices: Notices, studio: Studio) -> impl IntoView {
     // Each picker's image is decoded (and any problem reported) as soon as it is picked; the pair
     // is made once both views are there. The reading outlives this panel if the user switches
     // tab meanwhile, so it only touches `picked` while the panel exists.
@@ -177,7 +187,7 @@ fn UploadPair() -> impl IntoView {
                     Ok(decoded) => decoded,
                     Err(e) => {
                         picked.try_update(|p| p[view] = None);
-                        studio.error(format!("view {letter}: {}", with_causes(&e)));
+                        notices.error(format!("view {letter}: {}", with_causes(&e)));
                         return;
                     }
                 };
@@ -194,8 +204,8 @@ fn UploadPair() -> impl IntoView {
                     return;
                 };
                 match both {
-                    Some(views) => add_upload(studio, views),
-                    None => studio.info(format!(
+                    Some(views) => add_upload(studio, pairs, notices, views),
+                    None => notices.info(format!(
                         "view {letter}: {name} is ready; now pick view {}",
                         ["B", "A"][view]
                     )),
@@ -207,7 +217,7 @@ fn UploadPair() -> impl IntoView {
         ev.prevent_default();
         dragging.set(false);
         let dropped = files(ev.data_transfer().and_then(|d| d.files()));
-        load_files(studio, dropped);
+        load_files(studio, pairs, notices, dropped);
     };
     view! {
         <div class="upload">
@@ -233,7 +243,7 @@ fn UploadPair() -> impl IntoView {
             </div>
             <label class="file-button">"Pick both…"
                 <input id="file-pair" type="file" multiple accept="image/png,image/jpeg"
-                    on:change=move |ev| load_files(studio, take_picked_files(&ev))/>
+                    on:change=move |ev| load_files(studio, pairs, notices, take_picked_files(&ev))/>
             </label>
         </div>
     }
@@ -244,40 +254,53 @@ fn with_step([min, max]: [f64; 2]) -> [f64; 3] {
     [min, max, 1.0]
 }
 
-/// One labelled slider bound to a field of the twin's controls. Moving it re-renders the twin;
-/// releasing it runs H-Net.
-fn slider(
+/// The twin's sliders: each bound to a field of the twin's controls. Moving one re-renders the
+/// twin; releasing it runs H-Net.
+#[derive(Clone, Copy)]
+struct TwinSlider {
     studio: Studio,
-    id: &'static str,
-    label: &'static str,
-    unit: &'static str,
-    range: [f64; 3],
-    get: impl Fn(&TwinControls) -> f64 + Copy + Send + Sync + 'static,
-    set: fn(&mut TwinControls, f64),
-) -> impl IntoView {
-    let twin = studio.twin;
-    view! {
-        <label class="slider">
-            <span>{label}</span>
-            <input id=id type="range" min=range[0] max=range[1] step=range[2]
-                prop:value=move || twin.with(get).to_string()
-                on:input=on_slider(move |v| {
-                    twin.update(|t| set(t, v));
-                    studio.render_twin();
-                })
-                on:change=move |_| studio.run_model()/>
-            <output>{move || format!("{:.2} {unit}", twin.with(get))}</output>
-        </label>
+    controls: RwSignal<TwinControls>,
+}
+
+impl TwinSlider {
+    /// One labelled slider over `range` (`[min, max, step]`, in `unit`).
+    fn view(
+        self,
+        id: &'static str,
+        label: &'static str,
+        unit: &'static str,
+        range: [f64; 3],
+        get: impl Fn(&TwinControls) -> f64 + Copy + Send + Sync + 'static,
+        set: fn(&mut TwinControls, f64),
+    ) -> impl IntoView {
+        let Self { studio, controls } = self;
+        view! {
+            <label class="slider">
+                <span>{label}</span>
+                <input id=id type="range" min=range[0] max=range[1] step=range[2]
+                    prop:value=move || controls.with(get).to_string()
+                    on:input=on_slider(move |v| {
+                        controls.update(|t| set(t, v));
+                        studio.render_twin();
+                    })
+                    on:change=move |_| studio.run_model()/>
+                <output>{move || format!("{:.2} {unit}", controls.with(get))}</output>
+            </label>
+        }
     }
 }
 
 /// The twin's sliders.
 #[component]
-fn TwinSliders() -> impl IntoView {
-    let studio = expect_context::<Studio>();
-    let twin = studio.twin;
+fn TwinSliders(twin: TwinStore, pairs: PairStore, studio: Studio) -> impl IntoView {
+    let background = twin.background;
+    let twin = twin.controls;
+    let slider = TwinSlider {
+        studio,
+        controls: twin,
+    };
     let modality = move |ev: leptos::ev::Event| {
-        let xray = studio.background.with_untracked(|bg| bg.style.modality());
+        let xray = background.with_untracked(|bg| bg.style.modality());
         twin.update(|t| {
             t.modality = if event_target_value(&ev) == "rgb" {
                 Modality::Rgb
@@ -302,7 +325,7 @@ fn TwinSliders() -> impl IntoView {
     };
     // The force the contact gave, from the draft the sliders rendered.
     let read_force = move || {
-        studio.draft.with(|d| {
+        pairs.draft.with(|d| {
             let pair = d.as_ref()?;
             let f = pair.force_n?;
             let PairSource::Twin { settings, .. } = &pair.source else {
@@ -334,34 +357,34 @@ fn TwinSliders() -> impl IntoView {
             <Show when=move || !on_bench()>
                 <fieldset>
                     <legend>"Tip force"</legend>
-                    {slider(studio, "twin-fx", "Fx", "N", [-0.4, 0.4, 0.01], |t| t.force_n[0], |t, v| t.force_n[0] = v)}
-                    {slider(studio, "twin-fy", "Fy", "N", [-0.4, 0.4, 0.01], |t| t.force_n[1], |t, v| t.force_n[1] = v)}
-                    {slider(studio, "twin-fz", "Fz", "N", [-0.4, 0.4, 0.01], |t| t.force_n[2], |t, v| t.force_n[2] = v)}
+                    {slider.view("twin-fx", "Fx", "N", [-0.4, 0.4, 0.01], |t| t.force_n[0], |t, v| t.force_n[0] = v)}
+                    {slider.view("twin-fy", "Fy", "N", [-0.4, 0.4, 0.01], |t| t.force_n[1], |t, v| t.force_n[1] = v)}
+                    {slider.view("twin-fz", "Fz", "N", [-0.4, 0.4, 0.01], |t| t.force_n[2], |t, v| t.force_n[2] = v)}
                 </fieldset>
             </Show>
             <Show when=on_bench>
                 <fieldset>
                     <legend>"Sensor plate"</legend>
-                    {slider(studio, "plate-press", "Press", "mm", [0.0, 4.0, 0.05], plate(|c| c.press_mm), |t, v| if let Some(c) = t.paper_bench.as_mut() { c.press_mm = v })}
-                    {slider(studio, "plate-slide", "Slide", "mm", [-3.0, 3.0, 0.05], plate(|c| c.slide_mm), |t, v| if let Some(c) = t.paper_bench.as_mut() { c.slide_mm = v })}
-                    {slider(studio, "plate-slide-direction", "Slide direction", "°", [0.0, 180.0, 1.0], plate(|c| c.slide_azimuth_deg), |t, v| if let Some(c) = t.paper_bench.as_mut() { c.slide_azimuth_deg = v })}
-                    {slider(studio, "plate-tilt", "Plate tilt", "°", [0.0, 30.0, 1.0], plate(|c| c.tilt_deg), |t, v| if let Some(c) = t.paper_bench.as_mut() { c.tilt_deg = v })}
-                    {slider(studio, "plate-tilt-direction", "Tilt direction", "°", [0.0, 360.0, 1.0], plate(|c| c.tilt_azimuth_deg), |t, v| if let Some(c) = t.paper_bench.as_mut() { c.tilt_azimuth_deg = v })}
+                    {slider.view("plate-press", "Press", "mm", [0.0, 4.0, 0.05], plate(|c| c.press_mm), |t, v| if let Some(c) = t.paper_bench.as_mut() { c.press_mm = v })}
+                    {slider.view("plate-slide", "Slide", "mm", [-3.0, 3.0, 0.05], plate(|c| c.slide_mm), |t, v| if let Some(c) = t.paper_bench.as_mut() { c.slide_mm = v })}
+                    {slider.view("plate-slide-direction", "Slide direction", "°", [0.0, 180.0, 1.0], plate(|c| c.slide_azimuth_deg), |t, v| if let Some(c) = t.paper_bench.as_mut() { c.slide_azimuth_deg = v })}
+                    {slider.view("plate-tilt", "Plate tilt", "°", [0.0, 30.0, 1.0], plate(|c| c.tilt_deg), |t, v| if let Some(c) = t.paper_bench.as_mut() { c.tilt_deg = v })}
+                    {slider.view("plate-tilt-direction", "Tilt direction", "°", [0.0, 360.0, 1.0], plate(|c| c.tilt_azimuth_deg), |t, v| if let Some(c) = t.paper_bench.as_mut() { c.tilt_azimuth_deg = v })}
                     <p id="plate-force" class="hint">{read_force}</p>
                 </fieldset>
             </Show>
             <fieldset>
                 <legend>"Catheter"</legend>
-                {slider(studio, "twin-stiffness", "Stiffness EI", "mN·m²", [0.3, 1.2, 0.05], |t| t.stiffness_mn_m2, |t, v| t.stiffness_mn_m2 = v)}
-                {slider(studio, "twin-length", "Flexible length", "mm", [30.0, 70.0, 1.0], |t| t.length_mm, |t, v| t.length_mm = v)}
-                {slider(studio, "twin-precurve", "Pre-curve radius (0: straight)", "mm", [0.0, 150.0, 5.0], |t| t.precurve_radius_mm, |t, v| t.precurve_radius_mm = v)}
+                {slider.view("twin-stiffness", "Stiffness EI", "mN·m²", [0.3, 1.2, 0.05], |t| t.stiffness_mn_m2, |t, v| t.stiffness_mn_m2 = v)}
+                {slider.view("twin-length", "Flexible length", "mm", [30.0, 70.0, 1.0], |t| t.length_mm, |t, v| t.length_mm = v)}
+                {slider.view("twin-precurve", "Pre-curve radius (0: straight)", "mm", [0.0, 150.0, 5.0], |t| t.precurve_radius_mm, |t, v| t.precurve_radius_mm = v)}
             </fieldset>
             <fieldset disabled=on_bench>
                 <legend>"C-arm"</legend>
-                {slider(studio, "twin-a-primary", "View A LAO/RAO", "°", with_step(VIEW_A_PRIMARY_DEG), |t| t.view_a_deg[0], |t, v| t.view_a_deg[0] = v)}
-                {slider(studio, "twin-a-secondary", "View A cranial/caudal", "°", with_step(SECONDARY_DEG), |t| t.view_a_deg[1], |t, v| t.view_a_deg[1] = v)}
-                {slider(studio, "twin-b-primary", "View B LAO/RAO", "°", with_step(VIEW_B_PRIMARY_DEG), |t| t.view_b_deg[0], |t, v| t.view_b_deg[0] = v)}
-                {slider(studio, "twin-b-secondary", "View B cranial/caudal", "°", with_step(SECONDARY_DEG), |t| t.view_b_deg[1], |t, v| t.view_b_deg[1] = v)}
+                {slider.view("twin-a-primary", "View A LAO/RAO", "°", with_step(VIEW_A_PRIMARY_DEG), |t| t.view_a_deg[0], |t, v| t.view_a_deg[0] = v)}
+                {slider.view("twin-a-secondary", "View A cranial/caudal", "°", with_step(SECONDARY_DEG), |t| t.view_a_deg[1], |t, v| t.view_a_deg[1] = v)}
+                {slider.view("twin-b-primary", "View B LAO/RAO", "°", with_step(VIEW_B_PRIMARY_DEG), |t| t.view_b_deg[0], |t, v| t.view_b_deg[0] = v)}
+                {slider.view("twin-b-secondary", "View B cranial/caudal", "°", with_step(SECONDARY_DEG), |t| t.view_b_deg[1], |t, v| t.view_b_deg[1] = v)}
                 <label class="slider">
                     <span>"Images"</span>
                     <select id="twin-modality" on:change=modality>
@@ -375,7 +398,7 @@ fn TwinSliders() -> impl IntoView {
                 </label>
             </fieldset>
             <div class="actions">
-                <button id="twin-keep" class="primary" disabled=move || !studio.showing_draft()
+                <button id="twin-keep" class="primary" disabled=move || !pairs.showing_draft()
                     on:click=move |_| studio.keep_draft()>
                     "Keep this pair"
                 </button>

@@ -7,9 +7,13 @@ use wasm_bindgen::{Clamped, JsCast};
 
 use crate::catheter_3d::{epipolar_line, pair_views};
 use crate::components::on_slider;
+use crate::engine::Prediction;
 use crate::imaging::{WORK_SIZE, estimate_tip, force_arrow, overlay, project, rgba};
 use crate::keymap::{self, Command, Scope, tooltip};
-use crate::studio::{CANVAS_SIDE, PointerTool, SourceTab, Studio, ViewTransform, view_index};
+use crate::studio::{
+    CANVAS_SIDE, DisplaySettings, NetworkStore, Notices, PairStore, PointerTool, SourceTab, Studio,
+    TwinStore, ViewTransform,
+};
 use crate::workspace::{PairSource, View};
 
 /// Colour of H-Net's masks.
@@ -26,15 +30,23 @@ const EPIPOLAR_CASING: &str = "rgba(20, 10, 40, 0.85)";
 
 /// The toolbar and both views.
 #[component]
-pub fn StereoView() -> impl IntoView {
-    let studio = expect_context::<Studio>();
+pub fn StereoView(
+    pairs: PairStore,
+    network: NetworkStore,
+    display: DisplaySettings,
+    twin: TwinStore,
+    notices: Notices,
+    /// H-Net's prediction of the pair on screen.
+    prediction: Memo<Option<Prediction>>,
+    studio: Studio,
+) -> impl IntoView {
     let tool_button = move |tool: PointerTool,
                             id: &'static str,
                             label: &'static str,
                             command: Command| {
         view! {
-            <button id=id class="tool" aria-pressed=move || (studio.tool.get() == tool).to_string()
-                title=tooltip(label, command) on:click=move |_| studio.tool.set(tool)>
+            <button id=id class="tool" aria-pressed=move || (display.tool.get() == tool).to_string()
+                title=tooltip(label, command) on:click=move |_| display.tool.set(tool)>
                 {label}
             </button>
         }
@@ -53,16 +65,16 @@ pub fn StereoView() -> impl IntoView {
                 on:change=move |ev| value.set(event_target_checked(&ev))/>
         }
     };
-    let can = move || studio.workspace.with(|ws| ws.can_undo_redo());
+    let can = move || pairs.workspace.with(|ws| ws.can_undo_redo());
     let has_prediction = move || {
-        studio
+        pairs
             .shown_id()
-            .is_some_and(|id| studio.predictions.with(|p| p.contains_key(&id)))
+            .is_some_and(|id| network.predictions.with(|p| p.contains_key(&id)))
     };
     view! {
         <div class="toolbar" role="toolbar" aria-label="Labeling tools">
             <button id="run-model" class="primary" title=tooltip("Run H-Net", Command::RunModel)
-                disabled=move || studio.busy.get().is_some() || studio.shown_id().is_none()
+                disabled=move || notices.busy.get().is_some() || pairs.shown_id().is_none()
                 on:click=move |_| studio.run_model()>"Run H-Net"</button>
             <button id="accept-masks" title=tooltip("Use H-Net's masks as the labels", Command::AcceptMasks)
                 disabled=move || !has_prediction()
@@ -71,12 +83,12 @@ pub fn StereoView() -> impl IntoView {
                 {tool_button(PointerTool::Brush, "tool-brush", "Brush", Command::Brush)}
                 {tool_button(PointerTool::Eraser, "tool-eraser", "Eraser", Command::Eraser)}
                 {tool_button(PointerTool::Pan, "tool-pan", "Pan", Command::Pan)}
-                {move || studio.showing_cine_frame().then(|| tool_button(
+                {move || pairs.showing_cine_frame().then(|| tool_button(
                     PointerTool::WindowLevel, "tool-window-level", "Window/level", Command::WindowLevel))}
             </span>
             <label class="slider compact">"Size"
-                {slider("brush-size", ["1", "20", "0.5"], studio.brush_radius)}
-                <output>{move || format!("{:.1} px", studio.brush_radius.get())}</output>
+                {slider("brush-size", ["1", "20", "0.5"], display.brush_radius)}
+                <output>{move || format!("{:.1} px", display.brush_radius.get())}</output>
             </label>
             <span class="group">
                 <button id="undo" title=tooltip("Undo", Command::Undo) disabled=move || !can().0
@@ -85,24 +97,24 @@ pub fn StereoView() -> impl IntoView {
                     on:click=move |_| studio.undo_redo(true)>"Redo"</button>
             </span>
             <span class="group">
-                <label>{checkbox("show-prediction", studio.show_prediction)}
+                <label>{checkbox("show-prediction", display.show_prediction)}
                     <span class="swatch prediction"></span>"H-Net masks"</label>
-                <label>{checkbox("show-label", studio.show_label)}
+                <label>{checkbox("show-label", display.show_label)}
                     <span class="swatch label"></span>"Labels"</label>
             </span>
             <label class="slider compact">"Opacity"
-                {slider("opacity", ["0", "1", "0.05"], studio.opacity)}
+                {slider("opacity", ["0", "1", "0.05"], display.opacity)}
             </label>
             <button id="reset-zoom" title=tooltip("Fit both views", Command::FitViews)
-                on:click=move |_| studio.fit_views()>"Fit"</button>
+                on:click=move |_| display.fit_views()>"Fit"</button>
         </div>
-        {move || studio.showing_draft().then(|| view! {
+        {move || pairs.showing_draft().then(|| view! {
             <p class="draft-note">
-                {move || if studio.showing_cine_frame() {
+                {move || if pairs.showing_cine_frame() {
                     "DICOM cine frame (not kept yet). "
-                } else if studio.showing_upload_draft() {
+                } else if pairs.showing_upload_draft() {
                     "Your pair (not kept yet: it joins your pairs when you label it or keep it). "
-                } else if studio.tab.get() == SourceTab::Images {
+                } else if display.tab.get() == SourceTab::Images {
                     "A sample pair from the digital twin, with H-Net's masks, force and 3D view: \
                      load your own pair above, or change this one in the Digital twin tab. "
                 } else {
@@ -112,8 +124,8 @@ pub fn StereoView() -> impl IntoView {
             </p>
         })}
         <div class="views">
-            <ViewCanvas view=View::A/>
-            <ViewCanvas view=View::B/>
+            <ViewCanvas view=View::A pairs=pairs display=display twin=twin notices=notices prediction=prediction studio=studio/>
+            <ViewCanvas view=View::B pairs=pairs display=display twin=twin notices=notices prediction=prediction studio=studio/>
         </div>
         <p class="legend" title="The force arrows are the tip force projected on each view">
             <span class="arrow estimate"></span>"H-Net's force "
@@ -190,10 +202,18 @@ enum Gesture {
 
 /// One view's canvas.
 #[component]
-fn ViewCanvas(view: View) -> impl IntoView {
-    let studio = expect_context::<Studio>();
-    let index = view_index(view);
-    let transform = studio.transforms[index];
+fn ViewCanvas(
+    view: View,
+    pairs: PairStore,
+    display: DisplaySettings,
+    twin: TwinStore,
+    notices: Notices,
+    /// H-Net's prediction of the pair on screen.
+    prediction: Memo<Option<Prediction>>,
+    studio: Studio,
+) -> impl IntoView {
+    let index = view.index();
+    let transform = display.transforms[index];
     let canvas = NodeRef::<leptos::html::Canvas>::new();
     let pointer = RwSignal::new(None::<[f64; 2]>);
     let gesture = StoredValue::new(None::<Gesture>);
@@ -211,11 +231,11 @@ fn ViewCanvas(view: View) -> impl IntoView {
 
     // The epipolar line, in this view, of the pointer on the other view (image pixels).
     let epipolar = Memo::new(move |_| {
-        let (other, at) = studio.epipolar_pointer.get()?;
+        let (other, at) = twin.epipolar_pointer.get()?;
         if other == view {
             return None;
         }
-        studio.with_shown(|pair| epipolar_line(&pair_views(pair?), view, at))
+        pairs.with_shown(|pair| epipolar_line(&pair_views(pair?), view, at))
     });
 
     Effect::new(move |_| {
@@ -226,11 +246,12 @@ fn ViewCanvas(view: View) -> impl IntoView {
         let t = transform.get();
         ctx.set_fill_style_str("#15181c");
         ctx.fill_rect(0.0, 0.0, CANVAS_SIDE, CANVAS_SIDE);
-        let (show_prediction, show_label) = (studio.show_prediction.get(), studio.show_label.get());
-        let opacity = studio.opacity.get() as f32;
-        let arrows = studio.with_shown(|pair| {
+        let (show_prediction, show_label) =
+            (display.show_prediction.get(), display.show_label.get());
+        let opacity = display.opacity.get() as f32;
+        let arrows = pairs.with_shown(|pair| {
             let pair = pair?;
-            let prediction = studio.predictions.with(|p| p.get(&pair.id).cloned());
+            let prediction = prediction.get();
             let mut rgb = pair.image(view).to_vec();
             let predicted_mask = prediction.as_ref().map(|p| match view {
                 View::A => &p.mask_a,
@@ -326,8 +347,8 @@ fn ViewCanvas(view: View) -> impl IntoView {
             line(2.0, EPIPOLAR_LINE);
             let _ = ctx.set_line_dash(&js_sys::Array::new());
         }
-        if let (Some(p), Some(_)) = (pointer.get(), studio.tool.get().mask_tool()) {
-            let r = studio.brush_radius.get() * t.scale;
+        if let (Some(p), Some(_)) = (pointer.get(), display.tool.get().mask_tool()) {
+            let r = display.brush_radius.get() * t.scale;
             ctx.set_line_width(1.5);
             ctx.set_stroke_style_str("rgba(255,255,255,0.9)");
             ctx.begin_path();
@@ -356,40 +377,38 @@ fn ViewCanvas(view: View) -> impl IntoView {
         if let Some(c) = canvas.get_untracked() {
             let _ = c.set_pointer_capture(ev.pointer_id());
         }
-        let tool = studio.tool.get_untracked();
+        let tool = display.tool.get_untracked();
         match tool.mask_tool() {
             Some(mask_tool) if ev.button() == 0 => {
-                if studio.shown_id().is_none() {
+                if pairs.shown_id().is_none() {
                     return;
                 }
-                if studio.showing_draft() {
+                if pairs.showing_draft() {
                     studio.keep_draft();
                 }
                 let at = transform.get_untracked().to_image(p);
-                let radius = studio.brush_radius.get_untracked();
+                let radius = display.brush_radius.get_untracked();
                 // A view not yet labelled starts from H-Net's mask of it (issue #39).
-                let start_from = studio.shown_id().and_then(|id| {
-                    studio.predictions.with_untracked(|p| {
-                        p.get(&id).map(|p| {
-                            crate::imaging::binarize(match view {
-                                View::A => &p.mask_a,
-                                View::B => &p.mask_b,
-                            })
+                let start_from = prediction.with_untracked(|p| {
+                    p.as_ref().map(|p| {
+                        crate::imaging::binarize(match view {
+                            View::A => &p.mask_a,
+                            View::B => &p.mask_b,
                         })
                     })
                 });
-                studio.workspace.update(|ws| {
+                pairs.workspace.update(|ws| {
                     ws.begin_stroke(view, start_from);
                     ws.stroke_to(at, at, radius, mask_tool);
                 });
-                studio.show_label.set(true);
+                display.show_label.set(true);
                 gesture.set_value(Some(Gesture::Stroke(at)));
             }
             None if tool == PointerTool::WindowLevel && ev.button() == 0 => {
-                if studio.showing_cine_frame() {
+                if pairs.showing_cine_frame() {
                     gesture.set_value(Some(Gesture::Window(p)));
                 } else {
-                    studio.info("window/level changes a DICOM cine's frames: load one in the DICOM cine tab");
+                    notices.info("window/level changes a DICOM cine's frames: load one in the DICOM cine tab");
                 }
             }
             _ => gesture.set_value(Some(Gesture::Pan(p))),
@@ -398,15 +417,14 @@ fn ViewCanvas(view: View) -> impl IntoView {
     let on_move = move |ev: web_sys::PointerEvent| {
         let Some(p) = canvas_point(&ev) else { return };
         pointer.set(Some(p));
-        studio
-            .epipolar_pointer
+        twin.epipolar_pointer
             .set(Some((view, transform.get_untracked().to_image(p))));
         match gesture.get_value() {
             Some(Gesture::Stroke(last)) => {
                 let at = transform.get_untracked().to_image(p);
-                let radius = studio.brush_radius.get_untracked();
-                if let Some(tool) = studio.tool.get_untracked().mask_tool() {
-                    studio
+                let radius = display.brush_radius.get_untracked();
+                if let Some(tool) = display.tool.get_untracked().mask_tool() {
+                    pairs
                         .workspace
                         .update(|ws| ws.stroke_to(last, at, radius, tool));
                 }
@@ -432,7 +450,7 @@ fn ViewCanvas(view: View) -> impl IntoView {
     };
     let on_up = move |_: web_sys::PointerEvent| {
         match gesture.get_value() {
-            Some(Gesture::Stroke(_)) => studio.edit(|ws| ws.end_stroke()),
+            Some(Gesture::Stroke(_)) => pairs.edit(|ws| ws.end_stroke()),
             Some(Gesture::Window(_)) => studio.run_model(),
             _ => {}
         }
@@ -478,7 +496,7 @@ fn ViewCanvas(view: View) -> impl IntoView {
         transform.set(next);
     };
     let description = move || {
-        let masks = match (studio.show_prediction.get(), studio.show_label.get()) {
+        let masks = match (display.show_prediction.get(), display.show_label.get()) {
             (true, true) => "H-Net's mask in blue and the label in orange",
             (true, false) => "H-Net's mask in blue",
             (false, true) => "the label in orange",
@@ -491,7 +509,7 @@ fn ViewCanvas(view: View) -> impl IntoView {
         )
     };
     let label_pixels = move || {
-        studio.with_shown(|p| {
+        pairs.with_shown(|p| {
             p.map_or(0, |p| {
                 if p.masks_labeled {
                     p.labeled_pixels(view)
@@ -502,9 +520,8 @@ fn ViewCanvas(view: View) -> impl IntoView {
         })
     };
     let predicted_pixels = move || {
-        let id = studio.shown_id()?;
-        studio.predictions.with(|p| {
-            p.get(&id).map(|p| {
+        prediction.with(|p| {
+            p.as_ref().map(|p| {
                 let mask = if view == View::A {
                     &p.mask_a
                 } else {
@@ -519,14 +536,14 @@ fn ViewCanvas(view: View) -> impl IntoView {
         <figure class="view">
             <canvas id=format!("view-{}", view.letter().to_lowercase())
                 width=CANVAS_SIDE height=CANVAS_SIDE node_ref=canvas
-                class:panning=move || studio.tool.get() == PointerTool::Pan
+                class:panning=move || display.tool.get() == PointerTool::Pan
                 data-label-pixels=move || label_pixels().to_string()
                 data-predicted-pixels=move || predicted_pixels().map(|n| n.to_string()).unwrap_or_default()
                 on:pointerdown=on_down on:pointermove=on_move on:pointerup=on_up
                 on:pointercancel=on_up on:pointerleave=move |_| {
                     pointer.set(None);
-                    if studio.epipolar_pointer.get_untracked().is_some_and(|(v, _)| v == view) {
-                        studio.epipolar_pointer.set(None);
+                    if twin.epipolar_pointer.get_untracked().is_some_and(|(v, _)| v == view) {
+                        twin.epipolar_pointer.set(None);
                     }
                 }
                 data-epipolar=move || epipolar.get().map(|[a, b]| format!("{:.1},{:.1},{:.1},{:.1}", a[0], a[1], b[0], b[1])).unwrap_or_default()
@@ -534,7 +551,7 @@ fn ViewCanvas(view: View) -> impl IntoView {
                 tabindex="0" role="img" aria-label=description on:keydown=on_key></canvas>
             <figcaption>
                 "View "{view.letter()}
-                {move || studio.with_shown(|p| p.map(|p| match &p.source {
+                {move || pairs.with_shown(|p| p.map(|p| match &p.source {
                     PairSource::Upload { view_a, view_b, .. } => format!(" · {}", if view == View::A { view_a } else { view_b }),
                     PairSource::Twin { views, .. } => {
                         let c = if view == View::A { views.a } else { views.b };
@@ -552,12 +569,12 @@ fn ViewCanvas(view: View) -> impl IntoView {
                 // An empty mask is a label only when the view shows no catheter on purpose.
                 <label class="no-catheter">
                     <input id=format!("no-catheter-{}", view.letter().to_lowercase()) type="checkbox"
-                        disabled=move || studio.shown_id().is_none()
-                        prop:checked=move || studio.with_shown(|p| p.is_some_and(|p| p.marked_no_catheter(view)))
+                        disabled=move || pairs.shown_id().is_none()
+                        prop:checked=move || pairs.with_shown(|p| p.is_some_and(|p| p.marked_no_catheter(view)))
                         on:change=move |ev| {
                             let none = event_target_checked(&ev);
                             let Some(id) = studio.labeled_pair_id() else { return };
-                            studio.edit(|ws| ws.mark_no_catheter(&id, view, none).then_some(id.clone()));
+                            pairs.edit(|ws| ws.mark_no_catheter(&id, view, none).then_some(id.clone()));
                         }/>
                     " No catheter in this view"
                 </label>

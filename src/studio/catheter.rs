@@ -50,21 +50,17 @@ impl Studio {
     /// masks, else H-Net's, or H-Net's as [`Studio::fit_masks`] asks), into
     /// [`Studio::catheter`]. A failure is kept there as its message; nothing else changes.
     pub fn reconstruct_shown(&self) {
-        let shown = self
-            .draft
-            .with_untracked(|d| d.clone())
-            .or_else(|| self.workspace.with_untracked(|ws| ws.current().cloned()));
-        let Some(pair) = shown else {
-            self.catheter.set(None);
+        let Some(pair) = self.pairs.shown_untracked() else {
+            self.twin.catheter.set(None);
             return;
         };
-        let prediction = self.predictions.with_untracked(|p| {
+        let prediction = self.network.predictions.with_untracked(|p| {
             p.get(&pair.id)
                 .map(|p| (p.mask_a.clone(), p.mask_b.clone(), p.force_n))
         });
-        let controls = self.twin.get_untracked();
-        let calibration = self.calibration.get_untracked();
-        let choice = self.fit_masks.get_untracked();
+        let controls = self.twin.controls.get_untracked();
+        let calibration = self.twin.calibration.get_untracked();
+        let choice = self.twin.fit_masks.get_untracked();
         let clock = web_sys::window().and_then(|w| w.performance());
         let now = || clock.as_ref().map_or(0.0, |p| p.now());
         let start = now();
@@ -74,7 +70,7 @@ impl Studio {
                 reconstruct_pair(&geometry, &PairMasks::of(&pair, predicted, choice)?)
             });
         let millis = now() - start;
-        self.catheter.set(Some(CatheterReading {
+        self.twin.catheter.set(Some(CatheterReading {
             views: pair_views(&pair),
             id: pair.id,
             fit_masks: choice,
@@ -88,9 +84,9 @@ impl Studio {
     /// ([`crate::catheter_calibration`]); the 3D step and the trace then read every pair with
     /// it. A refusal says why and keeps the previous calibration.
     pub fn calibrate_catheter(&self) {
-        let controls = self.twin.get_untracked();
-        let outcome = self.workspace.with_untracked(|ws| {
-            self.predictions.with_untracked(|predictions| {
+        let controls = self.twin.controls.get_untracked();
+        let outcome = self.pairs.workspace.with_untracked(|ws| {
+            self.network.predictions.with_untracked(|predictions| {
                 let predicted = |id: &str| {
                     predictions
                         .get(id)
@@ -109,9 +105,9 @@ impl Studio {
                     text = format!("{text}; left out: {}", outcome.left_out.join("; "));
                 }
                 self.set_calibration(Some(outcome.calibration));
-                self.info(text);
+                self.notices.info(text);
             }
-            Err(e) => self.error(with_causes(&e)),
+            Err(e) => self.notices.error(with_causes(&e)),
         }
     }
 
@@ -119,11 +115,11 @@ impl Studio {
     /// it is kept in the browser. A failed write says so; the calibration still applies to this
     /// visit.
     pub fn set_calibration(&self, calibration: Option<StiffnessCalibration>) {
-        self.calibration.set(calibration);
+        self.twin.calibration.set(calibration);
         let studio = *self;
         leptos::task::spawn_local(async move {
             if let Err(e) = storage::save_calibration(calibration.as_ref()).await {
-                studio.error(format!(
+                studio.notices.error(format!(
                     "the catheter calibration applies to this visit only: {}",
                     with_causes(&e)
                 ));
@@ -139,16 +135,16 @@ impl Studio {
 pub fn install_reconstruction(studio: Studio) {
     let serial = StoredValue::new(0u64);
     Effect::new(move |_| {
-        let shown = studio.shown_id();
-        studio.predictions.track();
-        studio.twin.track();
-        studio.calibration.track();
-        studio.fit_masks.track();
-        if studio.workspace.with(Workspace::is_stroking) {
+        let shown = studio.pairs.shown_id();
+        studio.network.predictions.track();
+        studio.twin.controls.track();
+        studio.twin.calibration.track();
+        studio.twin.fit_masks.track();
+        if studio.pairs.workspace.with(Workspace::is_stroking) {
             return;
         }
         if shown.is_none() {
-            studio.catheter.set(None);
+            studio.twin.catheter.set(None);
             return;
         }
         serial.update_value(|s| *s += 1);

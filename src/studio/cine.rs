@@ -17,42 +17,94 @@ use std::path::Path;
 use hnet_twin::model_facts::recorded_name;
 use hnet_twin::reconstruction::physics_force::TipForceEstimate;
 
+/// The cine's state: its frames and windows, playback, and the force trace over its frames.
+#[derive(Clone, Copy)]
+pub struct CineStore {
+    /// The DICOM cine, once loaded. Read it with `with`: it holds every frame.
+    pub player: RwSignal<Option<CinePlayer>>,
+    /// Counts loaded cines, so that a trace of an earlier one stops.
+    pub serial: RwSignal<u64>,
+    /// Whether the cine plays.
+    pub playing: RwSignal<bool>,
+    /// The cine's playback timer, while it plays.
+    playback: StoredValue<Option<IntervalHandle>>,
+    /// Frames traced and frames to trace, while H-Net runs over the cine.
+    pub trace_progress: RwSignal<Option<(usize, usize)>>,
+    /// The user asked to stop the trace.
+    pub trace_cancelled: RwSignal<bool>,
+    /// Whether a window/level drag changes both cine planes (else the dragged view's only).
+    pub link_windows: RwSignal<bool>,
+}
+
+impl CineStore {
+    /// No cine loaded.
+    pub fn new() -> Self {
+        Self {
+            player: RwSignal::new(None),
+            serial: RwSignal::new(0),
+            playing: RwSignal::new(false),
+            playback: StoredValue::new(None),
+            trace_progress: RwSignal::new(None),
+            trace_cancelled: RwSignal::new(false),
+            link_windows: RwSignal::new(false),
+        }
+    }
+
+    /// Whether a cine is loaded.
+    pub fn loaded(&self) -> bool {
+        self.player.with(Option::is_some)
+    }
+
+    /// Stops the trace after the frame in progress.
+    pub fn cancel_trace(&self) {
+        self.trace_cancelled.set(true);
+    }
+
+    /// Pauses the cine.
+    pub fn stop_playback(&self) {
+        if let Some(handle) = self.playback.try_update_value(Option::take).flatten() {
+            handle.clear();
+            self.playing.set(false);
+        }
+    }
+}
+
+impl Default for CineStore {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl Studio {
     /// Loads a cine in place of the previous one: playback and any trace stop, its first frame
     /// is shown and H-Net runs on it.
     pub fn load_cine(&self, player: CinePlayer) {
-        self.stop_playback();
-        self.trace_cancelled.set(true);
-        self.cine_serial.update(|s| *s += 1);
+        self.cine.stop_playback();
+        self.cine.trace_cancelled.set(true);
+        self.cine.serial.update(|s| *s += 1);
         let frames = player.frame_count();
         let notes = player.notes.clone();
-        self.cine.set(Some(player));
+        self.cine.player.set(Some(player));
         self.show_cine_frame();
         self.run_model();
         let mut text = format!("cine loaded: {frames} frame pairs");
         if !notes.is_empty() {
             text = format!("{text}. {}", notes.join("; "));
         }
-        self.info(text);
+        self.notices.info(text);
     }
 
     /// Shows the cine's current frame as the draft (with a new id: its pixels follow the
     /// window), without running H-Net.
     pub fn show_cine_frame(&self) {
-        let serial = self.draft_serial.get_untracked() + 1;
-        self.draft_serial.set(serial);
-        let pair = self.cine.with_untracked(|cine| {
+        let serial = self.pairs.next_draft_serial();
+        let pair = self.cine.player.with_untracked(|cine| {
             cine.as_ref()
                 .and_then(|c| c.pair(c.frame, format!("cine-{serial}")))
         });
         if pair.is_some() {
             self.replace_draft(pair);
         }
-    }
-
-    /// Whether a cine is loaded.
-    pub fn has_cine(&self) -> bool {
-        self.cine.with(Option::is_some)
     }
 
     /// Moves the cine `delta` frames (pausing it), shows that frame and runs H-Net on it.
@@ -67,11 +119,11 @@ impl Studio {
 
     /// Pauses the cine, moves it with `to`, shows the frame and runs H-Net on it.
     fn move_cine(&self, to: impl FnOnce(&mut CinePlayer)) {
-        if !self.cine.with_untracked(Option::is_some) {
+        if !self.cine.player.with_untracked(Option::is_some) {
             return;
         }
-        self.stop_playback();
-        self.cine.update(|c| {
+        self.cine.stop_playback();
+        self.cine.player.update(|c| {
             if let Some(c) = c {
                 to(c);
             }
@@ -83,13 +135,14 @@ impl Studio {
     /// Plays the cine at its frame rate, looping, or pauses it (and runs H-Net on the frame it
     /// stops at). H-Net does not run on every frame while it plays: trace the force for that.
     pub fn toggle_play(&self) {
-        if self.playback.with_value(Option::is_some) {
-            self.stop_playback();
+        if self.cine.playback.with_value(Option::is_some) {
+            self.cine.stop_playback();
             self.run_model();
             return;
         }
         let Some(interval_ms) = self
             .cine
+            .player
             .with_untracked(|c| c.as_ref().map(CinePlayer::frame_interval_ms))
         else {
             return;
@@ -97,33 +150,28 @@ impl Studio {
         let studio = *self;
         let handle = set_interval_with_handle(
             move || {
-                studio.cine.update(|c| c.iter_mut().for_each(|c| c.step(1)));
+                studio
+                    .cine
+                    .player
+                    .update(|c| c.iter_mut().for_each(|c| c.step(1)));
                 studio.show_cine_frame();
             },
             std::time::Duration::from_micros((interval_ms * 1000.0) as u64),
         );
         match handle {
             Ok(handle) => {
-                self.playback.set_value(Some(handle));
-                self.playing.set(true);
+                self.cine.playback.set_value(Some(handle));
+                self.cine.playing.set(true);
             }
-            Err(e) => self.error(format!("the cine cannot play: {e:?}")),
-        }
-    }
-
-    /// Pauses the cine.
-    pub fn stop_playback(&self) {
-        if let Some(handle) = self.playback.try_update_value(Option::take).flatten() {
-            handle.clear();
-            self.playing.set(false);
+            Err(e) => self.notices.error(format!("the cine cannot play: {e:?}")),
         }
     }
 
     /// Changes a plane's window as a drag on its view does (fractions of the view's side) and
     /// shows the frame again; H-Net runs when the drag ends.
     pub fn drag_window(&self, view: View, right: f64, down: f64) {
-        let linked = self.link_windows.get_untracked();
-        self.cine.update(|c| {
+        let linked = self.cine.link_windows.get_untracked();
+        self.cine.player.update(|c| {
             c.iter_mut()
                 .for_each(|c| c.drag_window(view, right, down, linked))
         });
@@ -133,6 +181,7 @@ impl Studio {
     /// Both planes' windows back to the headers' and H-Net on the frame.
     pub fn reset_windows(&self) {
         self.cine
+            .player
             .update(|c| c.iter_mut().for_each(CinePlayer::reset_windows));
         self.show_cine_frame();
         self.run_model();
@@ -146,23 +195,28 @@ impl Studio {
     /// after the frames in progress (what was traced stays). Frames whose view a stopped worker
     /// left are read again by another, and the closing message names them.
     pub fn trace_cine(&self) {
-        let ModelState::Ready(engine) = self.model.get_untracked() else {
-            self.error("H-Net is not loaded yet: trace the force once it is");
+        let ModelState::Ready(engine) = self.network.model.get_untracked() else {
+            self.notices
+                .error("H-Net is not loaded yet: trace the force once it is");
             return;
         };
         let Some(total) = self
             .cine
+            .player
             .with_untracked(|c| c.as_ref().map(CinePlayer::frame_count))
         else {
             return;
         };
-        if self.trace_progress.get_untracked().is_some() || self.busy.get_untracked().is_some() {
-            self.error("H-Net is busy: trace the force when it is done");
+        if self.cine.trace_progress.get_untracked().is_some()
+            || self.notices.busy.get_untracked().is_some()
+        {
+            self.notices
+                .error("H-Net is busy: trace the force when it is done");
             return;
         }
-        let entry = self.catheter_entry.get_untracked();
+        let entry = self.network.catheter_entry.get_untracked();
         if !entry.can_read_force() {
-            self.error(format!(
+            self.notices.error(format!(
                 "no tip force to trace with \"Catheter enters from\" set to {}: H-Net's force is \
                  not read for a view read turned (its force head learned catheters that come up \
                  from the bottom). Set it to the bottom, or to find it",
@@ -170,33 +224,34 @@ impl Studio {
             ));
             return;
         }
-        let serial = self.cine_serial.get_untracked();
-        self.cine.update(|c| {
+        let serial = self.cine.serial.get_untracked();
+        self.cine.player.update(|c| {
             c.iter_mut()
                 .for_each(|c| c.start_trace(&recorded_name(Path::new(&engine.weights_name))))
         });
-        self.trace_cancelled.set(false);
-        self.trace_progress.set(Some((0, total)));
-        self.busy
+        self.cine.trace_cancelled.set(false);
+        self.cine.trace_progress.set(Some((0, total)));
+        self.notices
+            .busy
             .set(Some(format!("Tracing the tip force over {total} frames…")));
         // Each frame is two views: one frame per worker keeps them all busy while the page
         // joins the last frame's views and fits its rod.
-        let in_flight = match self.cpu_workers.get_untracked() {
+        let in_flight = match self.network.cpu_workers.get_untracked() {
             WorkersStatus::Running { running, .. } => running.max(1),
             _ => 1,
         };
         let studio = *self;
         leptos::task::spawn_local(async move {
             let start = now_ms();
-            let same_cine = || studio.cine_serial.get_untracked() == serial;
-            let stopped = || studio.trace_cancelled.get_untracked() || !same_cine();
+            let same_cine = || studio.cine.serial.get_untracked() == serial;
+            let stopped = || studio.cine.trace_cancelled.get_untracked() || !same_cine();
             let engine = &engine;
             let frames = futures::stream::iter(0..total)
                 .map(|frame| async move {
                     if stopped() {
                         return (frame, None);
                     }
-                    let views = studio.cine.with_untracked(|c| {
+                    let views = studio.cine.player.with_untracked(|c| {
                         let c = c.as_ref()?;
                         Some((c.rgb(View::A, frame)?, c.rgb(View::B, frame)?))
                     });
@@ -225,14 +280,14 @@ impl Studio {
                             redone_why.get_or_insert_with(|| why.clone());
                         }
                         if let Some(estimate) = studio.frame_estimate(engine, frame, &prediction) {
-                            studio.cine.update(|c| {
+                            studio.cine.player.update(|c| {
                                 c.iter_mut()
                                     .for_each(|c| c.record_estimate(frame, estimate))
                             });
                             traced += 1;
                         }
                         done += 1;
-                        studio.trace_progress.set(Some((done, total)));
+                        studio.cine.trace_progress.set(Some((done, total)));
                     }
                     Some(Ok(_)) => {}
                     Some(Err(e)) => {
@@ -241,12 +296,12 @@ impl Studio {
                             format!("H-Net failed on frame {}: {}", frame + 1, with_causes(&e))
                         });
                         // The frames in flight finish; no new one starts.
-                        studio.trace_cancelled.set(true);
+                        studio.cine.trace_cancelled.set(true);
                     }
                 }
             }
-            studio.trace_progress.set(None);
-            studio.busy.set(None);
+            studio.cine.trace_progress.set(None);
+            studio.notices.busy.set(None);
             let seconds = (now_ms() - start) / 1000.0;
             let redone_text = redone_why.map(|why| {
                 redone.sort_unstable();
@@ -259,48 +314,46 @@ impl Studio {
             });
             let redone_text = redone_text.unwrap_or_default();
             match failure {
-                Some(text) => studio.error(format!(
+                Some(text) => studio.notices.error(format!(
                     "{text}; {done} of {total} frames traced{redone_text}"
                 )),
                 None if !same_cine() => {}
-                None if done < total => studio.info(format!(
+                None if done < total => studio.notices.info(format!(
                     "trace stopped: {done} of {total} frames traced in {seconds:.1} s{redone_text}"
                 )),
-                None if traced < total => studio.info(format!(
+                None if traced < total => studio.notices.info(format!(
                     "tip force traced over {traced} of {total} frames in {seconds:.1} s: the \
                      other {} got no force (a view showed no catheter, or was read \
                      turned){redone_text}",
                     total - traced
                 )),
-                None => studio.info(format!(
+                None => studio.notices.info(format!(
                     "tip force traced over {total} frames in {seconds:.1} s ({:.0} ms per \
                      frame){redone_text}",
                     seconds * 1000.0 / total.max(1) as f64
                 )),
             }
-            if studio.rerun.get_untracked() {
-                studio.rerun.set(false);
+            if studio.network.rerun.get_untracked() {
+                studio.network.rerun.set(false);
                 studio.run_model();
             }
         });
-    }
-
-    /// Stops the trace after the frame in progress.
-    pub fn cancel_trace(&self) {
-        self.trace_cancelled.set(true);
     }
 
     /// Offers the cine's force trace as a CSV download (`hnet trace`'s format).
     pub fn export_trace(&self) {
         let Some(csv) = self
             .cine
+            .player
             .with_untracked(|c| c.as_ref().map(CinePlayer::trace_csv))
         else {
             return;
         };
         match download(crate::cine::TRACE_FILE, csv.as_bytes(), "text/csv") {
-            Ok(()) => self.info(format!("force trace saved as {}", crate::cine::TRACE_FILE)),
-            Err(e) => self.error(with_causes(&e)),
+            Ok(()) => self
+                .notices
+                .info(format!("force trace saved as {}", crate::cine::TRACE_FILE)),
+            Err(e) => self.notices.error(with_causes(&e)),
         }
     }
 
@@ -322,6 +375,7 @@ impl Studio {
         };
         let pair = self
             .cine
+            .player
             .with_untracked(|c| c.as_ref()?.pair(frame, format!("trace-{frame}")))?;
         // Headers without the geometry: the C-arms are the defaults, and the physics estimate
         // would only reflect them (`hnet trace` does the same).
@@ -332,8 +386,8 @@ impl Studio {
         {
             return Some(combination.estimate(force, None));
         }
-        let controls = self.twin.get_untracked();
-        let calibration = self.calibration.get_untracked();
+        let controls = self.twin.controls.get_untracked();
+        let calibration = self.twin.calibration.get_untracked();
         let physics = PairGeometry::of(&pair, &controls, calibration.as_ref())
             .and_then(|geometry| {
                 let predicted = [&prediction.mask_a[..], &prediction.mask_b[..]];

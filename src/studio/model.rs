@@ -6,8 +6,9 @@ use std::rc::Rc;
 
 use leptos::prelude::*;
 
-use super::Studio;
+use super::{PairStore, Studio};
 use crate::bundled::{self, FetchError};
+use crate::compute::BackendChoice;
 use crate::compute::{self, Backend};
 use crate::cpu_pool::WorkersStatus;
 use crate::engine::{Engine, EngineError, Prediction, WeightsOrigin};
@@ -27,56 +28,115 @@ pub enum ModelState {
     Failed(String),
 }
 
+/// The network's state: its engine, its CPU workers, the user's choices of backend and catheter
+/// entry, and its predictions.
+#[derive(Clone, Copy)]
+pub struct NetworkStore {
+    /// The network.
+    pub model: RwSignal<ModelState, LocalStorage>,
+    /// The CPU workers that read the views, as the model bar shows them.
+    pub cpu_workers: RwSignal<WorkersStatus>,
+    /// Which backend the user asked for.
+    pub backend_choice: RwSignal<BackendChoice>,
+    /// Through which edge the catheter enters the views H-Net reads (as trained: the bottom).
+    pub catheter_entry: RwSignal<EntrySetting>,
+    /// H-Net's latest prediction per pair id.
+    pub predictions: RwSignal<HashMap<String, Prediction>>,
+    /// H-Net was asked to run while it was busy: run again on the pair on screen when done.
+    pub rerun: RwSignal<bool>,
+}
+
+impl NetworkStore {
+    /// No network yet (loading), automatic backend, catheters read as trained.
+    pub fn new() -> Self {
+        Self {
+            model: RwSignal::new_local(ModelState::Loading("Loading H-Net…".into())),
+            cpu_workers: RwSignal::new(WorkersStatus::NotUsed),
+            backend_choice: RwSignal::new(BackendChoice::Auto),
+            catheter_entry: RwSignal::new(EntrySetting::AS_TRAINED),
+            predictions: RwSignal::new(HashMap::new()),
+            rerun: RwSignal::new(false),
+        }
+    }
+
+    /// H-Net's prediction of the pair `pairs` shows, once made: the one memo of it.
+    pub fn shown_prediction(&self, pairs: PairStore) -> Memo<Option<Prediction>> {
+        let predictions = self.predictions;
+        Memo::new(move |_| {
+            let id = pairs.shown_id()?;
+            predictions.with(|p| p.get(&id).cloned())
+        })
+    }
+
+    /// Whether `engine` is the model the page runs now (not one it has since replaced).
+    pub fn uses(&self, engine: &Rc<Engine>) -> bool {
+        matches!(
+            self.model.get_untracked(),
+            ModelState::Ready(current) if Rc::ptr_eq(&current, engine)
+        )
+    }
+}
+
+impl Default for NetworkStore {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl Studio {
     /// Runs H-Net on the pair on screen when the model is ready. A request made while H-Net is
     /// busy runs once the current inference is done, on the pair then on screen.
     pub fn run_model(&self) {
-        let ModelState::Ready(engine) = self.model.get_untracked() else {
+        let ModelState::Ready(engine) = self.network.model.get_untracked() else {
             return;
         };
-        if self.busy.get_untracked().is_some() {
-            self.rerun.set(true);
+        if self.notices.busy.get_untracked().is_some() {
+            self.network.rerun.set(true);
             return;
         }
-        let shown = self
-            .draft
-            .with_untracked(|d| d.clone())
-            .or_else(|| self.workspace.with_untracked(|ws| ws.current().cloned()));
-        let Some(pair) = shown else {
+        let Some(pair) = self.pairs.shown_untracked() else {
             self.start_workers(&engine);
             return;
         };
         let studio = *self;
         let id = pair.id;
-        let entry = self.catheter_entry.get_untracked();
-        self.busy.set(Some(format!("Running H-Net on {id}…")));
+        let entry = self.network.catheter_entry.get_untracked();
+        self.notices
+            .busy
+            .set(Some(format!("Running H-Net on {id}…")));
         leptos::task::spawn_local(async move {
             match engine.infer(&pair.view_a, &pair.view_b, entry).await {
                 // A reading under a model or an entry setting the page has left since is not
                 // shown: the rerun below reads the pair again.
                 Ok(prediction)
-                    if studio.uses(&engine) && studio.catheter_entry.get_untracked() == entry =>
+                    if studio.network.uses(&engine)
+                        && studio.network.catheter_entry.get_untracked() == entry =>
                 {
-                    studio.predictions.update(|p| {
+                    studio.network.predictions.update(|p| {
                         p.insert(id, prediction);
                     })
                 }
                 Ok(_) => {}
                 Err(e) => {
-                    studio.error(format!("H-Net failed on {id}: {}", with_causes(&e)));
+                    studio
+                        .notices
+                        .error(format!("H-Net failed on {id}: {}", with_causes(&e)));
                     studio.leave_webgpu_after(&engine, &e);
                 }
             }
-            studio.busy.set(None);
+            studio.notices.busy.set(None);
             // The workers start once the first estimate is on screen, so that their start
             // never delays it.
             studio.start_workers(&engine);
-            if studio.rerun.get_untracked() {
-                studio.rerun.set(false);
-                let current = studio.shown_id_untracked();
-                if current
-                    .is_some_and(|id| studio.predictions.with_untracked(|p| !p.contains_key(&id)))
-                {
+            if studio.network.rerun.get_untracked() {
+                studio.network.rerun.set(false);
+                let current = studio.pairs.shown_id_untracked();
+                if current.is_some_and(|id| {
+                    studio
+                        .network
+                        .predictions
+                        .with_untracked(|p| !p.contains_key(&id))
+                }) {
                     studio.run_model();
                 }
             }
@@ -86,32 +146,27 @@ impl Studio {
     /// Starts `engine`'s CPU workers (once) when it is the model the page runs, their state
     /// shown in the model bar.
     fn start_workers(&self, engine: &Rc<Engine>) {
-        if !self.uses(engine) {
+        if !self.network.uses(engine) {
             return;
         }
         let studio = *self;
         let this = Rc::downgrade(engine);
         engine.start_workers(move |status| {
             // A pool of weights the page has left says nothing about the page's.
-            if this.upgrade().is_some_and(|engine| studio.uses(&engine)) {
-                studio.cpu_workers.set(status);
+            if this
+                .upgrade()
+                .is_some_and(|engine| studio.network.uses(&engine))
+            {
+                studio.network.cpu_workers.set(status);
             }
         });
-    }
-
-    /// Whether `engine` is the model the page runs now (not one it has since replaced).
-    pub(super) fn uses(&self, engine: &Rc<Engine>) -> bool {
-        matches!(
-            self.model.get_untracked(),
-            ModelState::Ready(current) if Rc::ptr_eq(&current, engine)
-        )
     }
 
     /// After `engine` failed on WebGPU with `error`, the same weights on the CPU, which says why
     /// (the worker is stopped: every later call would fail too), and the pair on screen again.
     /// Any other failure, or an engine the page no longer uses, changes nothing.
     pub(super) fn leave_webgpu_after(&self, engine: &Rc<Engine>, error: &EngineError) {
-        if !self.uses(engine) || !matches!(error, EngineError::WebGpu(_)) {
+        if !self.network.uses(engine) || !matches!(error, EngineError::WebGpu(_)) {
             return;
         }
         let reason = format!("WebGPU failed ({}), so the CPU is used", with_causes(error));
@@ -122,11 +177,11 @@ impl Studio {
             reason,
         ) {
             Ok(cpu) => {
-                self.cpu_workers.set(WorkersStatus::NotUsed);
-                self.model.set(ModelState::Ready(Rc::new(cpu)));
+                self.network.cpu_workers.set(WorkersStatus::NotUsed);
+                self.network.model.set(ModelState::Ready(Rc::new(cpu)));
                 self.run_model();
             }
-            Err(e) => self.model.set(ModelState::Failed(with_causes(&e))),
+            Err(e) => self.network.model.set(ModelState::Failed(with_causes(&e))),
         }
     }
 }
@@ -149,7 +204,7 @@ async fn load_engine(
     studio: Studio,
     weights: Option<(Rc<[u8]>, String, WeightsOrigin)>,
 ) -> Result<Engine, LoadError> {
-    let backend = compute::choose_backend(studio.backend_choice.get_untracked()).await;
+    let backend = compute::choose_backend(studio.network.backend_choice.get_untracked()).await;
     let weights = match weights {
         Some(w) => Some(w),
         None => bundled::fetch_bytes(bundled::BUNDLED_WEIGHTS)
@@ -241,9 +296,9 @@ async fn checked_on_webgpu(cpu: &Engine) -> Result<Engine, String> {
 /// Loads the model (bundled weights, or `weights`) on the chosen backend. On failure the model
 /// that was loaded stays.
 pub fn load_model(studio: Studio, weights: Option<(Rc<[u8]>, String, WeightsOrigin)>) {
-    let previous = studio.model.get_untracked();
+    let previous = studio.network.model.get_untracked();
     let name = weights.as_ref().map(|w| w.1.clone());
-    studio.model.set(ModelState::Loading(match &name {
+    studio.network.model.set(ModelState::Loading(match &name {
         Some(name) => format!("Loading {name}…"),
         None => "Loading H-Net…".into(),
     }));
@@ -251,22 +306,26 @@ pub fn load_model(studio: Studio, weights: Option<(Rc<[u8]>, String, WeightsOrig
         match load_engine(studio, weights).await {
             Ok(engine) => {
                 let engine = Rc::new(engine);
-                studio.cpu_workers.set(WorkersStatus::NotUsed);
-                studio.model.set(ModelState::Ready(engine.clone()));
+                studio.network.cpu_workers.set(WorkersStatus::NotUsed);
+                studio.network.model.set(ModelState::Ready(engine.clone()));
                 if name.is_some() {
-                    studio.info(format!("Loaded {}", engine.weights_name));
+                    studio
+                        .notices
+                        .info(format!("Loaded {}", engine.weights_name));
                 }
-                studio.predictions.set(HashMap::new());
+                studio.network.predictions.set(HashMap::new());
                 studio.run_model();
             }
             Err(e) => {
                 let text = with_causes(&e);
                 match previous {
                     ModelState::Ready(engine) => {
-                        studio.model.set(ModelState::Ready(engine.clone()));
-                        studio.error(format!("{text}. Still using {}.", engine.weights_name));
+                        studio.network.model.set(ModelState::Ready(engine.clone()));
+                        studio
+                            .notices
+                            .error(format!("{text}. Still using {}.", engine.weights_name));
                     }
-                    _ => studio.model.set(ModelState::Failed(text)),
+                    _ => studio.network.model.set(ModelState::Failed(text)),
                 }
             }
         }

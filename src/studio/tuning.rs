@@ -87,25 +87,54 @@ pub struct TuningResult {
     pub weights: Option<Rc<[u8]>>,
 }
 
+/// The fine-tune's state: the run and its worker, and the weights kept from an earlier one.
+#[derive(Clone, Copy)]
+pub struct TuningStore {
+    /// The fine-tune running or ended.
+    pub state: RwSignal<TuningState, LocalStorage>,
+    /// Its worker, while it runs.
+    worker: StoredValue<Option<Rc<ModuleWorker>>, LocalStorage>,
+    /// The fine-tuned weights kept in the browser, if any.
+    pub kept: RwSignal<Option<Rc<KeptWeights>>, LocalStorage>,
+}
+
+impl TuningStore {
+    /// No fine-tune, nothing kept (until the browser's storage is read).
+    pub fn new() -> Self {
+        Self {
+            state: RwSignal::new_local(TuningState::Idle),
+            worker: StoredValue::new_local(None),
+            kept: RwSignal::new_local(None),
+        }
+    }
+}
+
+impl Default for TuningStore {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl Studio {
     /// Starts fine-tuning the loaded network on the page's labelled pairs with `settings`, in a
     /// worker of its own; with `rehearse`, on twin pairs of the weights' own domain too (when
     /// their file records it). Says why when it cannot.
     pub fn start_tuning(&self, settings: FineTuneSettings, rehearse: bool) {
-        if matches!(self.tuning.get_untracked(), TuningState::Running(_)) {
+        if matches!(self.tuning.state.get_untracked(), TuningState::Running(_)) {
             return;
         }
-        let ModelState::Ready(engine) = self.model.get_untracked() else {
-            self.error("Fine-tuning needs a loaded network");
+        let ModelState::Ready(engine) = self.network.model.get_untracked() else {
+            self.notices.error("Fine-tuning needs a loaded network");
             return;
         };
         let set = match self
+            .pairs
             .workspace
             .with_untracked(|ws| tuning_set(&ws.pairs, engine.input))
         {
             Ok(set) => set,
             Err(why) => {
-                self.error(format!("Cannot fine-tune: {why}"));
+                self.notices.error(format!("Cannot fine-tune: {why}"));
                 return;
             }
         };
@@ -118,11 +147,12 @@ impl Studio {
         let worker = match ModuleWorker::spawn("hnet-tune", "the fine-tuning worker") {
             Ok(worker) => Rc::new(worker),
             Err(e) => {
-                self.error(format!("Cannot fine-tune: {}", with_causes(&e)));
+                self.notices
+                    .error(format!("Cannot fine-tune: {}", with_causes(&e)));
                 return;
             }
         };
-        self.tuning_worker.set_value(Some(worker.clone()));
+        self.tuning.worker.set_value(Some(worker.clone()));
         let studio = *self;
         let (start_name, start_provenance) = (
             engine.weights_name.clone(),
@@ -132,7 +162,7 @@ impl Studio {
                 .map(|h| h.provenance.clone())
                 .unwrap_or_default(),
         );
-        self.tuning.set(TuningState::Running(TuningProgress {
+        self.tuning.state.set(TuningState::Running(TuningProgress {
             split: (0, 0),
             pairs: set.pairs,
             rehearsed: 0,
@@ -151,16 +181,16 @@ impl Studio {
                 Ok(sets) => sets,
                 Err(e) => {
                     worker.stop("the fine-tune did not start");
-                    studio.tuning_worker.set_value(None);
-                    studio.tuning.set(TuningState::Idle);
-                    studio.error(format!(
+                    studio.tuning.worker.set_value(None);
+                    studio.tuning.state.set(TuningState::Idle);
+                    studio.notices.error(format!(
                         "Cannot fine-tune: the twin pairs of the weights' domain: {e}"
                     ));
                     return;
                 }
             };
             let rehearsed = rehearsal.as_ref().map_or(0, |r| r.pairs);
-            studio.tuning.update(|state| {
+            studio.tuning.state.update(|state| {
                 if let TuningState::Running(progress) = state {
                     progress.rehearsed = rehearsed;
                 }
@@ -176,7 +206,7 @@ impl Studio {
             };
             let outcome = run(studio, &worker, &start).await;
             worker.stop("the fine-tune is over");
-            studio.tuning_worker.set_value(None);
+            studio.tuning.worker.set_value(None);
             match outcome {
                 Ok(result) => {
                     let said = match (result.reason, &result.best) {
@@ -190,15 +220,15 @@ impl Studio {
                         (_, Some(_)) => "Fine-tuning ended: keep or discard the result",
                     };
                     if result.reason == Some(FinishReason::Diverged) {
-                        studio.error(said);
+                        studio.notices.error(said);
                     } else {
-                        studio.info(said);
+                        studio.notices.info(said);
                     }
-                    studio.tuning.set(TuningState::Ended(result));
+                    studio.tuning.state.set(TuningState::Ended(result));
                 }
                 Err(e) => {
-                    studio.tuning.set(TuningState::Idle);
-                    studio.error(format!(
+                    studio.tuning.state.set(TuningState::Idle);
+                    studio.notices.error(format!(
                         "Fine-tuning failed: {}; the model in use is unchanged",
                         with_causes(&e)
                     ));
@@ -209,14 +239,14 @@ impl Studio {
 
     /// Stops the running fine-tune: its best epoch so far, if any, can still be kept.
     pub fn stop_tuning(&self) {
-        if let Some(worker) = self.tuning_worker.get_value() {
+        if let Some(worker) = self.tuning.worker.get_value() {
             worker.stop("stopped by the user");
         }
     }
 
     /// Keeps the ended fine-tune's weights: stored in the browser, chosen, and loaded.
     pub fn keep_tuned(&self) {
-        let TuningState::Ended(result) = self.tuning.get_untracked() else {
+        let TuningState::Ended(result) = self.tuning.state.get_untracked() else {
             return;
         };
         let Some(bytes) = result.weights else {
@@ -231,8 +261,8 @@ impl Studio {
             };
             match storage::save_kept_weights(&kept).await {
                 Ok(()) => {
-                    studio.kept.set(Some(Rc::new(kept)));
-                    studio.tuning.set(TuningState::Idle);
+                    studio.tuning.kept.set(Some(Rc::new(kept)));
+                    studio.tuning.state.set(TuningState::Idle);
                     load_model(
                         studio,
                         Some((bytes, KEPT_NAME.to_string(), WeightsOrigin::FineTuned)),
@@ -240,7 +270,7 @@ impl Studio {
                 }
                 // The result stays on the page (to retry or download); what was kept before
                 // is untouched.
-                Err(e) => studio.error(format!(
+                Err(e) => studio.notices.error(format!(
                     "The fine-tuned weights could not be kept: {}",
                     with_causes(&e)
                 )),
@@ -250,14 +280,15 @@ impl Studio {
 
     /// Discards the ended fine-tune.
     pub fn discard_tuned(&self) {
-        self.tuning.set(TuningState::Idle);
-        self.info("Fine-tuned weights discarded; the model in use is unchanged");
+        self.tuning.state.set(TuningState::Idle);
+        self.notices
+            .info("Fine-tuned weights discarded; the model in use is unchanged");
     }
 
     /// Uses the kept fine-tuned weights (`true`) or the bundled ones, now and when the page
     /// opens next.
     pub fn choose_kept(&self, fine_tuned: bool) {
-        let Some(kept) = self.kept.get_untracked() else {
+        let Some(kept) = self.tuning.kept.get_untracked() else {
             return;
         };
         let studio = *self;
@@ -277,8 +308,8 @@ impl Studio {
                 ..(*kept).clone()
             };
             match storage::save_kept_weights(&chosen).await {
-                Ok(()) => studio.kept.set(Some(Rc::new(chosen))),
-                Err(e) => studio.error(format!(
+                Ok(()) => studio.tuning.kept.set(Some(Rc::new(chosen))),
+                Err(e) => studio.notices.error(format!(
                     "The choice of weights could not be saved: {}",
                     with_causes(&e)
                 )),
@@ -401,7 +432,7 @@ async fn run(
             .map_err(|e| reply_error("start", &e.to_string()))?;
     let total = steps_per_epoch * settings.max_epochs;
     let update = |f: &dyn Fn(&mut TuningProgress)| {
-        studio.tuning.update(|state| {
+        studio.tuning.state.update(|state| {
             if let TuningState::Running(progress) = state {
                 f(progress);
             }
