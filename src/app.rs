@@ -5,13 +5,15 @@ use leptos::prelude::*;
 
 use crate::components::{
     catheter_view::CatheterView,
+    cine_panel::CinePanel,
+    composer::Composer,
     fine_tune_panel::FineTunePanel,
     force_panel::ForcePanel,
     force_trace::ForceTracePlot,
     model_bar::ModelBar,
     pair_list::PairList,
     shortcuts::{Shortcuts, install_shortcuts},
-    sources::Sources,
+    sources::{Sources, TwinSliders, UploadPair},
     stereo_view::StereoView,
 };
 use crate::engine::WeightsOrigin;
@@ -35,6 +37,11 @@ pub fn App() -> impl IntoView {
         shown_prediction: prediction,
     } = stores;
     let studio = stores.studio();
+    let network_ready = Signal::derive(move || {
+        network
+            .model
+            .with(|m| matches!(m, crate::studio::ModelState::Ready(_)))
+    });
     // The catheter calibrated on an earlier visit.
     leptos::task::spawn_local(async move {
         match storage::load_calibration().await {
@@ -129,18 +136,34 @@ pub fn App() -> impl IntoView {
                 " (" <a href="https://github.com/hnet-studio/hnet-studio/blob/main/docs/clinicians.md"
                     target="_blank" rel="noopener">"what the force can and cannot tell"</a> ")."
             </p>
-            <ModelBar network=network twin=twin tuning=tuning notices=notices prediction=prediction studio=studio/>
+            <ModelBar network=network calibration=twin.calibration kept=tuning.kept notices=notices
+                prediction=prediction studio=studio/>
         </header>
         <NoticeBar notices=notices studio=studio/>
         <main class="studio">
             <aside class="sources">
-                <Sources pairs=pairs network=network display=display twin=twin cine=cine notices=notices studio=studio/>
+                <Sources tab=display.tab studio=studio
+                    images=ViewFn::from(move || view! {
+                        <UploadPair pairs=pairs notices=notices studio=studio/>
+                    })
+                    cine=ViewFn::from(move || view! {
+                        <CinePanel cine=cine notices=notices tool=display.tool
+                            showing_draft=Signal::derive(move || pairs.showing_draft())
+                            network_ready=network_ready studio=studio/>
+                    })
+                    twin=ViewFn::from(move || view! {
+                        <TwinSliders twin=twin pairs=pairs studio=studio/>
+                    })
+                    background=ViewFn::from(move || view! {
+                        <Composer twin=twin notices=notices studio=studio/>
+                    })/>
             </aside>
             <section class="work">
-                <StereoView pairs=pairs network=network display=display twin=twin notices=notices prediction=prediction studio=studio/>
+                <StereoView pairs=pairs display=display notices=notices prediction=prediction studio=studio/>
                 // The cine's force trace, as wide as the views, while a cine is loaded.
                 {move || cine.player.with(Option::is_some).then(|| view! { <ForceTracePlot cine=cine studio=studio/> })}
-                <ForcePanel pairs=pairs network=network twin=twin notices=notices prediction=prediction studio=studio/>
+                <ForcePanel pairs=pairs network=network catheter=twin.catheter fit_masks=twin.fit_masks
+                    notices=notices prediction=prediction studio=studio/>
                 <CatheterView pairs=pairs twin=twin notices=notices prediction=prediction studio=studio/>
             </section>
             <aside class="pairs">

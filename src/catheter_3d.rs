@@ -27,6 +27,7 @@
 //! The 3D drawing's own geometry is here too ([`CArmSketch`], [`force_arrow_mm`]); its camera is
 //! [`crate::orbit_camera`].
 
+use hnet_twin::reconstruction::MaskOrigin;
 use hnet_twin::reconstruction::catalogue::{
     BENCH_CATHETER, CatalogueCatheter, StiffnessCalibration, catalogue,
 };
@@ -43,25 +44,6 @@ use hnet_twin::simulator::scene::{NominalBase, SceneParams, SceneSampling};
 use crate::imaging::WORK_SIZE;
 use crate::twin_live::TwinControls;
 use crate::workspace::{LabeledPair, PairSource, View};
-
-/// Which masks a reconstruction was made from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum MaskSource {
-    /// The pair's label masks.
-    Labels,
-    /// H-Net's predicted masks.
-    Predicted,
-}
-
-impl MaskSource {
-    /// In words: `the label masks` or `H-Net's masks`.
-    pub fn phrase(self) -> &'static str {
-        match self {
-            MaskSource::Labels => "the label masks",
-            MaskSource::Predicted => "H-Net's masks",
-        }
-    }
-}
 
 /// Which masks the user asked the rod to be fitted to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -121,10 +103,10 @@ impl<'a> PairMasks<'a> {
     }
 
     /// Where they came from.
-    pub fn source(&self) -> MaskSource {
+    pub fn source(&self) -> MaskOrigin {
         match self {
-            Self::Labels(_) => MaskSource::Labels,
-            Self::Predicted(_) => MaskSource::Predicted,
+            Self::Labels(_) => MaskOrigin::Labels,
+            Self::Predicted(_) => MaskOrigin::Predicted,
         }
     }
 
@@ -255,7 +237,7 @@ pub fn epipolar_line(views: &Biplane, to: View, at: [f64; 2]) -> Option<[[f64; 2
 #[derive(Debug, Clone, PartialEq)]
 pub struct Catheter3d {
     /// The masks it was made from.
-    pub masks: MaskSource,
+    pub masks: MaskOrigin,
     /// The 3D centreline, mm (world frame), from where the catheter enters both images to its
     /// tip.
     pub centreline_mm: Vec<[f64; 3]>,
@@ -296,7 +278,7 @@ impl Catheter3d {
     /// masks there is none: from the twin's exact masks the physics estimate is far better than
     /// H-Net on every axis, and for drawn or accepted masks nothing was measured.
     pub fn for_combination(&self) -> Option<([f32; 3], Option<[f32; 3]>)> {
-        (self.masks == MaskSource::Predicted).then(|| {
+        (self.masks == MaskOrigin::Predicted).then(|| {
             let sd = self.force_sd_n.map(|sd| sd.map(|v| v as f32));
             (self.force_f32(), sd)
         })
@@ -362,7 +344,7 @@ pub enum Catheter3dError {
     #[error("no centreline in {}", .masks.phrase())]
     Centreline {
         /// The masks read.
-        masks: MaskSource,
+        masks: MaskOrigin,
         /// Why.
         #[source]
         source: CentrelineError,
@@ -584,7 +566,7 @@ mod tests {
             );
             assert!(error < 0.03, "{:?} N vs {force:?} N", c.force_n);
             assert!(c.tip_seen && c.length_mm > 30.0, "{}", c.summary());
-            assert_eq!(c.masks, MaskSource::Labels);
+            assert_eq!(c.masks, MaskOrigin::Labels);
             // Read blind: the catalogue catheter, the base fitted.
             assert!(c.base_fitted);
             assert!(c.summary().contains("read blind"), "{}", c.summary());
@@ -611,10 +593,10 @@ mod tests {
         ));
         let masks =
             PairMasks::of(&pair, Some([&soft[0], &soft[1]]), FitMasks::LabelsFirst).unwrap();
-        assert_eq!(masks.source(), MaskSource::Predicted);
+        assert_eq!(masks.source(), MaskOrigin::Predicted);
         let geometry = PairGeometry::of(&pair, &TwinControls::default(), None).unwrap();
         let c = reconstruct_pair(&geometry, &masks).unwrap();
-        assert_eq!(c.masks, MaskSource::Predicted);
+        assert_eq!(c.masks, MaskOrigin::Predicted);
         // Only a rod fitted to H-Net's masks is combined with H-Net's force, with the fit's
         // standard error.
         let hnet = [0.3, 0.2, -0.3];
@@ -635,7 +617,7 @@ mod tests {
         // is nothing to fit.
         pair.masks_labeled = true;
         let chosen = PairMasks::of(&pair, Some([&soft[0], &soft[1]]), FitMasks::Hnet).unwrap();
-        assert_eq!(chosen.source(), MaskSource::Predicted);
+        assert_eq!(chosen.source(), MaskOrigin::Predicted);
         assert!(matches!(
             PairMasks::of(&pair, None, FitMasks::Hnet),
             Err(Catheter3dError::NoPredictedMasks)

@@ -11,12 +11,13 @@ use hnet_dicom::{
     BiplaneCine, DicomError, PairingError, Plane, PlaneSeries, TracePoint, WindowLevel,
     read_cine_file, trace_csv, twin_push_cine, write_xa,
 };
+use hnet_twin::dataset::resized;
 use hnet_twin::reconstruction::physics_force::TipForceEstimate;
 use hnet_twin::simulator::carm::Biplane;
 use hnet_twin::simulator::scene::TwinError;
 use hnet_units::ImageSize;
 
-use crate::imaging::{WORK_SIZE, resize_rgb};
+use crate::imaging::WORK_SIZE;
 use crate::workspace::{LabeledPair, PairSource, View};
 
 /// Largest DICOM input accepted per plane, bytes (all its files together): a long 1024 x 1024
@@ -113,7 +114,8 @@ pub fn read_plane(plane: Plane, files: Vec<GivenFile>) -> Result<PlaneSeries, Ci
 /// The twin's sample cine ([`twin_push_cine`]: a catheter pushed against the wall and released,
 /// seen by the default biplane) written as two XA files, plane A then plane B.
 pub fn sample_files() -> Result<[GivenFile; 2], CineError> {
-    let cine = twin_push_cine(WORK_SIZE, SAMPLE_FRAMES, SAMPLE_SEED).map_err(CineError::Sample)?;
+    let cine = twin_push_cine(ImageSize::square(WORK_SIZE), SAMPLE_FRAMES, SAMPLE_SEED)
+        .map_err(CineError::Sample)?;
     let [a, b] = cine.planes.each_ref().map(write_xa);
     Ok([(SAMPLE_FILES[0].into(), a), (SAMPLE_FILES[1].into(), b)])
 }
@@ -231,10 +233,8 @@ impl CinePlayer {
             .grey_frame(plane, frame, self.windows[view_slot(view)])?;
         let size = self.cine.series(plane).frames.size;
         let image = image::GrayImage::from_raw(size.width as u32, size.height as u32, grey)?;
-        Some(resize_rgb(
-            &image::DynamicImage::ImageLuma8(image),
-            WORK_SIZE,
-        ))
+        let image = resized(image.into(), ImageSize::square(WORK_SIZE));
+        Some(image.into_rgb8().into_raw())
     }
 
     /// Frame `frame` as a stereo pair called `id`, with its time and both planes' geometry.
@@ -350,7 +350,7 @@ mod tests {
     use hnet_dicom::{twin_cine, write_xa};
 
     fn small_cine(frames: usize) -> [GivenFile; 2] {
-        let cine = twin_cine(32, frames, 5).unwrap();
+        let cine = twin_cine(ImageSize::square(32), frames, 5).unwrap();
         let [a, b] = cine.planes.each_ref().map(write_xa);
         [("a.dcm".into(), a), ("b.dcm".into(), b)]
     }
@@ -361,7 +361,7 @@ mod tests {
         let player = CinePlayer::read(vec![a], vec![b]).unwrap();
         assert_eq!(player.frame_count(), 3);
         assert!(player.notes.is_empty(), "{:?}", player.notes);
-        let views = hnet_dicom::cine_views(32);
+        let views = hnet_dicom::cine_views(ImageSize::square(32));
         assert!((player.views.a.primary_deg - views.a.primary_deg).abs() < 1e-9);
         assert!((player.views.b.secondary_deg - views.b.secondary_deg).abs() < 1e-9);
         assert_eq!(player.views.a.image_size, ImageSize::square(WORK_SIZE));
@@ -466,7 +466,9 @@ mod tests {
         let primary = views["b"]["carm"]["primary_deg"]
             .as_f64()
             .unwrap_or_else(|| panic!("{record}"));
-        assert!((primary - hnet_dicom::cine_views(32).b.primary_deg).abs() < 1e-9);
+        assert!(
+            (primary - hnet_dicom::cine_views(ImageSize::square(32)).b.primary_deg).abs() < 1e-9
+        );
         assert_eq!(views["a"]["missing_geometry"], serde_json::json!([]));
         assert!(!record.to_string().contains("a.dcm"), "{record}");
         // Its force reading names what differs from the bundled weights' data.

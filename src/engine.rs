@@ -9,12 +9,13 @@ use burn::module::Module;
 use burn::tensor::Device;
 use hnet_model::architectures::{ModelSpec, StereoModel};
 use hnet_model::catheter_entry::{
-    CatheterEntry, EntryReading, EntrySearch, EntrySetting, ReadEntryError, TurnError,
-    TurnedOutput, turn_clockwise, turned_pair,
+    CatheterEntry, EntryReading, EntrySearch, EntrySetting, ReadEntryError, TurnedOutput,
+    turned_pair,
 };
 use hnet_model::inference::{JoinViewsError, PredictError, StereoPair, StereoPrediction};
 use hnet_model::weights::{WeightsError, WeightsHeader};
 use hnet_model::{HNet, HNetConfig, HNetConfigError};
+use hnet_units::turn::{TurnError, turn_clockwise};
 use hnet_units::{ImageSize, View};
 
 use crate::browser::{now_ms, yield_to_browser};

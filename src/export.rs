@@ -333,7 +333,11 @@ mod tests {
         );
         let loaded = dataset.load_pair(row, None).unwrap();
         assert_eq!(loaded.size, ImageSize::square(WORK_SIZE));
-        let catheter = loaded.mask_a.iter().filter(|&&m| m > 0.5).count();
+        let catheter = loaded
+            .mask_a
+            .iter()
+            .filter(|&&m| hnet_units::mask::is_catheter(m))
+            .count();
         assert_eq!(
             catheter,
             ws.pairs[0].labeled_pixels(crate::workspace::View::A)

@@ -1,9 +1,11 @@
 //! Pixels in the page: decoding what the user drops, the working resolution, and geometry drawn
 //! over the views (tip estimate, force arrows).
 
+use hnet_twin::dataset::resized;
 use hnet_twin::simulator::carm::CArm;
 use hnet_twin::simulator::raster::GreyImage;
 use hnet_twin::vec3::Vec3;
+use hnet_units::{ImageSize, MAX_IMAGE_SIDE};
 
 /// Side of the square images the page labels and exports, pixels (the paper's input size). The
 /// model sees them resized to its own input size.
@@ -11,9 +13,6 @@ pub const WORK_SIZE: usize = 224;
 
 /// Largest upload accepted, bytes.
 pub const MAX_UPLOAD_BYTES: usize = 40 * 1024 * 1024;
-
-/// Largest decoded image accepted, pixels per side.
-pub const MAX_UPLOAD_SIDE: u32 = 8192;
 
 /// Why an uploaded file cannot be used: the file, what is wrong, and the decoder's error when
 /// the bytes could not be decoded.
@@ -29,9 +28,10 @@ pub struct ImageError {
     pub cause: Option<image::ImageError>,
 }
 
-/// Decodes a PNG or JPEG and resizes it to `size` x `size` RGB.
+/// Decodes a PNG or JPEG and resizes it to `size` x `size` RGB ([`resized`]).
 pub fn decode_to_rgb(file: &str, bytes: &[u8], size: usize) -> Result<Vec<u8>, ImageError> {
-    Ok(resize_rgb(&decode(file, bytes)?, size))
+    let image = resized(decode(file, bytes)?, ImageSize::square(size));
+    Ok(image.into_rgb8().into_raw())
 }
 
 /// Longest side a radiograph is kept at for the background composer, pixels.
@@ -88,46 +88,31 @@ fn decode(file: &str, bytes: &[u8]) -> Result<image::DynamicImage, ImageError> {
     }
     let reader = || image::ImageReader::with_format(std::io::Cursor::new(bytes), format);
     let (width, height) = reader().into_dimensions().map_err(undecodable)?;
-    if width > MAX_UPLOAD_SIDE || height > MAX_UPLOAD_SIDE {
+    let max_side = MAX_IMAGE_SIDE as u32;
+    if width > max_side || height > max_side {
         return Err(error(format!(
-            "the image is {width} x {height} pixels; the limit is {MAX_UPLOAD_SIDE} per side"
+            "the image is {width} x {height} pixels; the limit is {MAX_IMAGE_SIDE} per side"
         )));
     }
     let mut reader = reader();
     let mut limits = image::Limits::default();
-    limits.max_image_width = Some(MAX_UPLOAD_SIDE);
-    limits.max_image_height = Some(MAX_UPLOAD_SIDE);
+    limits.max_image_width = Some(max_side);
+    limits.max_image_height = Some(max_side);
     limits.max_alloc = Some(512 * 1024 * 1024);
     reader.limits(limits);
     reader.decode().map_err(undecodable)
 }
 
-/// `image` as `size` x `size` RGB bytes (triangle filter).
-pub fn resize_rgb(image: &image::DynamicImage, size: usize) -> Vec<u8> {
-    image
-        .resize_exact(
-            size as u32,
-            size as u32,
-            image::imageops::FilterType::Triangle,
-        )
-        .to_rgb8()
-        .into_raw()
-}
-
-/// Resizes square RGB bytes from `from` to `to` pixels per side.
+/// Resizes square RGB bytes from `from` to `to` pixels per side ([`resized`]).
 pub fn rescale_rgb(rgb: &[u8], from: usize, to: usize) -> Vec<u8> {
     if from == to {
         return rgb.to_vec();
     }
     let image = image::RgbImage::from_raw(from as u32, from as u32, rgb.to_vec())
         .expect("buffer of the stated size");
-    image::imageops::resize(
-        &image,
-        to as u32,
-        to as u32,
-        image::imageops::FilterType::Triangle,
-    )
-    .into_raw()
+    resized(image.into(), ImageSize::square(to))
+        .into_rgb8()
+        .into_raw()
 }
 
 /// Resizes a square mask of probabilities from `from` to `to` pixels per side (bilinear).
@@ -149,15 +134,9 @@ pub fn rescale_mask(mask: &[f32], from: usize, to: usize) -> Vec<f32> {
         .data
 }
 
-/// Catheter label (0 or 255) of each pixel of a probability mask: 255 where `p >= 0.5`.
-pub fn binarize(probabilities: &[f32]) -> Vec<u8> {
-    probabilities
-        .iter()
-        .map(|&p| if p >= 0.5 { 255 } else { 0 })
-        .collect()
-}
-
-/// The catheter's tip in a mask of `size` x `size` pixels (values `>= threshold` are catheter):
+/// The catheter's tip in a mask of `size` x `size` pixels (values `>= threshold` are catheter:
+/// [`hnet_units::mask::LABEL_THRESHOLD`] for 8-bit labels, [`hnet_units::mask::MASK_THRESHOLD`]
+/// for probabilities):
 /// of the catheter pixels, the one farthest from where the catheter enters the image (its pixel
 /// nearest to the border). `None` when the mask is empty. Anchors the force arrow when the 3D
 /// geometry is unknown (uploaded pairs). Image coordinates, pixels.
@@ -275,7 +254,7 @@ mod tests {
     #[test]
     fn huge_images_are_refused_before_decoding() {
         let mut bytes = Vec::new();
-        image::GrayImage::new(MAX_UPLOAD_SIDE + 1, 1)
+        image::GrayImage::new(MAX_IMAGE_SIDE as u32 + 1, 1)
             .write_to(
                 &mut std::io::Cursor::new(&mut bytes),
                 image::ImageFormat::Png,
@@ -293,8 +272,14 @@ mod tests {
         for x in 0..13 {
             mask[10 * size + x] = 255;
         }
-        assert_eq!(estimate_tip(&mask, size, 128), Some([12.5, 10.5]));
-        assert_eq!(estimate_tip(&[0.0f32; 4], 2, 0.5), None);
+        assert_eq!(
+            estimate_tip(&mask, size, hnet_units::mask::LABEL_THRESHOLD),
+            Some([12.5, 10.5])
+        );
+        assert_eq!(
+            estimate_tip(&[0.0f32; 4], 2, hnet_units::mask::MASK_THRESHOLD),
+            None
+        );
     }
 
     #[test]
@@ -303,7 +288,6 @@ mod tests {
         let out = overlay(&rgb, [0.0, 1.0].into_iter(), [200, 0, 0], 0.5);
         assert_eq!(out, vec![100, 100, 100, 150, 50, 50]);
         assert_eq!(rgba(&out), vec![100, 100, 100, 255, 150, 50, 50, 255]);
-        assert_eq!(binarize(&[0.2, 0.5, 0.9]), vec![0, 255, 255]);
     }
 }
 
@@ -422,14 +406,14 @@ pub(crate) mod properties {
 
         #[test]
         fn a_png_claiming_any_size_is_refused_or_decoded_within_the_limits(
-            width in prop_oneof![1u32..64, 1u32..=MAX_UPLOAD_SIDE, any::<u32>()],
-            height in prop_oneof![1u32..64, 1u32..=MAX_UPLOAD_SIDE, any::<u32>()],
+            width in prop_oneof![1u32..64, 1u32..=MAX_IMAGE_SIDE as u32, any::<u32>()],
+            height in prop_oneof![1u32..64, 1u32..=MAX_IMAGE_SIDE as u32, any::<u32>()],
             depth in prop_oneof![Just(8u8), Just(16u8), any::<u8>()],
             colour in prop_oneof![Just(2u8), Just(6u8), any::<u8>()],
         ) {
             let png = png_claiming(width, height, depth, colour);
             let result = decode_to_rgb("claims.png", &png, 32);
-            if width > MAX_UPLOAD_SIDE || height > MAX_UPLOAD_SIDE {
+            if width > MAX_IMAGE_SIDE as u32 || height > MAX_IMAGE_SIDE as u32 {
                 let err = result.unwrap_err();
                 prop_assert!(err.problem.contains("limit") || err.problem.contains("decoded"), "{}", err);
             }
@@ -443,7 +427,7 @@ pub(crate) mod properties {
         ) {
             let jpeg = jpeg_claiming(width, height);
             let result = decode_to_rgb("claims.jpg", &jpeg, 32);
-            if u32::from(width) > MAX_UPLOAD_SIDE || u32::from(height) > MAX_UPLOAD_SIDE {
+            if u32::from(width) > MAX_IMAGE_SIDE as u32 || u32::from(height) > MAX_IMAGE_SIDE as u32 {
                 prop_assert!(result.is_err());
             }
             decode_both_ways(&jpeg)?;

@@ -66,5 +66,8 @@ pub mod storage;
 #[cfg(target_arch = "wasm32")]
 pub mod studio;
 
+#[cfg(all(test, not(target_arch = "wasm32")))]
+mod page_architecture;
+
 #[cfg(target_arch = "wasm32")]
 pub use app::App;

@@ -5,6 +5,7 @@
 
 use hnet_twin::simulator::carm::CArm;
 use hnet_twin::vec3::{Mat3, Vec3};
+use hnet_units::ImageSize;
 
 /// How depth is drawn.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -76,7 +77,7 @@ impl OrbitCamera {
     /// Rows: the canvas' right and down directions and the viewing direction, in world axes.
     pub fn axes(&self) -> Mat3 {
         // A C-arm at these angles looks along its beam with u to the right and v down.
-        CArm::cardiac(self.yaw_deg, self.pitch_deg, 1).rotation()
+        CArm::cardiac(self.yaw_deg, self.pitch_deg, ImageSize::square(1)).rotation()
     }
 
     /// Turned by `yaw` and `pitch` degrees (pitch kept within ±89°, yaw within ±180°).
@@ -190,7 +191,7 @@ mod tests {
         ));
         // View B (90° LAO) looks along +x: anterior (+y)... as the C-arm's own image axes.
         let side = front.rotated(90.0, 0.0);
-        let b = CArm::cardiac(90.0, 0.0, 224).rotation();
+        let b = CArm::cardiac(90.0, 0.0, ImageSize::square(224)).rotation();
         let p = side.project([0.0, 10.0, 0.0], SIDE).unwrap();
         assert!((p[0] - 200.0 - b.row(0).y() * 10.0 * 0.45 * SIDE / 100.0).abs() < 1e-9);
     }

@@ -259,11 +259,37 @@ impl Studio {
             return;
         };
         let masks = [
-            crate::imaging::binarize(&prediction.mask_a),
-            crate::imaging::binarize(&prediction.mask_b),
+            hnet_units::mask::binarize(&prediction.mask_a),
+            hnet_units::mask::binarize(&prediction.mask_b),
         ];
         self.pairs.edit(|ws| ws.set_masks(masks));
         self.display.show_label.set(true);
+    }
+
+    /// Opens source panel `which`: the cine pauses; the cine's frame, or the twin's pair (on
+    /// the background being composed, for that panel), is shown and H-Net runs on it.
+    pub fn open_source(&self, which: SourceTab) {
+        self.display.tab.set(which);
+        self.cine.stop_playback();
+        if which == SourceTab::Background {
+            // Show the catheter on the background being composed.
+            let xray = self
+                .twin
+                .background
+                .with_untracked(|bg| bg.style.modality());
+            self.twin.controls.update(|t| t.modality = xray);
+        }
+        match which {
+            SourceTab::Images => {}
+            SourceTab::Cine => {
+                self.show_cine_frame();
+                self.run_model();
+            }
+            SourceTab::Twin | SourceTab::Background => {
+                self.render_twin();
+                self.run_model();
+            }
+        }
     }
 
     /// Undo (`redo` false) or redo the last mask edit.

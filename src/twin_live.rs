@@ -18,6 +18,7 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::imaging::WORK_SIZE;
 use crate::workspace::{LabeledPair, PairSource};
+use hnet_units::ImageSize;
 
 /// The twin's sliders.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -76,13 +77,13 @@ impl TwinControls {
     /// for RGB.
     pub fn views(&self) -> Biplane {
         if self.paper_bench.is_some() {
-            return Biplane::paper_bench(WORK_SIZE);
+            return Biplane::paper_bench(ImageSize::square(WORK_SIZE));
         }
         let make = |deg: [f64; 2]| -> CArm {
             if self.modality.is_xray() {
-                CArm::cardiac(deg[0], deg[1], WORK_SIZE)
+                CArm::cardiac(deg[0], deg[1], ImageSize::square(WORK_SIZE))
             } else {
-                CArm::bench_camera(deg[0], deg[1], WORK_SIZE)
+                CArm::bench_camera(deg[0], deg[1], ImageSize::square(WORK_SIZE))
             }
         };
         Biplane {
@@ -132,8 +133,8 @@ impl TwinControls {
         background: &XrayBackground,
     ) -> Result<LabeledPair, ContactError> {
         let mut config = match self.paper_bench {
-            Some(_) => TwinConfig::paper_bench(self.modality, WORK_SIZE),
-            None => TwinConfig::new(self.modality, WORK_SIZE),
+            Some(_) => TwinConfig::paper_bench(self.modality, ImageSize::square(WORK_SIZE)),
+            None => TwinConfig::new(self.modality, ImageSize::square(WORK_SIZE)),
         };
         config.views = self.views();
         config.patches = background.rule();
@@ -187,9 +188,8 @@ impl TwinControls {
             views[1].pixels.to_rgb(),
         );
         // The twin knows the exact masks and force: they are the labels.
-        let binary = |m: &[u8]| m.iter().map(|&m| if m >= 128 { 255 } else { 0 }).collect();
-        pair.mask_a = binary(&views[0].mask);
-        pair.mask_b = binary(&views[1].mask);
+        pair.mask_a = hnet_units::mask::binarize_labels(&views[0].mask);
+        pair.mask_b = hnet_units::mask::binarize_labels(&views[1].mask);
         pair.masks_labeled = true;
         pair.force_n = Some(force_n);
         pair.force_origin = hnet_twin::dataset::label_origin::LabelOrigin::Simulated;
@@ -253,7 +253,8 @@ pub const DEFAULT_REGION_SIDE: f64 = 0.34;
 impl XrayBackground {
     /// The built-in thorax phantom seen frontally (512 px), region on the heart.
     pub fn phantom() -> Self {
-        let source = BackgroundSource::phantom(&CArm::cardiac(0.0, 0.0, WORK_SIZE), 512);
+        let source =
+            BackgroundSource::phantom(&CArm::cardiac(0.0, 0.0, ImageSize::square(WORK_SIZE)), 512);
         Self::on_heart(source)
     }
 
@@ -378,7 +379,7 @@ mod tests {
         else {
             panic!("a twin pair")
         };
-        assert_eq!(*views, Biplane::paper_bench(WORK_SIZE));
+        assert_eq!(*views, Biplane::paper_bench(ImageSize::square(WORK_SIZE)));
         assert_eq!(settings["preset"], PAPER_BENCH);
         assert_ne!(settings["scene"]["plate"]["state"], "free");
         // Not the force sliders' value: the contact's.

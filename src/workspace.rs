@@ -187,7 +187,10 @@ impl LabeledPair {
 
     /// Catheter pixels of a view's label mask.
     pub fn labeled_pixels(&self, view: View) -> usize {
-        self.mask(view).iter().filter(|&&m| m >= 128).count()
+        self.mask(view)
+            .iter()
+            .filter(|&&m| hnet_units::mask::is_catheter_label(m))
+            .count()
     }
 }
 
@@ -897,6 +900,7 @@ mod properties {
     use super::*;
     use crate::force_label::{implausible_label, parse_force_labels, parse_newtons};
     use crate::imaging::properties::cases;
+    use hnet_units::ImageSize;
     use proptest::prelude::*;
 
     /// A force component a label may hold: plausible, any `f32` bits in the range.
@@ -976,7 +980,7 @@ mod properties {
                 Some((true_force_n, tip_mm)) if tip_mm.iter().all(|v| v.is_finite()) => PairSource::Twin {
                     true_force_n,
                     tip_mm,
-                    views: Biplane::cardiac(WORK_SIZE),
+                    views: Biplane::cardiac(ImageSize::square(WORK_SIZE)),
                     settings: serde_json::json!({"force_n": true_force_n, "seed": 3}),
                 },
                 _ => PairSource::Upload { view_a: names.0, view_b: names.1, views: None },

@@ -8,9 +8,7 @@ use crate::browser::{download, files, read_file, take_picked_files, yield_to_bro
 use crate::cine::{CinePlayer, GivenFile, SAMPLE_FILES, read_plane, sample_files};
 use crate::error_text::with_causes;
 use crate::keymap::{Command, tooltip};
-use crate::studio::{
-    CineStore, DisplaySettings, NetworkStore, Notices, PairStore, PointerTool, Studio,
-};
+use crate::studio::{CineStore, Notices, PointerTool, Studio};
 use hnet_dicom::{Plane, PlaneSeries};
 
 /// Reads the bytes of `picked` files; the error names the file.
@@ -120,10 +118,13 @@ fn download_sample(notices: Notices) {
 #[component]
 pub fn CinePanel(
     cine: CineStore,
-    pairs: PairStore,
-    network: NetworkStore,
-    display: DisplaySettings,
     notices: Notices,
+    /// What the pointer does on the views (the window/level tool is chosen here).
+    tool: RwSignal<PointerTool>,
+    /// Whether the pair on screen is an unsaved draft (a frame that can be kept).
+    showing_draft: Signal<bool>,
+    /// Whether a network is loaded (the trace needs one).
+    network_ready: Signal<bool>,
     studio: Studio,
 ) -> impl IntoView {
     let planes = RwSignal::new_local([None::<PlaneSeries>, None::<PlaneSeries>]);
@@ -206,7 +207,7 @@ pub fn CinePanel(
                  datasets and force traces carry no patient name, ID, birth date, accession \
                  number or institution: only pixels, the C-arm geometry and frame times are kept."
             </p>
-            {move || loaded.get().then(|| view! { <CinePlayerControls cine=cine pairs=pairs network=network display=display studio=studio/> })}
+            {move || loaded.get().then(|| view! { <CinePlayerControls cine=cine tool=tool showing_draft=showing_draft network_ready=network_ready studio=studio/> })}
         </div>
     }
 }
@@ -215,9 +216,9 @@ pub fn CinePanel(
 #[component]
 fn CinePlayerControls(
     cine: CineStore,
-    pairs: PairStore,
-    network: NetworkStore,
-    display: DisplaySettings,
+    tool: RwSignal<PointerTool>,
+    showing_draft: Signal<bool>,
+    network_ready: Signal<bool>,
     studio: Studio,
 ) -> impl IntoView {
     let player = cine.player;
@@ -269,9 +270,9 @@ fn CinePlayerControls(
             </label>
             <div class="actions">
                 <button id="tool-window" class="tool"
-                    aria-pressed=move || (display.tool.get() == PointerTool::WindowLevel).to_string()
+                    aria-pressed=move || (tool.get() == PointerTool::WindowLevel).to_string()
                     title=tooltip("Window/level: drag on a view", Command::WindowLevel)
-                    on:click=move |_| display.tool.set(PointerTool::WindowLevel)>"Window/level"</button>
+                    on:click=move |_| tool.set(PointerTool::WindowLevel)>"Window/level"</button>
                 <button id="cine-window-reset" on:click=move |_| studio.reset_windows()>"Header windows"</button>
                 <label title="A drag on either view changes both planes' windows">
                     <input id="cine-link-windows" type="checkbox"
@@ -292,7 +293,7 @@ fn CinePlayerControls(
                 } else {
                     view! {
                         <button id="cine-trace" class="primary"
-                            disabled=move || !matches!(network.model.get(), crate::studio::ModelState::Ready(_))
+                            disabled=move || !network_ready.get()
                             on:click=move |_| studio.trace_cine()>"Trace the force over all frames"</button>
                     }.into_any()
                 }}
@@ -303,7 +304,7 @@ fn CinePlayerControls(
                 })}
                 <button id="cine-export-trace" disabled=move || traced() == 0 || tracing.get()
                     on:click=move |_| studio.export_trace()>"Export trace (CSV)"</button>
-                <button id="cine-keep" disabled=move || !pairs.showing_draft()
+                <button id="cine-keep" disabled=move || !showing_draft.get()
                     title="Keep this frame as a labeled pair (label its masks and force, then export)"
                     on:click=move |_| studio.keep_draft()>"Keep this frame"</button>
             </div>

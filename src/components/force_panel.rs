@@ -8,14 +8,13 @@ use leptos::prelude::*;
 
 use crate::browser::{read_file_with, take_picked_file};
 use crate::bundled::BUNDLED_FORCE_CAVEAT;
+use crate::catheter_3d::FitMasks;
 use crate::engine::Prediction;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
 use crate::force_label::{implausible_label, parse_force_labels, parse_newtons};
 use crate::force_reading::{ABLATION_BAND_N, BandPosition, Disagreement, Verdict};
-use crate::studio::{
-    CatheterReading, ModelState, NetworkStore, Notices, PairStore, Studio, TwinStore,
-};
+use crate::studio::{CatheterReading, ModelState, NetworkStore, Notices, PairStore, Studio};
 use hnet_twin::dataset::label_origin::LabelOrigin;
 use hnet_twin::reconstruction::physics_force::{EstimateKind, TipForceEstimate};
 use hnet_units::force_magnitude as magnitude;
@@ -28,12 +27,13 @@ const AXES: [&str; 3] = ["Fx", "Fy", "Fz"];
 /// now to be fitted to (a reading from before the choice changed is not shown).
 fn shown_reading<T>(
     pairs: PairStore,
-    twin: TwinStore,
+    catheter: RwSignal<Option<CatheterReading>>,
+    fit_masks: RwSignal<FitMasks>,
     read: impl FnOnce(&CatheterReading) -> Option<T>,
 ) -> Option<T> {
     let id = pairs.shown_id()?;
-    let fit_masks = twin.fit_masks.get();
-    twin.catheter.with(|r| {
+    let fit_masks = fit_masks.get();
+    catheter.with(|r| {
         r.as_ref()
             .filter(|r| r.id == id && r.fit_masks == fit_masks)
             .and_then(read)
@@ -45,7 +45,10 @@ fn shown_reading<T>(
 pub fn ForcePanel(
     pairs: PairStore,
     network: NetworkStore,
-    twin: TwinStore,
+    /// The catheter in 3D of the pair on screen, once reconstructed.
+    catheter: RwSignal<Option<CatheterReading>>,
+    /// Which masks the rod is to be fitted to.
+    fit_masks: RwSignal<FitMasks>,
     notices: Notices,
     /// H-Net's prediction of the pair on screen.
     prediction: Memo<Option<Prediction>>,
@@ -54,8 +57,16 @@ pub fn ForcePanel(
     let estimate = move || prediction.with(|p| p.as_ref().and_then(|p| p.force_n));
     let truth = move || pairs.with_shown(|p| p.and_then(|p| p.true_force()));
     // The physics estimate of the pair on screen, if its catheter was reconstructed.
-    let physics = move || shown_reading(pairs, twin, |r| Some(r.result.as_ref().ok()?.force_f32()));
-    let physics_masks = move || shown_reading(pairs, twin, |r| Some(r.result.as_ref().ok()?.masks));
+    let physics = move || {
+        shown_reading(pairs, catheter, fit_masks, |r| {
+            Some(r.result.as_ref().ok()?.force_f32())
+        })
+    };
+    let physics_masks = move || {
+        shown_reading(pairs, catheter, fit_masks, |r| {
+            Some(r.result.as_ref().ok()?.masks)
+        })
+    };
     // What the loaded weights' force was trained on and how far off it is, when their file
     // records it (hnet_twin::model_facts).
     let domain = move || {
@@ -81,7 +92,10 @@ pub fn ForcePanel(
     let reading = move || -> Option<TipForceEstimate> {
         let e = estimate()?;
         Some(match combination() {
-            Some(c) => c.estimate(e, shown_reading(pairs, twin, |r| r.physics_for(e))),
+            Some(c) => c.estimate(
+                e,
+                shown_reading(pairs, catheter, fit_masks, |r| r.physics_for(e)),
+            ),
             None => TipForceEstimate::uncalibrated(e),
         })
     };

@@ -14,17 +14,19 @@ use crate::cpu_pool::WorkersStatus;
 use crate::engine::Prediction;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
-use crate::studio::{
-    ModelState, NetworkStore, Notices, Studio, TuningStore, TwinStore, load_model,
-};
+use crate::storage::KeptWeights;
+use crate::studio::{ModelState, NetworkStore, Notices, Studio, load_model};
 use hnet_twin::model_facts::FACTS_KEY;
+use hnet_twin::reconstruction::catalogue::StiffnessCalibration;
 
 /// The model bar.
 #[component]
 pub fn ModelBar(
     network: NetworkStore,
-    twin: TwinStore,
-    tuning: TuningStore,
+    /// The catheter's stiffness calibration in use, if any.
+    calibration: RwSignal<Option<StiffnessCalibration>>,
+    /// The fine-tuned weights kept in the browser, if any.
+    kept: RwSignal<Option<std::rc::Rc<KeptWeights>>, LocalStorage>,
     notices: Notices,
     /// H-Net's prediction of the pair on screen.
     prediction: Memo<Option<Prediction>>,
@@ -156,11 +158,11 @@ pub fn ModelBar(
                             </div>
                             <div>
                                 <dt>"Catheter"</dt>
-                                <dd id="catheter-calibration">{move || match twin.calibration.get() {
+                                <dd id="catheter-calibration">{move || match calibration.get() {
                                     Some(c) => catheter_calibration::describe(&c),
                                     None => "as the page assumes it (not calibrated)".to_string(),
                                 }}</dd>
-                                {move || twin.calibration.get().map(|_| view! {
+                                {move || calibration.get().map(|_| view! {
                                     <dd><button id="catheter-calibration-reset" class="link"
                                         on:click=move |_| {
                                             studio.set_calibration(None);
@@ -212,7 +214,7 @@ pub fn ModelBar(
                         }).collect_view()}
                     </select>
                 </label>
-                {move || tuning.kept.get().map(|kept| {
+                {move || kept.get().map(|kept| {
                     let fine_tuned = move || network.model.with(|m| {
                         matches!(m, ModelState::Ready(e) if e.origin == WeightsOrigin::FineTuned)
                     });

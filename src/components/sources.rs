@@ -8,15 +8,11 @@ use hnet_twin::simulator::sensor_plate::PlateContact;
 use leptos::prelude::*;
 
 use crate::browser::{PickedFileError, files, read_file_with, take_picked_file, take_picked_files};
-use crate::components::cine_panel::CinePanel;
-use crate::components::composer::Composer;
 use crate::components::on_slider;
 use crate::error_text::with_causes;
 use crate::imaging::{ImageError, WORK_SIZE, decode_to_rgb};
 use crate::keymap::{self, Command, Scope};
-use crate::studio::{
-    CineStore, DisplaySettings, NetworkStore, Notices, PairStore, SourceTab, Studio, TwinStore,
-};
+use crate::studio::{Notices, PairStore, SourceTab, Studio, TwinStore};
 use crate::twin_live::{DEFAULT_PLATE, TwinControls};
 use crate::workspace::{LabeledPair, PairSource};
 
@@ -34,35 +30,16 @@ const TABS: [(SourceTab, &str, &str); 4] = [
 /// the focused one.
 #[component]
 pub fn Sources(
-    pairs: PairStore,
-    network: NetworkStore,
-    display: DisplaySettings,
-    twin: TwinStore,
-    cine: CineStore,
-    notices: Notices,
+    /// The open tab.
+    tab: RwSignal<SourceTab>,
+    /// Each tab's panel.
+    images: ViewFn,
+    cine: ViewFn,
+    twin: ViewFn,
+    background: ViewFn,
     studio: Studio,
 ) -> impl IntoView {
-    let tab = display.tab;
-    let select = move |which: SourceTab| {
-        tab.set(which);
-        cine.stop_playback();
-        if which == SourceTab::Background {
-            // Show the catheter on the background being composed.
-            let xray = twin.background.with_untracked(|bg| bg.style.modality());
-            twin.controls.update(|t| t.modality = xray);
-        }
-        match which {
-            SourceTab::Images => {}
-            SourceTab::Cine => {
-                studio.show_cine_frame();
-                studio.run_model();
-            }
-            SourceTab::Twin | SourceTab::Background => {
-                studio.render_twin();
-                studio.run_model();
-            }
-        }
-    };
+    let select = move |which: SourceTab| studio.open_source(which);
     let on_key = move |ev: web_sys::KeyboardEvent| {
         let focused = document()
             .active_element()
@@ -100,12 +77,10 @@ pub fn Sources(
         <div class="tab-panel" id="source-panel" role="tabpanel"
             aria-labelledby=move || TABS.iter().find(|t| t.0 == tab.get()).map_or("", |t| t.1)>
             {move || match tab.get() {
-                SourceTab::Images => view! { <UploadPair pairs=pairs notices=notices studio=studio/> }.into_any(),
-                SourceTab::Cine => view! {
-                    <CinePanel cine=cine pairs=pairs network=network display=display notices=notices studio=studio/>
-                }.into_any(),
-                SourceTab::Twin => view! { <TwinSliders twin=twin pairs=pairs studio=studio/> }.into_any(),
-                SourceTab::Background => view! { <Composer twin=twin notices=notices studio=studio/> }.into_any(),
+                SourceTab::Images => images.run(),
+                SourceTab::Cine => cine.run(),
+                SourceTab::Twin => twin.run(),
+                SourceTab::Background => background.run(),
             }}
         </div>
     }
@@ -170,7 +145,7 @@ fn load_files(studio: Studio, pairs: PairStore, notices: Notices, mut picked: Ve
 
 /// Two file pickers and a drop zone.
 #[component]
-fn UploadPair(pairs: PairStore, notices: Notices, studio: Studio) -> impl IntoView {
+pub fn UploadPair(pairs: PairStore, notices: Notices, studio: Studio) -> impl IntoView {
     // Each picker's image is decoded (and any problem reported) as soon as it is picked; the pair
     // is made once both views are there. The reading outlives this panel if the user switches
     // tab meanwhile, so it only touches `picked` while the panel exists.
@@ -292,7 +267,7 @@ impl TwinSlider {
 
 /// The twin's sliders.
 #[component]
-fn TwinSliders(twin: TwinStore, pairs: PairStore, studio: Studio) -> impl IntoView {
+pub fn TwinSliders(twin: TwinStore, pairs: PairStore, studio: Studio) -> impl IntoView {
     let background = twin.background;
     let twin = twin.controls;
     let slider = TwinSlider {

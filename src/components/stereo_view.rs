@@ -2,6 +2,7 @@
 //! tip force as arrows, and the brush, eraser, zoom and pan that correct the labels.
 
 use hnet_twin::simulator::carm::CArm;
+use hnet_units::mask;
 use leptos::prelude::*;
 use wasm_bindgen::{Clamped, JsCast};
 
@@ -11,8 +12,7 @@ use crate::engine::Prediction;
 use crate::imaging::{WORK_SIZE, estimate_tip, force_arrow, overlay, project, rgba};
 use crate::keymap::{self, Command, Scope, tooltip};
 use crate::studio::{
-    CANVAS_SIDE, DisplaySettings, NetworkStore, Notices, PairStore, PointerTool, SourceTab, Studio,
-    TwinStore, ViewTransform,
+    CANVAS_SIDE, DisplaySettings, Notices, PairStore, PointerTool, SourceTab, Studio, ViewTransform,
 };
 use crate::workspace::{PairSource, View};
 
@@ -32,9 +32,7 @@ const EPIPOLAR_CASING: &str = "rgba(20, 10, 40, 0.85)";
 #[component]
 pub fn StereoView(
     pairs: PairStore,
-    network: NetworkStore,
     display: DisplaySettings,
-    twin: TwinStore,
     notices: Notices,
     /// H-Net's prediction of the pair on screen.
     prediction: Memo<Option<Prediction>>,
@@ -66,11 +64,7 @@ pub fn StereoView(
         }
     };
     let can = move || pairs.workspace.with(|ws| ws.can_undo_redo());
-    let has_prediction = move || {
-        pairs
-            .shown_id()
-            .is_some_and(|id| network.predictions.with(|p| p.contains_key(&id)))
-    };
+    let has_prediction = move || prediction.with(Option::is_some);
     view! {
         <div class="toolbar" role="toolbar" aria-label="Labeling tools">
             <button id="run-model" class="primary" title=tooltip("Run H-Net", Command::RunModel)
@@ -124,8 +118,8 @@ pub fn StereoView(
             </p>
         })}
         <div class="views">
-            <ViewCanvas view=View::A pairs=pairs display=display twin=twin notices=notices prediction=prediction studio=studio/>
-            <ViewCanvas view=View::B pairs=pairs display=display twin=twin notices=notices prediction=prediction studio=studio/>
+            <ViewCanvas view=View::A pairs=pairs display=display notices=notices prediction=prediction studio=studio/>
+            <ViewCanvas view=View::B pairs=pairs display=display notices=notices prediction=prediction studio=studio/>
         </div>
         <p class="legend" title="The force arrows are the tip force projected on each view">
             <span class="arrow estimate"></span>"H-Net's force "
@@ -206,7 +200,6 @@ fn ViewCanvas(
     view: View,
     pairs: PairStore,
     display: DisplaySettings,
-    twin: TwinStore,
     notices: Notices,
     /// H-Net's prediction of the pair on screen.
     prediction: Memo<Option<Prediction>>,
@@ -231,7 +224,7 @@ fn ViewCanvas(
 
     // The epipolar line, in this view, of the pointer on the other view (image pixels).
     let epipolar = Memo::new(move |_| {
-        let (other, at) = twin.epipolar_pointer.get()?;
+        let (other, at) = display.epipolar_pointer.get()?;
         if other == view {
             return None;
         }
@@ -299,9 +292,10 @@ fn ViewCanvas(
                         default.b
                     };
                     let tip = if pair.masks_labeled {
-                        estimate_tip(pair.mask(view), WORK_SIZE, 128)
+                        estimate_tip(pair.mask(view), WORK_SIZE, mask::LABEL_THRESHOLD)
                     } else {
-                        predicted_mask.and_then(|m| estimate_tip(m, WORK_SIZE, 0.5))
+                        predicted_mask
+                            .and_then(|m| estimate_tip(m, WORK_SIZE, mask::MASK_THRESHOLD))
                     };
                     (tip, carm)
                 }
@@ -391,7 +385,7 @@ fn ViewCanvas(
                 // A view not yet labelled starts from H-Net's mask of it (issue #39).
                 let start_from = prediction.with_untracked(|p| {
                     p.as_ref().map(|p| {
-                        crate::imaging::binarize(match view {
+                        mask::binarize(match view {
                             View::A => &p.mask_a,
                             View::B => &p.mask_b,
                         })
@@ -417,7 +411,8 @@ fn ViewCanvas(
     let on_move = move |ev: web_sys::PointerEvent| {
         let Some(p) = canvas_point(&ev) else { return };
         pointer.set(Some(p));
-        twin.epipolar_pointer
+        display
+            .epipolar_pointer
             .set(Some((view, transform.get_untracked().to_image(p))));
         match gesture.get_value() {
             Some(Gesture::Stroke(last)) => {
@@ -527,7 +522,7 @@ fn ViewCanvas(
                 } else {
                     &p.mask_b
                 };
-                mask.iter().filter(|&&m| m >= 0.5).count()
+                mask.iter().filter(|&&m| mask::is_catheter(m)).count()
             })
         })
     };
@@ -542,8 +537,8 @@ fn ViewCanvas(
                 on:pointerdown=on_down on:pointermove=on_move on:pointerup=on_up
                 on:pointercancel=on_up on:pointerleave=move |_| {
                     pointer.set(None);
-                    if twin.epipolar_pointer.get_untracked().is_some_and(|(v, _)| v == view) {
-                        twin.epipolar_pointer.set(None);
+                    if display.epipolar_pointer.get_untracked().is_some_and(|(v, _)| v == view) {
+                        display.epipolar_pointer.set(None);
                     }
                 }
                 data-epipolar=move || epipolar.get().map(|[a, b]| format!("{:.1},{:.1},{:.1},{:.1}", a[0], a[1], b[0], b[1])).unwrap_or_default()

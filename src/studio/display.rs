@@ -1,5 +1,6 @@
 //! How the two views are shown and what the pointer does on them: the overlays, the pointer tool
-//! and brush, each view's zoom and pan, and the open source panel.
+//! and brush, each view's zoom and pan, the pointer whose epipolar line the other view draws,
+//! and the open source panel.
 
 use leptos::prelude::*;
 
@@ -110,6 +111,8 @@ pub struct DisplaySettings {
     pub transforms: [RwSignal<ViewTransform>; 2],
     /// The open source panel.
     pub tab: RwSignal<SourceTab>,
+    /// The pointer on a view (image pixels), whose epipolar line the other view draws.
+    pub epipolar_pointer: RwSignal<Option<(View, [f64; 2])>>,
 }
 
 impl DisplaySettings {
@@ -126,6 +129,7 @@ impl DisplaySettings {
                 RwSignal::new(ViewTransform::default()),
             ],
             tab: RwSignal::new(SourceTab::Images),
+            epipolar_pointer: RwSignal::new(None),
         }
     }
 

@@ -1,6 +1,6 @@
 //! The twin and the catheter in 3D: the live twin's sliders and X-ray background, the catheter
 //! (its stiffness calibration), the reconstruction of the pair on screen with its rod fit, and
-//! the 3D view's camera and epipolar pointer.
+//! the 3D view's camera.
 
 use leptos::prelude::*;
 
@@ -8,7 +8,6 @@ use super::CatheterReading;
 use crate::catheter_3d::FitMasks;
 use crate::orbit_camera::OrbitCamera;
 use crate::twin_live::{TwinControls, XrayBackground};
-use crate::workspace::View;
 use hnet_twin::reconstruction::catalogue::StiffnessCalibration;
 
 /// The twin's and the 3D view's state.
@@ -25,8 +24,6 @@ pub struct TwinStore {
     pub catheter: RwSignal<Option<CatheterReading>>,
     /// Which masks the rod is fitted to.
     pub fit_masks: RwSignal<FitMasks>,
-    /// The pointer on a view (image pixels), whose epipolar line the other view draws.
-    pub epipolar_pointer: RwSignal<Option<(View, [f64; 2])>>,
     /// The 3D view's camera (its target and framing follow the catheter).
     pub orbit: RwSignal<OrbitCamera>,
 }
@@ -41,7 +38,6 @@ impl TwinStore {
             calibration: RwSignal::new(None),
             catheter: RwSignal::new(None),
             fit_masks: RwSignal::new(FitMasks::default()),
-            epipolar_pointer: RwSignal::new(None),
             orbit: RwSignal::new(OrbitCamera::default()),
         }
     }

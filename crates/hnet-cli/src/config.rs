@@ -9,14 +9,10 @@ use hnet_model::HNetLossConfig;
 use hnet_model::architectures::ModelSpec;
 use hnet_model::weights::ConfigProblem;
 use hnet_twin::dataset::label_origin::LabelFilter;
-use hnet_units::ImageSize;
+use hnet_units::{ImageSize, MAX_IMAGE_SIDE};
 use serde::{Deserialize, Serialize};
 
 use crate::data::twin_stream::TwinStreamConfig;
-
-/// The largest training image side, pixels (the page's upload limit): every pair is resized to
-/// the image size, so a larger one would only exhaust memory.
-pub const MAX_IMAGE_SIDE: usize = 8192;
 
 /// The most threads decoding or simulating batches.
 pub const MAX_WORKERS: usize = 256;

@@ -23,12 +23,13 @@ use physics::{calibrate_combination, physics_checks};
 use crate::backend::BackendChoice;
 use crate::data::StereoSplit;
 use crate::network::{load_run, load_weights, predict_entry};
-use crate::physics_check::{self, BlindEstimator, Estimator, MaskOrigin, PhysicsEvaluation};
+use crate::physics_check::{self, BlindEstimator, Estimator, PhysicsEvaluation};
 use crate::run_dir::RunDir;
 use hnet_twin::dataset::simulate::nominal_base;
 use hnet_twin::model_facts::{
     ForceDomain, MeasuredCombination, MeasuredForce, ModelFacts, recorded_name,
 };
+use hnet_twin::reconstruction::MaskOrigin;
 use hnet_twin::reconstruction::catalogue::{BENCH_CATHETER, CatalogueCatheter};
 use hnet_twin::simulator::carm::HeaderError;
 
@@ -527,7 +528,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
             (load_run(run, &device)?, data)
         }
         (None, Some(weights)) => (
-            load_weights(weights, args.size, &device)?,
+            load_weights(weights, args.size.map(ImageSize::square), &device)?,
             args.data.clone().context("--weights needs --data")?,
         ),
         (None, None) => anyhow::bail!("give --run or --weights"),

@@ -22,6 +22,7 @@ use anyhow::Context;
 use burn::tensor::Device;
 use hnet_model::metrics::ForceMetrics;
 use hnet_twin::dataset::Split;
+use hnet_twin::reconstruction::MaskOrigin;
 use hnet_twin::reconstruction::catalogue::{BENCH_CATHETER, CatalogueCatheter};
 use hnet_twin::simulator::carm::HeaderError;
 use hnet_twin::simulator::render::XRayDetector;
@@ -31,7 +32,6 @@ use serde::Serialize;
 use crate::backend::BackendChoice;
 use crate::evaluation::{EvalOptions, Evaluation, evaluate};
 use crate::network::load_weights;
-use crate::physics_check::MaskOrigin;
 use crate::simulate::{Scenes, SimulateArgs};
 
 /// `hnet study mismatch`.

@@ -15,25 +15,23 @@ use crate::data::StereoItem;
 use crate::run_dir::RunDir;
 
 /// Loads a weights file on its own. H-Net's weights record their input size; a baseline's come
-/// at `size` (square, pixels: the command's `--size`).
+/// at `size` (the command's `--size`).
 pub fn load_weights(
     path: &Path,
-    size: Option<usize>,
+    size: Option<ImageSize>,
     device: &Device,
 ) -> anyhow::Result<Predictor> {
     let bytes = std::fs::read(path)
         .with_context(|| format!("cannot read weights file '{}'", path.display()))?;
     let source = path.display().to_string();
-    Predictor::from_weights_bytes(&bytes, size.map(ImageSize::square), device, &source).map_err(
-        |error| {
-            let hint = match &error {
-                LoadError::OtherSize { .. } => " (leave --size out)",
-                LoadError::SizeUnknown { .. } | LoadError::BadSize { .. } => " (--size)",
-                LoadError::Weights(_) => "",
-            };
-            anyhow::Error::new(error).context(format!("loading the network{hint}"))
-        },
-    )
+    Predictor::from_weights_bytes(&bytes, size, device, &source).map_err(|error| {
+        let hint = match &error {
+            LoadError::OtherSize { .. } => " (leave --size out)",
+            LoadError::SizeUnknown { .. } | LoadError::BadSize { .. } => " (--size)",
+            LoadError::Weights(_) => "",
+        };
+        anyhow::Error::new(error).context(format!("loading the network{hint}"))
+    })
 }
 
 /// Loads a run folder's `model.bpk`: H-Net at the size its weights record, a baseline at the

@@ -88,7 +88,7 @@ pub fn run(args: &NoCatheterArgs) -> anyhow::Result<()> {
         with,
     ));
 
-    let twin = TwinConfig::new(Modality::Xray2, size.width);
+    let twin = TwinConfig::new(Modality::Xray2, size);
     let phantom = [&twin.views.a, &twin.views.b].map(|view| BackgroundSource::phantom(view, 512));
     let radiographs: Vec<BackgroundSource> = background_files(&args.backgrounds)?
         .iter()

@@ -15,6 +15,7 @@ use std::time::Instant;
 use hnet_model::metrics::{AXES, ForceAccumulator, ForceMetrics};
 use hnet_twin::dataset::Dataset;
 use hnet_twin::dataset::simulate::{SampleRecord, read_sample_record};
+use hnet_twin::reconstruction::MaskOrigin;
 use hnet_twin::reconstruction::catalogue::CatalogueCatheter;
 use hnet_twin::reconstruction::centreline::Mask;
 use hnet_twin::reconstruction::physics_force::{
@@ -29,25 +30,6 @@ use hnet_twin::vec3::Vec3;
 use hnet_units::ImageSize;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-
-/// Which masks the catheter was reconstructed from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum MaskOrigin {
-    /// The dataset's masks (exact for simulated pairs).
-    True,
-    /// The network's predicted masks (probabilities).
-    Predicted,
-}
-
-impl MaskOrigin {
-    fn describe(self) -> &'static str {
-        match self {
-            Self::True => "true masks",
-            Self::Predicted => "predicted masks",
-        }
-    }
-}
 
 /// What the rod fit is told about each pair.
 #[derive(Debug, Clone)]
@@ -399,7 +381,7 @@ pub fn markdown(checks: &[PhysicsEvaluation]) -> String {
         let _ = writeln!(
             s,
             "| {} ({}) | {} of {} | {} | {} | {} | {} | {} | {} | {} | {:.0} |",
-            c.masks.describe(),
+            c.masks.row_name(),
             c.size,
             c.fitted,
             c.pairs,
@@ -431,7 +413,7 @@ mod tests {
     fn the_network_force_is_combined_with_the_physics_estimate_from_its_own_masks() {
         let root = std::env::temp_dir().join(format!("hnet-physics-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&root);
-        let twin = TwinConfig::new(Modality::Xray2, 128);
+        let twin = TwinConfig::new(Modality::Xray2, ImageSize::square(128));
         let backgrounds = Backgrounds::phantom(&twin.views);
         let names = ["phantom:+0/+0".to_string(), "phantom:+90/+0".to_string()];
         simulate_dataset(&twin, &backgrounds, &names, 4, 11, &root, &|_| {}).unwrap();
@@ -508,7 +490,7 @@ mod tests {
         );
         assert!(without.combined_force.is_none() && without.combination.is_none());
         let from_truth = check(
-            MaskOrigin::True,
+            MaskOrigin::Labels,
             size,
             &pairs,
             &records,

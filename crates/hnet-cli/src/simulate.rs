@@ -13,11 +13,12 @@ use hnet_twin::simulator::off_bench::OffBench;
 use hnet_twin::simulator::raster::GreyImage;
 use hnet_twin::simulator::render::XRayDetector;
 use hnet_twin::simulator::scene::{
-    Backgrounds, MaskSource, Modality, PAPER_BENCH, SceneSampling, TwinConfig,
+    Backgrounds, MaskRecipe, Modality, PAPER_BENCH, SceneSampling, TwinConfig,
 };
 use hnet_twin::simulator::synthetic_xray::BackgroundSource;
 
 use crate::progress;
+use hnet_units::ImageSize;
 
 #[derive(clap::Args, Debug)]
 pub struct SimulateArgs {
@@ -44,7 +45,7 @@ pub struct SimulateArgs {
     /// `cutout` (the bench photograph thresholded against the empty bench, the paper's way).
     /// Default: `geometry`, `cutout` for `--scenes paper-bench`.
     #[arg(long, value_parser = parse_mask)]
-    pub mask: Option<MaskSource>,
+    pub mask: Option<MaskRecipe>,
     /// How scenes are drawn: `bench` (the twin's bench seen by the C-arm: one catheter on a
     /// fixed base, a random tip force), `varied` (random catheters and base poses too; see
     /// docs/twin.md), `paper-bench` (the paper's bench as its cameras saw it: close up, the tip
@@ -142,14 +143,14 @@ pub fn parse_modality(text: &str) -> Result<Modality, String> {
     Modality::parse(text).ok_or_else(|| format!("`{text}` is not rgb, xray1 or xray2"))
 }
 
-fn parse_mask(text: &str) -> Result<MaskSource, String> {
+fn parse_mask(text: &str) -> Result<MaskRecipe, String> {
     match text {
-        "geometry" => Ok(MaskSource::Geometry),
-        "otsu" => Ok(MaskSource::Otsu),
-        "cutout" => Ok(MaskSource::Cutout),
+        "geometry" => Ok(MaskRecipe::Geometry),
+        "otsu" => Ok(MaskRecipe::Otsu),
+        "cutout" => Ok(MaskRecipe::Cutout),
         level => level
             .parse::<u8>()
-            .map(MaskSource::Threshold)
+            .map(MaskRecipe::Threshold)
             .map_err(|_| format!("`{text}` is not geometry, otsu or a grey level 0-255")),
     }
 }
@@ -252,9 +253,9 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     }
     let paper_bench = matches!(&args.scenes, Scenes::Preset(s) if s.plate.is_some());
     let mut config = if paper_bench {
-        TwinConfig::paper_bench(args.modality, args.size)
+        TwinConfig::paper_bench(args.modality, ImageSize::square(args.size))
     } else {
-        TwinConfig::new(args.modality, args.size)
+        TwinConfig::new(args.modality, ImageSize::square(args.size))
     };
     if let Some(mask) = args.mask {
         config.mask = mask;

@@ -8,6 +8,7 @@ use std::process::{Output, Stdio};
 use std::time::{Duration, Instant};
 
 use common::{config_json, fails, hnet, model_json, scratch, succeeds, train};
+use hnet_units::mask::is_catheter_label;
 
 fn run(args: &[&str]) -> Output {
     succeeds(hnet().args(args))
@@ -409,7 +410,7 @@ fn every_baseline_trains_and_evaluates_in_the_same_harness() {
                     turned_label
                         .pixels()
                         .zip(errors.pixels())
-                        .all(|(l, e)| (l.0[0] >= 128) == catheter(e)),
+                        .all(|(l, e)| is_catheter_label(l.0[0]) == catheter(e)),
                     "pair {}",
                     row[0]
                 );
@@ -1095,7 +1096,7 @@ mod config_properties {
 #[test]
 fn a_biplane_dicom_cine_imports_and_traces_without_patient_identifiers() {
     let dir = scratch("dicom");
-    let cine = hnet_dicom::twin_cine(32, 4, 9).unwrap();
+    let cine = hnet_dicom::twin_cine(hnet_units::ImageSize::square(32), 4, 9).unwrap();
     let (plane_a, folder_b) = (dir.join("plane-a.dcm"), dir.join("DOE_JANE_plane_b"));
     std::fs::create_dir_all(&folder_b).unwrap();
     std::fs::write(&plane_a, hnet_dicom::write_xa(&cine.planes[0])).unwrap();

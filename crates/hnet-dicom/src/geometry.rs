@@ -50,7 +50,7 @@ impl Plane {
             Plane::A => 0.0,
             Plane::B => 90.0,
         };
-        CArm::cardiac(primary_deg, 0.0, size.width).with_image_size(size)
+        CArm::cardiac(primary_deg, 0.0, size)
     }
 }
 
@@ -238,7 +238,10 @@ mod tests {
             pixel_spacing_mm: None,
             ..header
         };
-        assert_eq!(none.carm(Plane::B).carm, CArm::cardiac(90.0, 0.0, 32));
+        assert_eq!(
+            none.carm(Plane::B).carm,
+            CArm::cardiac(90.0, 0.0, ImageSize::square(32))
+        );
         assert_eq!(none.carm(Plane::A).missing.len(), 5);
     }
 }

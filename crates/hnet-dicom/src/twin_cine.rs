@@ -29,18 +29,18 @@ pub struct TwinCine {
     pub forces_n: Vec<[f64; 3]>,
 }
 
-/// The twin's biplane for the cines: off the default frontal/lateral angles, so that tests see
-/// the headers' geometry being read.
-pub fn cine_views(size: usize) -> Biplane {
+/// The twin's biplane for the cines, at `size`: off the default frontal/lateral angles, so that
+/// tests see the headers' geometry being read.
+pub fn cine_views(size: ImageSize) -> Biplane {
     Biplane {
         a: CArm::cardiac(-20.0, 10.0, size),
         b: CArm::cardiac(70.0, -5.0, size),
     }
 }
 
-/// `frames` frames of `size` x `size` pixels from the twin (X-ray, easy backgrounds; each frame
-/// a new scene of the run seeded `seed`) as two 12-bit XA cines with their geometry.
-pub fn twin_cine(size: usize, frames: usize, seed: u64) -> Result<TwinCine, TwinError> {
+/// `frames` frames of `size` from the twin (X-ray, easy backgrounds; each frame a new scene of
+/// the run seeded `seed`) as two 12-bit XA cines with their geometry.
+pub fn twin_cine(size: ImageSize, frames: usize, seed: u64) -> Result<TwinCine, TwinError> {
     let mut config = TwinConfig::new(Modality::Xray1, size);
     config.views = cine_views(size);
     let backgrounds = Backgrounds::phantom(&config.views);
@@ -61,11 +61,11 @@ pub fn twin_cine(size: usize, frames: usize, seed: u64) -> Result<TwinCine, Twin
 const PUSH_DRAWS: u64 = 8;
 
 /// A catheter pushed against the wall and released, as a biplane cine of `frames` frames of
-/// `size` x `size` pixels: one bench scene of the run seeded `seed` (the twin's default cardiac
+/// `size`: one bench scene of the run seeded `seed` (the twin's default cardiac
 /// biplane, XRay-2 look), whose tip force follows a half sine from zero to the scene's force and
 /// back, on the same backgrounds throughout with fresh detector noise in every frame. What the
 /// bundled model was trained on, moving as a cine does: the page's sample cine.
-pub fn twin_push_cine(size: usize, frames: usize, seed: u64) -> Result<TwinCine, TwinError> {
+pub fn twin_push_cine(size: ImageSize, frames: usize, seed: u64) -> Result<TwinCine, TwinError> {
     let config = TwinConfig::new(Modality::Xray2, size);
     let backgrounds = Backgrounds::phantom(&config.views);
     let mut rng = sample_rng(seed, 0);
@@ -130,7 +130,12 @@ pub fn twin_push_cine(size: usize, frames: usize, seed: u64) -> Result<TwinCine,
 }
 
 /// Both planes' frames as 12-bit XA cines with the views' geometry, 15 frames per second.
-fn xa_planes(views: Biplane, size: usize, frames: &[[&ViewPixels; 2]], seed: u64) -> [XaCine; 2] {
+fn xa_planes(
+    views: Biplane,
+    size: ImageSize,
+    frames: &[[&ViewPixels; 2]],
+    seed: u64,
+) -> [XaCine; 2] {
     let scale = |pixels: &ViewPixels| -> Vec<u16> {
         // 8-bit grey to 12 bits: 0 -> 8, 255 -> 4088.
         pixels
@@ -141,7 +146,7 @@ fn xa_planes(views: Biplane, size: usize, frames: &[[&ViewPixels; 2]], seed: u64
     };
     [(Plane::A, views.a, 0), (Plane::B, views.b, 1)].map(|(plane, carm, view)| XaCine {
         plane,
-        size: ImageSize::square(size),
+        size,
         bits_stored: BITS_STORED,
         signed: false,
         monochrome: Monochrome::Two,

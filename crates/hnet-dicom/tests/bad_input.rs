@@ -8,11 +8,12 @@ use hnet_dicom::{
     DicomError, PairingError, PatientIdentity, Plane, PlaneSeries, XaCine, pair_frames,
     read_cine_file, twin_cine, write_xa, xa_object,
 };
+use hnet_units::ImageSize;
 
 const NAME: &str = "run-07/plane-a.dcm";
 
 fn cine() -> XaCine {
-    twin_cine(32, 3, 3).unwrap().planes[0].clone()
+    twin_cine(ImageSize::square(32), 3, 3).unwrap().planes[0].clone()
 }
 
 fn message(error: DicomError) -> String {
@@ -261,7 +262,7 @@ mod properties {
         static FILES: OnceLock<Vec<Vec<u8>>> = OnceLock::new();
         FILES.get_or_init(|| {
             (0..2)
-                .flat_map(|seed| twin_cine(16, 2, seed).unwrap().planes)
+                .flat_map(|seed| twin_cine(ImageSize::square(16), 2, seed).unwrap().planes)
                 .map(|plane| write_xa(&plane))
                 .collect()
         })
@@ -298,7 +299,7 @@ mod properties {
                         .collect()
                 })
                 .collect(),
-            carm: Some(CArm::cardiac(10.0, -5.0, size.width)),
+            carm: Some(CArm::cardiac(10.0, -5.0, size)),
             frame_time_ms: Some(66.7),
             acquisition_date_time: None,
             windows: vec![],

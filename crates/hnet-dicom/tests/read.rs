@@ -12,7 +12,7 @@ use hnet_dicom::{
 };
 use hnet_units::ImageSize;
 
-const SIZE: usize = 32;
+const SIZE: ImageSize = ImageSize::square(32);
 const FRAMES: usize = 3;
 
 fn series(plane: Plane, name: &str, bytes: &[u8]) -> PlaneSeries {
@@ -30,7 +30,7 @@ fn a_twin_cine_reads_back_with_its_frames_geometry_and_timing() {
     let views = cine_views(SIZE);
     for (series, carm) in [(&a, views.a), (&b, views.b)] {
         assert_eq!(series.count(), FRAMES);
-        assert_eq!(series.frames.size, ImageSize::square(SIZE));
+        assert_eq!(series.frames.size, SIZE);
         assert_eq!(series.geometry.missing, []);
         let read = series.geometry.carm;
         assert_eq!(read.image_size, carm.image_size);

@@ -20,17 +20,19 @@
 //! The force head learned the bench with both views as they are, so its force is kept only when
 //! both views were read untouched ([`EntryReading::force`]).
 //!
-//! Turning is exact on the pixel grid (no resampling), for square images only.
+//! Turning is [`hnet_units::turn::turn_clockwise`]: exact on the pixel grid (no resampling), for
+//! square images only.
 
 use alloc::string::String;
 use alloc::vec::Vec;
 
+use hnet_units::mask::is_catheter;
+use hnet_units::turn::{TurnError, turn_clockwise};
 use hnet_units::{ImageSize, View};
 
 use burn::tensor::Device;
 
 use crate::inference::{PredictError, StereoPair, StereoPrediction};
-use crate::metrics::MASK_THRESHOLD;
 use crate::model::HNet;
 
 /// The edge of a view through which the catheter enters the image.
@@ -155,64 +157,6 @@ impl EntrySetting {
     }
 }
 
-/// An image to be turned is not a square of the expected size.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error(
-    "cannot turn a view of {size} with {found} values ({channels} per pixel): only square \
-     images of the network's input size can be turned"
-)]
-pub struct TurnError {
-    /// The image size.
-    pub size: ImageSize,
-    /// Values per pixel.
-    pub channels: usize,
-    /// Values found.
-    pub found: usize,
-}
-
-/// `values`, a square image of `size` with `channels` interleaved values per pixel (row-major),
-/// turned clockwise by `quarter_turns` (counted modulo 4).
-///
-/// On raw buffers, for the page and any network input; `hnet_twin::dataset::SquareSymmetry` turns
-/// a dataset's decoded images (`hnet eval --turn-views`) with the `image` crate, which this
-/// `no_std` crate does not use. The two conventions are checked against each other by `hnet
-/// eval --turn-views 1 --catheter-entry left` reading the untouched views (crates/hnet-cli's
-/// tests).
-pub fn turn_clockwise<T: Copy>(
-    values: &[T],
-    size: ImageSize,
-    channels: usize,
-    quarter_turns: u8,
-) -> Result<Vec<T>, TurnError> {
-    let side = size.width;
-    if size.height != side || values.len() != side * side * channels {
-        return Err(TurnError {
-            size,
-            channels,
-            found: values.len(),
-        });
-    }
-    let turns = quarter_turns % 4;
-    if turns == 0 {
-        return Ok(values.to_vec());
-    }
-    let last = side - 1;
-    let mut turned = Vec::with_capacity(values.len());
-    for row in 0..side {
-        for col in 0..side {
-            // The source pixel of (row, col) after the turn.
-            let (src_row, src_col) = match turns {
-                1 => (last - col, row),
-                2 => (last - row, last - col),
-                _ => (col, last - row),
-            };
-            let at = (src_row * side + src_col) * channels;
-            turned.extend_from_slice(&values[at..at + channels]);
-        }
-    }
-    Ok(turned)
-}
-
 /// Both views of a pair turned so that their catheters enter from the bottom, as the network
 /// reads them: RGB bytes, row-major.
 #[derive(Debug, Clone, PartialEq)]
@@ -281,9 +225,9 @@ impl EntryReading {
     }
 }
 
-/// Pixels a mask calls catheter (probability at least [`MASK_THRESHOLD`]).
+/// Pixels a mask calls catheter ([`is_catheter`]).
 fn catheter_pixels(mask: &[f32]) -> usize {
-    mask.iter().filter(|&&p| p >= MASK_THRESHOLD).count()
+    mask.iter().filter(|&&p| is_catheter(p)).count()
 }
 
 /// Whether a view's mask (catheter probabilities, row-major, of `size`), read as it is, enters
@@ -298,7 +242,7 @@ pub fn reaches_bottom(mask: &[f32], size: ImageSize) -> bool {
         return false;
     }
     let band = (width.min(height) / 32).max(1);
-    let catheter = |row: usize, col: usize| usize::from(mask[row * width + col] >= MASK_THRESHOLD);
+    let catheter = |row: usize, col: usize| usize::from(is_catheter(mask[row * width + col]));
     let rows = |from: usize| -> usize {
         (from..from + band)
             .map(|r| (0..width).map(|c| catheter(r, c)).sum::<usize>())
@@ -520,27 +464,6 @@ mod tests {
         width: 3,
         height: 3,
     };
-
-    #[test]
-    fn a_clockwise_turn_takes_the_right_edge_to_the_bottom() {
-        // 0 1 2 / 3 4 5 / 6 7 8 turned clockwise: 6 3 0 / 7 4 1 / 8 5 2.
-        let image: Vec<u8> = (0..9).collect();
-        let turned = turn_clockwise(&image, SIZE, 1, 1).unwrap();
-        assert_eq!(turned, [6, 3, 0, 7, 4, 1, 8, 5, 2]);
-        // The right column (2, 5, 8) is now the bottom row.
-        assert_eq!(&turned[6..], &[8, 5, 2]);
-        for turns in 0..4u8 {
-            let there = turn_clockwise(&image, SIZE, 1, turns).unwrap();
-            let back = turn_clockwise(&there, SIZE, 1, (4 - turns) % 4).unwrap();
-            assert_eq!(back, image, "{turns} turns and back");
-        }
-        // Channels travel with their pixel.
-        let rgb: Vec<u8> = (0..27).collect();
-        let turned = turn_clockwise(&rgb, SIZE, 3, 1).unwrap();
-        assert_eq!(&turned[..3], &[18, 19, 20]);
-        assert!(turn_clockwise(&rgb, ImageSize::new(3, 9), 1, 1).is_err());
-        assert!(turn_clockwise(&rgb, SIZE, 1, 1).is_err());
-    }
 
     #[test]
     fn entry_edges_round_trip_their_names() {

@@ -128,7 +128,8 @@ pub struct HeldBackScores {
     pub pairs: usize,
     /// The loss of eq. 7 on them (masks, and the force where labelled).
     pub loss: f64,
-    /// Catheter IoU over both views of every held-back pair (masks thresholded at 0.5).
+    /// Catheter IoU over both views of every held-back pair (masks thresholded at
+    /// [`hnet_units::mask::MASK_THRESHOLD`]).
     pub catheter_iou: f64,
     /// Mean absolute error of the force head over the labelled held-back pairs, newtons.
     pub force_mae_n: Option<f64>,

@@ -12,10 +12,8 @@
 //! A value that is undefined for the data, such as R² of a constant target, is `None` (`null` in
 //! JSON) rather than NaN.
 
+use hnet_units::mask::is_catheter;
 use serde::{Deserialize, Serialize};
-
-/// Probability at or above which a pixel counts as catheter, in predictions and in targets.
-pub const MASK_THRESHOLD: f32 = 0.5;
 
 /// The force axes, in the order used everywhere: `(Fx, Fy, Fz)`.
 pub const AXES: [&str; 3] = ["x", "y", "z"];
@@ -204,9 +202,9 @@ pub enum PixelOutcome {
 
 impl PixelOutcome {
     /// The outcome of catheter probability `predicted` against `target`, each thresholded at
-    /// [`MASK_THRESHOLD`].
+    /// [`hnet_units::mask::MASK_THRESHOLD`].
     pub fn of(predicted: f32, target: f32) -> Self {
-        match (predicted >= MASK_THRESHOLD, target >= MASK_THRESHOLD) {
+        match (is_catheter(predicted), is_catheter(target)) {
             (true, true) => Self::Found,
             (false, true) => Self::Missed,
             (true, false) => Self::Spurious,
@@ -231,7 +229,7 @@ impl SegmentationAccumulator {
     }
 
     /// Adds one mask: `predicted` and `target` hold per-pixel catheter probabilities in the same
-    /// pixel order; each is thresholded at [`MASK_THRESHOLD`].
+    /// pixel order; each is thresholded at [`hnet_units::mask::MASK_THRESHOLD`].
     pub fn push(&mut self, predicted: &[f32], target: &[f32]) -> Result<(), MaskSizeMismatch> {
         if predicted.len() != target.len() {
             return Err(MaskSizeMismatch {

@@ -14,11 +14,10 @@ use alloc::vec::Vec;
 use burn::tensor::activation::sigmoid;
 use burn::tensor::{Device, Tensor, TensorData, Transaction};
 use hnet_units::ImageSize;
+use hnet_units::turn::TurnError;
 
 use crate::architectures::{ModelSpec, StereoModel};
-use crate::catheter_entry::{
-    CatheterEntry, EntrySearch, EntrySetting, TurnError, TurnedOutput, turned_pair,
-};
+use crate::catheter_entry::{CatheterEntry, EntrySearch, EntrySetting, TurnedOutput, turned_pair};
 use crate::inference::{InputSizeError, PredictError, ReadbackError, push_mask, push_planar};
 use crate::weights::{WeightsError, WeightsHeader};
 

@@ -16,6 +16,7 @@ use hnet_twin::simulator::off_bench::OffBench;
 use hnet_twin::simulator::raster::GreyImage;
 use hnet_twin::simulator::scene::{Backgrounds, Modality, TwinConfig};
 use hnet_twin::simulator::synthetic_xray::BackgroundSource;
+use hnet_units::ImageSize;
 
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("hnet-twin-{name}-{}", std::process::id()));
@@ -63,7 +64,7 @@ fn simulate(config: &TwinConfig, samples: usize, seed: u64, out: &Path) {
 
 #[test]
 fn the_same_seed_gives_byte_identical_datasets() {
-    let config = TwinConfig::new(Modality::Xray2, 48);
+    let config = TwinConfig::new(Modality::Xray2, ImageSize::square(48));
     let (a, b) = (scratch("same-a"), scratch("same-b"));
     simulate(&config, 6, 9, &a);
     simulate(&config, 6, 9, &b);
@@ -79,7 +80,7 @@ fn the_same_seed_gives_byte_identical_datasets() {
 
 #[test]
 fn a_killed_generation_resumes_to_the_same_result() {
-    let config = TwinConfig::new(Modality::Rgb, 48);
+    let config = TwinConfig::new(Modality::Rgb, ImageSize::square(48));
     let (whole, resumed) = (scratch("whole"), scratch("resumed"));
     simulate(&config, 8, 3, &whole);
     simulate(&config, 8, 3, &resumed);
@@ -100,9 +101,34 @@ fn a_killed_generation_resumes_to_the_same_result() {
 }
 
 #[test]
+fn a_generation_started_before_named_sizes_resumes() {
+    let config = TwinConfig::new(Modality::Rgb, ImageSize::square(16));
+    let out = scratch("resume-bare-side");
+    simulate(&config, 4, 3, &out);
+    // Before ImageSize, the twin's settings in the header held the image size as a bare side.
+    let header_path = out.join("dataset.json");
+    let mut header: serde_json::Value =
+        serde_json::from_slice(&fs::read(&header_path).unwrap()).unwrap();
+    header["source"]["twin"]["image_size"] = 16.into();
+    fs::write(&header_path, serde_json::to_vec_pretty(&header).unwrap()).unwrap();
+    fs::remove_file(out.join("samples/000002.json")).unwrap();
+
+    let backgrounds = Backgrounds::phantom(&config.views);
+    let report = simulate_dataset(&config, &backgrounds, &[], 4, 3, &out, &|_| {}).unwrap();
+    assert_eq!((report.generated, report.resumed), (1, 3));
+    let twin = Dataset::open(&out).unwrap().header.source["twin"].clone();
+    assert_eq!(serde_json::from_value::<TwinConfig>(twin).unwrap(), config);
+    fs::remove_dir_all(out).ok();
+}
+
+#[test]
 fn a_simulation_in_four_parts_merges_into_the_same_bytes() {
     // The size: 2,000 pairs, at a size that keeps the test to seconds.
-    let (config, samples, seed) = (TwinConfig::new(Modality::Rgb, 16), 2000, 5);
+    let (config, samples, seed) = (
+        TwinConfig::new(Modality::Rgb, ImageSize::square(16)),
+        2000,
+        5,
+    );
     let whole = scratch("shard-whole");
     simulate(&config, samples, seed, &whole);
     let backgrounds = Backgrounds::phantom(&config.views);
@@ -144,7 +170,7 @@ fn a_simulation_in_four_parts_merges_into_the_same_bytes() {
 
 #[test]
 fn other_settings_or_foreign_folders_are_refused() {
-    let config = TwinConfig::new(Modality::Xray1, 32);
+    let config = TwinConfig::new(Modality::Xray1, ImageSize::square(32));
     let out = scratch("refuse");
     simulate(&config, 2, 1, &out);
     let backgrounds = Backgrounds::phantom(&config.views);
@@ -164,7 +190,7 @@ fn other_settings_or_foreign_folders_are_refused() {
 
 #[test]
 fn a_simulated_dataset_reads_back_with_splits_masks_and_geometry() {
-    let config = TwinConfig::new(Modality::Xray1, 64);
+    let config = TwinConfig::new(Modality::Xray1, ImageSize::square(64));
     let out = scratch("read");
     simulate(&config, 20, 5, &out);
     let dataset = Dataset::open(&out).unwrap();
@@ -187,7 +213,10 @@ fn a_simulated_dataset_reads_back_with_splits_masks_and_geometry() {
     let backgrounds = Backgrounds::phantom(&config.views);
     let sample = hnet_twin::simulator::scene::generate(&config, &backgrounds, 5, index).unwrap();
     let small = hnet_units::ImageSize::square(32);
-    assert_eq!(LoadedPair::from_sample(&sample, 64, small), resized);
+    assert_eq!(
+        LoadedPair::from_sample(&sample, ImageSize::square(64), small),
+        resized
+    );
 
     // The saved camera matrices reconstruct the saved 3D centreline.
     let record = read_sample_record(&dataset, &row.id).unwrap();
@@ -207,7 +236,7 @@ fn a_simulated_dataset_reads_back_with_splits_masks_and_geometry() {
 
 #[test]
 fn an_off_bench_dataset_records_each_pairs_own_views() {
-    let config = TwinConfig::new(Modality::Xray2, 32);
+    let config = TwinConfig::new(Modality::Xray2, ImageSize::square(32));
     // On a flat radiograph: the phantom takes seconds per view to render in a debug build.
     let flat = BackgroundSource::chest_radiograph("flat", GreyImage::filled(64, 64, 0.5));
     let off_bench = OffBench::new(config.clone(), vec![flat], 1.0);

@@ -11,11 +11,22 @@
 //! stored bare arrays, in two orders: the network's settings `[height, width]` (the tensor
 //! order) and the twin's `[width, height]`. [`ImageSize`]'s own `Deserialize` reads the object,
 //! and an array as `[height, width]`; fields that held `[width, height]` read old files with
-//! `#[serde(deserialize_with = "hnet_units::width_height_or_named")]`.
+//! `#[serde(deserialize_with = "hnet_units::width_height_or_named")]`, and fields that held a
+//! square's bare side with [`side_or_named`].
+//!
+//! [`mask`] holds the mask threshold: which pixels of a mask are catheter; [`turn`] the quarter
+//! turns of a square image's pixels.
 use core::fmt;
 
 use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
 use serde::{Deserialize, Serialize};
+
+pub mod mask;
+pub mod turn;
+
+/// The largest image side accepted, pixels: the page's uploads, and the CLI's training image
+/// size (every pair is resized to it, so a larger one would only exhaust memory).
+pub const MAX_IMAGE_SIDE: usize = 8192;
 
 /// `error`'s message followed by each of its causes, `: `-separated (as `hnet` prints them), so
 /// that what a library kept (a decoder's or a device's own account) reaches the reader: the one
@@ -123,11 +134,13 @@ impl fmt::Display for ImageSize {
     }
 }
 
-/// Which order a bare two-number array has (files written before [`ImageSize`] existed).
+/// What else than `{"width": W, "height": H}` a file written before [`ImageSize`] existed may
+/// hold: a bare two-number array in one of two orders, or a square's bare side.
 #[derive(Clone, Copy)]
-enum ArrayOrder {
+enum OldSpelling {
     HeightWidth,
     WidthHeight,
+    Side,
 }
 
 /// A key of `{"width": W, "height": H}`.
@@ -138,7 +151,7 @@ enum Field {
     Height,
 }
 
-struct SizeVisitor(ArrayOrder);
+struct SizeVisitor(OldSpelling);
 
 impl<'de> Visitor<'de> for SizeVisitor {
     type Value = ImageSize;
@@ -161,7 +174,19 @@ impl<'de> Visitor<'de> for SizeVisitor {
         })
     }
 
+    fn visit_u64<E: de::Error>(self, side: u64) -> Result<ImageSize, E> {
+        match self.0 {
+            OldSpelling::Side => usize::try_from(side)
+                .map(ImageSize::square)
+                .map_err(|_| E::invalid_value(de::Unexpected::Unsigned(side), &self)),
+            _ => Err(E::invalid_type(de::Unexpected::Unsigned(side), &self)),
+        }
+    }
+
     fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<ImageSize, A::Error> {
+        if let OldSpelling::Side = self.0 {
+            return Err(de::Error::invalid_type(de::Unexpected::Seq, &self));
+        }
         let first: usize = seq
             .next_element()?
             .ok_or_else(|| de::Error::invalid_length(0, &self))?;
@@ -172,8 +197,8 @@ impl<'de> Visitor<'de> for SizeVisitor {
             return Err(de::Error::invalid_length(3, &self));
         }
         Ok(match self.0 {
-            ArrayOrder::HeightWidth => ImageSize::new(second, first),
-            ArrayOrder::WidthHeight => ImageSize::new(first, second),
+            OldSpelling::HeightWidth => ImageSize::new(second, first),
+            OldSpelling::WidthHeight | OldSpelling::Side => ImageSize::new(first, second),
         })
     }
 }
@@ -182,7 +207,7 @@ impl<'de> Deserialize<'de> for ImageSize {
     /// Reads `{"width": W, "height": H}`, or a bare `[height, width]` array (the network's
     /// settings before this type existed).
     fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-        deserializer.deserialize_any(SizeVisitor(ArrayOrder::HeightWidth))
+        deserializer.deserialize_any(SizeVisitor(OldSpelling::HeightWidth))
     }
 }
 
@@ -191,7 +216,13 @@ impl<'de> Deserialize<'de> for ImageSize {
 pub fn width_height_or_named<'de, D: Deserializer<'de>>(
     deserializer: D,
 ) -> Result<ImageSize, D::Error> {
-    deserializer.deserialize_any(SizeVisitor(ArrayOrder::WidthHeight))
+    deserializer.deserialize_any(SizeVisitor(OldSpelling::WidthHeight))
+}
+
+/// Reads `{"width": W, "height": H}`, or a bare number: the side of a square, pixels (the twin's
+/// `image_size` before [`ImageSize`] existed). For `#[serde(deserialize_with = ..)]`.
+pub fn side_or_named<'de, D: Deserializer<'de>>(deserializer: D) -> Result<ImageSize, D::Error> {
+    deserializer.deserialize_any(SizeVisitor(OldSpelling::Side))
 }
 
 #[cfg(test)]
@@ -253,6 +284,28 @@ mod tests {
     }
 
     #[test]
+    fn a_bare_side_reads_as_a_square_where_files_held_one() {
+        let read = |json: &str| side_or_named(&mut serde_json::Deserializer::from_str(json));
+        assert_eq!(read("224").unwrap(), ImageSize::square(224));
+        let size = ImageSize::new(320, 240);
+        assert_eq!(read(&serde_json::to_string(&size).unwrap()).unwrap(), size);
+        for bad in [
+            "-1",
+            "2.5",
+            "[320, 240]",
+            r#"{"width": 3}"#,
+            "\"224\"",
+            "null",
+        ] {
+            assert!(read(bad).is_err(), "{bad}");
+        }
+        // Only this reader takes a bare side.
+        assert!(serde_json::from_str::<ImageSize>("224").is_err());
+        let mut de = serde_json::Deserializer::from_str("224");
+        assert!(width_height_or_named(&mut de).is_err());
+    }
+
+    #[test]
     fn tensor_order_and_display() {
         let size = ImageSize::new(320, 240);
         assert_eq!(size.height_width(), [240, 320]);
@@ -276,7 +329,7 @@ mod tests {
             #![proptest_config(hnet_mutations::cases(256))]
 
             #[test]
-            fn sizes_round_trip_exactly_in_both_readers(width in any::<usize>(), height in any::<usize>()) {
+            fn sizes_round_trip_exactly_in_every_reader(width in any::<usize>(), height in any::<usize>()) {
                 let size = ImageSize::new(width, height);
                 let json = serde_json::to_string(&size).unwrap();
                 prop_assert_eq!(serde_json::from_str::<ImageSize>(&json).unwrap(), size);
@@ -288,6 +341,12 @@ mod tests {
                 let array = format!("[{width}, {height}]");
                 let mut de = serde_json::Deserializer::from_str(&array);
                 prop_assert_eq!(width_height_or_named(&mut de).unwrap(), size);
+                let mut de = serde_json::Deserializer::from_str(&json);
+                prop_assert_eq!(side_or_named(&mut de).unwrap(), size);
+                // The old bare side, a square.
+                let side = format!("{width}");
+                let mut de = serde_json::Deserializer::from_str(&side);
+                prop_assert_eq!(side_or_named(&mut de).unwrap(), ImageSize::square(width));
             }
 
             #[test]
@@ -296,6 +355,8 @@ mod tests {
                 let _ = serde_json::from_slice::<ImageSize>(&bytes);
                 let mut de = serde_json::Deserializer::from_str(&text);
                 let _ = width_height_or_named(&mut de);
+                let mut de = serde_json::Deserializer::from_str(&text);
+                let _ = side_or_named(&mut de);
             }
 
             #[test]

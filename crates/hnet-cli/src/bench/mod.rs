@@ -286,7 +286,7 @@ fn folder_size(path: &std::path::Path) -> u64 {
 }
 
 fn simulate(args: &SimulateBench) -> anyhow::Result<()> {
-    let config = TwinConfig::new(args.modality, args.size);
+    let config = TwinConfig::new(args.modality, ImageSize::square(args.size));
     let (backgrounds, names) = backgrounds(&config, &[])?;
     let scratch = args.scratch.clone().unwrap_or_else(|| {
         std::env::temp_dir().join(format!("hnet-bench-simulate-{}", std::process::id()))

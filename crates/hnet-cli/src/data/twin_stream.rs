@@ -386,7 +386,7 @@ mod tests {
     fn dataset(name: &str, seed: u64) -> Dataset {
         let root = std::env::temp_dir().join(format!("hnet-stream-{name}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&root);
-        let twin = TwinConfig::new(Modality::Xray2, 32);
+        let twin = TwinConfig::new(Modality::Xray2, ImageSize::square(32));
         let backgrounds = Backgrounds::phantom(&twin.views);
         let names = ["phantom:+0/+0".to_string(), "phantom:+90/+0".to_string()];
         simulate_dataset(&twin, &backgrounds, &names, 4, seed, &root, &|_| {}).unwrap();

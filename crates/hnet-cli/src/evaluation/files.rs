@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use anyhow::Context;
-use hnet_model::metrics::{AXES, AxisMetrics, MASK_THRESHOLD, PixelOutcome};
+use hnet_model::metrics::{AXES, AxisMetrics, PixelOutcome};
 use hnet_twin::dataset::{ImageRef, encode_png};
 use hnet_units::ImageSize;
 use serde::{Deserialize, Serialize};
@@ -93,7 +93,7 @@ fn error_rgb(outcome: PixelOutcome) -> [u8; 3] {
 }
 
 /// Writes pair `id`'s predicted masks (catheter probabilities of views A and B, thresholded at
-/// [`MASK_THRESHOLD`]) into `folder` as `<id>_predicted_mask_a.png` and `_b`, at the network's
+/// [`hnet_units::mask::MASK_THRESHOLD`]) into `folder` as `<id>_predicted_mask_a.png` and `_b`, at the network's
 /// input size (`size`), beside error maps against the label masks `targets` (catheter
 /// probabilities, the same size) as `<id>_errors_a.png` and `_b`: white the catheter found, blue
 /// missed, red spurious.
@@ -105,10 +105,7 @@ pub fn write_predicted_masks(
     targets: &[Vec<f32>; 2],
 ) -> anyhow::Result<()> {
     for ((view, predicted), target) in ["a", "b"].iter().zip(predicted).zip(targets) {
-        let mask: Vec<u8> = predicted
-            .iter()
-            .map(|&p| if p >= MASK_THRESHOLD { 255 } else { 0 })
-            .collect();
+        let mask = hnet_units::mask::binarize(predicted);
         let errors: Vec<u8> = predicted
             .iter()
             .zip(target)

@@ -5,12 +5,13 @@ use burn::tensor::Device;
 use hnet_model::predictor::{PairOutput, Predictor};
 use hnet_twin::dataset::simulate::SampleRecord;
 use hnet_twin::dataset::{Dataset, Split};
+use hnet_twin::reconstruction::MaskOrigin;
 use hnet_twin::reconstruction::centreline::Mask;
 use hnet_twin::reconstruction::physics_force::{ForceCombination, MIN_CALIBRATION_PAIRS};
 
 use crate::data::{StereoItem, StereoSplit};
 use crate::network::predict;
-use crate::physics_check::{self, Estimator, MaskOrigin, PairToCheck, PhysicsEvaluation};
+use crate::physics_check::{self, Estimator, PairToCheck, PhysicsEvaluation};
 
 /// Calibrates the combination of the network's force and the physics estimate from its own masks
 /// ([`ForceCombination::calibrate`]) on `split` of `dataset`; `None` (with a note) where that
@@ -143,7 +144,7 @@ pub(super) fn physics_checks(
         })
         .collect();
     let mut checks = vec![physics_check::check(
-        MaskOrigin::True,
+        MaskOrigin::Labels,
         size,
         &from_truth,
         records,

@@ -39,6 +39,20 @@ fn complete_row(root: &Path, id: &str) -> Option<ManifestRow> {
         .then_some(record.manifest)
 }
 
+/// `header` with a simulated set's twin settings (`source.twin`) spelled as this version writes
+/// them, so that a simulation started before a setting's spelling changed (`image_size`, once a
+/// bare side) still resumes.
+fn respelled(mut header: DatasetHeader) -> DatasetHeader {
+    use crate::simulator::scene::TwinConfig;
+    if let Some(twin) = header.source.get_mut("twin")
+        && let Ok(config) = serde_json::from_value::<TwinConfig>(twin.clone())
+        && let Ok(value) = serde_json::to_value(config)
+    {
+        *twin = value;
+    }
+    header
+}
+
 /// Writes a dataset folder sample by sample, crash-safely, and resumes an interrupted one.
 #[derive(Debug)]
 pub struct DatasetWriter {
@@ -57,7 +71,7 @@ impl DatasetWriter {
             let bytes = fs::read(&header_path).map_err(|e| io(&header_path, e))?;
             let existing: DatasetHeader = serde_json::from_slice(&bytes)
                 .map_err(|e| DatasetError::caused_by(&header_path, "not a dataset header", e))?;
-            if &existing != header {
+            if respelled(existing) != respelled(header.clone()) {
                 return Err(DatasetError::new(
                     root,
                     "holds a dataset made with other settings; choose another output \
@@ -319,16 +333,14 @@ impl LoadedPair {
             self.size.width, self.size.height,
             "the square's symmetries need a square pair"
         );
-        let side = self.size.width as u32;
+        let size = self.size;
         let rgb = |pixels: Vec<u8>, s: SquareSymmetry| {
-            let image = image::RgbImage::from_raw(side, side, pixels)
-                .expect("a loaded view holds size × size RGB pixels");
-            s.apply(&image).into_raw()
+            s.apply(&pixels, size, 3)
+                .expect("a loaded view holds size × size RGB pixels")
         };
         let mask = |pixels: Vec<f32>, s: SquareSymmetry| {
-            let image = image::ImageBuffer::<image::Luma<f32>, _>::from_raw(side, side, pixels)
-                .expect("a loaded mask holds size × size values");
-            s.apply(&image).into_raw()
+            s.apply(&pixels, size, 1)
+                .expect("a loaded mask holds size × size values")
         };
         LoadedPair {
             size: self.size,
@@ -339,28 +351,28 @@ impl LoadedPair {
         }
     }
 
-    /// A twin sample rendered at `rendered` pixels as [`Dataset::load_pair`] would read it
+    /// A twin sample rendered at `rendered` as [`Dataset::load_pair`] would read it
     /// back from the files [`crate::dataset::simulate::simulated_sample_files`] writes (lossless
     /// PNG), at `size`: training on samples made on the fly sees the same pixels as
     /// training on a simulated dataset.
     pub fn from_sample(
         sample: &crate::simulator::scene::StereoSample,
-        rendered: usize,
+        rendered: ImageSize,
         size: ImageSize,
     ) -> Self {
         use crate::simulator::scene::ViewPixels;
-        let side = rendered as u32;
+        let (width, height) = (rendered.width as u32, rendered.height as u32);
         let view = |pixels: &ViewPixels| -> image::DynamicImage {
             match pixels {
-                ViewPixels::Grey(g) => image::GrayImage::from_raw(side, side, g.clone())
+                ViewPixels::Grey(g) => image::GrayImage::from_raw(width, height, g.clone())
                     .map(image::DynamicImage::ImageLuma8),
-                ViewPixels::Rgb(c) => image::RgbImage::from_raw(side, side, c.clone())
+                ViewPixels::Rgb(c) => image::RgbImage::from_raw(width, height, c.clone())
                     .map(image::DynamicImage::ImageRgb8),
             }
             .expect("a rendered view has the twin's image size")
         };
         let mask = |m: &Vec<u8>| -> image::DynamicImage {
-            image::GrayImage::from_raw(side, side, m.clone())
+            image::GrayImage::from_raw(width, height, m.clone())
                 .map(image::DynamicImage::ImageLuma8)
                 .expect("a rendered mask has the twin's image size")
         };

@@ -30,6 +30,7 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 use hnet_units::ImageSize;
+use hnet_units::turn::{TurnError, turn_clockwise};
 use serde::{Deserialize, Serialize};
 
 use crate::dataset::label_origin::{LabelOrigin, UnknownOrigin};
@@ -508,29 +509,28 @@ impl SquareSymmetry {
         }
     }
 
-    /// `image` carried by this symmetry (any pixel type; a square image stays the same size).
-    pub fn apply<I>(
+    /// `values`, a square image of `size` with `channels` interleaved values per pixel
+    /// (row-major), carried by this symmetry: turned by [`hnet_units::turn::turn_clockwise`] (the
+    /// network's own turn), then mirrored.
+    pub fn apply<T: Copy>(
         self,
-        image: &I,
-    ) -> image::ImageBuffer<I::Pixel, Vec<<I::Pixel as image::Pixel>::Subpixel>>
-    where
-        I: image::GenericImageView,
-        I::Pixel: 'static,
-    {
-        use image::imageops::{flip_horizontal_in_place, rotate90, rotate180, rotate270};
-        let mut turned = match self.quarter_turns % 4 {
-            0 => {
-                let (w, h) = image.dimensions();
-                image::ImageBuffer::from_fn(w, h, |x, y| image.get_pixel(x, y))
+        values: &[T],
+        size: ImageSize,
+        channels: usize,
+    ) -> Result<Vec<T>, TurnError> {
+        let mut turned = turn_clockwise(values, size, channels, self.quarter_turns)?;
+        let row = size.width * channels;
+        if self.mirrored && row > 0 {
+            for row in turned.chunks_exact_mut(row) {
+                // Reversing the row reverses its pixels and each pixel's channels; reversing
+                // each pixel again puts its channels back in order.
+                row.reverse();
+                for pixel in row.chunks_exact_mut(channels) {
+                    pixel.reverse();
+                }
             }
-            1 => rotate90(image),
-            2 => rotate180(image),
-            _ => rotate270(image),
-        };
-        if self.mirrored {
-            flip_horizontal_in_place(&mut turned);
         }
-        turned
+        Ok(turned)
     }
 }
 
@@ -539,7 +539,8 @@ pub fn image_size_of(image: &image::DynamicImage) -> ImageSize {
     ImageSize::new(image.width() as usize, image.height() as usize)
 }
 
-/// `image` at `size` (bilinear, the one resize of dataset images), untouched when already there.
+/// `image` at `size` (bilinear: the one resize of images, the dataset's, the page's uploads and
+/// cine frames), untouched when already there.
 pub fn resized(image: image::DynamicImage, size: ImageSize) -> image::DynamicImage {
     if image_size_of(&image) == size {
         image
@@ -730,6 +731,40 @@ mod tests {
         assert_eq!(turned.view_b[3 * 2..3 * 3], pair.view_b[0..3]);
         // And the bottom-left one to the top-left.
         assert_eq!(turned.mask_a[0], pair.mask_a[6]);
+    }
+
+    #[test]
+    fn the_squares_symmetries_are_the_image_crates_turns_and_mirror() {
+        use image::imageops::{flip_horizontal_in_place, rotate90, rotate180, rotate270};
+        let side = 5u32;
+        let size = ImageSize::square(side as usize);
+        let image = image::RgbImage::from_fn(side, side, |x, y| {
+            image::Rgb([(x * 40 + y) as u8, (y * 40 + x) as u8, (x * y) as u8])
+        });
+        for index in 0..8 {
+            let s = SquareSymmetry::nth(index);
+            let mut expected = match s.quarter_turns {
+                0 => image.clone(),
+                1 => rotate90(&image),
+                2 => rotate180(&image),
+                _ => rotate270(&image),
+            };
+            if s.mirrored {
+                flip_horizontal_in_place(&mut expected);
+            }
+            assert_eq!(
+                s.apply(image.as_raw(), size, 3).unwrap(),
+                expected.into_raw(),
+                "{s:?}"
+            );
+        }
+        let rgb = image.into_raw();
+        assert!(SquareSymmetry::nth(3).apply(&rgb, size, 1).is_err());
+        assert!(
+            SquareSymmetry::nth(1)
+                .apply(&rgb, ImageSize::new(15, 5), 1)
+                .is_err()
+        );
     }
 
     #[test]

@@ -93,14 +93,14 @@ pub fn simulated_sample_files(
 ) -> Vec<(String, Vec<u8>)> {
     let size = config.image_size;
     let view = |i: usize| ImageRef {
-        width: size,
-        height: size,
+        width: size.width,
+        height: size.height,
         channels: sample.views[i].pixels.channels(),
         pixels: sample.views[i].pixels.bytes(),
     };
     let mask = |i: usize| ImageRef {
-        width: size,
-        height: size,
+        width: size.width,
+        height: size.height,
         channels: 1,
         pixels: &sample.views[i].mask,
     };
@@ -420,7 +420,7 @@ fn write_samples(
     progress: &(dyn Fn(usize) + Sync),
     make: &(dyn Fn(u64) -> Result<(TwinConfig, StereoSample), SimulationError> + Sync),
 ) -> Result<SimulationReport, SimulationError> {
-    let whole = DatasetHeader::new(ImageSize::square(config.image_size), part.samples, source);
+    let whole = DatasetHeader::new(config.image_size, part.samples, source);
     let header = part.shard.header(&whole);
     let writer = DatasetWriter::create_or_resume(out, &header)?;
     // Splits are drawn over every pair of the whole simulation, so that each part's pairs get

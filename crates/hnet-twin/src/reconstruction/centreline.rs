@@ -38,6 +38,7 @@
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
+use hnet_units::mask::{is_catheter, is_catheter_label};
 use serde::{Deserialize, Serialize};
 
 /// A mask's values: 8-bit coverage (255 = catheter) or soft values in `[0, 1]` (probabilities or
@@ -87,12 +88,12 @@ impl<'a> Mask<'a> {
         }
     }
 
-    /// The share of its pixels at half coverage or more (a network's probability 0.5, the
-    /// mask threshold everywhere), 0-1.
+    /// The share of its pixels at half coverage or more (the mask threshold everywhere,
+    /// [`hnet_units::mask`]), 0-1.
     pub fn share_at_half(&self) -> f64 {
         let found = match self.values {
-            MaskValues::Coverage8(v) => v.iter().filter(|&&b| b >= 128).count(),
-            MaskValues::Soft(v) => v.iter().filter(|&&x| x >= 0.5).count(),
+            MaskValues::Coverage8(v) => v.iter().filter(|&&b| is_catheter_label(b)).count(),
+            MaskValues::Soft(v) => v.iter().filter(|&&x| is_catheter(x)).count(),
         };
         found as f64 / self.len().max(1) as f64
     }
@@ -373,7 +374,7 @@ pub fn extract_centreline(
         height,
         values: &values,
     };
-    let inside: Vec<bool> = values.iter().map(|&c| c >= 0.5).collect();
+    let inside: Vec<bool> = values.iter().map(|&c| is_catheter(c)).collect();
     let blob = largest_blob(&inside, width, height, view, settings)?;
 
     let on_border = |i: usize| {
@@ -540,6 +541,7 @@ pub fn extract_centreline(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use hnet_units::ImageSize;
     use std::ops::Range;
 
     use crate::simulator::carm::CArm;
@@ -624,7 +626,7 @@ mod tests {
             (Vec3::new(-0.2, 0.1, -0.1), [90.0, 0.0], 128),
             (Vec3::new(0.0, 0.0, 0.0), [-30.0, 20.0], 160),
         ] {
-            let view = CArm::cardiac(angles[0], angles[1], size);
+            let view = CArm::cardiac(angles[0], angles[1], ImageSize::square(size));
             let shape = bent_catheter(force);
             let mask = mask_of(&shape, &view);
             let line = extract_centreline(
@@ -671,7 +673,7 @@ mod tests {
 
     #[test]
     fn soft_masks_give_the_same_centreline() {
-        let view = CArm::cardiac(0.0, 0.0, 96);
+        let view = CArm::cardiac(0.0, 0.0, ImageSize::square(96));
         let shape = bent_catheter(Vec3::new(0.15, 0.0, -0.1));
         let tube = rasterize_catheter(&shape, 2.33, &CatheterDesign::default(), &view);
         let soft = extract_centreline(

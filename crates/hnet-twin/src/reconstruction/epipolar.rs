@@ -548,10 +548,11 @@ pub(crate) mod tests {
     use crate::simulator::render::PROXIMAL_SHAFT_MM;
     use crate::simulator::rod::RodShape;
     use crate::simulator::scene::{Backgrounds, Modality, StereoSample, TwinConfig, generate};
+    use hnet_units::ImageSize;
 
     /// Bench XRay-2 sample `index` at `size` px, and its twin settings.
     pub(crate) fn bench_sample(size: usize, seed: u64, index: u64) -> (TwinConfig, StereoSample) {
-        let config = TwinConfig::new(Modality::Xray2, size);
+        let config = TwinConfig::new(Modality::Xray2, ImageSize::square(size));
         let backgrounds = Backgrounds::phantom(&config.views);
         let sample = generate(&config, &backgrounds, seed, index).unwrap();
         (config, sample)
@@ -623,8 +624,8 @@ pub(crate) mod tests {
     #[test]
     fn epipolar_lines_pass_through_the_matching_point() {
         let views = Biplane {
-            a: CArm::cardiac(-30.0, 20.0, 200),
-            b: CArm::cardiac(60.0, -10.0, 160),
+            a: CArm::cardiac(-30.0, 20.0, ImageSize::square(200)),
+            b: CArm::cardiac(60.0, -10.0, ImageSize::square(160)),
         };
         let (pa, pb) = (views.a.camera_matrix(), views.b.camera_matrix());
         let geometry = EpipolarGeometry::new(&pa, &pb).unwrap();
@@ -656,7 +657,7 @@ pub(crate) mod tests {
         let params = crate::simulator::scene::SceneSampling::bench()
             .sample(&mut crate::simulator::scene::sample_rng(1, 0));
         let (_, base) = params.rod(&crate::simulator::rod::RodConfig::default());
-        for view in Biplane::cardiac(64).views() {
+        for view in Biplane::cardiac(ImageSize::square(64)).views() {
             let hint = proximal_hint_px(&view.camera_matrix(), &base).unwrap();
             // The base points cranially, so the shaft comes from the image's bottom edge.
             assert!(hint[1] > 64.0 && (0.0..64.0).contains(&hint[0]), "{hint:?}");
@@ -684,7 +685,7 @@ pub(crate) mod tests {
 
     #[test]
     fn degenerate_cameras_are_refused() {
-        let views = Biplane::cardiac(128);
+        let views = Biplane::cardiac(ImageSize::square(128));
         let good = views.a.camera_matrix();
         let line = centreline_of(
             &views.a,
@@ -724,7 +725,7 @@ pub(crate) mod tests {
             "{err}"
         );
         // Two views 3° apart see a curved catheter consistently, but give it no reliable depth.
-        let near = crate::simulator::carm::CArm::cardiac(3.0, 0.0, 128);
+        let near = crate::simulator::carm::CArm::cardiac(3.0, 0.0, ImageSize::square(128));
         let curve: Vec<Vec3> = (0..40)
             .map(|k| {
                 let t = k as f64 / 39.0;
@@ -749,7 +750,7 @@ pub(crate) mod tests {
     fn a_catheter_along_the_epipolar_lines_is_refused() {
         // Both sources lie in the plane z = 0, so that plane is an epipolar plane: a catheter
         // lying (nearly) in it runs along the epipolar lines in both views.
-        let views = Biplane::cardiac(128);
+        let views = Biplane::cardiac(ImageSize::square(128));
         let points: Vec<Vec3> = (0..=40)
             .map(|k| {
                 let t = k as f64 - 20.0;

@@ -487,6 +487,7 @@ mod tests {
     };
     use crate::reconstruction::epipolar::{ReconstructionSettings, reconstruct};
     use crate::simulator::scene::{SceneParams, SceneSampling, sample_rng};
+    use hnet_units::ImageSize;
 
     /// A bench scene's rod, its base and its solved shape.
     fn bench_rod(index: u64) -> (SceneParams, RodConfig, RodBase, RodShape) {
@@ -728,10 +729,9 @@ mod tests {
         use crate::simulator::scene::{Modality, SceneSampling, TwinConfig};
         use rand::{RngExt, SeedableRng};
 
-        let bench = TwinConfig::new(Modality::Xray2, 224);
+        let bench = TwinConfig::new(Modality::Xray2, ImageSize::square(224));
         let exact = |m: &[u8]| m.to_vec();
-        let binary =
-            |m: &[u8]| -> Vec<u8> { m.iter().map(|&v| if v >= 128 { 255 } else { 0 }).collect() };
+        let binary = hnet_units::mask::binarize_labels;
         let ragged = |m: &[u8]| -> Vec<u8> {
             let size = 224;
             let b = binary(m);
@@ -874,7 +874,7 @@ mod tests {
         use crate::simulator::scene::{Backgrounds, generate};
         use std::time::{Duration, Instant};
 
-        let size = config.image_size;
+        let size = config.image_size.width;
         let backgrounds = Backgrounds::phantom(&config.views);
         let (mut line_errors, mut tip_errors, mut truth, mut fitted) =
             (Vec::new(), Vec::new(), Vec::new(), Vec::new());

@@ -97,32 +97,33 @@ pub struct Projected {
 }
 
 impl CArm {
-    /// A cardiac C-arm at the given angles: source 750 mm and detector 1200 mm from the focal
-    /// spot, and a detector whose `size_px` pixels span 150 mm (about 94 mm at the isocentre, the
-    /// field of view of a zoomed cardiac run).
-    pub fn cardiac(primary_deg: f64, secondary_deg: f64, size_px: usize) -> Self {
+    /// A cardiac C-arm at the given angles, its images of `size` pixels: source 750 mm and
+    /// detector 1200 mm from the focal spot, and a detector 150 mm wide (about 94 mm at the
+    /// isocentre, the field of view of a zoomed cardiac run) with square pixels.
+    pub fn cardiac(primary_deg: f64, secondary_deg: f64, size: ImageSize) -> Self {
         Self {
             primary_deg,
             secondary_deg,
             source_to_isocentre_mm: 750.0,
             source_to_detector_mm: 1200.0,
-            pixel_pitch_mm: 150.0 / size_px as f64,
-            image_size: ImageSize::square(size_px),
+            pixel_pitch_mm: 150.0 / size.width as f64,
+            image_size: size,
         }
     }
 
-    /// A bench camera looking at the isocentre from 300 mm away, framing about 90 mm there.
-    pub fn bench_camera(primary_deg: f64, secondary_deg: f64, size_px: usize) -> Self {
-        Self::bench_camera_at(primary_deg, secondary_deg, 300.0, size_px)
+    /// A bench camera looking at the isocentre from 300 mm away, framing about 90 mm there
+    /// across its images of `size` pixels.
+    pub fn bench_camera(primary_deg: f64, secondary_deg: f64, size: ImageSize) -> Self {
+        Self::bench_camera_at(primary_deg, secondary_deg, 300.0, size)
     }
 
-    /// A bench camera (12 mm lens, 3.6 mm sensor) looking at the isocentre from `distance_mm`,
-    /// framing `0.3 · distance_mm` there.
+    /// A bench camera (12 mm lens, 3.6 mm sensor width, square pixels) looking at the isocentre
+    /// from `distance_mm`, framing `0.3 · distance_mm` there across its images of `size` pixels.
     pub fn bench_camera_at(
         primary_deg: f64,
         secondary_deg: f64,
         distance_mm: f64,
-        size_px: usize,
+        size: ImageSize,
     ) -> Self {
         Self {
             primary_deg,
@@ -130,8 +131,8 @@ impl CArm {
             source_to_isocentre_mm: distance_mm,
             // A 12 mm focal length on a sensor 3.6 mm wide.
             source_to_detector_mm: 12.0,
-            pixel_pitch_mm: 3.6 / size_px as f64,
-            image_size: ImageSize::square(size_px),
+            pixel_pitch_mm: 3.6 / size.width as f64,
+            image_size: size,
         }
     }
 
@@ -237,28 +238,29 @@ pub struct Biplane {
 }
 
 impl Biplane {
-    /// A biplane cardiac system: frontal (PA) and left lateral, 90° apart.
-    pub fn cardiac(size_px: usize) -> Self {
+    /// A biplane cardiac system: frontal (PA) and left lateral, 90° apart, both at `size`.
+    pub fn cardiac(size: ImageSize) -> Self {
         Self {
-            a: CArm::cardiac(0.0, 0.0, size_px),
-            b: CArm::cardiac(90.0, 0.0, size_px),
+            a: CArm::cardiac(0.0, 0.0, size),
+            b: CArm::cardiac(90.0, 0.0, size),
         }
     }
 
-    /// The paper's bench: two cameras 90° apart.
-    pub fn bench(size_px: usize) -> Self {
+    /// The paper's bench: two cameras 90° apart, both at `size`.
+    pub fn bench(size: ImageSize) -> Self {
         Self {
-            a: CArm::bench_camera(0.0, 0.0, size_px),
-            b: CArm::bench_camera(90.0, 0.0, size_px),
+            a: CArm::bench_camera(0.0, 0.0, size),
+            b: CArm::bench_camera(90.0, 0.0, size),
         }
     }
 
     /// The paper's bench as its cameras saw it: two cameras 90° apart, 200 mm from the
-    /// catheter, framing 60 mm there, so that the 50 mm flexible section fills most of the frame.
-    pub fn paper_bench(size_px: usize) -> Self {
+    /// catheter, framing 60 mm there, so that the 50 mm flexible section fills most of the frame;
+    /// both at `size`.
+    pub fn paper_bench(size: ImageSize) -> Self {
         Self {
-            a: CArm::bench_camera_at(0.0, 0.0, 200.0, size_px),
-            b: CArm::bench_camera_at(90.0, 0.0, 200.0, size_px),
+            a: CArm::bench_camera_at(0.0, 0.0, 200.0, size),
+            b: CArm::bench_camera_at(90.0, 0.0, 200.0, size),
         }
     }
 
@@ -319,7 +321,7 @@ mod tests {
 
     #[test]
     fn an_isocentre_offset_reads_a_shifted_world() {
-        let carm = CArm::cardiac(90.0, 0.0, 128);
+        let carm = CArm::cardiac(90.0, 0.0, ImageSize::square(128));
         let offset = [1.5, -2.0, 0.5];
         let moved = HeaderError::with_isocentre_offset(carm.camera_matrix(), offset);
         let p = Vec3::new(3.0, -4.0, 10.0);
@@ -341,7 +343,7 @@ mod tests {
 
     #[test]
     fn the_isocentre_projects_to_the_image_centre() {
-        for view in Biplane::cardiac(224).views() {
+        for view in Biplane::cardiac(ImageSize::square(224)).views() {
             let p = view.project(Vec3::ZERO);
             assert!((p.u - 112.0).abs() < 1e-9 && (p.v - 112.0).abs() < 1e-9);
             assert!((p.depth_mm - 750.0).abs() < 1e-9);
@@ -350,7 +352,7 @@ mod tests {
 
     #[test]
     fn frontal_view_shows_the_patients_left_on_the_right_and_head_up() {
-        let view = CArm::cardiac(0.0, 0.0, 224);
+        let view = CArm::cardiac(0.0, 0.0, ImageSize::square(224));
         let left = view.project(Vec3::new(10.0, 0.0, 0.0));
         let head = view.project(Vec3::new(0.0, 0.0, 10.0));
         assert!(left.u > 112.0);
@@ -360,20 +362,20 @@ mod tests {
         assert!((left.u - 112.0 - 10.0 / mm_per_px).abs() < 1e-9);
         // LAO 90 (left lateral): the detector is on the patient's left, the source on the right,
         // and left-right motion is seen only as depth.
-        let lateral = CArm::cardiac(90.0, 0.0, 224);
+        let lateral = CArm::cardiac(90.0, 0.0, ImageSize::square(224));
         assert!((lateral.rotation().row(2) - Vec3::X).max_abs() < 1e-12);
         assert!(lateral.source_mm().x() < 0.0);
         assert!((lateral.project(Vec3::new(10.0, 0.0, 0.0)).u - 112.0).abs() < 1e-9);
         // Cranial tilt moves the detector towards the head.
-        let cranial = CArm::cardiac(0.0, 30.0, 224);
+        let cranial = CArm::cardiac(0.0, 30.0, ImageSize::square(224));
         assert!(cranial.rotation().row(2).z() > 0.0);
     }
 
     #[test]
     fn camera_matrix_matches_projection_and_triangulates() {
         let biplane = Biplane {
-            a: CArm::cardiac(-30.0, 20.0, 224),
-            b: CArm::cardiac(60.0, -10.0, 224),
+            a: CArm::cardiac(-30.0, 20.0, ImageSize::square(224)),
+            b: CArm::cardiac(60.0, -10.0, ImageSize::square(224)),
         };
         let point = Vec3::new(12.0, -7.0, 25.0);
         let mut uv = [[0.0; 2]; 2];
@@ -402,7 +404,7 @@ mod tests {
 
     #[test]
     fn resizing_keeps_the_field_of_view() {
-        let big = CArm::cardiac(0.0, 0.0, 224);
+        let big = CArm::cardiac(0.0, 0.0, ImageSize::square(224));
         let small = big.with_image_size(ImageSize::square(112));
         let p = Vec3::new(20.0, 0.0, 15.0);
         let (a, b) = (big.project(p), small.project(p));

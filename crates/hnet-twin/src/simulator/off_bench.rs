@@ -119,7 +119,7 @@ impl OffBench {
             let at = CArm::cardiac(
                 f64::from(key.0) * PHANTOM_GRID_DEG,
                 f64::from(key.1) * PHANTOM_GRID_DEG,
-                view.image_size.width,
+                view.image_size,
             );
             BackgroundSource::phantom(&at, PHANTOM_SIZE_PX)
         });
@@ -131,6 +131,7 @@ impl OffBench {
 mod tests {
     use super::*;
     use crate::simulator::scene::Modality;
+    use hnet_units::ImageSize;
 
     /// A small flat radiograph: rendering the phantom at 512 px takes seconds in a debug build
     /// (the phantom path runs in the training stream's test).
@@ -143,7 +144,7 @@ mod tests {
 
     #[test]
     fn off_bench_pairs_are_seeded_and_inside_the_pages_angles() {
-        let twin = TwinConfig::new(Modality::Xray2, 32);
+        let twin = TwinConfig::new(Modality::Xray2, ImageSize::square(32));
         let off = OffBench::new(twin, vec![flat_radiograph()], 1.0);
         for index in 0..4 {
             let (twin, sample) = off.generate(3, index).unwrap();

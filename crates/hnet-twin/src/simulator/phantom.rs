@@ -457,7 +457,7 @@ mod tests {
 
     #[test]
     fn the_radiograph_shows_dark_lungs_and_a_bright_spine() {
-        let view = CArm::cardiac(0.0, 0.0, 224);
+        let view = CArm::cardiac(0.0, 0.0, ImageSize::square(224));
         let (image, wide) = Thorax::adult().radiograph(&view, 420.0, 128);
         let at = |p: Vec3| {
             let q = wide.project(p);

@@ -517,7 +517,7 @@ mod tests {
 
     /// The frontal view at `size` pixels and the straight catheter rasterised in it.
     fn straight_tube(size: usize) -> (CArm, TubeRaster) {
-        let view = CArm::cardiac(0.0, 0.0, size);
+        let view = CArm::cardiac(0.0, 0.0, ImageSize::square(size));
         let design = CatheterDesign::default();
         let tube = rasterize_catheter(&straight_catheter(), DIAMETER_MM, &design, &view);
         (view, tube)

@@ -14,7 +14,7 @@ use crate::vec3::{Mat3, Vec3};
 
 mod sample;
 pub use sample::{
-    Backgrounds, MaskSource, StereoSample, TwinConfig, TwinError, ViewPixels, ViewSample,
+    Backgrounds, MaskRecipe, StereoSample, TwinConfig, TwinError, ViewPixels, ViewSample,
     XRayRecipe, generate, luma, otsu_threshold, render_empty_xray_view, render_view, sample_rng,
     threshold_mask,
 };
@@ -696,12 +696,14 @@ mod tests {
     use super::*;
     use crate::simulator::render::XRayDetector;
     use crate::simulator::sensor_plate;
+    use hnet_units::ImageSize;
+    use hnet_units::mask::is_catheter_label;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 
     #[test]
     fn motion_between_exposures_moves_the_catheter_in_view_b_only() {
-        let mut config = TwinConfig::new(Modality::Xray2, 64);
+        let mut config = TwinConfig::new(Modality::Xray2, ImageSize::square(64));
         let backgrounds = Backgrounds::phantom(&config.views);
         let still = generate(&config, &backgrounds, 7, 3).unwrap();
         config.scene.exposure_motion_mm = 1.0;
@@ -721,7 +723,7 @@ mod tests {
 
     #[test]
     fn scatter_lowers_the_catheters_contrast_and_leaves_its_mask() {
-        let mut config = TwinConfig::new(Modality::Xray2, 64);
+        let mut config = TwinConfig::new(Modality::Xray2, ImageSize::square(64));
         let backgrounds = Backgrounds::phantom(&config.views);
         let plain = generate(&config, &backgrounds, 7, 3).unwrap();
         config.detector.scatter_fraction = 0.3;
@@ -733,7 +735,7 @@ mod tests {
             };
             let (mut sums, mut counts) = ([0.0f64; 2], [0usize; 2]);
             for (&g, &m) in grey.iter().zip(&s.views[0].mask) {
-                let i = usize::from(m >= 128);
+                let i = usize::from(is_catheter_label(m));
                 sums[i] += f64::from(g);
                 counts[i] += 1;
             }
@@ -755,18 +757,18 @@ mod tests {
 
     #[test]
     fn the_papers_bench_frames_the_section_close_up_and_pastes_its_thresholded_catheter() {
-        let mut config = TwinConfig::paper_bench(Modality::Xray2, 96);
+        let mut config = TwinConfig::paper_bench(Modality::Xray2, ImageSize::square(96));
         let backgrounds = Backgrounds::phantom(&config.views);
         let pasted = generate(&config, &backgrounds, 5, 1).unwrap();
         let contact = pasted.params.plate.expect("the force comes from the plate");
         assert_ne!(contact.state, sensor_plate::ContactState::Free);
         assert!(pasted.params.tip_force_n.norm() > 0.0);
-        config.mask = MaskSource::Geometry;
+        config.mask = MaskRecipe::Geometry;
         let exact = generate(&config, &backgrounds, 5, 1).unwrap();
         assert_eq!(pasted.params, exact.params);
         for (cut, view) in pasted.views.iter().zip(&exact.views) {
             // The thresholded catheter is the exact one, give or take its edges and highlights.
-            let inside = |m: &[u8], i: usize| m[i] >= 128;
+            let inside = |m: &[u8], i: usize| is_catheter_label(m[i]);
             let (mut both, mut either) = (0, 0);
             for i in 0..cut.mask.len() {
                 both += usize::from(inside(&cut.mask, i) && inside(&view.mask, i));
@@ -782,7 +784,7 @@ mod tests {
             .filter(|&r| {
                 exact.views[0].mask[r * 96..(r + 1) * 96]
                     .iter()
-                    .any(|&m| m >= 128)
+                    .any(|&m| is_catheter_label(m))
             })
             .collect();
         assert!(rows.len() > 96 * 6 / 10, "{} rows", rows.len());
@@ -790,7 +792,7 @@ mod tests {
 
     #[test]
     fn the_same_seed_and_index_give_the_same_sample() {
-        let config = TwinConfig::new(Modality::Xray2, 64);
+        let config = TwinConfig::new(Modality::Xray2, ImageSize::square(64));
         let backgrounds = Backgrounds::phantom(&config.views);
         let a = generate(&config, &backgrounds, 7, 3).unwrap();
         let b = generate(&config, &backgrounds, 7, 3).unwrap();
@@ -918,7 +920,7 @@ mod tests {
         assert!(leant.departures(&drawn).is_empty());
         assert!(!SceneSampling::bench().departures(&drawn).is_empty());
 
-        let mut config = TwinConfig::new(Modality::Xray2, 64);
+        let mut config = TwinConfig::new(Modality::Xray2, ImageSize::square(64));
         let backgrounds = Backgrounds::phantom(&config.views);
         let plain = generate(&config, &backgrounds, 7, 3).unwrap();
         let flexible = |s: &StereoSample| *s.shape.arc_mm.last().unwrap();
@@ -1001,7 +1003,7 @@ mod tests {
     #[test]
     fn masks_match_the_catheter_in_the_images() {
         for modality in [Modality::Rgb, Modality::Xray1] {
-            let config = TwinConfig::new(modality, 96);
+            let config = TwinConfig::new(modality, ImageSize::square(96));
             let backgrounds = Backgrounds::phantom(&config.views);
             let sample = generate(&config, &backgrounds, 11, 0).unwrap();
             for view in &sample.views {

@@ -300,6 +300,7 @@ pub fn compose(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use hnet_units::ImageSize;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 
@@ -392,7 +393,8 @@ mod tests {
 
     #[test]
     fn the_phantom_locates_the_heart_near_the_image_centre() {
-        let source = BackgroundSource::phantom(&CArm::cardiac(0.0, 0.0, 224), 96);
+        let source =
+            BackgroundSource::phantom(&CArm::cardiac(0.0, 0.0, ImageSize::square(224)), 96);
         let heart = source.region_centre(Anatomy::Heart).unwrap();
         assert!(
             (0.4..0.65).contains(&heart[0]) && (0.4..0.65).contains(&heart[1]),

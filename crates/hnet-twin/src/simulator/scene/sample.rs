@@ -17,10 +17,11 @@ use crate::simulator::sensor_plate::{self, ContactError};
 use crate::simulator::synthetic_xray::{self, Anatomy, BackgroundSource, PatchLayout, PatchRule};
 use crate::vec3::Vec3;
 
-/// How the masks are made.
+/// How a simulated set's label masks are made (`mask` in its `dataset.json`). Not to be confused
+/// with [`crate::reconstruction::MaskOrigin`], which masks a reconstruction read.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase", tag = "kind", content = "level")]
-pub enum MaskSource {
+pub enum MaskRecipe {
     /// Exact anti-aliased coverage from the geometry.
     Geometry,
     /// The paper's way: threshold the rendered image (catheter darker than the level, 0-255).
@@ -52,8 +53,10 @@ pub enum XRayRecipe {
 pub struct TwinConfig {
     /// The look of the images.
     pub modality: Modality,
-    /// Side of the square images, pixels.
-    pub image_size: usize,
+    /// The images' size, pixels. Files written before [`ImageSize`] existed hold a square's
+    /// bare side.
+    #[serde(deserialize_with = "hnet_units::side_or_named")]
+    pub image_size: ImageSize,
     /// Random scene parameters.
     pub scene: SceneSampling,
     /// The rod's fixed properties (length, stiffness and pre-curvature come from the scene).
@@ -69,7 +72,7 @@ pub struct TwinConfig {
     /// Regions to crop backgrounds around (X-ray modalities).
     pub anatomies: Vec<Anatomy>,
     /// How masks are made.
-    pub mask: MaskSource,
+    pub mask: MaskRecipe,
     /// How X-ray frames are made (X-ray modalities).
     #[serde(default)]
     pub xray_recipe: XRayRecipe,
@@ -78,7 +81,7 @@ pub struct TwinConfig {
 impl TwinConfig {
     /// The defaults for a modality at an image size: bench cameras for `rgb`, a biplane cardiac
     /// C-arm for the X-ray modalities.
-    pub fn new(modality: Modality, image_size: usize) -> Self {
+    pub fn new(modality: Modality, image_size: ImageSize) -> Self {
         Self {
             modality,
             image_size,
@@ -97,7 +100,7 @@ impl TwinConfig {
                 PatchRule::xray1()
             },
             anatomies: Anatomy::ALL.to_vec(),
-            mask: MaskSource::Geometry,
+            mask: MaskRecipe::Geometry,
             xray_recipe: XRayRecipe::Detector,
         }
     }
@@ -106,11 +109,11 @@ impl TwinConfig {
     /// close-up cameras 90° apart ([`Biplane::paper_bench`]), masks thresholded from the bench
     /// photographs, and for `xray1`/`xray2` those thresholded catheters pasted onto the patch
     /// shuffle ([`XRayRecipe::Pasted`]).
-    pub fn paper_bench(modality: Modality, image_size: usize) -> Self {
+    pub fn paper_bench(modality: Modality, image_size: ImageSize) -> Self {
         Self {
             scene: SceneSampling::paper_bench(),
             views: Biplane::paper_bench(image_size),
-            mask: MaskSource::Cutout,
+            mask: MaskRecipe::Cutout,
             xray_recipe: XRayRecipe::Pasted,
             ..Self::new(modality, image_size)
         }
@@ -342,10 +345,10 @@ pub fn render_view(
         .to_u8()
     };
     let mask = match config.mask {
-        MaskSource::Geometry => geometry(),
-        MaskSource::Cutout => cutout.unwrap_or_else(geometry),
-        MaskSource::Threshold(level) => threshold_mask(&grey_of(&pixels), level),
-        MaskSource::Otsu => {
+        MaskRecipe::Geometry => geometry(),
+        MaskRecipe::Cutout => cutout.unwrap_or_else(geometry),
+        MaskRecipe::Threshold(level) => threshold_mask(&grey_of(&pixels), level),
+        MaskRecipe::Otsu => {
             let grey = grey_of(&pixels);
             threshold_mask(&grey, otsu_threshold(&grey))
         }
