@@ -112,8 +112,8 @@ impl<'a> PairMasks<'a> {
 
     fn mask(&self, index: usize) -> Mask<'a> {
         match self {
-            Self::Labels(m) => Mask::coverage8(WORK_SIZE, WORK_SIZE, m[index]),
-            Self::Predicted(m) => Mask::soft(WORK_SIZE, WORK_SIZE, m[index]),
+            Self::Labels(m) => Mask::coverage8(WORK_SIZE.width, WORK_SIZE.height, m[index]),
+            Self::Predicted(m) => Mask::soft(WORK_SIZE.width, WORK_SIZE.height, m[index]),
         }
     }
 }
@@ -840,10 +840,8 @@ mod tests {
         let off = ((b.u - p[0]) * dy - (b.v - p[1]) * dx).abs() / dx.hypot(dy);
         assert!(off < 1e-6, "{off}");
         let [p, _] = epipolar_line(&views, View::A, [b.u, b.v]).unwrap();
-        assert!(
-            p.iter()
-                .all(|c| (0.0..=WORK_SIZE as f64 + 1e-6).contains(c))
-        );
+        assert!((0.0..=WORK_SIZE.width as f64 + 1e-6).contains(&p[0]));
+        assert!((0.0..=WORK_SIZE.height as f64 + 1e-6).contains(&p[1]));
     }
 
     #[test]

@@ -15,7 +15,6 @@ use hnet_twin::dataset::resized;
 use hnet_twin::reconstruction::physics_force::TipForceEstimate;
 use hnet_twin::simulator::carm::Biplane;
 use hnet_twin::simulator::scene::TwinError;
-use hnet_units::ImageSize;
 
 use crate::imaging::WORK_SIZE;
 use crate::workspace::{LabeledPair, PairSource, View};
@@ -114,8 +113,7 @@ pub fn read_plane(plane: Plane, files: Vec<GivenFile>) -> Result<PlaneSeries, Ci
 /// The twin's sample cine ([`twin_push_cine`]: a catheter pushed against the wall and released,
 /// seen by the default biplane) written as two XA files, plane A then plane B.
 pub fn sample_files() -> Result<[GivenFile; 2], CineError> {
-    let cine = twin_push_cine(ImageSize::square(WORK_SIZE), SAMPLE_FRAMES, SAMPLE_SEED)
-        .map_err(CineError::Sample)?;
+    let cine = twin_push_cine(WORK_SIZE, SAMPLE_FRAMES, SAMPLE_SEED).map_err(CineError::Sample)?;
     let [a, b] = cine.planes.each_ref().map(write_xa);
     Ok([(SAMPLE_FILES[0].into(), a), (SAMPLE_FILES[1].into(), b)])
 }
@@ -159,12 +157,8 @@ impl CinePlayer {
     /// The player of `cine`, on its first frame, each plane under its header's window (else the
     /// first frame's range).
     pub fn new(cine: BiplaneCine) -> Self {
-        let at_work_size = |plane: Plane| {
-            cine.series(plane)
-                .geometry
-                .carm
-                .with_image_size(ImageSize::square(WORK_SIZE))
-        };
+        let at_work_size =
+            |plane: Plane| cine.series(plane).geometry.carm.with_image_size(WORK_SIZE);
         Self {
             views: Biplane {
                 a: at_work_size(Plane::A),
@@ -233,7 +227,7 @@ impl CinePlayer {
             .grey_frame(plane, frame, self.windows[view_slot(view)])?;
         let size = self.cine.series(plane).frames.size;
         let image = image::GrayImage::from_raw(size.width as u32, size.height as u32, grey)?;
-        let image = resized(image.into(), ImageSize::square(WORK_SIZE));
+        let image = resized(image.into(), WORK_SIZE);
         Some(image.into_rgb8().into_raw())
     }
 
@@ -348,6 +342,7 @@ fn view_slot(view: View) -> usize {
 mod tests {
     use super::*;
     use hnet_dicom::{twin_cine, write_xa};
+    use hnet_units::ImageSize;
 
     fn small_cine(frames: usize) -> [GivenFile; 2] {
         let cine = twin_cine(ImageSize::square(32), frames, 5).unwrap();
@@ -364,9 +359,9 @@ mod tests {
         let views = hnet_dicom::cine_views(ImageSize::square(32));
         assert!((player.views.a.primary_deg - views.a.primary_deg).abs() < 1e-9);
         assert!((player.views.b.secondary_deg - views.b.secondary_deg).abs() < 1e-9);
-        assert_eq!(player.views.a.image_size, ImageSize::square(WORK_SIZE));
+        assert_eq!(player.views.a.image_size, WORK_SIZE);
         let pair = player.pair(2, "f3".into()).unwrap();
-        assert_eq!(pair.view_a.len(), WORK_SIZE * WORK_SIZE * 3);
+        assert_eq!(pair.view_a.len(), WORK_SIZE.pixels() * 3);
         let PairSource::Dicom {
             frame,
             time_s,
@@ -436,7 +431,7 @@ mod tests {
         let mut ws = crate::workspace::Workspace::default();
         ws.add(player.pair(1, ws.next_id()).unwrap());
         let id = ws.pairs[0].id.clone();
-        let masks = [0, 1].map(|_| vec![0; WORK_SIZE * WORK_SIZE]);
+        let masks = [0, 1].map(|_| vec![0; WORK_SIZE.pixels()]);
         ws.set_masks(masks);
         // The small cine shows no catheter: its empty masks are labels only once said so.
         for view in crate::workspace::View::BOTH {

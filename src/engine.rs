@@ -28,8 +28,9 @@ use crate::imaging::{WORK_SIZE, rescale_mask, rescale_rgb};
 use hnet_twin::model_facts::ModelFacts;
 use hnet_twin::reconstruction::physics_force::ForceCombination;
 
-/// Input size of the untrained network the page falls back to when it ships no weights, pixels.
-pub const FALLBACK_INPUT: usize = 64;
+/// Input size of the untrained network the page falls back to when it ships no weights: 64×64
+/// pixels.
+pub const FALLBACK_INPUT: ImageSize = ImageSize::square(64);
 
 /// Where the weights came from.
 #[derive(Debug, Clone, PartialEq)]
@@ -247,11 +248,11 @@ impl Engine {
         }
     }
 
-    /// An untrained H-Net on the CPU (paper architecture at [`FALLBACK_INPUT`] pixels). Its
+    /// An untrained H-Net on the CPU (paper architecture at [`FALLBACK_INPUT`]). Its
     /// freshly initialised weights are kept as a file's bytes, so that WebGPU and a later switch
     /// of backend get the same numbers.
     pub fn untrained(reason: String) -> Result<Self, EngineError> {
-        let config = HNetConfig::new().with_image_size(ImageSize::square(FALLBACK_INPUT));
+        let config = HNetConfig::new().with_image_size(FALLBACK_INPUT);
         let model = config
             .init(&Device::flex())
             .map_err(EngineError::Untrained)?;
@@ -352,10 +353,9 @@ impl Engine {
         view_b: &[u8],
         entry: EntrySetting,
     ) -> Result<Prediction, EngineError> {
-        let side = self.input.width;
         let (a, b) = (
-            rescale_rgb(view_a, WORK_SIZE, side),
-            rescale_rgb(view_b, WORK_SIZE, side),
+            rescale_rgb(view_a, WORK_SIZE, self.input),
+            rescale_rgb(view_b, WORK_SIZE, self.input),
         );
         yield_to_browser().await;
         let start = now_ms();
@@ -409,10 +409,10 @@ impl Engine {
         };
         let millis = now_ms() - start;
         let [mask_a, mask_b] = &reading.masks;
-        let no_catheter = crate::force_reading::no_catheter_found(mask_a, mask_b, side);
+        let no_catheter = crate::force_reading::no_catheter_found(mask_a, mask_b, self.input);
         Ok(Prediction {
-            mask_a: rescale_mask(mask_a, side, WORK_SIZE),
-            mask_b: rescale_mask(mask_b, side, WORK_SIZE),
+            mask_a: rescale_mask(mask_a, self.input, WORK_SIZE),
+            mask_b: rescale_mask(mask_b, self.input, WORK_SIZE),
             force_n: reading.force.filter(|_| no_catheter.is_none()),
             head_force_n: reading.force,
             entry: reading.entry,

@@ -10,8 +10,12 @@ mod tests {
 
     #[test]
     fn causes_follow_the_message() {
-        let err =
-            crate::imaging::decode_to_rgb("scan.png", b"\x89PNG\r\n\x1a\n broken", 8).unwrap_err();
+        let err = crate::imaging::decode_to_rgb(
+            "scan.png",
+            b"\x89PNG\r\n\x1a\n broken",
+            hnet_units::ImageSize::square(8),
+        )
+        .unwrap_err();
         let text = with_causes(&err);
         assert!(text.starts_with("scan.png: cannot be decoded: "), "{text}");
         assert!(text.len() > "scan.png: cannot be decoded: ".len(), "{text}");

@@ -3,7 +3,6 @@
 
 use hnet_twin::dataset::archive::{ArchiveError, DatasetArchive};
 use hnet_twin::dataset::{DatasetHeader, ImageRef, ManifestRow, Split};
-use hnet_units::ImageSize;
 
 use crate::imaging::WORK_SIZE;
 use crate::workspace::{LabeledPair, PairSource, export_splits};
@@ -54,11 +53,11 @@ pub enum ExportError {
     Archive(#[from] ArchiveError),
 }
 
-/// A square image at the working size.
+/// An image at the working size.
 fn image(pixels: &[u8], channels: usize) -> ImageRef<'_> {
     ImageRef {
-        width: WORK_SIZE,
-        height: WORK_SIZE,
+        width: WORK_SIZE.width,
+        height: WORK_SIZE.height,
         channels,
         pixels,
     }
@@ -246,7 +245,7 @@ impl ExportBuilder {
             return Err(ExportError::NothingComplete);
         }
         let header = DatasetHeader::new(
-            ImageSize::square(WORK_SIZE),
+            WORK_SIZE,
             self.added.len(),
             serde_json::json!({
                 "generator": "hnet-studio",
@@ -332,7 +331,7 @@ mod tests {
             Some("hnet-cpu.bpk")
         );
         let loaded = dataset.load_pair(row, None).unwrap();
-        assert_eq!(loaded.size, ImageSize::square(WORK_SIZE));
+        assert_eq!(loaded.size, WORK_SIZE);
         let catheter = loaded
             .mask_a
             .iter()
@@ -517,8 +516,8 @@ pub(crate) mod properties {
             ]),
         )
             .prop_map(|(seed, (a, b), masks_labeled, force_n, split)| {
-                let rgb = WORK_SIZE * WORK_SIZE * 3;
-                let grey = WORK_SIZE * WORK_SIZE;
+                let rgb = WORK_SIZE.pixels() * 3;
+                let grey = WORK_SIZE.pixels();
                 LabeledPair {
                     id: String::new(),
                     source: PairSource::Upload {

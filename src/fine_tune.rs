@@ -62,11 +62,10 @@ pub enum TuningRefusal {
 /// label trains the force head unless it was copied from a model's estimate (as `hnet train`
 /// leaves those out by default: a network never learns its own guesses).
 pub fn tuning_set(pairs: &[LabeledPair], input: ImageSize) -> Result<TuningSet, TuningRefusal> {
-    let work = ImageSize::square(WORK_SIZE);
-    if input != work {
+    if input != WORK_SIZE {
         return Err(TuningRefusal::OtherSize {
             network: input,
-            pairs: work,
+            pairs: WORK_SIZE,
         });
     }
     let learnt = LabelFilter::not_estimates();
@@ -79,7 +78,7 @@ pub fn tuning_set(pairs: &[LabeledPair], input: ImageSize) -> Result<TuningSet, 
         });
     }
     let mut set = TuningSet {
-        images: Vec::with_capacity(labelled.len() * work.pixels() * 8),
+        images: Vec::with_capacity(labelled.len() * WORK_SIZE.pixels() * 8),
         forces: Vec::with_capacity(labelled.len() * 3),
         pairs: labelled.len(),
         with_force: 0,
@@ -172,13 +171,13 @@ impl TwinDomainSampler {
         if !domain.phantom_backgrounds || domain.scenes.plate.is_some() {
             return None;
         }
-        let mut config = TwinConfig::new(domain.modality, ImageSize::square(WORK_SIZE));
+        let mut config = TwinConfig::new(domain.modality, WORK_SIZE);
         config.scene = domain.scenes.clone();
         let view = |deg: [f64; 2]| {
             if domain.modality.is_xray() {
-                CArm::cardiac(deg[0], deg[1], ImageSize::square(WORK_SIZE))
+                CArm::cardiac(deg[0], deg[1], WORK_SIZE)
             } else {
-                CArm::bench_camera(deg[0], deg[1], ImageSize::square(WORK_SIZE))
+                CArm::bench_camera(deg[0], deg[1], WORK_SIZE)
             }
         };
         config.views = Biplane {
@@ -235,7 +234,7 @@ mod tests {
     use hnet_twin::model_facts::FACTS_KEY;
 
     fn pair(id: &str, painted: bool, force: Option<([f32; 3], LabelOrigin)>) -> LabeledPair {
-        let rgb = vec![40u8; WORK_SIZE * WORK_SIZE * 3];
+        let rgb = vec![40u8; WORK_SIZE.pixels() * 3];
         let mut p = LabeledPair::new(
             id.into(),
             PairSource::Upload {
@@ -271,21 +270,21 @@ mod tests {
             pair("p3", false, Some(([0.1, 0.1, 0.1], LabelOrigin::Typed))),
             pair("p4", true, None),
         ];
-        let set = tuning_set(&pairs, ImageSize::square(WORK_SIZE)).unwrap();
+        let set = tuning_set(&pairs, WORK_SIZE).unwrap();
         assert_eq!((set.pairs, set.with_force, set.left_out), (3, 1, 1));
-        let per_pair = WORK_SIZE * WORK_SIZE * 8;
+        let per_pair = WORK_SIZE.pixels() * 8;
         assert_eq!(set.images.len(), 3 * per_pair);
         assert_eq!(&set.forces[..3], &[0.1, 0.2, 0.3]);
         assert!(set.forces[3..].iter().all(|f| f.is_nan()));
         // Pair p1's mask A is right after its two views.
-        assert_eq!(set.images[2 * WORK_SIZE * WORK_SIZE * 3 + 5], 255);
+        assert_eq!(set.images[2 * WORK_SIZE.pixels() * 3 + 5], 255);
         assert_eq!(pairs[0].labeled_pixels(View::A), 1);
     }
 
     #[test]
     fn too_few_pairs_or_another_size_are_refused_with_why() {
         let one = vec![pair("p1", true, None), pair("p2", false, None)];
-        let refusal = tuning_set(&one, ImageSize::square(WORK_SIZE)).unwrap_err();
+        let refusal = tuning_set(&one, WORK_SIZE).unwrap_err();
         assert_eq!(
             refusal,
             TuningRefusal::TooFewPairs {
@@ -318,10 +317,10 @@ mod tests {
             .unwrap()
             .unwrap();
         assert_ne!(&rehearsed.images[..], &set.images[..rehearsed.images.len()]);
-        assert_eq!(set.images.len(), 2 * WORK_SIZE * WORK_SIZE * 8);
+        assert_eq!(set.images.len(), 2 * WORK_SIZE.pixels() * 8);
         assert!(set.forces.iter().all(|f| f.is_finite()));
         // A mask holds the catheter.
-        let mask_a = &set.images[2 * WORK_SIZE * WORK_SIZE * 3..][..WORK_SIZE * WORK_SIZE];
+        let mask_a = &set.images[2 * WORK_SIZE.pixels() * 3..][..WORK_SIZE.pixels()];
         let catheter = mask_a
             .iter()
             .filter(|&&m| hnet_units::mask::is_catheter_label(m));
@@ -335,11 +334,7 @@ mod tests {
             (FACTS_KEY.to_string(), "{}".to_string()),
             ("seed".to_string(), "42".to_string()),
         ]);
-        let set = tuning_set(
-            &[pair("p1", true, None), pair("p2", true, None)],
-            ImageSize::square(WORK_SIZE),
-        )
-        .unwrap();
+        let set = tuning_set(&[pair("p1", true, None), pair("p2", true, None)], WORK_SIZE).unwrap();
         let scores = |iou| HeldBackScores {
             pairs: 1,
             loss: 0.1,

@@ -10,17 +10,18 @@ use hnet_twin::simulator::carm::Biplane;
 use hnet_twin::simulator::scene::{Modality, SceneParams};
 
 use crate::workspace::{LabeledPair, PairSource};
+use hnet_units::ImageSize;
 use hnet_units::force_magnitude as magnitude;
 
-/// Why no force is read from a pair whose masks (catheter probabilities of views A and B, `side`
-/// pixels square) do not both show a catheter ([`catheter_seen`]: enough catheter pixels, and
+/// Why no force is read from a pair whose masks (catheter probabilities of views A and B, `size`
+/// pixels) do not both show a catheter ([`catheter_seen`]: enough catheter pixels, and
 /// not too many, in one blob long enough for a catheter); `None` when both do. The same rule as `hnet study no-catheter` measures.
-pub fn no_catheter_found(mask_a: &[f32], mask_b: &[f32], side: usize) -> Option<String> {
+pub fn no_catheter_found(mask_a: &[f32], mask_b: &[f32], size: ImageSize) -> Option<String> {
     let settings = CentrelineSettings::default();
     [(mask_a, "A"), (mask_b, "B")]
         .into_iter()
         .find_map(|(mask, view)| {
-            catheter_seen(&Mask::soft(side, side, mask), view, &settings).err()
+            catheter_seen(&Mask::soft(size.width, size.height, mask), view, &settings).err()
         })
         .map(|why| hnet_units::with_causes(&why))
 }
@@ -571,25 +572,25 @@ pub(crate) mod tests {
 
     #[test]
     fn a_pair_without_a_catheter_gets_no_force() {
-        let side = 64;
-        let empty = vec![0.0f32; side * side];
+        let size = ImageSize::square(64);
+        let empty = vec![0.0f32; size.pixels()];
         // A straight vertical catheter 4 pixels wide from the bottom edge up to mid-height.
-        let tube: Vec<f32> = (0..side * side)
+        let tube: Vec<f32> = (0..size.pixels())
             .map(|i| {
-                let (x, y) = (i % side, i / side);
-                if (30..34).contains(&x) && y >= side / 2 {
+                let (x, y) = (i % size.width, i / size.width);
+                if (30..34).contains(&x) && y >= size.height / 2 {
                     1.0
                 } else {
                     0.0
                 }
             })
             .collect();
-        assert_eq!(no_catheter_found(&tube, &tube, side), None);
-        let why = no_catheter_found(&tube, &empty, side).unwrap();
+        assert_eq!(no_catheter_found(&tube, &tube, size), None);
+        let why = no_catheter_found(&tube, &empty, size).unwrap();
         assert!(why.contains("view B: no catheter found"), "{why}");
         // A view painted catheter all over (the network does so to a black image).
-        let everywhere = vec![1.0f32; side * side];
-        let why = no_catheter_found(&everywhere, &tube, side).unwrap();
+        let everywhere = vec![1.0f32; size.pixels()];
+        let why = no_catheter_found(&everywhere, &tube, size).unwrap();
         assert!(why.contains("more than a catheter covers"), "{why}");
     }
 

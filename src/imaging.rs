@@ -7,9 +7,9 @@ use hnet_twin::simulator::raster::GreyImage;
 use hnet_twin::vec3::Vec3;
 use hnet_units::{ImageSize, MAX_IMAGE_SIDE};
 
-/// Side of the square images the page labels and exports, pixels (the paper's input size). The
+/// Size of the images the page labels and exports: 224×224 pixels (the paper's input size). The
 /// model sees them resized to its own input size.
-pub const WORK_SIZE: usize = 224;
+pub const WORK_SIZE: ImageSize = ImageSize::square(224);
 
 /// Largest upload accepted, bytes.
 pub const MAX_UPLOAD_BYTES: usize = 40 * 1024 * 1024;
@@ -28,9 +28,9 @@ pub struct ImageError {
     pub cause: Option<image::ImageError>,
 }
 
-/// Decodes a PNG or JPEG and resizes it to `size` x `size` RGB ([`resized`]).
-pub fn decode_to_rgb(file: &str, bytes: &[u8], size: usize) -> Result<Vec<u8>, ImageError> {
-    let image = resized(decode(file, bytes)?, ImageSize::square(size));
+/// Decodes a PNG or JPEG and resizes it to RGB of `size` pixels ([`resized`]).
+pub fn decode_to_rgb(file: &str, bytes: &[u8], size: ImageSize) -> Result<Vec<u8>, ImageError> {
+    let image = resized(decode(file, bytes)?, size);
     Ok(image.into_rgb8().into_raw())
 }
 
@@ -103,38 +103,36 @@ fn decode(file: &str, bytes: &[u8]) -> Result<image::DynamicImage, ImageError> {
     reader.decode().map_err(undecodable)
 }
 
-/// Resizes square RGB bytes from `from` to `to` pixels per side ([`resized`]).
-pub fn rescale_rgb(rgb: &[u8], from: usize, to: usize) -> Vec<u8> {
+/// Resizes RGB bytes from `from` to `to` pixels ([`resized`]).
+pub fn rescale_rgb(rgb: &[u8], from: ImageSize, to: ImageSize) -> Vec<u8> {
     if from == to {
         return rgb.to_vec();
     }
-    let image = image::RgbImage::from_raw(from as u32, from as u32, rgb.to_vec())
+    let image = image::RgbImage::from_raw(from.width as u32, from.height as u32, rgb.to_vec())
         .expect("buffer of the stated size");
-    resized(image.into(), ImageSize::square(to))
-        .into_rgb8()
-        .into_raw()
+    resized(image.into(), to).into_rgb8().into_raw()
 }
 
-/// Resizes a square mask of probabilities from `from` to `to` pixels per side (bilinear).
-pub fn rescale_mask(mask: &[f32], from: usize, to: usize) -> Vec<f32> {
+/// Resizes a mask of probabilities from `from` to `to` pixels (bilinear).
+pub fn rescale_mask(mask: &[f32], from: ImageSize, to: ImageSize) -> Vec<f32> {
     if from == to {
         return mask.to_vec();
     }
     let image = GreyImage {
-        width: from,
-        height: from,
+        width: from.width,
+        height: from.height,
         data: mask.to_vec(),
     };
     image
         .crop_resampled(
             hnet_twin::simulator::raster::Rect([0.0, 0.0, 1.0, 1.0]),
-            to,
-            to,
+            to.width,
+            to.height,
         )
         .data
 }
 
-/// The catheter's tip in a mask of `size` x `size` pixels (values `>= threshold` are catheter:
+/// The catheter's tip in a mask of `size` pixels (values `>= threshold` are catheter:
 /// [`hnet_units::mask::LABEL_THRESHOLD`] for 8-bit labels, [`hnet_units::mask::MASK_THRESHOLD`]
 /// for probabilities):
 /// of the catheter pixels, the one farthest from where the catheter enters the image (its pixel
@@ -142,16 +140,17 @@ pub fn rescale_mask(mask: &[f32], from: usize, to: usize) -> Vec<f32> {
 /// geometry is unknown (uploaded pairs). Image coordinates, pixels.
 pub fn estimate_tip<T: Copy + PartialOrd>(
     mask: &[T],
-    size: usize,
+    size: ImageSize,
     threshold: T,
 ) -> Option<[f64; 2]> {
     let pixels: Vec<(f64, f64)> = mask
         .iter()
         .enumerate()
         .filter(|(_, m)| **m >= threshold)
-        .map(|(i, _)| ((i % size) as f64 + 0.5, (i / size) as f64 + 0.5))
+        .map(|(i, _)| ((i % size.width) as f64 + 0.5, (i / size.width) as f64 + 0.5))
         .collect();
-    let border = |&(x, y): &(f64, f64)| x.min(y).min(size as f64 - x).min(size as f64 - y);
+    let (width, height) = (size.width as f64, size.height as f64);
+    let border = |&(x, y): &(f64, f64)| x.min(y).min(width - x).min(height - y);
     let entry = pixels
         .iter()
         .min_by(|a, b| border(a).total_cmp(&border(b)))?;
@@ -236,18 +235,19 @@ mod tests {
 
     #[test]
     fn uploads_are_decoded_and_resized_or_named_in_the_error() {
-        let rgb = decode_to_rgb("a.png", &png(300, 100), 32).unwrap();
+        let rgb = decode_to_rgb("a.png", &png(300, 100), ImageSize::square(32)).unwrap();
         assert_eq!(rgb.len(), 32 * 32 * 3);
         assert_eq!(&rgb[..3], &[10, 200, 30]);
 
-        let err = decode_to_rgb("notes.txt", b"hello, not an image", 32).unwrap_err();
+        let err =
+            decode_to_rgb("notes.txt", b"hello, not an image", ImageSize::square(32)).unwrap_err();
         assert_eq!(err.file, "notes.txt");
         assert!(err.problem.contains("not an image"), "{err}");
-        let err = decode_to_rgb("empty.png", b"", 32).unwrap_err();
+        let err = decode_to_rgb("empty.png", b"", ImageSize::square(32)).unwrap_err();
         assert!(err.to_string().contains("empty.png: the file is empty"));
         let mut cut = png(64, 64);
         cut.truncate(cut.len() / 2);
-        let err = decode_to_rgb("cut.png", &cut, 32).unwrap_err();
+        let err = decode_to_rgb("cut.png", &cut, ImageSize::square(32)).unwrap_err();
         assert!(err.problem.contains("cannot be decoded"), "{err}");
     }
 
@@ -260,24 +260,28 @@ mod tests {
                 image::ImageFormat::Png,
             )
             .unwrap();
-        let err = decode_to_rgb("wide.png", &bytes, 32).unwrap_err();
+        let err = decode_to_rgb("wide.png", &bytes, ImageSize::square(32)).unwrap_err();
         assert!(err.problem.contains("8193 x 1 pixels"), "{err}");
     }
 
     #[test]
     fn the_tip_is_the_catheter_end_away_from_the_border() {
-        let size = 20;
-        let mut mask = vec![0u8; size * size];
+        let size = ImageSize::square(20);
+        let mut mask = vec![0u8; size.pixels()];
         // A horizontal catheter entering from the left edge, ending at x = 12.
         for x in 0..13 {
-            mask[10 * size + x] = 255;
+            mask[10 * size.width + x] = 255;
         }
         assert_eq!(
             estimate_tip(&mask, size, hnet_units::mask::LABEL_THRESHOLD),
             Some([12.5, 10.5])
         );
         assert_eq!(
-            estimate_tip(&[0.0f32; 4], 2, hnet_units::mask::MASK_THRESHOLD),
+            estimate_tip(
+                &[0.0f32; 4],
+                ImageSize::square(2),
+                hnet_units::mask::MASK_THRESHOLD
+            ),
             None
         );
     }
@@ -362,7 +366,7 @@ pub(crate) mod properties {
 
     /// Decodes `bytes` both ways the page does; a result must respect the limits.
     fn decode_both_ways(bytes: &[u8]) -> Result<(), TestCaseError> {
-        if let Ok(rgb) = decode_to_rgb("p.png", bytes, 32) {
+        if let Ok(rgb) = decode_to_rgb("p.png", bytes, ImageSize::square(32)) {
             prop_assert_eq!(rgb.len(), 32 * 32 * 3);
         }
         if let Ok(grey) = decode_radiograph("p.png", bytes) {
@@ -412,7 +416,7 @@ pub(crate) mod properties {
             colour in prop_oneof![Just(2u8), Just(6u8), any::<u8>()],
         ) {
             let png = png_claiming(width, height, depth, colour);
-            let result = decode_to_rgb("claims.png", &png, 32);
+            let result = decode_to_rgb("claims.png", &png, ImageSize::square(32));
             if width > MAX_IMAGE_SIDE as u32 || height > MAX_IMAGE_SIDE as u32 {
                 let err = result.unwrap_err();
                 prop_assert!(err.problem.contains("limit") || err.problem.contains("decoded"), "{}", err);
@@ -426,7 +430,7 @@ pub(crate) mod properties {
             height in prop_oneof![1u16..64, any::<u16>()],
         ) {
             let jpeg = jpeg_claiming(width, height);
-            let result = decode_to_rgb("claims.jpg", &jpeg, 32);
+            let result = decode_to_rgb("claims.jpg", &jpeg, ImageSize::square(32));
             if u32::from(width) > MAX_IMAGE_SIDE as u32 || u32::from(height) > MAX_IMAGE_SIDE as u32 {
                 prop_assert!(result.is_err());
             }
@@ -438,7 +442,7 @@ pub(crate) mod properties {
     fn uploads_over_the_byte_limit_are_refused_before_decoding() {
         let mut bytes = encoded(image::ImageFormat::Png, false);
         bytes.resize(MAX_UPLOAD_BYTES + 1, 0);
-        let err = decode_to_rgb("big.png", &bytes, 32).unwrap_err();
+        let err = decode_to_rgb("big.png", &bytes, ImageSize::square(32)).unwrap_err();
         assert!(err.problem.contains("the limit is 40 MB"), "{err}");
     }
 }

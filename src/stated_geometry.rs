@@ -4,7 +4,6 @@
 //! something; without it the page assumes its default biplane and says so.
 
 use hnet_twin::simulator::carm::{Biplane, CArm};
-use hnet_units::ImageSize;
 
 use crate::imaging::WORK_SIZE;
 
@@ -144,8 +143,8 @@ impl StatedGeometry {
             secondary_deg,
             source_to_isocentre_mm: self.source_to_isocentre_mm,
             source_to_detector_mm: self.source_to_detector_mm,
-            pixel_pitch_mm: self.detector_width_mm / WORK_SIZE as f64,
-            image_size: ImageSize::square(WORK_SIZE),
+            pixel_pitch_mm: self.detector_width_mm / WORK_SIZE.width as f64,
+            image_size: WORK_SIZE,
         };
         Biplane {
             a: carm(self.views_deg[0]),

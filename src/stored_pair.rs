@@ -8,6 +8,7 @@
 
 use hnet_twin::dataset::label_origin::LabelOrigin;
 use hnet_twin::dataset::{ImageRef, Split, encode_png};
+use hnet_units::ImageSize;
 
 use crate::imaging::WORK_SIZE;
 use crate::workspace::{LabeledPair, PairSource};
@@ -67,7 +68,9 @@ pub enum DamagedRecord {
     },
     /// An image or mask is a PNG of another size than the page works at.
     #[error(
-        "stored pair {id}: `{key}` is {width} x {height} pixels, not {WORK_SIZE} x {WORK_SIZE}"
+        "stored pair {id}: `{key}` is {width} x {height} pixels, not {} x {}",
+        WORK_SIZE.width,
+        WORK_SIZE.height
     )]
     Size {
         /// The pair.
@@ -99,8 +102,8 @@ pub fn image_pngs(pair: &LabeledPair) -> [Vec<u8>; 4] {
     let pixels = [&pair.view_a, &pair.view_b, &pair.mask_a, &pair.mask_b];
     core::array::from_fn(|i| {
         encode_png(ImageRef {
-            width: WORK_SIZE,
-            height: WORK_SIZE,
+            width: WORK_SIZE.width,
+            height: WORK_SIZE.height,
             channels: IMAGE_KEYS[i].1,
             pixels: pixels[i],
         })
@@ -133,7 +136,7 @@ fn decode(
     limits.max_alloc = Some(MAX_DECODE_BYTES);
     reader.limits(limits);
     let image = reader.decode().map_err(damaged)?;
-    if (image.width(), image.height()) != (WORK_SIZE as u32, WORK_SIZE as u32) {
+    if ImageSize::new(image.width() as usize, image.height() as usize) != WORK_SIZE {
         return Err(DamagedRecord::Size {
             id: id.to_string(),
             key,
@@ -219,7 +222,7 @@ mod properties {
                 for (pixels, (_, channels)) in
                     [&back.view_a, &back.view_b, &back.mask_a, &back.mask_b].iter().zip(IMAGE_KEYS)
                 {
-                    prop_assert_eq!(pixels.len(), WORK_SIZE * WORK_SIZE * channels);
+                    prop_assert_eq!(pixels.len(), WORK_SIZE.pixels() * channels);
                 }
             }
         }

@@ -77,13 +77,13 @@ impl TwinControls {
     /// for RGB.
     pub fn views(&self) -> Biplane {
         if self.paper_bench.is_some() {
-            return Biplane::paper_bench(ImageSize::square(WORK_SIZE));
+            return Biplane::paper_bench(WORK_SIZE);
         }
         let make = |deg: [f64; 2]| -> CArm {
             if self.modality.is_xray() {
-                CArm::cardiac(deg[0], deg[1], ImageSize::square(WORK_SIZE))
+                CArm::cardiac(deg[0], deg[1], WORK_SIZE)
             } else {
-                CArm::bench_camera(deg[0], deg[1], ImageSize::square(WORK_SIZE))
+                CArm::bench_camera(deg[0], deg[1], WORK_SIZE)
             }
         };
         Biplane {
@@ -133,8 +133,8 @@ impl TwinControls {
         background: &XrayBackground,
     ) -> Result<LabeledPair, ContactError> {
         let mut config = match self.paper_bench {
-            Some(_) => TwinConfig::paper_bench(self.modality, ImageSize::square(WORK_SIZE)),
-            None => TwinConfig::new(self.modality, ImageSize::square(WORK_SIZE)),
+            Some(_) => TwinConfig::paper_bench(self.modality, WORK_SIZE),
+            None => TwinConfig::new(self.modality, WORK_SIZE),
         };
         config.views = self.views();
         config.patches = background.rule();
@@ -253,8 +253,7 @@ pub const DEFAULT_REGION_SIDE: f64 = 0.34;
 impl XrayBackground {
     /// The built-in thorax phantom seen frontally (512 px), region on the heart.
     pub fn phantom() -> Self {
-        let source =
-            BackgroundSource::phantom(&CArm::cardiac(0.0, 0.0, ImageSize::square(WORK_SIZE)), 512);
+        let source = BackgroundSource::phantom(&CArm::cardiac(0.0, 0.0, WORK_SIZE), 512);
         Self::on_heart(source)
     }
 
@@ -321,11 +320,11 @@ impl XrayBackground {
         [a, b]
     }
 
-    /// Both views' backgrounds as transmission maps `size` x `size` (1 = nothing absorbs).
-    pub fn compose(&self, size: usize) -> [GreyImage; 2] {
+    /// Both views' backgrounds as transmission maps of `size` pixels (1 = nothing absorbs).
+    pub fn compose(&self, size: ImageSize) -> [GreyImage; 2] {
         let rule = self.rule();
         self.layouts()
-            .map(|layout| compose(&self.source, &layout, &rule, size, size))
+            .map(|layout| compose(&self.source, &layout, &rule, size.width, size.height))
     }
 }
 
@@ -339,7 +338,7 @@ mod tests {
         let controls = TwinControls::default();
         let background = XrayBackground::phantom();
         let pair = controls.render("pair-0001".into(), &background).unwrap();
-        assert_eq!(pair.view_a.len(), WORK_SIZE * WORK_SIZE * 3);
+        assert_eq!(pair.view_a.len(), WORK_SIZE.pixels() * 3);
         assert!(pair.is_complete());
         assert_eq!(pair.force_n, Some([0.15, 0.05, -0.10]));
         // The catheter is visible in both views, and darker than its surroundings (X-ray).
@@ -379,7 +378,7 @@ mod tests {
         else {
             panic!("a twin pair")
         };
-        assert_eq!(*views, Biplane::paper_bench(ImageSize::square(WORK_SIZE)));
+        assert_eq!(*views, Biplane::paper_bench(WORK_SIZE));
         assert_eq!(settings["preset"], PAPER_BENCH);
         assert_ne!(settings["scene"]["plate"]["state"], "free");
         // Not the force sliders' value: the contact's.
@@ -411,8 +410,8 @@ mod tests {
         assert!(x0 >= 0.0 && y1 <= 1.0 + 1e-12 && x1 > x0 && y1 > y0);
         bg.resize_region(0.5);
         assert!((bg.region_side() - 0.5).abs() < 1e-9);
-        let [a, _] = bg.compose(64);
-        assert_eq!((a.width, a.height), (64, 64));
+        let [a, _] = bg.compose(ImageSize::new(64, 48));
+        assert_eq!((a.width, a.height), (64, 48));
         assert!(a.data.iter().all(|t| (0.0..=1.0).contains(t)));
     }
 }

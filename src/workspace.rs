@@ -1,7 +1,7 @@
 //! The labeling work: stereo pairs with their (corrected) masks and force labels, and undo and
 //! redo per brush stroke. Plain data, so it can be stored in the browser and exported.
 //!
-//! Images and masks are square, [`WORK_SIZE`] pixels per side, row-major; pixel `(x, y)` covers
+//! Images and masks are [`WORK_SIZE`] pixels, row-major; pixel `(x, y)` covers
 //! `[x, x+1) x [y, y+1)` in image coordinates (origin at the top-left corner, `y` down).
 
 use hnet_twin::dataset::label_origin::LabelOrigin;
@@ -11,6 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::force_label::ForceLabelRow;
 use crate::imaging::WORK_SIZE;
+use hnet_units::ImageSize;
 /// The two views of a pair (one type for the page, the network and the twin).
 pub use hnet_units::View;
 
@@ -91,7 +92,7 @@ pub struct LabeledPair {
 impl LabeledPair {
     /// A pair with empty masks and no force label.
     pub fn new(id: String, source: PairSource, view_a: Vec<u8>, view_b: Vec<u8>) -> Self {
-        let pixels = WORK_SIZE * WORK_SIZE;
+        let pixels = WORK_SIZE.pixels();
         Self {
             id,
             source,
@@ -203,17 +204,24 @@ pub enum Tool {
     Eraser,
 }
 
-/// Paints a disc of `radius` pixels centred at `(x, y)` (image coordinates) into a `size` x
-/// `size` mask; returns whether anything changed.
-pub fn paint_disc(mask: &mut [u8], size: usize, x: f64, y: f64, radius: f64, tool: Tool) -> bool {
+/// Paints a disc of `radius` pixels centred at `(x, y)` (image coordinates) into a mask of
+/// `size` pixels; returns whether anything changed.
+pub fn paint_disc(
+    mask: &mut [u8],
+    size: ImageSize,
+    x: f64,
+    y: f64,
+    radius: f64,
+    tool: Tool,
+) -> bool {
     let value = match tool {
         Tool::Brush => 255,
         Tool::Eraser => 0,
     };
     let r = radius.max(0.5);
-    let last = size as f64 - 1.0;
-    let (x0, x1) = ((x - r).floor().max(0.0), (x + r).ceil().min(last));
-    let (y0, y1) = ((y - r).floor().max(0.0), (y + r).ceil().min(last));
+    let (last_x, last_y) = (size.width as f64 - 1.0, size.height as f64 - 1.0);
+    let (x0, x1) = ((x - r).floor().max(0.0), (x + r).ceil().min(last_x));
+    let (y0, y1) = ((y - r).floor().max(0.0), (y + r).ceil().min(last_y));
     if x1 < x0 || y1 < y0 {
         return false;
     }
@@ -222,7 +230,7 @@ pub fn paint_disc(mask: &mut [u8], size: usize, x: f64, y: f64, radius: f64, too
         for px in x0 as usize..=x1 as usize {
             let (dx, dy) = (px as f64 + 0.5 - x, py as f64 + 0.5 - y);
             if dx * dx + dy * dy <= r * r {
-                let m = &mut mask[py * size + px];
+                let m = &mut mask[py * size.width + px];
                 if *m != value {
                     *m = value;
                     changed = true;
@@ -233,10 +241,11 @@ pub fn paint_disc(mask: &mut [u8], size: usize, x: f64, y: f64, radius: f64, too
     changed
 }
 
-/// Paints a stroke segment from `from` to `to` (image coordinates) with discs every half radius.
+/// Paints a stroke segment from `from` to `to` (image coordinates) with discs every half radius
+/// into a mask of `size` pixels.
 pub fn paint_segment(
     mask: &mut [u8],
-    size: usize,
+    size: ImageSize,
     from: [f64; 2],
     to: [f64; 2],
     radius: f64,
@@ -624,7 +633,7 @@ pub(crate) mod tests {
     /// tests).
     pub(crate) fn workspace(n: usize) -> Workspace {
         let mut ws = Workspace::default();
-        let rgb = vec![0u8; WORK_SIZE * WORK_SIZE * 3];
+        let rgb = vec![0u8; WORK_SIZE.pixels() * 3];
         for _ in 0..n {
             let source = PairSource::Upload {
                 view_a: "a.png".into(),
@@ -660,16 +669,18 @@ pub(crate) mod tests {
     #[test]
     fn a_correction_starts_from_h_nets_mask_and_undoes_with_it() {
         let mut ws = workspace(1);
-        let size = WORK_SIZE * WORK_SIZE;
+        let size = WORK_SIZE.pixels();
         let mut hnet = vec![0u8; size];
-        hnet[..WORK_SIZE * 3].fill(255);
+        // The first three rows.
+        let rows = WORK_SIZE.width * 3;
+        hnet[..rows].fill(255);
         // The first stroke on an empty view starts from H-Net's mask, and adds to it.
         ws.begin_stroke(View::A, Some(hnet.clone()));
         ws.stroke_to([50.0, 100.0], [60.0, 100.0], 3.0, Tool::Brush);
         ws.end_stroke();
         let painted = ws.current().unwrap().mask(View::A).to_vec();
-        assert!(painted[..WORK_SIZE * 3].iter().all(|&v| v == 255));
-        assert!(painted.iter().filter(|&&v| v > 0).count() > WORK_SIZE * 3);
+        assert!(painted[..rows].iter().all(|&v| v == 255));
+        assert!(painted.iter().filter(|&&v| v > 0).count() > rows);
         // One undo step takes both away.
         ws.undo();
         assert!(ws.current().unwrap().mask(View::A).iter().all(|&v| v == 0));
@@ -719,7 +730,7 @@ pub(crate) mod tests {
     #[test]
     fn pre_labels_are_one_undo_step_for_both_views() {
         let mut ws = workspace(1);
-        let full = vec![255u8; WORK_SIZE * WORK_SIZE];
+        let full = vec![255u8; WORK_SIZE.pixels()];
         assert!(ws.set_masks([full.clone(), full.clone()]).is_some());
         assert_eq!(ws.current().unwrap().mask_b, full);
         ws.undo();
@@ -730,13 +741,20 @@ pub(crate) mod tests {
 
     #[test]
     fn painting_at_the_border_stays_inside() {
-        let mut mask = vec![0u8; 16 * 16];
-        assert!(paint_disc(&mut mask, 16, 0.0, 15.9, 3.0, Tool::Brush));
-        assert!(paint_disc(&mut mask, 16, 15.9, 0.0, 3.0, Tool::Brush));
-        assert!(!paint_disc(&mut mask, 16, -20.0, -20.0, 3.0, Tool::Brush));
-        assert!(!paint_disc(&mut mask, 16, 40.0, 8.0, 3.0, Tool::Brush));
+        let size = ImageSize::square(16);
+        let mut mask = vec![0u8; size.pixels()];
+        assert!(paint_disc(&mut mask, size, 0.0, 15.9, 3.0, Tool::Brush));
+        assert!(paint_disc(&mut mask, size, 15.9, 0.0, 3.0, Tool::Brush));
+        assert!(!paint_disc(&mut mask, size, -20.0, -20.0, 3.0, Tool::Brush));
+        assert!(!paint_disc(&mut mask, size, 40.0, 8.0, 3.0, Tool::Brush));
         assert_eq!(mask[15 * 16], 255);
         assert_eq!(mask[15], 255);
+        // A wide mask: `width` pixels per row, `height` rows.
+        let size = ImageSize::new(16, 4);
+        let mut mask = vec![0u8; size.pixels()];
+        assert!(paint_disc(&mut mask, size, 15.9, 3.9, 1.0, Tool::Brush));
+        assert_eq!(mask[3 * 16 + 15], 255);
+        assert!(!paint_disc(&mut mask, size, 8.0, 8.0, 1.0, Tool::Brush));
     }
 
     #[test]
@@ -900,7 +918,6 @@ mod properties {
     use super::*;
     use crate::force_label::{implausible_label, parse_force_labels, parse_newtons};
     use crate::imaging::properties::cases;
-    use hnet_units::ImageSize;
     use proptest::prelude::*;
 
     /// A force component a label may hold: plausible, any `f32` bits in the range.
@@ -980,7 +997,7 @@ mod properties {
                 Some((true_force_n, tip_mm)) if tip_mm.iter().all(|v| v.is_finite()) => PairSource::Twin {
                     true_force_n,
                     tip_mm,
-                    views: Biplane::cardiac(ImageSize::square(WORK_SIZE)),
+                    views: Biplane::cardiac(WORK_SIZE),
                     settings: serde_json::json!({"force_n": true_force_n, "seed": 3}),
                 },
                 _ => PairSource::Upload { view_a: names.0, view_b: names.1, views: None },

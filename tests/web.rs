@@ -120,7 +120,7 @@ async fn the_engine_runs_on_a_twin_pair_at_the_working_size() {
         .infer(&pair.view_a, &pair.view_b, EntrySetting::AS_TRAINED)
         .await
         .unwrap();
-    assert_eq!(prediction.mask_a.len(), WORK_SIZE * WORK_SIZE);
+    assert_eq!(prediction.mask_a.len(), WORK_SIZE.pixels());
     assert!(prediction.mask_b.iter().all(|p| (0.0..=1.0).contains(p)));
     assert!(
         prediction
@@ -157,7 +157,7 @@ async fn the_engine_runs_on_a_twin_pair_at_the_working_size() {
         )
         .await
         .unwrap();
-    assert_eq!(turned.mask_a.len(), WORK_SIZE * WORK_SIZE);
+    assert_eq!(turned.mask_a.len(), WORK_SIZE.pixels());
     assert_eq!(turned.entry, [CatheterEntry::Left, CatheterEntry::Bottom]);
     assert_eq!(turned.force_n, None);
     let why = turned.force_left_out().unwrap();

@@ -3,6 +3,8 @@
 //! a seeded shuffle, the XRay-1 / XRay-2 style, and both views' composed backgrounds. The live
 //! twin's X-ray pairs are rendered on them.
 
+use hnet_twin::simulator::raster::GreyImage;
+use hnet_units::ImageSize;
 use leptos::prelude::*;
 use wasm_bindgen::{Clamped, JsCast};
 
@@ -16,26 +18,25 @@ use crate::twin_live::{XrayBackground, XrayStyle};
 
 /// Side of the radiograph canvas, canvas pixels.
 const SOURCE_SIDE: f64 = 320.0;
-/// Side of each composed background preview, pixels.
-const PREVIEW_SIDE: usize = 160;
+/// Size of each composed background preview, pixels: square, as style.css shows it.
+const PREVIEW_SIZE: ImageSize = ImageSize::square(160);
 
 fn context_2d(canvas: &web_sys::HtmlCanvasElement) -> Option<web_sys::CanvasRenderingContext2d> {
     canvas.get_context("2d").ok()??.dyn_into().ok()
 }
 
-/// Puts 8-bit grey pixels on a canvas of the same size.
-fn put_grey(canvas: &web_sys::HtmlCanvasElement, grey: &[u8], width: usize, height: usize) {
+/// Puts `image` on `canvas` as 8-bit grey pixels, the canvas sized to it.
+fn put_grey(canvas: &web_sys::HtmlCanvasElement, image: &GreyImage) {
     let Some(ctx) = context_2d(canvas) else {
         return;
     };
-    canvas.set_width(width as u32);
-    canvas.set_height(height as u32);
-    let rgba: Vec<u8> = grey.iter().flat_map(|&g| [g, g, g, 255]).collect();
-    if let Ok(data) = web_sys::ImageData::new_with_u8_clamped_array_and_sh(
-        Clamped(&rgba),
-        width as u32,
-        height as u32,
-    ) {
+    let (width, height) = (image.width as u32, image.height as u32);
+    canvas.set_width(width);
+    canvas.set_height(height);
+    let rgba: Vec<u8> = image.to_u8().iter().flat_map(|&g| [g, g, g, 255]).collect();
+    if let Ok(data) =
+        web_sys::ImageData::new_with_u8_clamped_array_and_sh(Clamped(&rgba), width, height)
+    {
         let _ = ctx.put_image_data(&data, 0.0, 0.0);
     }
 }
@@ -125,14 +126,19 @@ pub fn Composer(twin: TwinStore, notices: Notices, studio: Studio) -> impl IntoV
         });
     });
     Effect::new(move |_| {
-        let composed = background.with(|bg| bg.compose(PREVIEW_SIDE));
+        let composed = background.with(|bg| bg.compose(PREVIEW_SIZE));
         let grid = background.with(|bg| bg.rule().grid);
-        let side = PREVIEW_SIDE as f64;
         for (canvas, image) in previews.iter().zip(composed) {
             if let Some(canvas) = canvas.get() {
-                put_grey(&canvas, &image.to_u8(), PREVIEW_SIDE, PREVIEW_SIDE);
+                put_grey(&canvas, &image);
                 if let Some(ctx) = context_2d(&canvas) {
-                    draw_grid(&ctx, [0.0, 0.0, side, side], grid, "rgba(255,176,0,0.55)");
+                    let (width, height) = (image.width as f64, image.height as f64);
+                    draw_grid(
+                        &ctx,
+                        [0.0, 0.0, width, height],
+                        grid,
+                        "rgba(255,176,0,0.55)",
+                    );
                 }
             }
         }

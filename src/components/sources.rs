@@ -198,7 +198,7 @@ pub fn UploadPair(pairs: PairStore, notices: Notices, studio: Studio) -> impl In
         <div class="upload">
             <p class="hint">
                 "Two simultaneous images of the catheter (PNG or JPEG, any size; resized to "
-                {WORK_SIZE}" px). They stay on this machine."
+                {WORK_SIZE.to_string()}" px). They stay on this machine."
             </p>
             {[0usize, 1].into_iter().map(|view| view! {
                 <label class="file-button">

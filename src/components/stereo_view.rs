@@ -217,8 +217,8 @@ fn ViewCanvas(
             .and_then(|d| d.create_element("canvas").ok())
             .and_then(|c| c.dyn_into::<web_sys::HtmlCanvasElement>().ok())
             .inspect(|c| {
-                c.set_width(WORK_SIZE as u32);
-                c.set_height(WORK_SIZE as u32);
+                c.set_width(WORK_SIZE.width as u32);
+                c.set_height(WORK_SIZE.height as u32);
             }),
     );
 
@@ -260,21 +260,20 @@ fn ViewCanvas(
             let offscreen = offscreen.get_value()?;
             let image = web_sys::ImageData::new_with_u8_clamped_array_and_sh(
                 Clamped(&rgba(&rgb)),
-                WORK_SIZE as u32,
-                WORK_SIZE as u32,
+                WORK_SIZE.width as u32,
+                WORK_SIZE.height as u32,
             )
             .ok()?;
             context_2d(&offscreen)?
                 .put_image_data(&image, 0.0, 0.0)
                 .ok()?;
             ctx.set_image_smoothing_enabled(false);
-            let side = WORK_SIZE as f64 * t.scale;
             let _ = ctx.draw_image_with_html_canvas_element_and_dw_and_dh(
                 &offscreen,
                 t.offset[0],
                 t.offset[1],
-                side,
-                side,
+                WORK_SIZE.width as f64 * t.scale,
+                WORK_SIZE.height as f64 * t.scale,
             );
             // Where the tip is and how the view sees the world: exact for twin pairs; for
             // uploads and DICOM frames, the tip found in the masks and the pair's geometry (the

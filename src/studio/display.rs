@@ -44,9 +44,10 @@ pub struct ViewTransform {
 pub const CANVAS_SIDE: f64 = 448.0;
 
 impl Default for ViewTransform {
+    /// The fit: a [`WORK_SIZE`] image's longer side across the square canvas.
     fn default() -> Self {
         Self {
-            scale: CANVAS_SIDE / WORK_SIZE as f64,
+            scale: CANVAS_SIDE / WORK_SIZE.width.max(WORK_SIZE.height) as f64,
             offset: [0.0, 0.0],
         }
     }

@@ -393,7 +393,8 @@ async fn run(
     for value in [
         Uint8Array::from(weights).into(),
         JsValue::from_str(start_name),
-        JsValue::from(WORK_SIZE as u32),
+        JsValue::from(WORK_SIZE.width as u32),
+        JsValue::from(WORK_SIZE.height as u32),
         images.clone().into(),
         forces.clone().into(),
         reference_images.clone().into(),

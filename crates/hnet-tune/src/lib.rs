@@ -18,7 +18,7 @@ use std::collections::BTreeMap;
 
 use burn::tensor::Device;
 use hnet_model::fine_tune::{FineTune, FineTuneSettings, TrainingPair};
-use hnet_units::with_causes;
+use hnet_units::{ImageSize, with_causes};
 use wasm_bindgen::prelude::*;
 
 thread_local! {
@@ -41,9 +41,10 @@ fn json<T: serde::Serialize>(value: &T) -> Result<String, JsError> {
 /// `rehearsal_images` and `rehearsal_forces` without holding any back, with the settings in
 /// `settings_json` ([`FineTuneSettings`]; fields left out keep their defaults).
 ///
-/// `images` holds each pair in turn at `side`×`side` pixels: view A and view B as 8-bit RGB,
-/// then mask A and mask B (255 catheter). `forces` holds each pair's force label
-/// `(Fx, Fy, Fz)` in newtons, NaN for a pair that trains its masks only.
+/// `images` holds each pair in turn at `width`×`height` pixels (row-major, `height` rows of
+/// `width` pixels): view A and view B as 8-bit RGB, then mask A and mask B (255 catheter).
+/// `forces` holds each pair's force label `(Fx, Fy, Fz)` in newtons, NaN for a pair that trains
+/// its masks only.
 ///
 /// Returns, as JSON, the split (`train`, `held_back`), `steps_per_epoch` and the starting
 /// network's scores on the held-back pairs (`before`) and the reference pairs
@@ -53,7 +54,8 @@ fn json<T: serde::Serialize>(value: &T) -> Result<String, JsError> {
 pub fn start(
     weights: &[u8],
     name: &str,
-    side: u32,
+    width: u32,
+    height: u32,
     images: &[u8],
     forces: &[f32],
     reference_images: &[u8],
@@ -65,10 +67,10 @@ pub fn start(
     console_error_panic_hook::set_once();
     let settings: FineTuneSettings = serde_json::from_str(settings_json)
         .map_err(|e| JsError::new(&format!("the fine-tune settings are not readable: {e}")))?;
-    let side = side as usize;
-    let pairs = unpack(side, images, forces, "pairs")?;
-    let reference = unpack(side, reference_images, reference_forces, "reference pairs")?;
-    let rehearsal = unpack(side, rehearsal_images, rehearsal_forces, "rehearsed pairs")?;
+    let size = ImageSize::new(width as usize, height as usize);
+    let pairs = unpack(size, images, forces, "pairs")?;
+    let reference = unpack(size, reference_images, reference_forces, "reference pairs")?;
+    let rehearsal = unpack(size, rehearsal_images, rehearsal_forces, "rehearsed pairs")?;
     let run = FineTune::new(weights, name, pairs, settings, &Device::flex())
         .and_then(|run| run.with_reference(reference))
         .and_then(|run| run.with_rehearsal(rehearsal))
@@ -89,19 +91,19 @@ pub fn start(
 
 /// The pairs packed in `images` and `forces` ([`start`]'s layout); `what` names them in errors.
 fn unpack(
-    side: usize,
+    size: ImageSize,
     images: &[u8],
     forces: &[f32],
     what: &str,
 ) -> Result<Vec<TrainingPair>, JsError> {
-    let (rgb, grey) = (side * side * 3, side * side);
+    let (rgb, grey) = (size.pixels() * 3, size.pixels());
     let per_pair = 2 * rgb + 2 * grey;
     if per_pair == 0
         || !images.len().is_multiple_of(per_pair)
         || images.len() / per_pair * 3 != forces.len()
     {
         return Err(JsError::new(&format!(
-            "the {what} sent are not whole {side}×{side} pairs: {} image bytes, {} force values",
+            "the {what} sent are not whole {size} pairs: {} image bytes, {} force values",
             images.len(),
             forces.len()
         )));
