@@ -24,6 +24,7 @@ use wasm_bindgen::prelude::*;
 
 use crate::browser::JsError;
 use crate::module_worker::{ModuleWorker, ModuleWorkerError, within};
+use crate::page_query;
 
 /// The most workers the pool starts, whatever the browser reports: each holds its own copy of
 /// the network and its activations (about 60 MB at 224 px).
@@ -36,9 +37,16 @@ const ATTEMPTS: u32 = 2;
 /// A worker, in words.
 const NAME: &str = "a CPU worker";
 
-/// How long a worker may take to read one view before it counts as stopped, seconds: a view at
-/// 224 px takes about a tenth of a second (docs/benchmarks.md).
-const VIEW_TIMEOUT_S: i32 = 60;
+/// How long a worker may take to read one view before it counts as stopped, seconds
+/// ([`page_query::CPU_VIEW_TIMEOUT_S`], unless the page's address sets
+/// [`page_query::CPU_VIEW_TIMEOUT`]).
+fn view_timeout_s() -> u32 {
+    web_sys::window()
+        .and_then(|w| w.location().search().ok())
+        .map_or(page_query::CPU_VIEW_TIMEOUT_S, |query| {
+            page_query::cpu_view_timeout_s(&query)
+        })
+}
 
 /// Why the pool gave no reading.
 #[derive(Debug, thiserror::Error)]
@@ -128,12 +136,13 @@ impl Member {
             &bytes,
         );
         // A worker that never answers (hung, or killed without an error event) counts as
-        // stopped after VIEW_TIMEOUT_S.
+        // stopped after the view's time.
+        let seconds = view_timeout_s();
         let reply = within(
             self.worker
                 .send("read_view", &args, &Array::of1(&bytes.buffer()))?,
-            VIEW_TIMEOUT_S,
-            &format!("no answer within {VIEW_TIMEOUT_S} s"),
+            i32::try_from(seconds).unwrap_or(i32::MAX),
+            &format!("no answer within {seconds} s"),
         );
         let answer = self.worker.reply("read_view", reply).await;
         if let Err(e) = &answer {

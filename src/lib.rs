@@ -18,6 +18,7 @@
 //! - [`force_label`]: force labels as typed or read from a CSV file;
 //! - [`force_reading`]: what a force estimate can be said to show against the ablation band;
 //! - [`webgpu_check`]: WebGPU's result on a check pair against the CPU's, before it is trusted;
+//! - [`page_query`]: the diagnosis and test switches a page address's query can set;
 //! - [`keymap`]: every keyboard shortcut, for the handlers, the help list and the tooltips;
 //! - [`error_text`]: an error and its causes as one message.
 //!
@@ -37,6 +38,7 @@ pub mod force_reading;
 pub mod imaging;
 pub mod keymap;
 pub mod orbit_camera;
+pub mod page_query;
 pub mod stated_geometry;
 pub mod stored_pair;
 pub mod twin_live;

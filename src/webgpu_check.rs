@@ -19,10 +19,6 @@ pub const MASK_TOLERANCE: f32 = 0.01;
 /// Largest difference of a tip-force component between WebGPU and the CPU, newtons.
 pub const FORCE_TOLERANCE_N: f32 = 0.001;
 
-/// The URL parameter that scales both tolerances (a diagnosis and test hook: `0` demands equal
-/// results, a negative scale fails every check).
-pub const TOLERANCE_SCALE_PARAMETER: &str = "webgpu-tolerance-scale";
-
 /// The pair both backends run on: the twin tab's first pair (default sliders, phantom
 /// background), the same on every machine.
 pub fn check_pair() -> Result<LabeledPair, ContactError> {
@@ -107,19 +103,6 @@ impl Difference {
     }
 }
 
-/// The tolerance scale a page URL's query (`?a=1&webgpu-tolerance-scale=0`) asks for; 1 when
-/// absent or unreadable.
-pub fn tolerance_scale(query: &str) -> f64 {
-    query
-        .trim_start_matches('?')
-        .split('&')
-        .filter_map(|pair| pair.split_once('='))
-        .find(|(key, _)| *key == TOLERANCE_SCALE_PARAMETER)
-        .and_then(|(_, value)| value.parse::<f64>().ok())
-        .filter(|scale| scale.is_finite())
-        .unwrap_or(1.0)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -159,15 +142,6 @@ mod tests {
             Difference::between(output(&cpu, force), output(&short, force)).mask,
             f32::INFINITY
         );
-    }
-
-    #[test]
-    fn the_scale_comes_from_the_query_or_is_one() {
-        assert_eq!(tolerance_scale(""), 1.0);
-        assert_eq!(tolerance_scale("?webgpu-tolerance-scale=-1"), -1.0);
-        assert_eq!(tolerance_scale("?a=b&webgpu-tolerance-scale=0"), 0.0);
-        assert_eq!(tolerance_scale("?webgpu-tolerance-scale=inf"), 1.0);
-        assert_eq!(tolerance_scale("?webgpu-tolerance-scale"), 1.0);
     }
 
     #[test]

@@ -630,8 +630,9 @@ test("a twin pair in 3D: the catheter, the physics force beside H-Net's, the epi
   await page.close();
 });
 
-test("every core: one CPU worker per core reads the views as the page's thread does; without workers the page's thread runs H-Net and says why", async () => {
-  const { page, errors } = await openPage(context, server.url);
+test("every core: one CPU worker per core reads the views as the page's thread does; a silent worker is replaced; without workers the page's thread runs H-Net and says why", async () => {
+  // A worker that does not answer a view within 10 s counts as stopped (60 s by default).
+  const { page, errors } = await openPage(context, server.url + "?cpu-view-timeout-s=10");
   await waitForModel(page);
   // The first estimate comes from the page's thread; the workers start after it.
   await page.waitForSelector("#force-verdict", { timeout: 120_000 });
@@ -649,6 +650,19 @@ test("every core: one CPU worker per core reads the views as the page's thread d
   await page.selectOption("#catheter-entry", "bottom");
   await page.waitForFunction(() => / workers$/.test(document.querySelector("#inference-time").textContent) && !document.querySelector("#busy"), null, { timeout: 60_000 });
   assert.equal(await page.textContent("#force-table"), onPageThread);
+  // A worker that goes silent (it reads, but its answers never arrive) is replaced once the
+  // view's time is up, and its view is read again: the same masks and force. With two workers
+  // (this machine's and CI's cores), a pair's two views go to both, so one of them is silent.
+  if (cores === 2) {
+    const [silent] = page.workers().filter((w) => w.url().includes("module=hnet-cpu"));
+    await silent.evaluate(() => { self.postMessage = () => {}; });
+    await page.selectOption("#catheter-entry", "left");
+    await page.waitForFunction(() => !document.querySelector("#busy"), null, { timeout: 60_000 });
+    await page.selectOption("#catheter-entry", "bottom");
+    await page.waitForFunction(() => / workers$/.test(document.querySelector("#inference-time").textContent) && !document.querySelector("#busy"), null, { timeout: 60_000 });
+    assert.match(await page.getAttribute("#cpu-workers", "title"), /^2 workers, one per core; 1 replaced after stopping/);
+    assert.equal(await page.textContent("#force-table"), onPageThread);
+  }
   assert.deepEqual(errors, []);
   await page.close();
 

@@ -14,7 +14,7 @@ use crate::cpu_pool::WorkersStatus;
 use crate::engine::{Engine, EngineError, Prediction, WeightsOrigin};
 use crate::error_text::with_causes;
 use crate::gpu_worker::GpuWorker;
-use crate::webgpu_check;
+use crate::{page_query, webgpu_check};
 use hnet_model::catheter_entry::EntrySetting;
 
 /// The model's state.
@@ -285,7 +285,7 @@ async fn checked_on_webgpu(cpu: &Engine) -> Result<Engine, String> {
     }
     let scale = web_sys::window()
         .and_then(|w| w.location().search().ok())
-        .map_or(1.0, |query| webgpu_check::tolerance_scale(&query));
+        .map_or(1.0, |query| page_query::webgpu_tolerance_scale(&query));
     let difference = webgpu_check::Difference::between(output(&expected), output(&found));
     if !difference.within(scale) {
         return Err(difference.refusal(scale));

@@ -1,0 +1,75 @@
+//! The switches a page address's query can set (`?a=1&webgpu-tolerance-scale=0`): diagnosis and
+//! test hooks, each with its name, its reader and its default in one place. Read natively from
+//! the query string, so that they are tested without a browser.
+
+/// Scales both tolerances of the WebGPU check ([`crate::webgpu_check`]): `0` demands equal
+/// results, a negative scale fails every check. Default 1.
+pub const WEBGPU_TOLERANCE_SCALE: &str = "webgpu-tolerance-scale";
+
+/// How long a CPU worker may take to read one view before it counts as stopped and is replaced,
+/// seconds (a whole number, at least 1). Default [`CPU_VIEW_TIMEOUT_S`]; the browser tests
+/// shorten it to see a silent worker replaced.
+pub const CPU_VIEW_TIMEOUT: &str = "cpu-view-timeout-s";
+
+/// A CPU worker's default time to read one view, seconds: a view at 224 px takes about a tenth of
+/// a second (docs/benchmarks.md).
+pub const CPU_VIEW_TIMEOUT_S: u32 = 60;
+
+/// The value of parameter `key` in `query` (with or without its leading `?`), if given.
+fn value<'a>(query: &'a str, key: &str) -> Option<&'a str> {
+    query
+        .trim_start_matches('?')
+        .split('&')
+        .filter_map(|pair| pair.split_once('='))
+        .find(|(k, _)| *k == key)
+        .map(|(_, value)| value)
+}
+
+/// The WebGPU check's tolerance scale `query` asks for; 1 when absent or unreadable.
+pub fn webgpu_tolerance_scale(query: &str) -> f64 {
+    value(query, WEBGPU_TOLERANCE_SCALE)
+        .and_then(|value| value.parse::<f64>().ok())
+        .filter(|scale| scale.is_finite())
+        .unwrap_or(1.0)
+}
+
+/// The CPU workers' time to read one view `query` asks for, seconds;
+/// [`CPU_VIEW_TIMEOUT_S`] when absent, zero or unreadable.
+pub fn cpu_view_timeout_s(query: &str) -> u32 {
+    value(query, CPU_VIEW_TIMEOUT)
+        .and_then(|value| value.parse::<u32>().ok())
+        .filter(|&seconds| seconds >= 1)
+        .unwrap_or(CPU_VIEW_TIMEOUT_S)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn switches_come_from_the_query_or_take_their_default() {
+        assert_eq!(webgpu_tolerance_scale(""), 1.0);
+        assert_eq!(webgpu_tolerance_scale("?webgpu-tolerance-scale=-1"), -1.0);
+        assert_eq!(webgpu_tolerance_scale("?a=b&webgpu-tolerance-scale=0"), 0.0);
+        assert_eq!(webgpu_tolerance_scale("?webgpu-tolerance-scale=inf"), 1.0);
+        assert_eq!(webgpu_tolerance_scale("?webgpu-tolerance-scale"), 1.0);
+        assert_eq!(cpu_view_timeout_s(""), CPU_VIEW_TIMEOUT_S);
+        assert_eq!(cpu_view_timeout_s("?cpu-view-timeout-s=5"), 5);
+        assert_eq!(
+            cpu_view_timeout_s("webgpu-tolerance-scale=0&cpu-view-timeout-s=2"),
+            2
+        );
+        for unreadable in [
+            "?cpu-view-timeout-s=0",
+            "?cpu-view-timeout-s=-3",
+            "?cpu-view-timeout-s=1.5",
+            "?cpu-view-timeout-s=",
+        ] {
+            assert_eq!(
+                cpu_view_timeout_s(unreadable),
+                CPU_VIEW_TIMEOUT_S,
+                "{unreadable}"
+            );
+        }
+    }
+}
