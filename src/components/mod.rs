@@ -1,5 +1,7 @@
-//! The page's components, one concern each. They share the [`Studio`](crate::studio::Studio) state
-//! through Leptos' context.
+//! The page's components, one concern each. Each takes what it shows as props: the store of its
+//! concern ([`crate::studio`]), narrow signals of others, and [`Studio`](crate::studio::Studio)
+//! for the actions that change more than one store; none reads a context
+//! (`src/page_architecture.rs` checks it).
 
 pub mod catheter_view;
 pub mod cine_panel;
