@@ -250,7 +250,7 @@ pub struct Catheter3d {
     /// The physics estimate: the tip force of the fitted rod, N (world frame).
     pub force_n: [f64; 3],
     /// The fit's standard error of each force component, N (a relative measure until scaled by
-    /// a [`ForceCombination`]); `None` for a singular fit.
+    /// a [`ForceCombination`](hnet_twin::reconstruction::physics_force::ForceCombination)); `None` for a singular fit.
     pub force_sd_n: Option<[f64; 3]>,
     /// Root mean square distance of the centreline from the fitted rod, mm.
     pub rms_mm: f64,

@@ -225,7 +225,7 @@ const METADATA_BATCH: usize = 25;
 
 /// Saves what changed in pairs whose images and masks did not (a split, a force label): each
 /// stored record is read and put back with the pair's new metadata, without encoding any image
-/// again, in transactions of [`METADATA_BATCH`] pairs. Returns the ids of pairs that have no
+/// again, in transactions of `METADATA_BATCH` pairs. Returns the ids of pairs that have no
 /// stored record (a save that failed earlier): those need [`save_pair`]. On an error, the
 /// batches before it are saved and the failing one is not.
 pub async fn save_metadata(metadata: Vec<PairMetadata>) -> Result<Vec<String>, StorageError> {

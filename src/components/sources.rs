@@ -1,5 +1,5 @@
 //! Where pairs come from: two image files (picked or dropped), a biplane DICOM cine
-//! ([`CinePanel`]), or the live digital twin with its sliders; and the synthetic X-ray background
+//! ([`CinePanel`](crate::components::cine_panel::CinePanel)), or the live digital twin with its sliders; and the synthetic X-ray background
 //! composer.
 
 use hnet_twin::simulator::carm::{SECONDARY_DEG, VIEW_A_PRIMARY_DEG, VIEW_B_PRIMARY_DEG};

@@ -47,8 +47,8 @@ impl CatheterReading {
 
 impl Studio {
     /// Reconstructs the catheter of the pair on screen in 3D and fits the rod to it (the label
-    /// masks, else H-Net's, or H-Net's as [`Studio::fit_masks`] asks), into
-    /// [`Studio::catheter`]. A failure is kept there as its message; nothing else changes.
+    /// masks, else H-Net's, or H-Net's as [`TwinStore::fit_masks`](super::TwinStore::fit_masks) asks), into
+    /// [`TwinStore::catheter`](super::TwinStore::catheter). A failure is kept there as its message; nothing else changes.
     pub fn reconstruct_shown(&self) {
         let Some(pair) = self.pairs.shown_untracked() else {
             self.twin.catheter.set(None);
@@ -128,7 +128,7 @@ impl Studio {
     }
 }
 
-/// Keeps [`Studio::catheter`] up to date: after the pair on screen, its masks, H-Net's masks,
+/// Keeps [`TwinStore::catheter`](super::TwinStore::catheter) up to date: after the pair on screen, its masks, H-Net's masks,
 /// the masks the rod is to be fitted to or the twin's catheter settings change (not during a
 /// brush stroke), the catheter is reconstructed again, once the changes have paused for a
 /// moment (a slider being dragged renders many pairs).

@@ -188,10 +188,10 @@ impl Studio {
     }
 
     /// Runs H-Net over every frame of the cine, under the current windows, into its force
-    /// trace, each frame's estimate made as the verdict makes it ([`Studio::frame_estimate`]).
+    /// trace, each frame's estimate made as the verdict makes it (`Studio::frame_estimate`).
     /// As many frames are in flight as there are CPU workers (one on the page's thread or on
     /// WebGPU), and the trace fills in as each frame is done; the cine keeps playing meanwhile.
-    /// The progress shows in [`Studio::trace_progress`], and [`Studio::cancel_trace`] stops it
+    /// The progress shows in [`CineStore::trace_progress`], and [`CineStore::cancel_trace`] stops it
     /// after the frames in progress (what was traced stays). Frames whose view a stopped worker
     /// left are read again by another, and the closing message names them.
     pub fn trace_cine(&self) {
