@@ -962,7 +962,7 @@ test("storage faults: an older record loads, a damaged or newer one is named whi
   await page.close();
 });
 
-test("fine-tune on my pairs: refused without labelled pairs, a one-epoch run with its before/after table, kept, chosen after a reload, the bundled weights chosen back", async () => {
+test("fine-tune on my pairs: refused without labelled pairs, a one-epoch run with its before/after table, refused while the storage is full, kept, chosen after a reload and after a tab closed mid-run, the bundled weights chosen back", async () => {
   // A browser of its own: the pairs it trains on are the three kept below, whatever the other
   // tests stored.
   const own = await launchBrowser();
@@ -1004,6 +1004,18 @@ test("fine-tune on my pairs: refused without labelled pairs, a one-epoch run wit
     assert.match(await page.textContent("#tune-reference"), /^On 4 twin pairs of the weights' own domain: catheter IoU \d\.\d{3} before, \d\.\d{3} after/);
     // A one-epoch run improves on nothing before it: its only epoch is the best one.
     assert.match(rows[0][2], /^\d\.\d{3}$/);
+    // The browser's storage full when the weights are kept: the page says so, the bundled
+    // weights stay in use and the result stays on the page, to keep once there is room (the
+    // 31 s wait: see the storage faults test).
+    const origin = new URL(server.url).origin;
+    const cdp = await own.newCDPSession(page);
+    await cdp.send("Storage.overrideQuotaForOrigin", { origin, quotaSize: 1 });
+    await page.waitForTimeout(31_000);
+    await page.click("#tune-keep");
+    await page.waitForFunction(() => /^The fine-tuned weights could not be kept: .*the browser's storage for this page is full/.test(document.querySelector("#notice")?.textContent), null, { timeout: 30_000 });
+    assert.equal(await page.textContent("#weights"), bundledName);
+    assert.ok(await page.$("#tune-table"), "the fine-tune's result left the page when it could not be kept");
+    await cdp.send("Storage.overrideQuotaForOrigin", { origin });
     await page.click("#tune-keep");
     await page.waitForFunction(() => document.querySelector("#weights")?.textContent === "hnet-fine-tuned.bpk");
     // The kept weights record no measured force errors: no verdict is given from them.
@@ -1017,13 +1029,22 @@ test("fine-tune on my pairs: refused without labelled pairs, a one-epoch run wit
     // A weights file hnet eval reads: the download is the kept file.
     const [download] = await Promise.all([page.waitForEvent("download"), page.click("#tune-download")]);
     assert.equal(download.suggestedFilename(), "hnet-fine-tuned.bpk");
-    // The bundled weights chosen back, and still after a reload.
-    await page.selectOption("#weights-choice", "bundled");
-    await page.waitForFunction((name) => document.querySelector("#weights")?.textContent === name, bundledName);
-    await page.reload();
-    await waitForModel(page);
-    assert.equal(await page.textContent("#weights"), bundledName);
+    // A tab closed while a fine-tune trains leaves the weights kept before intact and chosen.
+    await page.click("#tune-start");
+    await page.waitForFunction(() => /Epoch 1 of at most/.test(document.querySelector("#tune-progress-text")?.textContent), null, { timeout: 120_000 });
     assert.deepEqual(errors, []);
+    await page.close();
+    const reopened = await openPage(own, server.url);
+    await waitForModel(reopened.page);
+    assert.equal(await reopened.page.textContent("#weights"), "hnet-fine-tuned.bpk");
+    assert.equal(await reopened.page.$eval("#weights-choice", (s) => s.value), "fine-tuned");
+    // The bundled weights chosen back, and still after a reload.
+    await reopened.page.selectOption("#weights-choice", "bundled");
+    await reopened.page.waitForFunction((name) => document.querySelector("#weights")?.textContent === name, bundledName);
+    await reopened.page.reload();
+    await waitForModel(reopened.page);
+    assert.equal(await reopened.page.textContent("#weights"), bundledName);
+    assert.deepEqual(reopened.errors, []);
   } finally {
     await own.close();
   }
