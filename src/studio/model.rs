@@ -59,11 +59,13 @@ impl NetworkStore {
         }
     }
 
-    /// H-Net's prediction of the pair `pairs` shows, once made: the one memo of it.
+    /// H-Net's prediction of the pair `pairs` shows, once made: the one memo of it. It follows
+    /// the shown pair's id, not the pair itself, so that a brush stroke does not copy it.
     pub fn shown_prediction(&self, pairs: PairStore) -> Memo<Option<Prediction>> {
         let predictions = self.predictions;
+        let shown_id = Memo::new(move |_| pairs.shown_id());
         Memo::new(move |_| {
-            let id = pairs.shown_id()?;
+            let id = shown_id.get()?;
             predictions.with(|p| p.get(&id).cloned())
         })
     }
