@@ -40,6 +40,7 @@ use hnet_twin::reconstruction::rod_fit::RodFitError;
 use hnet_twin::simulator::carm::{Biplane, CArm, CameraMatrix};
 use hnet_twin::simulator::rod::{RodBase, RodConfig};
 use hnet_twin::simulator::scene::{NominalBase, SceneParams, SceneSampling};
+use hnet_units::TipForce;
 
 use crate::imaging::WORK_SIZE;
 use crate::twin_live::TwinControls;
@@ -248,10 +249,10 @@ pub struct Catheter3d {
     /// Whether its last point is the tip, seen in both views.
     pub tip_seen: bool,
     /// The physics estimate: the tip force of the fitted rod, N (world frame).
-    pub force_n: [f64; 3],
+    pub force_n: TipForce,
     /// The fit's standard error of each force component, N (a relative measure until scaled by
     /// a [`ForceCombination`](hnet_twin::reconstruction::physics_force::ForceCombination)); `None` for a singular fit.
-    pub force_sd_n: Option<[f64; 3]>,
+    pub force_sd_n: Option<[f32; 3]>,
     /// Root mean square distance of the centreline from the fitted rod, mm.
     pub rms_mm: f64,
     /// The fitted rod's centreline, mm, from its base to its tip.
@@ -266,22 +267,14 @@ pub struct Catheter3d {
 }
 
 impl Catheter3d {
-    /// The physics estimate in the page's force type.
-    pub fn force_f32(&self) -> [f32; 3] {
-        self.force_n.map(|f| f as f32)
-    }
-
     /// This physics estimate (its force and its fit's standard error, N) as the combination
     /// with H-Net's force reads it ([`crate::force_reading::TrainingDomain::estimate`]), when the
     /// rod was fitted to H-Net's own masks, the case the combination is for (measured on twin
     /// bench pairs read blind: docs/results.md, "Force without the twin's answers"). From label
     /// masks there is none: from the twin's exact masks the physics estimate is far better than
     /// H-Net on every axis, and for drawn or accepted masks nothing was measured.
-    pub fn for_combination(&self) -> Option<([f32; 3], Option<[f32; 3]>)> {
-        (self.masks == MaskOrigin::Predicted).then(|| {
-            let sd = self.force_sd_n.map(|sd| sd.map(|v| v as f32));
-            (self.force_f32(), sd)
-        })
+    pub fn for_combination(&self) -> Option<(TipForce, Option<[f32; 3]>)> {
+        (self.masks == MaskOrigin::Predicted).then_some((self.force_n, self.force_sd_n))
     }
 
     /// The catheter's tip (the last centreline point), mm.
@@ -295,7 +288,7 @@ impl Catheter3d {
     /// One sentence for screen readers and the panel.
     pub fn summary(&self) -> String {
         let f = self.force_n;
-        let magnitude = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+        let magnitude = f.magnitude();
         format!(
             "catheter {:.0} mm reconstructed from {} ({}, {}); physics force ({:+.3}, {:+.3}, \
              {:+.3}) N, |F| {magnitude:.3} N, from a rod fitted within {:.2} mm RMS{}",
@@ -408,8 +401,8 @@ pub fn reconstruct_pair(
         length_mm: reconstruction.arc_mm.last().copied().unwrap_or(0.0),
         mean_residual_px: reconstruction.mean_residual_px,
         tip_seen: reconstruction.tip_seen,
-        force_n: fit.force_n.0,
-        force_sd_n: fit.force_sd_n.map(|sd| sd.0),
+        force_n: fit.force_n,
+        force_sd_n: fit.force_sd_n,
         rms_mm: fit.rms_mm,
         rod_mm: fit.shape.points_mm.iter().map(|p| p.0).collect(),
         base_fitted: !geometry.base_known,
@@ -463,7 +456,7 @@ impl CArmSketch {
 pub const ARROW_MM_PER_NEWTON: f64 = 100.0;
 
 /// The 3D arrow of `force_n` (N) from `tip_mm`: its start and end, mm.
-pub fn force_arrow_mm(tip_mm: [f64; 3], force_n: [f32; 3]) -> [[f64; 3]; 2] {
+pub fn force_arrow_mm(tip_mm: [f64; 3], force_n: TipForce) -> [[f64; 3]; 2] {
     let end = [0, 1, 2].map(|i| tip_mm[i] + f64::from(force_n[i]) * ARROW_MM_PER_NEWTON);
     [tip_mm, end]
 }
@@ -548,7 +541,10 @@ mod tests {
 
     #[test]
     fn a_twin_pair_gives_its_catheter_and_force() {
-        for force in [[0.15, 0.05, -0.10], [-0.2, 0.1, -0.05]] {
+        for force in [
+            TipForce::new(0.15, 0.05, -0.10),
+            TipForce::new(-0.2, 0.1, -0.05),
+        ] {
             let controls = TwinControls {
                 force_n: force,
                 ..TwinControls::default()
@@ -557,9 +553,7 @@ mod tests {
             let start = std::time::Instant::now();
             let c = run(&pair).unwrap();
             let millis = start.elapsed().as_secs_f64() * 1e3;
-            let error = (0..3)
-                .map(|i| (c.force_n[i] - force[i]).abs())
-                .fold(0.0, f64::max);
+            let error = (c.force_n - force).max_abs();
             eprintln!(
                 "{force:?}: physics {:?} N, error {error:.4} N, {:.1} mm, rms {:.3} mm, {millis:.0} ms",
                 c.force_n, c.length_mm, c.rms_mm
@@ -601,12 +595,9 @@ mod tests {
         // standard error.
         let hnet = [0.3, 0.2, -0.3];
         let sd = c.force_sd_n.expect("a fitted rod has a standard error");
-        assert_eq!(
-            c.for_combination(),
-            Some((c.force_f32(), Some(sd.map(|v| v as f32))))
-        );
-        let combined =
-            crate::force_reading::tests::bench_domain().estimate(hnet, c.for_combination());
+        assert_eq!(c.for_combination(), Some((c.force_n, Some(sd))));
+        let combined = crate::force_reading::tests::bench_domain()
+            .estimate(TipForce::from_newtons(hnet), c.for_combination());
         assert_eq!(
             combined.kind,
             hnet_twin::reconstruction::physics_force::EstimateKind::Combined
@@ -761,7 +752,7 @@ mod tests {
         // A straight catheter in the plane of both sources (view B tilted cranially from view
         // A): it runs along the epipolar lines, no crossing locates a point in depth.
         let near = twin(TwinControls {
-            force_n: [0.0, 0.1, -0.05],
+            force_n: TipForce::new(0.0, 0.1, -0.05),
             precurve_radius_mm: 0.0,
             view_b_deg: [0.0, 60.0],
             ..TwinControls::default()
@@ -803,7 +794,7 @@ mod tests {
         // Views where the straight catheter nearly lies in the plane of both sources: the rod
         // solver fails around the forces that would fit.
         let ill = twin(TwinControls {
-            force_n: [0.0, 0.1, -0.05],
+            force_n: TipForce::new(0.0, 0.1, -0.05),
             precurve_radius_mm: 0.0,
             view_b_deg: [5.0, 60.0],
             ..TwinControls::default()
@@ -855,7 +846,7 @@ mod tests {
         assert!((distance(a.detector_mm[0], a.detector_mm[1]) - 15.0).abs() < 1e-9);
         let b = CArmSketch::of(&views.b);
         assert!(b.source_mm[0] < -74.0, "{:?}", b.source_mm);
-        let arrow = force_arrow_mm([1.0, 2.0, 3.0], [0.1, 0.0, -0.2]);
+        let arrow = force_arrow_mm([1.0, 2.0, 3.0], TipForce::new(0.1, 0.0, -0.2));
         assert!((distance(arrow[0], arrow[1]) - 0.05f64.sqrt() * 100.0).abs() < 1e-4);
     }
 }

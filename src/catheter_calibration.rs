@@ -77,7 +77,7 @@ pub fn calibrate_catheter(
         )
         .and_then(|masks| reconstruct_pair(&PairGeometry::of(pair, controls, None)?, &masks));
         match (read, pair.force_n) {
-            (Ok(catheter), Some(label)) => forces.push((label.map(f64::from), catheter.force_n)),
+            (Ok(catheter), Some(label)) => forces.push((label, catheter.force_n)),
             (Err(e), _) => left_out.push(format!("{}: {}", pair.id, with_causes(&e))),
             (Ok(_), None) => {}
         }
@@ -117,6 +117,7 @@ mod tests {
     use super::*;
     use crate::twin_live::XrayBackground;
     use hnet_twin::dataset::label_origin::LabelOrigin;
+    use hnet_units::TipForce;
 
     /// Twin pairs of a catheter 30 % stiffer than the catalogue's, labelled with their true
     /// force: the scale comes out near 1.3, and a model's estimate as a label is never used.
@@ -135,9 +136,12 @@ mod tests {
         .into_iter()
         .enumerate()
         .map(|(i, force_n)| {
-            let mut pair = TwinControls { force_n, ..stiffer }
-                .render(format!("t{i}"), &background)
-                .unwrap();
+            let mut pair = TwinControls {
+                force_n: TipForce::from_newtons(force_n),
+                ..stiffer
+            }
+            .render(format!("t{i}"), &background)
+            .unwrap();
             pair.force_n = pair.true_force();
             pair.force_origin = LabelOrigin::Simulated;
             pair

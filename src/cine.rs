@@ -342,7 +342,7 @@ fn view_slot(view: View) -> usize {
 mod tests {
     use super::*;
     use hnet_dicom::{twin_cine, write_xa};
-    use hnet_units::ImageSize;
+    use hnet_units::{ImageSize, TipForce};
 
     fn small_cine(frames: usize) -> [GivenFile; 2] {
         let cine = twin_cine(ImageSize::square(32), frames, 5).unwrap();
@@ -406,9 +406,12 @@ mod tests {
         let mut player = CinePlayer::read(vec![a], vec![b]).unwrap();
         assert_eq!(player.next_untraced(1), Some(1));
         player.start_trace("hnet-cpu.bpk");
-        player.record_estimate(1, TipForceEstimate::uncalibrated([0.1, 0.0, 0.0]));
+        player.record_estimate(
+            1,
+            TipForceEstimate::uncalibrated(TipForce::new(0.1, 0.0, 0.0)),
+        );
         let combination = crate::force_reading::tests::bench_domain().combination;
-        player.record_estimate(0, combination.estimate([0.0, 0.0, 0.2], None));
+        player.record_estimate(0, combination.estimate(TipForce::new(0.0, 0.0, 0.2), None));
         assert_eq!(player.next_untraced(1), Some(2));
         assert_eq!(
             player.trace_csv(),
@@ -440,7 +443,7 @@ mod tests {
         ws.set_force(
             &id,
             Some((
-                [0.1, 0.0, 0.0],
+                TipForce::new(0.1, 0.0, 0.0),
                 hnet_twin::dataset::label_origin::LabelOrigin::Typed,
             )),
         );

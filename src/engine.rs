@@ -16,7 +16,7 @@ use hnet_model::inference::{JoinViewsError, PredictError, StereoPair, StereoPred
 use hnet_model::weights::{WeightsError, WeightsHeader};
 use hnet_model::{HNet, HNetConfig, HNetConfigError};
 use hnet_units::turn::{TurnError, turn_clockwise};
-use hnet_units::{ImageSize, View};
+use hnet_units::{ImageSize, TipForce, View};
 
 use crate::browser::{now_ms, yield_to_browser};
 use crate::compute::Backend;
@@ -99,10 +99,10 @@ pub struct Prediction {
     /// H-Net's tip force `(Fx, Fy, Fz)` in newtons as the page reads it; `None` when a view was
     /// read turned (its force head learned catheters that come up from the bottom of both views)
     /// or shows no catheter ([`Self::no_catheter`]).
-    pub force_n: Option<[f32; 3]>,
+    pub force_n: Option<TipForce>,
     /// What the force head answered, catheter or not (`None` only for a view read turned): what
     /// the WebGPU check compares, never shown as a force.
-    pub head_force_n: Option<[f32; 3]>,
+    pub head_force_n: Option<TipForce>,
     /// The edge through which each view's catheter was read as entering
     /// ([`hnet_model::catheter_entry`]).
     pub entry: [CatheterEntry; 2],

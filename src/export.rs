@@ -214,11 +214,7 @@ impl ExportBuilder {
             "a": pair.no_catheter[0],
             "b": pair.no_catheter[1],
         });
-        // The label's shortest decimal form (0.12, not 0.11999999731779099).
-        let force = pair
-            .force_n
-            .unwrap_or_default()
-            .map(|f| f.to_string().parse::<f64>().unwrap_or(f64::from(f)));
+        let force = pair.force_n.unwrap_or_default();
         let row = ManifestRow {
             id: id.clone(),
             split,
@@ -282,6 +278,7 @@ mod tests {
     use crate::twin_live::{TwinControls, XrayBackground};
     use crate::workspace::Workspace;
     use hnet_twin::dataset::label_origin::LabelOrigin;
+    use hnet_units::TipForce;
 
     #[test]
     fn complete_pairs_export_and_incomplete_ones_are_listed() {
@@ -289,7 +286,7 @@ mod tests {
         let background = XrayBackground::phantom();
         for fx in [0.1, -0.1, 0.2] {
             let controls = TwinControls {
-                force_n: [fx, 0.0, -0.1],
+                force_n: TipForce::new(fx, 0.0, -0.1),
                 ..TwinControls::default()
             };
             ws.add(controls.render(ws.next_id(), &background).unwrap());
@@ -301,7 +298,10 @@ mod tests {
             weights: "hnet-cpu.bpk".into(),
             estimator: "combined".into(),
         };
-        ws.set_force("pair-0003", Some(([0.2, 0.0, -0.1], estimate.clone())));
+        ws.set_force(
+            "pair-0003",
+            Some((TipForce::new(0.2, 0.0, -0.1), estimate.clone())),
+        );
 
         let export = dataset_zip(&ws.pairs).unwrap();
         assert_eq!(export.exported, vec!["pair-0001", "pair-0003"]);
@@ -322,7 +322,7 @@ mod tests {
         let dataset = hnet_twin::dataset::Dataset::open(&dir.join(DATASET_NAME)).unwrap();
         assert_eq!(dataset.rows.len(), 2);
         let row = &dataset.rows[0];
-        assert_eq!(row.force_n, [0.1, 0.0, -0.1]);
+        assert_eq!(row.force_n, TipForce::new(0.1, 0.0, -0.1));
         // The twin's label is its exact force; the accepted estimate says what it is.
         assert_eq!(row.label_origin(), Ok(LabelOrigin::Simulated));
         assert_eq!(dataset.rows[1].label_origin(), Ok(estimate));
@@ -405,7 +405,7 @@ mod tests {
         let mut seen: Vec<(String, Split)> = Vec::new();
         for i in 0..12 {
             let controls = TwinControls {
-                force_n: [0.02 * i as f64, 0.0, -0.1],
+                force_n: TipForce::new(0.02 * i as f32, 0.0, -0.1),
                 ..TwinControls::default()
             };
             ws.add(controls.render(ws.next_id(), &background).unwrap());
@@ -422,7 +422,10 @@ mod tests {
         let before = ws.pairs[2].split;
         ws.set_force("pair-0003", None);
         assert!(ws.assign_splits().is_empty());
-        ws.set_force("pair-0003", Some(([0.1, 0.0, 0.0], LabelOrigin::Typed)));
+        ws.set_force(
+            "pair-0003",
+            Some((TipForce::new(0.1, 0.0, 0.0), LabelOrigin::Typed)),
+        );
         assert_eq!(ws.pairs[2].split, before);
     }
 
@@ -432,7 +435,7 @@ mod tests {
         let mut ws = crate::workspace::tests::workspace(2);
         for id in ["pair-0001", "pair-0002"] {
             ws.select(ws.pairs.iter().position(|p| p.id == id).unwrap());
-            ws.set_force(id, Some(([0.1, 0.0, 0.0], LabelOrigin::Typed)));
+            ws.set_force(id, Some((TipForce::new(0.1, 0.0, 0.0), LabelOrigin::Typed)));
             ws.begin_stroke(View::A, None);
             ws.stroke_to([10.0, 10.0], [100.0, 10.0], 3.0, Tool::Brush);
             ws.end_stroke();
@@ -530,7 +533,7 @@ pub(crate) mod properties {
                     mask_a: pixels(seed ^ 2, grey, true),
                     mask_b: pixels(seed ^ 3, grey, true),
                     masks_labeled,
-                    force_n,
+                    force_n: force_n.map(hnet_units::TipForce::from_newtons),
                     force_origin: LabelOrigin::Typed,
                     no_catheter: [false; 2],
                     split,
@@ -571,7 +574,7 @@ pub(crate) mod properties {
                 let pair = &pairs[index];
                 prop_assert_eq!(Some(row.split), splits[index]);
                 let want = pair.force_n.unwrap();
-                prop_assert_eq!(row.force_n.map(|f| (f as f32).to_bits()), want.map(f32::to_bits));
+                prop_assert_eq!(row.force_n.newtons().map(f32::to_bits), want.newtons().map(f32::to_bits));
                 let PairSource::Upload { view_a, view_b, .. } = &pair.source else { unreachable!() };
                 prop_assert_eq!(&row.extra[1], &("view_a_file".to_string(), view_a.clone()));
                 prop_assert_eq!(&row.extra[2], &("view_b_file".to_string(), view_b.clone()));

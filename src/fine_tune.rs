@@ -90,7 +90,7 @@ pub fn tuning_set(pairs: &[LabeledPair], input: ImageSize) -> Result<TuningSet, 
         }
         match pair.force_n.filter(|_| learnt.admits(&pair.force_origin)) {
             Some(force) => {
-                set.forces.extend_from_slice(&force);
+                set.forces.extend_from_slice(&force.newtons());
                 set.with_force += 1;
             }
             None => set.forces.extend_from_slice(&[f32::NAN; 3]),
@@ -232,8 +232,9 @@ mod tests {
     use crate::workspace::{PairSource, View};
     use hnet_twin::dataset::label_origin::LabelOrigin;
     use hnet_twin::model_facts::FACTS_KEY;
+    use hnet_units::TipForce;
 
-    fn pair(id: &str, painted: bool, force: Option<([f32; 3], LabelOrigin)>) -> LabeledPair {
+    fn pair(id: &str, painted: bool, force: Option<(TipForce, LabelOrigin)>) -> LabeledPair {
         let rgb = vec![40u8; WORK_SIZE.pixels() * 3];
         let mut p = LabeledPair::new(
             id.into(),
@@ -264,10 +265,18 @@ mod tests {
             estimator: "H-Net".into(),
         };
         let pairs = vec![
-            pair("p1", true, Some(([0.1, 0.2, 0.3], LabelOrigin::Measured))),
-            pair("p2", true, Some(([0.5, 0.5, 0.5], estimate))),
+            pair(
+                "p1",
+                true,
+                Some((TipForce::new(0.1, 0.2, 0.3), LabelOrigin::Measured)),
+            ),
+            pair("p2", true, Some((TipForce::new(0.5, 0.5, 0.5), estimate))),
             // Masks not labelled yet: left out whatever its force.
-            pair("p3", false, Some(([0.1, 0.1, 0.1], LabelOrigin::Typed))),
+            pair(
+                "p3",
+                false,
+                Some((TipForce::new(0.1, 0.1, 0.1), LabelOrigin::Typed)),
+            ),
             pair("p4", true, None),
         ];
         let set = tuning_set(&pairs, WORK_SIZE).unwrap();

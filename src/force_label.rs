@@ -3,8 +3,9 @@
 //! `manifest.csv` included) with where each came from.
 
 use hnet_twin::dataset::force_table::{ForceTableError, read_force_table};
-use hnet_twin::dataset::implausible_tip_force;
+pub use hnet_twin::dataset::implausible_tip_force;
 use hnet_twin::dataset::label_origin::LabelOrigin;
+use hnet_units::TipForce;
 
 /// Why a force-label file cannot be used: the file, and what is wrong in it (with the line,
 /// when it is one line's fault).
@@ -45,27 +46,20 @@ pub fn parse_newtons(axis: &str, text: &str) -> Result<f32, TypedForceError> {
             axis: axis.to_string(),
         });
     }
-    hnet_twin::dataset::force_table::parse_newtons(trimmed)
-        .map(|v| v as f32)
-        // A finite f64 beyond f32's range (1e39) would become an infinite label.
-        .filter(|v| v.is_finite())
-        .ok_or_else(|| TypedForceError::NotNewtons {
+    hnet_twin::dataset::force_table::parse_newtons(trimmed).ok_or_else(|| {
+        TypedForceError::NotNewtons {
             axis: axis.to_string(),
             text: trimmed.to_string(),
-        })
-}
-
-/// Why a force label is implausible (see [`implausible_tip_force`]), or `None`.
-pub fn implausible_label(force_n: [f32; 3]) -> Option<String> {
-    implausible_tip_force(force_n.map(f64::from))
+        }
+    })
 }
 
 /// A force label read from a file: the pair's id, the force in newtons, and where it came from.
-pub type ForceLabelRow = (String, [f32; 3], LabelOrigin);
+pub type ForceLabelRow = (String, TipForce, LabelOrigin);
 
 /// Reads force labels from a CSV file with a header naming the columns `id`, `fx`, `fy` and `fz`
 /// (newtons; other columns are ignored, so a dataset's `manifest.csv` works too). Every value must
-/// be a finite number of newtons and the label plausible (see [`implausible_label`]); the first
+/// be a finite number of newtons and the label plausible (see [`implausible_tip_force`]); the first
 /// bad line is reported and nothing is applied. A `label_origin` column says where each label
 /// came from (a sensor's log writes `measured`); without one, they are `imported`.
 pub fn parse_force_labels(file: &str, bytes: &[u8]) -> Result<Vec<ForceLabelRow>, ForceLabelError> {
@@ -76,8 +70,8 @@ pub fn parse_force_labels(file: &str, bytes: &[u8]) -> Result<Vec<ForceLabelRow>
     let mut labels = Vec::new();
     for row in read_force_table(bytes, &["id"]).map_err(error)? {
         let row = row.map_err(error)?;
-        let force = row.force_n.map(|f| f as f32);
-        if let Some(why) = implausible_label(force) {
+        let force = row.force_n;
+        if let Some(why) = implausible_tip_force(force) {
             return Err(error(ForceTableError::new(
                 Some(row.line),
                 format!("the force of `{}` is refused: {why}", row.key),

@@ -10,8 +10,7 @@ use hnet_twin::simulator::carm::Biplane;
 use hnet_twin::simulator::scene::{Modality, SceneParams};
 
 use crate::workspace::{LabeledPair, PairSource};
-use hnet_units::ImageSize;
-use hnet_units::force_magnitude as magnitude;
+use hnet_units::{ImageSize, TipForce};
 
 /// Why no force is read from a pair whose masks (catheter probabilities of views A and B, `size`
 /// pixels) do not both show a catheter ([`catheter_seen`]: enough catheter pixels, and
@@ -96,8 +95,8 @@ impl TrainingDomain {
     /// [`ForceCombination::estimate`], the rule `hnet eval` and `hnet trace` follow.
     pub fn estimate(
         &self,
-        hnet_n: [f32; 3],
-        physics: Option<([f32; 3], Option<[f32; 3]>)>,
+        hnet_n: TipForce,
+        physics: Option<(TipForce, Option<[f32; 3]>)>,
     ) -> TipForceEstimate {
         self.combination.estimate(hnet_n, physics)
     }
@@ -249,7 +248,7 @@ impl Verdict {
 
     /// The sentence shown under the gauge, for `estimate`.
     pub fn text(&self, estimate: &TipForceEstimate) -> String {
-        let m = magnitude(estimate.force_n);
+        let m = estimate.force_n.magnitude();
         let range = |(low, high): (f32, f32)| {
             format!("|F| = {m:.3} N, {low:.3}–{high:.3} N within its 90 % intervals")
         };
@@ -310,9 +309,9 @@ pub struct Disagreement {
 
 impl Disagreement {
     /// Between H-Net's estimate `hnet_n` and the physics estimate `physics_n`.
-    pub fn between(hnet_n: [f32; 3], physics_n: [f32; 3]) -> Self {
+    pub fn between(hnet_n: TipForce, physics_n: TipForce) -> Self {
         Self {
-            delta_n: magnitude([0, 1, 2].map(|i| hnet_n[i] - physics_n[i])),
+            delta_n: (hnet_n - physics_n).magnitude(),
         }
     }
 
@@ -383,7 +382,7 @@ pub(crate) mod tests {
         assert_eq!(domain.departures(&pair), Vec::<String>::new());
         // H-Net's 0.18 N with its own intervals (about ±0.12 N per axis) spans the band's lower
         // edge: no verdict.
-        let head = domain.estimate([0.18, 0.0, 0.0], None);
+        let head = domain.estimate(TipForce::new(0.18, 0.0, 0.0), None);
         assert_eq!(head.kind, EstimateKind::Head);
         let unclear = Verdict::of(&head, Some(&domain), &pair);
         assert!(matches!(unclear, Verdict::Unclear { .. }), "{unclear:?}");
@@ -396,14 +395,14 @@ pub(crate) mod tests {
             },
             ..domain.clone()
         };
-        let sharp = precise.estimate([0.18, 0.0, 0.0], None);
+        let sharp = precise.estimate(TipForce::new(0.18, 0.0, 0.0), None);
         assert_eq!(
             Verdict::of(&sharp, Some(&precise), &pair).text(&sharp),
             "|F| = 0.180 N, 0.170–0.191 N within its 90 % intervals: within the 0.1–0.3 N \
              ablation band"
         );
         assert_eq!(Verdict::of(&head, None, &pair), Verdict::UnknownAccuracy);
-        let uncalibrated = TipForceEstimate::uncalibrated([0.18, 0.0, 0.0]);
+        let uncalibrated = TipForceEstimate::uncalibrated(TipForce::new(0.18, 0.0, 0.0));
         assert_eq!(
             Verdict::of(&uncalibrated, Some(&domain), &pair),
             Verdict::UnknownAccuracy
@@ -412,13 +411,16 @@ pub(crate) mod tests {
         // H-Net's intervals cannot.
         assert!(matches!(
             Verdict::of(
-                &domain.estimate([0.2, 0.0, 0.0], None),
+                &domain.estimate(TipForce::new(0.2, 0.0, 0.0), None),
                 Some(&domain),
                 &pair
             ),
             Verdict::Unclear { .. }
         ));
-        let combined = domain.estimate([0.2, 0.0, 0.0], Some(([0.2, 0.0, 0.0], Some([0.005; 3]))));
+        let combined = domain.estimate(
+            TipForce::new(0.2, 0.0, 0.0),
+            Some((TipForce::new(0.2, 0.0, 0.0), Some([0.005; 3]))),
+        );
         assert_eq!(combined.kind, EstimateKind::Combined);
         assert!(matches!(
             Verdict::of(&combined, Some(&domain), &pair),
@@ -439,11 +441,11 @@ pub(crate) mod tests {
         let domain = bench_domain();
         // The issue's case: |F| 0.69 N pushing cranially (Fz > 0).
         let pair = twin(TwinControls {
-            force_n: [0.4, 0.4, 0.4],
+            force_n: TipForce::new(0.4, 0.4, 0.4),
             view_a_deg: [30.0, 0.0],
             ..TwinControls::default()
         });
-        let estimate = domain.estimate([0.1, 0.1, 0.1], None);
+        let estimate = domain.estimate(TipForce::new(0.1, 0.1, 0.1), None);
         let verdict = Verdict::of(&estimate, Some(&domain), &pair);
         let Verdict::OutsideTraining(departures) = &verdict else {
             panic!("{verdict:?}");
@@ -496,7 +498,7 @@ pub(crate) mod tests {
             Vec::new(),
         );
         let domain = bench_domain();
-        let estimate = domain.estimate([0.5, 0.0, 0.0], None);
+        let estimate = domain.estimate(TipForce::new(0.5, 0.0, 0.0), None);
         let verdict = Verdict::of(&estimate, Some(&domain), &upload);
         assert!(
             verdict
@@ -552,14 +554,18 @@ pub(crate) mod tests {
 
     #[test]
     fn a_disagreement_beyond_the_tolerance_is_a_warning() {
-        let agree = Disagreement::between([0.1, 0.0, -0.1], [0.2, 0.0, -0.1]);
+        let agree =
+            Disagreement::between(TipForce::new(0.1, 0.0, -0.1), TipForce::new(0.2, 0.0, -0.1));
         assert!((agree.delta_n - 0.1).abs() < 1e-6);
         assert!(!agree.beyond_tolerance());
         assert_eq!(
             agree.text(),
             "H-Net and the physics estimate agree within 0.27 N: |ΔF| = 0.100 N."
         );
-        let apart = Disagreement::between([0.1, 0.0, -0.1], [-0.1, 0.2, -0.1]);
+        let apart = Disagreement::between(
+            TipForce::new(0.1, 0.0, -0.1),
+            TipForce::new(-0.1, 0.2, -0.1),
+        );
         assert!(apart.beyond_tolerance());
         assert!(
             apart

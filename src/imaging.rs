@@ -5,7 +5,7 @@ use hnet_twin::dataset::resized;
 use hnet_twin::simulator::carm::CArm;
 use hnet_twin::simulator::raster::GreyImage;
 use hnet_twin::vec3::Vec3;
-use hnet_units::{ImageSize, MAX_IMAGE_SIDE};
+use hnet_units::{ImageSize, MAX_IMAGE_SIDE, TipForce};
 
 /// Size of the images the page labels and exports: 224×224 pixels (the paper's input size). The
 /// model sees them resized to its own input size.
@@ -172,13 +172,9 @@ pub const ARROW_PX_PER_NEWTON: f64 = 180.0;
 
 /// The 2D arrow of `force_n` (newtons, world frame) in `view`, starting at `start` (image
 /// coordinates at [`WORK_SIZE`]): the force's components along the view's image axes.
-pub fn force_arrow(view: &CArm, start: [f64; 2], force_n: [f32; 3]) -> [[f64; 2]; 2] {
+pub fn force_arrow(view: &CArm, start: [f64; 2], force_n: TipForce) -> [[f64; 2]; 2] {
     let r = view.rotation();
-    let f = Vec3::new(
-        f64::from(force_n[0]),
-        f64::from(force_n[1]),
-        f64::from(force_n[2]),
-    );
+    let f = Vec3::from(force_n);
     [
         start,
         [

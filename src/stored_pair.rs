@@ -8,7 +8,7 @@
 
 use hnet_twin::dataset::label_origin::LabelOrigin;
 use hnet_twin::dataset::{ImageRef, Split, encode_png};
-use hnet_units::ImageSize;
+use hnet_units::{ImageSize, TipForce};
 
 use crate::imaging::WORK_SIZE;
 use crate::workspace::{LabeledPair, PairSource};
@@ -26,7 +26,7 @@ struct Metadata {
     id: String,
     source: PairSource,
     masks_labeled: bool,
-    force_n: Option<[f32; 3]>,
+    force_n: Option<TipForce>,
     /// Absent in records saved before label origins were kept (read as unrecorded).
     #[serde(default)]
     force_origin: LabelOrigin,

@@ -18,14 +18,14 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::imaging::WORK_SIZE;
 use crate::workspace::{LabeledPair, PairSource};
-use hnet_units::ImageSize;
+use hnet_units::{ImageSize, TipForce};
 
 /// The twin's sliders.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TwinControls {
     /// Tip force `(Fx, Fy, Fz)` in newtons, world frame (x: patient left, y: anterior, z:
     /// cranial).
-    pub force_n: [f64; 3],
+    pub force_n: TipForce,
     /// Bending stiffness EI in 10⁻³ N·m².
     pub stiffness_mn_m2: f64,
     /// Flexible length, mm.
@@ -59,7 +59,7 @@ pub const DEFAULT_PLATE: PlateContact = PlateContact {
 impl Default for TwinControls {
     fn default() -> Self {
         Self {
-            force_n: [0.15, 0.05, -0.10],
+            force_n: TipForce::new(0.15, 0.05, -0.10),
             stiffness_mn_m2: 0.6,
             length_mm: 50.0,
             precurve_radius_mm: 60.0,
@@ -95,7 +95,7 @@ impl TwinControls {
     /// The scene: the twin's nominal base pose with these mechanics.
     pub fn scene(&self) -> SceneParams {
         SceneParams {
-            tip_force_n: Vec3(self.force_n),
+            tip_force_n: self.force_n,
             bending_stiffness_n_m2: self.stiffness_mn_m2 * 1e-3,
             length_mm: self.length_mm,
             precurvature_per_mm: if self.precurve_radius_mm > 0.0 {
@@ -146,12 +146,12 @@ impl TwinControls {
                 let pose = plate.pose(&base, &rest, contact);
                 let solved = sensor_plate::solve(&rod_config, &base, plate, &pose, contact)?;
                 contact.state = solved.state;
-                scene.tip_force_n = solved.tip_force_n;
+                scene.tip_force_n = solved.tip_force_n.into();
                 solved.shape
             }
-            _ => rod::solve(&rod_config, &base, scene.tip_force_n)?,
+            _ => rod::solve(&rod_config, &base, scene.tip_force_n.into())?,
         };
-        let force_n = scene.tip_force_n.0.map(|f| f as f32);
+        let force_n = scene.tip_force_n;
         let mut rng = ChaCha8Rng::seed_from_u64(self.noise_seed);
         let layouts = background.layouts();
         let mut views = Vec::with_capacity(2);
@@ -340,7 +340,7 @@ mod tests {
         let pair = controls.render("pair-0001".into(), &background).unwrap();
         assert_eq!(pair.view_a.len(), WORK_SIZE.pixels() * 3);
         assert!(pair.is_complete());
-        assert_eq!(pair.force_n, Some([0.15, 0.05, -0.10]));
+        assert_eq!(pair.force_n, Some(TipForce::new(0.15, 0.05, -0.10)));
         // The catheter is visible in both views, and darker than its surroundings (X-ray).
         for view in crate::workspace::View::BOTH {
             let n = pair.labeled_pixels(view);
@@ -352,7 +352,7 @@ mod tests {
             pair
         );
         let pushed = TwinControls {
-            force_n: [-0.3, 0.0, 0.0],
+            force_n: TipForce::new(-0.3, 0.0, 0.0),
             ..controls
         }
         .render("pair-0001".into(), &background)
@@ -382,8 +382,8 @@ mod tests {
         assert_eq!(settings["preset"], PAPER_BENCH);
         assert_ne!(settings["scene"]["plate"]["state"], "free");
         // Not the force sliders' value: the contact's.
-        assert_ne!(true_force_n.map(f64::from), controls.force_n);
-        assert!(true_force_n.iter().any(|f| f.abs() > 0.01));
+        assert_ne!(*true_force_n, controls.force_n);
+        assert!(true_force_n.max_abs() > 0.01);
         assert_eq!(pair.force_n, Some(*true_force_n));
     }
 

@@ -9,6 +9,7 @@
 //! stale buffer gives.
 
 use hnet_twin::simulator::sensor_plate::ContactError;
+use hnet_units::TipForce;
 
 use crate::twin_live::{TwinControls, XrayBackground};
 use crate::workspace::LabeledPair;
@@ -31,7 +32,7 @@ pub struct Output<'a> {
     /// View A's and view B's catheter probabilities.
     pub masks: [&'a [f32]; 2],
     /// Tip force, newtons.
-    pub force_n: [f32; 3],
+    pub force_n: TipForce,
 }
 
 /// The largest differences between two backends' outputs.
@@ -72,7 +73,7 @@ impl Difference {
         };
         Self {
             mask,
-            force_n: largest(cpu.force_n, webgpu.force_n),
+            force_n: largest(cpu.force_n.newtons(), webgpu.force_n.newtons()),
         }
     }
 
@@ -110,15 +111,18 @@ mod tests {
     #[test]
     fn small_float_differences_pass_and_wrong_or_stale_results_do_not() {
         let cpu = [vec![0.1f32, 0.9, 0.5], vec![0.0, 1.0, 0.2]];
-        let force = [0.1, -0.05, 0.2];
-        fn output(masks: &[Vec<f32>; 2], force_n: [f32; 3]) -> Output<'_> {
+        let force = TipForce::new(0.1, -0.05, 0.2);
+        fn output(masks: &[Vec<f32>; 2], force_n: TipForce) -> Output<'_> {
             Output {
                 masks: [&masks[0], &masks[1]],
                 force_n,
             }
         }
         let close = [vec![0.10001f32, 0.9, 0.5], vec![0.0, 0.99999, 0.2]];
-        let same = Difference::between(output(&cpu, force), output(&close, [0.10002, -0.05, 0.2]));
+        let same = Difference::between(
+            output(&cpu, force),
+            output(&close, TipForce::new(0.10002, -0.05, 0.2)),
+        );
         assert!(same.within(1.0), "{same:?}");
         assert!(
             same.text().starts_with("masks within 1.00e-5"),
@@ -128,14 +132,17 @@ mod tests {
         assert!(!same.within(-1.0));
         // Stale zeros, a NaN, a short buffer.
         let zeros = [vec![0.0f32; 3], vec![0.0; 3]];
-        let stale = Difference::between(output(&cpu, force), output(&zeros, [0.0; 3]));
+        let stale = Difference::between(output(&cpu, force), output(&zeros, TipForce::ZERO));
         assert!(!stale.within(1.0));
         assert!(
             stale.refusal(1.0).contains("masks by up to 1.00e0"),
             "{}",
             stale.refusal(1.0)
         );
-        let nan = Difference::between(output(&cpu, force), output(&cpu, [f32::NAN, 0.0, 0.0]));
+        let nan = Difference::between(
+            output(&cpu, force),
+            output(&cpu, TipForce::new(f32::NAN, 0.0, 0.0)),
+        );
         assert_eq!(nan.force_n, f32::INFINITY);
         let short = [vec![0.1f32], vec![0.0]];
         assert_eq!(

@@ -11,9 +11,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::force_label::ForceLabelRow;
 use crate::imaging::WORK_SIZE;
-use hnet_units::ImageSize;
 /// The two views of a pair (one type for the page, the network and the twin).
 pub use hnet_units::View;
+use hnet_units::{ImageSize, TipForce};
 
 /// Where a pair came from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -32,7 +32,7 @@ pub enum PairSource {
     /// The live digital twin, with its ground truth.
     Twin {
         /// The true tip force `(Fx, Fy, Fz)` in newtons, world frame.
-        true_force_n: [f32; 3],
+        true_force_n: TipForce,
         /// The true tip position in millimetres, world frame.
         tip_mm: [f64; 3],
         /// The views it was rendered with (at [`WORK_SIZE`]).
@@ -74,7 +74,7 @@ pub struct LabeledPair {
     /// user's strokes).
     pub masks_labeled: bool,
     /// The force label `(Fx, Fy, Fz)` in newtons, once entered, imported or accepted.
-    pub force_n: Option<[f32; 3]>,
+    pub force_n: Option<TipForce>,
     /// Where the force label came from (meaningful only with one): typed, measured, imported,
     /// simulated, or copied from a model's estimate, which the export marks as such.
     #[serde(default)]
@@ -137,7 +137,7 @@ impl LabeledPair {
     }
 
     /// The true force in newtons, for twin pairs.
-    pub fn true_force(&self) -> Option<[f32; 3]> {
+    pub fn true_force(&self) -> Option<TipForce> {
         match &self.source {
             PairSource::Twin { true_force_n, .. } => Some(*true_force_n),
             PairSource::Upload { .. } | PairSource::Dicom { .. } => None,
@@ -492,7 +492,7 @@ impl Workspace {
 
     /// Sets (or clears) the force label of pair `id`, with where it came from; returns whether
     /// there is such a pair.
-    pub fn set_force(&mut self, id: &str, label: Option<([f32; 3], LabelOrigin)>) -> bool {
+    pub fn set_force(&mut self, id: &str, label: Option<(TipForce, LabelOrigin)>) -> bool {
         match self.pairs.iter_mut().find(|p| p.id == id) {
             Some(pair) => {
                 let (force_n, origin) = match label {
@@ -627,7 +627,7 @@ pub fn export_splits(pairs: &[LabeledPair]) -> Vec<Option<Split>> {
 #[cfg(all(test, not(target_arch = "wasm32")))]
 pub(crate) mod tests {
     use super::*;
-    use crate::force_label::{implausible_label, parse_force_labels, parse_newtons};
+    use crate::force_label::{implausible_tip_force, parse_force_labels, parse_newtons};
 
     /// A workspace of `n` black uploaded pairs, `pair-0001` to `pair-000n` (also the export's
     /// tests).
@@ -773,7 +773,10 @@ pub(crate) mod tests {
         let mut ws = workspace(3);
         ws.select(1);
         brush(&mut ws, View::A, [10.0, 10.0], [60.0, 10.0], 3.0);
-        ws.set_force("pair-0002", Some(([0.1, 0.2, -0.1], LabelOrigin::Typed)));
+        ws.set_force(
+            "pair-0002",
+            Some((TipForce::new(0.1, 0.2, -0.1), LabelOrigin::Typed)),
+        );
         let before = ws.pairs.clone();
         let removed = ws.remove_current().unwrap();
         assert_eq!(ws.pairs.len(), 2);
@@ -813,8 +816,8 @@ pub(crate) mod tests {
             "Fz is `abc`, not a number of newtons"
         );
         assert!(parse_newtons("Fz", "inf").is_err());
-        assert!(implausible_label([5.0, 0.0, 0.0]).is_some());
-        assert!(implausible_label([0.12, -0.05, 0.2]).is_none());
+        assert!(implausible_tip_force(TipForce::new(5.0, 0.0, 0.0)).is_some());
+        assert!(implausible_tip_force(TipForce::new(0.12, -0.05, 0.2)).is_none());
     }
 
     #[test]
@@ -825,7 +828,7 @@ pub(crate) mod tests {
             labels,
             vec![(
                 "pair-0001".to_string(),
-                [0.1, -0.2, 0.05],
+                TipForce::new(0.1, -0.2, 0.05),
                 LabelOrigin::Imported
             )]
         );
@@ -839,7 +842,7 @@ pub(crate) mod tests {
         let manifest = b"id,split,fx,fy,fz,source\np1,train,0.1,0.2,0.3,x\n";
         assert_eq!(
             parse_force_labels("m.csv", manifest).unwrap()[0].1,
-            [0.1, 0.2, 0.3]
+            TipForce::new(0.1, 0.2, 0.3)
         );
 
         let err = parse_force_labels("f.csv", b"id,fx,fy,fz\np1,0,0,0\np2,0,NaN,0\n").unwrap_err();
@@ -862,11 +865,19 @@ pub(crate) mod tests {
 
         let mut ws = workspace(1);
         let (applied, unknown) = ws.apply_force_labels(&[
-            ("pair-0001".into(), [0.1, 0.0, 0.0], LabelOrigin::Measured),
-            ("pair-0099".into(), [0.0; 3], LabelOrigin::Imported),
+            (
+                "pair-0001".into(),
+                TipForce::new(0.1, 0.0, 0.0),
+                LabelOrigin::Measured,
+            ),
+            (
+                "pair-0099".into(),
+                TipForce::new(0.0, 0.0, 0.0),
+                LabelOrigin::Imported,
+            ),
         ]);
         assert_eq!((applied, unknown), (1, vec!["pair-0099".to_string()]));
-        assert_eq!(ws.pairs[0].force_n, Some([0.1, 0.0, 0.0]));
+        assert_eq!(ws.pairs[0].force_n, Some(TipForce::new(0.1, 0.0, 0.0)));
         assert_eq!(ws.pairs[0].force_origin, LabelOrigin::Measured);
     }
 
@@ -874,7 +885,10 @@ pub(crate) mod tests {
     fn a_pair_is_complete_only_when_both_masks_hold_a_catheter_or_are_marked_empty() {
         let mut ws = workspace(1);
         let id = ws.current().unwrap().id.clone();
-        ws.set_force(&id, Some(([0.1, 0.0, 0.0], LabelOrigin::Typed)));
+        ws.set_force(
+            &id,
+            Some((TipForce::new(0.1, 0.0, 0.0), LabelOrigin::Typed)),
+        );
         assert_eq!(
             ws.current().unwrap().incomplete_because(),
             Some("masks not labeled")
@@ -916,7 +930,7 @@ pub(crate) mod tests {
 #[cfg(all(test, not(target_arch = "wasm32")))]
 mod properties {
     use super::*;
-    use crate::force_label::{implausible_label, parse_force_labels, parse_newtons};
+    use crate::force_label::{implausible_tip_force, parse_force_labels, parse_newtons};
     use crate::imaging::properties::cases;
     use proptest::prelude::*;
 
@@ -938,8 +952,8 @@ mod properties {
                 prop_assert!(!labels.is_empty());
                 for (id, force, _) in labels {
                     prop_assert!(!id.is_empty());
-                    prop_assert!(force.iter().all(|f| f.is_finite()), "{:?}", force);
-                    prop_assert!(implausible_label(force).is_none());
+                    prop_assert!(force.is_finite(), "{:?}", force);
+                    prop_assert!(implausible_tip_force(force).is_none());
                 }
             }
         }
@@ -978,7 +992,7 @@ mod properties {
             prop_assert_eq!(read.len(), labels.len());
             for ((id, force, _), (want_id, want)) in read.iter().zip(&labels) {
                 prop_assert_eq!(id, want_id);
-                prop_assert_eq!(force.map(f32::to_bits), want.map(f32::to_bits), "{}", csv);
+                prop_assert_eq!(force.newtons().map(f32::to_bits), want.map(f32::to_bits), "{}", csv);
             }
         }
 
@@ -995,7 +1009,7 @@ mod properties {
         ) {
             let source = match twin {
                 Some((true_force_n, tip_mm)) if tip_mm.iter().all(|v| v.is_finite()) => PairSource::Twin {
-                    true_force_n,
+                    true_force_n: TipForce::from_newtons(true_force_n),
                     tip_mm,
                     views: Biplane::cardiac(WORK_SIZE),
                     settings: serde_json::json!({"force_n": true_force_n, "seed": 3}),
@@ -1010,7 +1024,7 @@ mod properties {
                 mask_a: vec![0],
                 mask_b: vec![255],
                 masks_labeled,
-                force_n: force,
+                force_n: force.map(TipForce::from_newtons),
                 force_origin: LabelOrigin::Estimate {
                     weights: "w.bpk".into(),
                     estimator: "combined".into(),

@@ -122,13 +122,7 @@ async fn the_engine_runs_on_a_twin_pair_at_the_working_size() {
         .unwrap();
     assert_eq!(prediction.mask_a.len(), WORK_SIZE.pixels());
     assert!(prediction.mask_b.iter().all(|p| (0.0..=1.0).contains(p)));
-    assert!(
-        prediction
-            .head_force_n
-            .unwrap()
-            .iter()
-            .all(|f| f.is_finite())
-    );
+    assert!(prediction.head_force_n.unwrap().is_finite());
     // This small untrained network's masks may show no catheter: then no force is read, and
     // the panel says why.
     match &prediction.no_catheter {
@@ -219,7 +213,7 @@ async fn metadata_changes_are_saved_without_the_images() {
         .unwrap();
     storage::save_pair(&pair).await.unwrap();
     pair.split = Some(hnet_twin::dataset::Split::Val);
-    pair.force_n = Some([0.1, -0.05, 0.2]);
+    pair.force_n = Some(hnet_units::TipForce::new(0.1, -0.05, 0.2));
     let never_stored = TwinControls::default()
         .render(
             "test-storage-never-stored".into(),

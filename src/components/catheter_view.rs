@@ -25,6 +25,7 @@ use crate::orbit_camera::{OrbitCamera, Projection};
 use crate::studio::{CatheterReading, Notices, PairStore, Studio, TwinStore};
 use crate::workspace::{LabeledPair, PairSource};
 use hnet_twin::simulator::carm::Biplane;
+use hnet_units::TipForce;
 
 /// Side of the 3D canvas, canvas pixels.
 const SIDE: f64 = 400.0;
@@ -71,7 +72,7 @@ fn draw(
     reading: &CatheterReading,
     catheter: &Catheter3d,
     orbit: OrbitCamera,
-    arrows: &[([f64; 3], [f32; 3], &str, bool)],
+    arrows: &[([f64; 3], TipForce, &str, bool)],
 ) {
     let camera = orbit.framing(
         &catheter.centreline_mm,
@@ -187,7 +188,7 @@ pub fn CatheterView(
             if let Some(f) = estimate {
                 arrows.push((tip, f, ESTIMATE_ARROW, false));
             }
-            arrows.push((tip, catheter.force_f32(), PHYSICS_ARROW, false));
+            arrows.push((tip, catheter.force_n, PHYSICS_ARROW, false));
             if let Some((true_tip, f)) = truth {
                 arrows.push((true_tip, f, TRUE_ARROW, true));
             }

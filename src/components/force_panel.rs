@@ -12,16 +12,15 @@ use crate::catheter_3d::FitMasks;
 use crate::engine::Prediction;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
-use crate::force_label::{implausible_label, parse_force_labels, parse_newtons};
+use crate::force_label::{implausible_tip_force, parse_force_labels, parse_newtons};
 use crate::force_reading::{ABLATION_BAND_N, BandPosition, Disagreement, Verdict};
 use crate::studio::{CatheterReading, ModelState, NetworkStore, Notices, PairStore, Studio};
 use hnet_twin::dataset::label_origin::LabelOrigin;
 use hnet_twin::reconstruction::physics_force::{EstimateKind, TipForceEstimate};
-use hnet_units::force_magnitude as magnitude;
+use hnet_units::TipForce;
 
 /// Full scale of the magnitude gauge, newtons.
 const GAUGE_MAX_N: f32 = 0.5;
-const AXES: [&str; 3] = ["Fx", "Fy", "Fz"];
 
 /// `read` of the reconstruction of the pair on screen, if it was made from the masks the rod is
 /// now to be fitted to (a reading from before the choice changed is not shown).
@@ -59,7 +58,7 @@ pub fn ForcePanel(
     // The physics estimate of the pair on screen, if its catheter was reconstructed.
     let physics = move || {
         shown_reading(pairs, catheter, fit_masks, |r| {
-            Some(r.result.as_ref().ok()?.force_f32())
+            Some(r.result.as_ref().ok()?.force_n)
         })
     };
     let physics_masks = move || {
@@ -109,18 +108,20 @@ pub fn ForcePanel(
     let shown_label = Memo::new(move |_| (pairs.shown_id(), label()));
     let field_text = RwSignal::new([String::new(), String::new(), String::new()]);
     // A typed label far outside a catheter's range, waiting for the user's confirmation.
-    let implausible = RwSignal::new(None::<([f32; 3], String)>);
+    let implausible = RwSignal::new(None::<(TipForce, String)>);
     // Shows `force` in the fields, in its shortest exact form (`0.12`, never a rounded `0.123`
     // for `0.12345`, which a save would then write back).
-    let show = move |force: Option<[f32; 3]>| {
-        let values = force.map(|f| f.map(|v| v.to_string())).unwrap_or_default();
+    let show = move |force: Option<TipForce>| {
+        let values = force
+            .map(|f| f.newtons().map(|v| v.to_string()))
+            .unwrap_or_default();
         typed.set(values.clone());
         field_text.set(values);
         implausible.set(None);
     };
     Effect::new(move |_| show(shown_label.get().1));
 
-    let set_label = move |label: Option<([f32; 3], LabelOrigin)>| {
+    let set_label = move |label: Option<(TipForce, LabelOrigin)>| {
         let Some(id) = studio.labeled_pair_id() else {
             return;
         };
@@ -151,7 +152,7 @@ pub fn ForcePanel(
                 .map(|p| p.force_origin.describe())
         })
     };
-    let save = move |force: [f32; 3]| {
+    let save = move |force: TipForce| {
         implausible.set(None);
         set_label(Some((force, LabelOrigin::Typed)));
         notices.info(format!(
@@ -161,9 +162,9 @@ pub fn ForcePanel(
     };
     let save_typed = move || {
         let values = typed.get_untracked();
-        let mut force = [0.0f32; 3];
+        let mut force = TipForce::ZERO;
         for (axis, text) in values.iter().enumerate() {
-            match parse_newtons(AXES[axis], text) {
+            match parse_newtons(TipForce::AXES[axis], text) {
                 Ok(v) => force[axis] = v,
                 Err(e) => {
                     notices.error(with_causes(&e));
@@ -171,7 +172,7 @@ pub fn ForcePanel(
                 }
             }
         }
-        match implausible_label(force) {
+        match implausible_tip_force(force) {
             Some(why) => implausible.set(Some((force, why))),
             None => save(force),
         }
@@ -223,7 +224,7 @@ pub fn ForcePanel(
         None => format!("{v:+.3}"),
     };
     let row = move |name: String,
-                    values: Option<[f32; 3]>,
+                    values: Option<TipForce>,
                     interval: Option<[f32; 3]>,
                     class: &'static str| {
         view! {
@@ -232,7 +233,7 @@ pub fn ForcePanel(
                 {(0..3).map(|i| view! {
                     <td>{values.map(|v| cell(v[i], interval.map(|h| h[i]))).unwrap_or_else(|| "–".into())}</td>
                 }).collect_view()}
-                <td>{values.map(|v| format!("{:.3}", magnitude(v))).unwrap_or_else(|| "–".into())}</td>
+                <td>{values.map(|v| format!("{:.3}", v.magnitude())).unwrap_or_else(|| "–".into())}</td>
             </tr>
         }
     };
@@ -242,7 +243,7 @@ pub fn ForcePanel(
             <h2 id="force-title">"Tip force"</h2>
             // The verdict first, where it is seen without scrolling; the numbers below it.
             {move || reading().map(|r| {
-                let m = magnitude(r.force_n);
+                let m = r.force_n.magnitude();
                 let pct = |v: f32| format!("{:.1}%", (v / GAUGE_MAX_N).clamp(0.0, 1.0) * 100.0);
                 let range = r.magnitude_range_n();
                 let label = match range {
@@ -263,7 +264,7 @@ pub fn ForcePanel(
                                 style:width=pct(high - low)></div>
                         })}
                         <div class="marker" style:left=pct(m)></div>
-                        {truth().map(|t| view! { <div class="marker truth" style:left=pct(magnitude(t))></div> })}
+                        {truth().map(|t| view! { <div class="marker truth" style:left=pct(t.magnitude())></div> })}
                     </div>
                     {verdict_text(r).map(|(verdict, trust)| view! {
                         <p class="verdict" id="force-verdict" data-estimator=r.kind.name()>{verdict}</p>
@@ -274,7 +275,7 @@ pub fn ForcePanel(
                         </p>
                     })}
                     {truth().map(|t| {
-                        let m = magnitude(t);
+                        let m = t.magnitude();
                         view! {
                             <p class="verdict truth" id="force-truth-verdict">
                                 {format!("True |F| = {m:.3} N: {}", BandPosition::of(m).phrase())}
@@ -309,7 +310,7 @@ pub fn ForcePanel(
                     {move || match (reading(), truth()) {
                         (Some(r), Some(t)) => Some(row(
                             format!("Error ({})", r.kind.name()),
-                            Some([0, 1, 2].map(|i| r.force_n[i] - t[i])),
+                            Some(r.force_n - t),
                             None,
                             "error",
                         )),
@@ -347,12 +348,12 @@ pub fn ForcePanel(
                     save_typed();
                 }>
                     {(0..3).map(|i| view! {
-                        <label>{AXES[i]}
+                        <label>{TipForce::AXES[i]}
                             // Text, not type=number: a number field reports "" for partial input
                             // such as `-` or `0.`, which then rewrote what was typed.
                             <input id=format!("label-f{}", ["x", "y", "z"][i]) type="text"
                                 inputmode="decimal" autocomplete="off" spellcheck="false"
-                                aria-label=format!("{} label in newtons", AXES[i])
+                                aria-label=format!("{} label in newtons", TipForce::AXES[i])
                                 prop:value=move || field_text.with(|t| t[i].clone())
                                 on:input=move |ev| {
                                     implausible.set(None);

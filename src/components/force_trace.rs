@@ -10,7 +10,7 @@ use crate::cine::CinePlayer;
 use crate::force_reading::ABLATION_BAND_N;
 use crate::studio::{CineStore, Studio};
 use hnet_twin::reconstruction::physics_force::EstimateKind;
-use hnet_units::force_magnitude;
+use hnet_units::TipForce;
 
 /// The plot's size in SVG units, and its margins (left, right, top, bottom).
 const WIDTH: f64 = 420.0;
@@ -18,14 +18,14 @@ const HEIGHT: f64 = 170.0;
 const MARGIN: [f64; 4] = [40.0, 8.0, 8.0, 20.0];
 
 /// One plotted quantity of a force (newtons).
-type Component = fn([f32; 3]) -> f32;
+type Component = fn(TipForce) -> f32;
 
 /// The series: name, colour, and the value of a force.
 const SERIES: [(&str, &str, Component); 4] = [
     ("Fx", "#d0453a", |f| f[0]),
     ("Fy", "#2f9e44", |f| f[1]),
     ("Fz", "#3867d6", |f| f[2]),
-    ("|F|", "#222222", force_magnitude),
+    ("|F|", "#222222", TipForce::magnitude),
 ];
 
 /// What the plot draws, computed once per change of the trace or the frame.
@@ -63,7 +63,7 @@ fn y_of(force_n: f64, top_n: f64) -> f64 {
 impl Plot {
     fn of(cine: &CinePlayer) -> Self {
         let frames = cine.frame_count();
-        let forces: Vec<Option<[f32; 3]>> = cine
+        let forces: Vec<Option<TipForce>> = cine
             .estimates
             .iter()
             .map(|e| e.map(|e| e.force_n))

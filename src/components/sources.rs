@@ -332,9 +332,9 @@ pub fn TwinSliders(twin: TwinStore, pairs: PairStore, studio: Studio) -> impl In
             <Show when=move || !on_bench()>
                 <fieldset>
                     <legend>"Tip force"</legend>
-                    {slider.view("twin-fx", "Fx", "N", [-0.4, 0.4, 0.01], |t| t.force_n[0], |t, v| t.force_n[0] = v)}
-                    {slider.view("twin-fy", "Fy", "N", [-0.4, 0.4, 0.01], |t| t.force_n[1], |t, v| t.force_n[1] = v)}
-                    {slider.view("twin-fz", "Fz", "N", [-0.4, 0.4, 0.01], |t| t.force_n[2], |t, v| t.force_n[2] = v)}
+                    {slider.view("twin-fx", "Fx", "N", [-0.4, 0.4, 0.01], |t| f64::from(t.force_n[0]), |t, v| t.force_n[0] = v as f32)}
+                    {slider.view("twin-fy", "Fy", "N", [-0.4, 0.4, 0.01], |t| f64::from(t.force_n[1]), |t, v| t.force_n[1] = v as f32)}
+                    {slider.view("twin-fz", "Fz", "N", [-0.4, 0.4, 0.01], |t| f64::from(t.force_n[2]), |t, v| t.force_n[2] = v as f32)}
                 </fieldset>
             </Show>
             <Show when=on_bench>

@@ -14,6 +14,7 @@ use crate::storage;
 use crate::workspace::Workspace;
 use hnet_twin::reconstruction::catalogue::StiffnessCalibration;
 use hnet_twin::simulator::carm::Biplane;
+use hnet_units::TipForce;
 
 /// The catheter in 3D of one pair, as the page computed it ([`Studio::reconstruct_shown`]).
 #[derive(Debug, Clone, PartialEq)]
@@ -24,7 +25,7 @@ pub struct CatheterReading {
     pub fit_masks: FitMasks,
     /// H-Net's force estimate of the prediction on hand when it was made, newtons (whose masks
     /// it was fitted to, when it was fitted to H-Net's).
-    pub prediction_force_n: Option<[f32; 3]>,
+    pub prediction_force_n: Option<TipForce>,
     /// Its views (for drawing the C-arms).
     pub views: Biplane,
     /// The catheter and its physics force, or why there is none (with its causes).
@@ -37,7 +38,7 @@ impl CatheterReading {
     /// The physics estimate to combine with H-Net's estimate `hnet_n`
     /// ([`Catheter3d::for_combination`]), when the rod was fitted to the masks of the prediction
     /// that gave `hnet_n` (not to an earlier prediction's, of other weights).
-    pub fn physics_for(&self, hnet_n: [f32; 3]) -> Option<([f32; 3], Option<[f32; 3]>)> {
+    pub fn physics_for(&self, hnet_n: TipForce) -> Option<(TipForce, Option<[f32; 3]>)> {
         if self.prediction_force_n != Some(hnet_n) {
             return None;
         }

@@ -16,6 +16,7 @@ use crate::error_text::with_causes;
 use crate::gpu_worker::GpuWorker;
 use crate::{page_query, webgpu_check};
 use hnet_model::catheter_entry::EntrySetting;
+use hnet_units::TipForce;
 
 /// The model's state.
 #[derive(Clone)]
@@ -282,7 +283,9 @@ async fn checked_on_webgpu(cpu: &Engine) -> Result<Engine, String> {
             masks: [&p.mask_a[..], &p.mask_b[..]],
             // Read as trained, a pair always has the force head's estimate (catheter or not);
             // a missing one reads as NaN, which the check refuses.
-            force_n: p.head_force_n.unwrap_or([f32::NAN; 3]),
+            force_n: p
+                .head_force_n
+                .unwrap_or(TipForce::new(f32::NAN, f32::NAN, f32::NAN)),
         }
     }
     let scale = web_sys::window()

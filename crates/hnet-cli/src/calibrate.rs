@@ -26,7 +26,7 @@ use crate::data::StereoItem;
 use crate::evaluation::parse_split;
 use crate::network::{load_weights, predict};
 use hnet_twin::dataset::Split;
-use hnet_units::ImageSize;
+use hnet_units::{ImageSize, TipForce};
 
 #[derive(clap::Args, Debug)]
 pub struct CalibrateArgs {
@@ -56,7 +56,7 @@ pub struct CalibrateArgs {
 }
 
 /// A pair's measured force and its blind estimate, N.
-type ForcePair = ([f64; 3], [f64; 3]);
+type ForcePair = (TipForce, TipForce);
 
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let catheter = CatalogueCatheter::find(&args.catheter)?;
@@ -134,7 +134,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             let masks = [a, b].map(|m| Mask::soft(size.width, size.height, m));
             let estimate =
                 physics_estimate(masks, &setup).map_err(|e| format!("pair {}: {e}", row.id))?;
-            Ok((row.force_n, estimate.fit.force_n.0))
+            Ok((row.force_n, estimate.fit.force_n))
         })
         .collect();
     let mut pairs = Vec::new();

@@ -18,6 +18,7 @@ use hnet_model::training::{LabelledPair, TrainingBatch};
 use hnet_twin::dataset::label_origin::LabelFilter;
 use hnet_twin::dataset::{Dataset, LoadedPair, ManifestRow, Split, SquareSymmetry};
 use hnet_units::ImageSize;
+use hnet_units::TipForce;
 use rayon::prelude::*;
 
 /// One stereo pair at the model's input size.
@@ -32,7 +33,7 @@ pub struct StereoItem {
     /// Mask B.
     pub mask_b: Arc<[u8]>,
     /// Tip force in newtons.
-    pub force_n: [f32; 3],
+    pub force_n: TipForce,
     /// Whether the force is a label to learn from; off-bench pairs of a stream carry masks
     /// only (see [`twin_stream`]).
     pub force_known: bool,
@@ -42,7 +43,7 @@ pub struct StereoItem {
 
 impl StereoItem {
     /// A pair as the network reads it, with its tip force in newtons.
-    pub fn new(pair: LoadedPair, force_n: [f64; 3], force_known: bool, id: String) -> Self {
+    pub fn new(pair: LoadedPair, force_n: TipForce, force_known: bool, id: String) -> Self {
         let mask =
             |m: &[f32]| -> Arc<[u8]> { m.iter().map(|v| (v * 255.0).round() as u8).collect() };
         Self {
@@ -50,7 +51,7 @@ impl StereoItem {
             view_b: pair.view_b.into(),
             mask_a: mask(&pair.mask_a),
             mask_b: mask(&pair.mask_b),
-            force_n: force_n.map(|f| f as f32),
+            force_n,
             force_known,
             id: id.into(),
         }
@@ -271,7 +272,7 @@ mod tests {
         let row = ManifestRow {
             id: "wide".into(),
             split: Split::Train,
-            force_n: [0.1, 0.0, 0.0],
+            force_n: TipForce::new(0.1, 0.0, 0.0),
             extra: Vec::new(),
         };
         let images = [rgb_image, rgb_image, mask_image, mask_image];

@@ -9,7 +9,7 @@ use anyhow::Context;
 use burn::tensor::Device;
 use hnet_model::catheter_entry::{CatheterEntry, EntrySetting};
 use hnet_model::predictor::{EntryError, LoadError, PairInput, Predictor};
-use hnet_units::ImageSize;
+use hnet_units::{ImageSize, TipForce};
 
 use crate::data::StereoItem;
 use crate::run_dir::RunDir;
@@ -79,7 +79,7 @@ pub fn predict(
     items: &[StereoItem],
     batch_size: usize,
     device: &Device,
-    mut visit: impl FnMut(&StereoItem, Option<[Vec<f32>; 2]>, Option<[f32; 3]>),
+    mut visit: impl FnMut(&StereoItem, Option<[Vec<f32>; 2]>, Option<TipForce>),
 ) -> anyhow::Result<()> {
     for chunk in items.chunks(batch_size.max(1)) {
         let inputs: Vec<PairInput<'_>> = chunk.iter().map(input).collect();
@@ -109,7 +109,7 @@ pub fn predict_entry(
     batch_size: usize,
     device: &Device,
     entry: EntrySetting,
-    mut visit: impl FnMut(&StereoItem, Option<[Vec<f32>; 2]>, Option<[f32; 3]>),
+    mut visit: impl FnMut(&StereoItem, Option<[Vec<f32>; 2]>, Option<TipForce>),
 ) -> anyhow::Result<EntryCounts> {
     let mut counts = EntryCounts::default();
     for chunk in items.chunks(batch_size.max(1)) {

@@ -61,7 +61,7 @@ fn pair(id: String, a: Arc<[u8]>, b: Arc<[u8]>, pixels: usize) -> StereoItem {
         view_b: b,
         mask_a: empty.clone(),
         mask_b: empty,
-        force_n: [0.0; 3],
+        force_n: hnet_units::TipForce::ZERO,
         force_known: false,
         id: id.into(),
     }

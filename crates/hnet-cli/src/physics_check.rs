@@ -27,7 +27,7 @@ use hnet_twin::simulator::render::PROXIMAL_SHAFT_MM;
 use hnet_twin::simulator::rod;
 use hnet_twin::simulator::scene::NominalBase;
 use hnet_twin::vec3::Vec3;
-use hnet_units::ImageSize;
+use hnet_units::{ImageSize, TipForce};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -167,7 +167,7 @@ impl PhysicsEvaluation {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PhysicsForce {
     /// The tip force, N.
-    pub force_n: [f32; 3],
+    pub force_n: TipForce,
     /// Its standard error from the fit ([`hnet_twin::reconstruction::rod_fit::RodFit::force_sd_n`]), N.
     pub sd_n: Option<[f32; 3]>,
 }
@@ -175,9 +175,9 @@ pub struct PhysicsForce {
 /// One pair to check.
 pub struct PairToCheck<'a> {
     /// Its true force, N.
-    pub truth_n: [f32; 3],
+    pub truth_n: TipForce,
     /// The network's force, N, when it has one.
-    pub network_n: Option<[f32; 3]>,
+    pub network_n: Option<TipForce>,
     /// The masks of view A and B to reconstruct from.
     pub masks: [Mask<'a>; 2],
 }
@@ -193,7 +193,7 @@ pub fn read_records(dataset: &Dataset, ids: &[&str]) -> Option<Vec<SampleRecord>
 /// Mean distance of `points` from the true rod of `record`, mm.
 fn distance_from_truth(record: &SampleRecord, points: &[Vec3]) -> Option<f64> {
     let (config, base) = record.scene.rod(&record.rod);
-    let truth = rod::solve(&config, &base, record.scene.tip_force_n).ok()?;
+    let truth = rod::solve(&config, &base, record.scene.tip_force_n.into()).ok()?;
     let d = distances_to_rod(&truth, PROXIMAL_SHAFT_MM, points);
     (!d.is_empty()).then(|| d.iter().sum::<f64>() / d.len() as f64)
 }
@@ -229,8 +229,8 @@ pub fn check(
                     let reconstruction = &estimate.reconstruction;
                     Outcome::Fitted {
                         physics: PhysicsForce {
-                            force_n: estimate.fit.force_n.0.map(|f| f as f32),
-                            sd_n: estimate.fit.force_sd_n.map(|sd| sd.0.map(|v| v as f32)),
+                            force_n: estimate.fit.force_n,
+                            sd_n: estimate.fit.force_sd_n,
                         },
                         centreline_error_mm: distance_from_truth(record, &reconstruction.points_mm),
                         tip_error_mm: reconstruction
@@ -426,11 +426,7 @@ mod tests {
         let ids: Vec<&str> = dataset.rows.iter().map(|row| row.id.as_str()).collect();
         let records = read_records(&dataset, &ids).unwrap();
         let size = dataset.header.image_size;
-        let truth: Vec<[f32; 3]> = dataset
-            .rows
-            .iter()
-            .map(|row| row.force_n.map(|f| f as f32))
-            .collect();
+        let truth: Vec<TipForce> = dataset.rows.iter().map(|row| row.force_n).collect();
         let pairs: Vec<PairToCheck> = loaded
             .iter()
             .zip(&truth)

@@ -12,7 +12,7 @@ use anyhow::{Context, bail};
 use burn::tensor::Device;
 use hnet_model::metrics::AXES;
 use hnet_twin::dataset::{Dataset, Split};
-use hnet_units::ImageSize;
+use hnet_units::{ImageSize, TipForce};
 use image::{Rgb, RgbImage};
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
@@ -70,8 +70,8 @@ fn register_font() -> anyhow::Result<()> {
 
 /// One test pair's true and predicted tip force, N.
 struct ForcePoint {
-    truth: [f32; 3],
-    predicted: [f32; 3],
+    truth: TipForce,
+    predicted: TipForce,
 }
 
 /// One chart of the report.
@@ -216,7 +216,7 @@ fn force_plot<DB: PlotBackend>(
         56,
     )?;
     /// A curve of the figure: its label, colour and which force of a pair it draws.
-    type Curve = (&'static str, RGBColor, fn(&ForcePoint) -> [f32; 3]);
+    type Curve = (&'static str, RGBColor, fn(&ForcePoint) -> TipForce);
     let curves: [Curve; 2] = [
         ("true", BLACK, |p| p.truth),
         ("predicted", RED, |p| p.predicted),

@@ -30,6 +30,7 @@ use hnet_twin::dataset::simulate::{SampleRecord, read_sample_record};
 use hnet_twin::dataset::{Dataset, Split};
 use hnet_twin::reconstruction::epipolar::project;
 use hnet_twin::vec3::Vec3;
+use hnet_units::TipForce;
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -184,7 +185,7 @@ struct Samples {
 }
 
 impl Samples {
-    fn new(records: &[(SampleRecord, [f64; 3])], input: GeometryInput, points: usize) -> Self {
+    fn new(records: &[(SampleRecord, TipForce)], input: GeometryInput, points: usize) -> Self {
         let rows: Vec<Vec<f64>> = records
             .par_iter()
             .map(|(r, _)| input.features(r, points))
@@ -192,7 +193,7 @@ impl Samples {
         let columns = rows.first().map_or(0, Vec::len);
         Self {
             features: DMatrix::from_fn(rows.len(), columns, |i, j| rows[i][j]),
-            forces: records.iter().map(|(_, f)| *f).collect(),
+            forces: records.iter().map(|(_, f)| f.to_f64()).collect(),
         }
     }
 }
@@ -296,7 +297,7 @@ impl KernelRidge {
 fn force_metrics(predicted: &[[f64; 3]], truth: &[[f64; 3]]) -> ForceMetrics {
     let mut acc = ForceAccumulator::new();
     for (p, t) in predicted.iter().zip(truth) {
-        acc.push(p.map(|v| v as f32), t.map(|v| v as f32));
+        acc.push(TipForce::from_f64(*p), TipForce::from_f64(*t));
     }
     acc.finish().expect("the splits are not empty")
 }
@@ -326,7 +327,7 @@ pub struct CeilingRow {
 fn study_input(
     input: GeometryInput,
     points: usize,
-    [train, val, test]: [&[(SampleRecord, [f64; 3])]; 3],
+    [train, val, test]: [&[(SampleRecord, TipForce)]; 3],
 ) -> anyhow::Result<CeilingRow> {
     let [train, val, test] = [train, val, test].map(|split| Samples::new(split, input, points));
     let fit = fit_and_test(&train, &val, &test).with_context(|| input.describe())?;
@@ -384,7 +385,7 @@ fn load_split(
     dataset: &Dataset,
     split: Split,
     limit: usize,
-) -> anyhow::Result<Vec<(SampleRecord, [f64; 3])>> {
+) -> anyhow::Result<Vec<(SampleRecord, TipForce)>> {
     let rows: Vec<_> = dataset.split(split).take(limit).collect();
     if rows.is_empty() {
         bail!(
@@ -500,7 +501,7 @@ fn pooled_features(
                 .chunks_exact(3)
                 .map(|f| [0, 1, 2].map(|i| f64::from(f[i]))),
         );
-        forces.extend(chunk.iter().map(|item| item.force_n.map(f64::from)));
+        forces.extend(chunk.iter().map(|item| item.force_n.to_f64()));
     }
     let columns = rows.first().map_or(0, Vec::len);
     let samples = Samples {

@@ -20,6 +20,7 @@ use hnet_twin::reconstruction::physics_force::{
 };
 use hnet_twin::simulator::carm::Biplane;
 use hnet_twin::simulator::scene::SceneSampling;
+use hnet_units::TipForce;
 
 use crate::backend::BackendChoice;
 use crate::cine::{grey_pair, open_cine};
@@ -99,7 +100,7 @@ pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
                 let empty = image::GrayImage::new(a.width(), a.height());
                 let images = [a, b, empty.clone(), empty].map(image::DynamicImage::ImageLuma8);
                 let loaded = LoadedPair::of_images(images, size);
-                StereoItem::new(loaded, [0.0; 3], false, (pair.frame + 1).to_string())
+                StereoItem::new(loaded, TipForce::ZERO, false, (pair.frame + 1).to_string())
             })
             .collect();
         let mut outputs = Vec::with_capacity(chunk.len());
@@ -176,7 +177,7 @@ pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
 /// at `size`): none where a view shows no catheter; combined where the rod could be fitted to
 /// the masks with `setup` and the weights carry a `combination`; else the head alone.
 fn frame_estimate(
-    head_n: [f32; 3],
+    head_n: TipForce,
     masks: Option<&[Vec<f32>; 2]>,
     size: hnet_units::ImageSize,
     combination: Option<&ForceCombination>,
@@ -197,10 +198,7 @@ fn frame_estimate(
         .and_then(|(masks, setup)| physics_estimate(masks, setup).ok())
         .map(|estimate| {
             let fit = estimate.fit;
-            (
-                fit.force_n.0.map(|f| f as f32),
-                fit.force_sd_n.map(|sd| sd.0.map(|v| v as f32)),
-            )
+            (fit.force_n, fit.force_sd_n)
         });
     Ok(combination.estimate(head_n, physics))
 }

@@ -17,7 +17,7 @@ fn the_page_export_trains_and_evaluates() {
     let background = XrayBackground::phantom();
     for i in 0..10 {
         let controls = TwinControls {
-            force_n: [0.04 * i as f64 - 0.2, 0.1, -0.05],
+            force_n: hnet_units::TipForce::new(0.04 * i as f32 - 0.2, 0.1, -0.05),
             noise_seed: i,
             ..TwinControls::default()
         };

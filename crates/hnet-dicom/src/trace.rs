@@ -12,7 +12,6 @@
 use std::fmt::Write as _;
 
 use hnet_twin::reconstruction::physics_force::TipForceEstimate;
-use hnet_units::force_magnitude;
 
 /// The trace's header line.
 pub const TRACE_COLUMNS: &str =
@@ -52,7 +51,7 @@ pub fn trace_csv<'a>(points: impl IntoIterator<Item = &'a TracePoint>, weights: 
                     f[0],
                     f[1],
                     f[2],
-                    force_magnitude(f),
+                    f.magnitude(),
                     estimate.kind.name()
                 )
             }
@@ -75,7 +74,7 @@ mod tests {
                 frame: 0,
                 time_s: Some(0.0667),
                 estimate: Ok(TipForceEstimate {
-                    force_n: [0.3, 0.0, -0.4],
+                    force_n: hnet_units::TipForce::new(0.3, 0.0, -0.4),
                     interval_90_n: Some([0.05, 0.06, 0.07]),
                     kind: EstimateKind::Combined,
                 }),
@@ -83,7 +82,7 @@ mod tests {
             TracePoint {
                 frame: 1,
                 time_s: None,
-                estimate: Ok(TipForceEstimate::uncalibrated([0.0; 3])),
+                estimate: Ok(TipForceEstimate::uncalibrated(hnet_units::TipForce::ZERO)),
             },
             TracePoint {
                 frame: 2,

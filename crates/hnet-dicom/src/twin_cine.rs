@@ -7,7 +7,7 @@ use hnet_twin::simulator::scene::{
     Backgrounds, Modality, TwinConfig, TwinError, ViewPixels, generate, render_view, sample_rng,
 };
 use hnet_twin::simulator::synthetic_xray::PatchLayout;
-use hnet_units::ImageSize;
+use hnet_units::{ImageSize, TipForce};
 
 use crate::frames::Monochrome;
 use crate::geometry::Plane;
@@ -26,7 +26,7 @@ pub struct TwinCine {
     /// Plane A and plane B.
     pub planes: [XaCine; 2],
     /// Each frame's tip force `(Fx, Fy, Fz)`, newtons.
-    pub forces_n: Vec<[f64; 3]>,
+    pub forces_n: Vec<TipForce>,
 }
 
 /// The twin's biplane for the cines, at `size`: off the default frontal/lateral angles, so that
@@ -53,7 +53,7 @@ pub fn twin_cine(size: ImageSize, frames: usize, seed: u64) -> Result<TwinCine, 
         .collect::<Vec<_>>();
     Ok(TwinCine {
         planes: xa_planes(config.views, size, &frames, seed),
-        forces_n: samples.iter().map(|s| s.params.tip_force_n.0).collect(),
+        forces_n: samples.iter().map(|s| s.params.tip_force_n).collect(),
     })
 }
 
@@ -74,7 +74,7 @@ pub fn twin_push_cine(size: ImageSize, frames: usize, seed: u64) -> Result<TwinC
     for _ in 0..PUSH_DRAWS {
         let params = config.scene.sample(&mut rng);
         let (rod_config, base) = params.rod(&config.rod);
-        match rod::solve(&rod_config, &base, params.tip_force_n) {
+        match rod::solve(&rod_config, &base, params.tip_force_n.into()) {
             Ok(_) => {
                 scene = Some(params);
                 break;
@@ -104,9 +104,11 @@ pub fn twin_push_cine(size: ImageSize, frames: usize, seed: u64) -> Result<TwinC
             0.5
         };
         let mut params = scene;
-        params.tip_force_n = scene.tip_force_n * (std::f64::consts::PI * phase).sin();
+        let envelope = (std::f64::consts::PI * phase).sin() as f32;
+        params.tip_force_n = scene.tip_force_n.map(|f| f * envelope);
         let (rod_config, base) = params.rod(&config.rod);
-        let shape = rod::solve(&rod_config, &base, params.tip_force_n).map_err(unsolvable)?;
+        let shape =
+            rod::solve(&rod_config, &base, params.tip_force_n.into()).map_err(unsolvable)?;
         let mut noise = sample_rng(seed, frame as u64 + 1);
         let [a, b] = [(&config.views.a, 0), (&config.views.b, 1)].map(|(view, i)| {
             let (source, layout) = &layouts[i];
@@ -120,7 +122,7 @@ pub fn twin_push_cine(size: ImageSize, frames: usize, seed: u64) -> Result<TwinC
             .pixels
         });
         pictures.push([a, b]);
-        forces_n.push(params.tip_force_n.0);
+        forces_n.push(params.tip_force_n);
     }
     let frames = pictures.iter().map(|[a, b]| [a, b]).collect::<Vec<_>>();
     Ok(TwinCine {

@@ -66,8 +66,7 @@ fn a_twin_cine_reads_back_with_its_frames_geometry_and_timing() {
 fn a_push_cine_ramps_the_force_up_and_back_on_one_scene_and_pairs_without_notes() {
     let frames = 5;
     let cine = twin_push_cine(SIZE, frames, 4).unwrap();
-    let magnitude = |f: [f64; 3]| f.iter().map(|x| x * x).sum::<f64>().sqrt();
-    let forces: Vec<f64> = cine.forces_n.iter().map(|f| magnitude(*f)).collect();
+    let forces: Vec<f32> = cine.forces_n.iter().map(|f| f.magnitude()).collect();
     assert!(forces[0] < 1e-9 && forces[frames - 1] < 1e-9, "{forces:?}");
     assert!(forces[2] > forces[1] && forces[1] > 0.0, "{forces:?}");
     let [a, b] = cine

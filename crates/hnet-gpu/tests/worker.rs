@@ -62,7 +62,10 @@ async fn h_net_on_webgpu_computes_what_the_cpu_computes() {
             .map(|(x, y)| (x - y).abs())
             .fold(0.0f32, f32::max)
     };
-    assert!(largest(&expected.force, &found.force) < 1e-4, "{found:?}");
+    assert!(
+        largest(&expected.force.newtons(), &found.force.newtons()) < 1e-4,
+        "{found:?}"
+    );
     assert!(largest(&expected.mask_a, &found.mask_a) < 1e-4);
     assert!(largest(&expected.mask_b, &found.mask_b) < 1e-4);
 

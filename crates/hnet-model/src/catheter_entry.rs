@@ -28,7 +28,7 @@ use alloc::vec::Vec;
 
 use hnet_units::mask::is_catheter;
 use hnet_units::turn::{TurnError, turn_clockwise};
-use hnet_units::{ImageSize, View};
+use hnet_units::{ImageSize, TipForce, View};
 
 use burn::tensor::Device;
 
@@ -191,7 +191,7 @@ pub struct TurnedOutput {
     /// Catheter probabilities of views A and B, row-major, as the network returned them.
     pub masks: [Vec<f32>; 2],
     /// Tip force `(Fx, Fy, Fz)` in newtons, when the network has a force head.
-    pub force: Option<[f32; 3]>,
+    pub force: Option<TipForce>,
 }
 
 impl TurnedOutput {
@@ -215,7 +215,7 @@ pub struct EntryReading {
     pub entry: [CatheterEntry; 2],
     /// The force head's tip force in newtons, when both views were read as they are (the only
     /// way it learned them) and the network has one; `None` otherwise.
-    pub force: Option<[f32; 3]>,
+    pub force: Option<TipForce>,
 }
 
 impl EntryReading {
@@ -273,7 +273,7 @@ pub struct EntrySearch {
     /// Per view, its readings so far: the edge and the mask in the turned frame.
     readings: [Vec<(CatheterEntry, Vec<f32>)>; 2],
     /// The force head's estimate of the first reading.
-    force: Option<[f32; 3]>,
+    force: Option<TipForce>,
 }
 
 /// The edges a search reads a view at after reading it as it is.
@@ -495,7 +495,7 @@ mod tests {
         TurnedOutput {
             entry: [entry; 2],
             masks: [a.to_vec(), b.to_vec()],
-            force: Some([0.1, 0.2, 0.3]),
+            force: Some(TipForce::new(0.1, 0.2, 0.3)),
         }
     }
 
@@ -534,7 +534,7 @@ mod tests {
         }
         let reading = search.finish().unwrap();
         assert_eq!(reading.entry, [CatheterEntry::Bottom; 2]);
-        assert_eq!(reading.force, Some([0.1, 0.2, 0.3]));
+        assert_eq!(reading.force, Some(TipForce::new(0.1, 0.2, 0.3)));
     }
 
     #[test]

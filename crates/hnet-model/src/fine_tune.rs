@@ -13,7 +13,7 @@
 use alloc::string::String;
 use alloc::vec::Vec;
 
-use hnet_units::ImageSize;
+use hnet_units::{ImageSize, TipForce};
 
 use crate::inference::InputSizeError;
 use crate::training::LabelledPair;
@@ -70,7 +70,7 @@ pub struct TrainingPair {
     /// View B's.
     pub mask_b: Vec<u8>,
     /// The tip force label in newtons, where the pair has one (masks only otherwise).
-    pub force_n: Option<[f32; 3]>,
+    pub force_n: Option<TipForce>,
 }
 
 impl TrainingPair {

@@ -7,7 +7,7 @@
 use alloc::vec::Vec;
 
 use burn::tensor::{DataError, Device, ExecutionError, Tensor, TensorData, Transaction};
-use hnet_units::{ImageSize, View};
+use hnet_units::{ImageSize, TipForce, View};
 
 use crate::model::{HNet, HNetOutput};
 use burn::tensor::activation::sigmoid;
@@ -47,15 +47,10 @@ pub struct StereoPrediction {
     /// View B catheter probability per pixel, row-major.
     pub mask_b: Vec<f32>,
     /// Tip force `(Fx, Fy, Fz)` in newtons.
-    pub force: [f32; 3],
+    pub force: TipForce,
 }
 
 impl StereoPrediction {
-    /// Magnitude of the tip force in newtons.
-    pub fn force_magnitude(&self) -> f32 {
-        force_magnitude(self.force)
-    }
-
     /// The prediction as one buffer: view A's mask, view B's mask (row-major, `size.pixels()`
     /// values each), then `(Fx, Fy, Fz)` in newtons. How the page's WebGPU worker hands a
     /// prediction to the page (crates/hnet-gpu).
@@ -63,7 +58,7 @@ impl StereoPrediction {
         let mut values = Vec::with_capacity(self.mask_a.len() + self.mask_b.len() + 3);
         values.extend_from_slice(&self.mask_a);
         values.extend_from_slice(&self.mask_b);
-        values.extend_from_slice(&self.force);
+        values.extend_from_slice(&self.force.newtons());
         values
     }
 
@@ -80,12 +75,10 @@ impl StereoPrediction {
             size,
             mask_a: mask_a.to_vec(),
             mask_b: mask_b.to_vec(),
-            force: [force[0], force[1], force[2]],
+            force: TipForce::new(force[0], force[1], force[2]),
         })
     }
 }
-
-pub use hnet_units::force_magnitude;
 
 /// Appends an interleaved 8-bit RGB image as planar channels scaled to `[0, 1]` (the network's
 /// `[3, H, W]` input layout). The one conversion of images to network input, used by inference
@@ -154,7 +147,7 @@ fn split_predictions(
             size,
             mask_a: a.to_vec(),
             mask_b: b.to_vec(),
-            force: [f[0], f[1], f[2]],
+            force: TipForce::new(f[0], f[1], f[2]),
         })
         .collect()
 }
@@ -356,6 +349,7 @@ impl HNet {
         let force = host_values(self.force_of_features(features))
             .map_err(|e| JoinViewsError::Predict(e.into()))?;
         let force = <[f32; 3]>::try_from(&force[..])
+            .map(TipForce::from_newtons)
             .map_err(|_| JoinViewsError::ForceValues(force.len()))?;
         Ok(StereoPrediction {
             size: a.size,

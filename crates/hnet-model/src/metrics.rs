@@ -12,6 +12,7 @@
 //! A value that is undefined for the data, such as R² of a constant target, is `None` (`null` in
 //! JSON) rather than NaN.
 
+use hnet_units::TipForce;
 use hnet_units::mask::is_catheter;
 use serde::{Deserialize, Serialize};
 
@@ -109,8 +110,12 @@ impl ForceAccumulator {
     }
 
     /// Adds one stereo pair's predicted and true force `(Fx, Fy, Fz)` in newtons.
-    pub fn push(&mut self, predicted: [f32; 3], target: [f32; 3]) {
-        for (axis, (p, t)) in self.axes.iter_mut().zip(predicted.iter().zip(target)) {
+    pub fn push(&mut self, predicted: TipForce, target: TipForce) {
+        for (axis, (p, t)) in self
+            .axes
+            .iter_mut()
+            .zip(predicted.newtons().iter().zip(target.newtons()))
+        {
             axis.push(f64::from(*p), f64::from(t));
         }
     }
@@ -307,9 +312,9 @@ mod tests {
         // x: targets 1, 2, 3 and predictions 1, 2, 4 -> errors 0, 0, 1.
         // y: exact. z: targets -1, 0, 1 and predictions 0, 0, 0 -> errors 1, 0, 1.
         let mut acc = ForceAccumulator::new();
-        acc.push([1.0, 5.0, 0.0], [1.0, 5.0, -1.0]);
-        acc.push([2.0, 6.0, 0.0], [2.0, 6.0, 0.0]);
-        acc.push([4.0, 7.0, 0.0], [3.0, 7.0, 1.0]);
+        acc.push([1.0, 5.0, 0.0].into(), [1.0, 5.0, -1.0].into());
+        acc.push([2.0, 6.0, 0.0].into(), [2.0, 6.0, 0.0].into());
+        acc.push([4.0, 7.0, 0.0].into(), [3.0, 7.0, 1.0].into());
         let m = acc.finish().unwrap();
         assert_eq!(m.samples, 3);
 
@@ -341,8 +346,8 @@ mod tests {
     #[test]
     fn constant_target_gives_undefined_r2_not_nan() {
         let mut acc = ForceAccumulator::new();
-        acc.push([0.1, 0.0, 0.2], [0.2, 0.0, 0.2]);
-        acc.push([0.3, 0.0, 0.2], [0.2, 0.0, 0.2]);
+        acc.push([0.1, 0.0, 0.2].into(), [0.2, 0.0, 0.2].into());
+        acc.push([0.3, 0.0, 0.2].into(), [0.2, 0.0, 0.2].into());
         let m = acc.finish().unwrap();
         assert_eq!(m.axes[0].r2, None);
         assert_eq!(m.axes[0].r_over_range, None);

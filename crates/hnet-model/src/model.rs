@@ -19,7 +19,7 @@
 
 use alloc::vec::Vec;
 
-use hnet_units::{ImageSize, View};
+use hnet_units::{ImageSize, TipForce, View};
 use serde::{Deserialize, Serialize};
 
 use burn::config::Config;
@@ -78,9 +78,10 @@ pub struct ForceScale {
 impl ForceScale {
     /// The statistics of `forces` (N); `None` for fewer than two forces or an axis that does
     /// not vary.
-    pub fn of(forces: impl IntoIterator<Item = [f64; 3]>) -> Option<Self> {
+    pub fn of(forces: impl IntoIterator<Item = TipForce>) -> Option<Self> {
         let (mut n, mut sum, mut sum_sq) = (0usize, [0.0f64; 3], [0.0f64; 3]);
         for f in forces {
+            let f = f.to_f64();
             n += 1;
             for axis in 0..3 {
                 sum[axis] += f[axis];

@@ -13,8 +13,8 @@ use alloc::vec::Vec;
 
 use burn::tensor::activation::sigmoid;
 use burn::tensor::{Device, Tensor, TensorData, Transaction};
-use hnet_units::ImageSize;
 use hnet_units::turn::TurnError;
+use hnet_units::{ImageSize, TipForce};
 
 use crate::architectures::{ModelSpec, StereoModel};
 use crate::catheter_entry::{CatheterEntry, EntrySearch, EntrySetting, TurnedOutput, turned_pair};
@@ -96,7 +96,7 @@ pub struct PairOutput {
     pub masks: Option<[Vec<f32>; 2]>,
     /// Tip force `(Fx, Fy, Fz)`, newtons, for networks that estimate it (and, when views were
     /// turned for their catheter's entry edge, only for pairs read as they are).
-    pub force: Option<[f32; 3]>,
+    pub force: Option<TipForce>,
 }
 
 /// A pair read with its views turned for their catheter's entry edge.
@@ -255,7 +255,7 @@ impl Predictor {
                 }),
                 force: forces
                     .as_ref()
-                    .map(|f| [f[i * 3], f[i * 3 + 1], f[i * 3 + 2]]),
+                    .map(|f| TipForce::new(f[i * 3], f[i * 3 + 1], f[i * 3 + 2])),
             })
             .collect())
     }

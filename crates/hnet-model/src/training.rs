@@ -6,7 +6,7 @@
 use alloc::vec::Vec;
 
 use burn::tensor::{Device, Tensor, TensorData};
-use hnet_units::ImageSize;
+use hnet_units::{ImageSize, TipForce};
 
 use crate::architectures::{StereoInput, StereoModel, StereoOutputs};
 use crate::inference::{InputSizeError, push_mask, push_planar};
@@ -25,7 +25,7 @@ pub struct LabelledPair<'a> {
     /// View B's.
     pub mask_b: &'a [u8],
     /// The tip force label `(Fx, Fy, Fz)` in newtons; `None`: the pair trains the masks only.
-    pub force_n: Option<[f32; 3]>,
+    pub force_n: Option<TipForce>,
 }
 
 impl LabelledPair<'_> {
@@ -92,7 +92,7 @@ impl TrainingBatch {
             push_planar(pair.view_b, &mut b);
             push_mask(pair.mask_a, &mut ma);
             push_mask(pair.mask_b, &mut mb);
-            f.extend_from_slice(&pair.force_n.unwrap_or([0.0; 3]));
+            f.extend_from_slice(&pair.force_n.unwrap_or_default().newtons());
             known.push(if pair.force_n.is_some() { 1.0f32 } else { 0.0 });
         }
         let image = |data| Tensor::from_data(TensorData::new(data, [n, 3, h, w]), device);

@@ -11,7 +11,7 @@ use hnet_model::inference::{
 use hnet_model::model::ForceScale;
 use hnet_model::predictor::{PairInput, Predictor};
 use hnet_model::{HNet, HNetConfig, HNetLossConfig};
-use hnet_units::{ImageSize, View};
+use hnet_units::{ImageSize, TipForce, View};
 
 /// A small network that still has the paper's structure (two pooling levels, 8 filters).
 fn small_config() -> HNetConfig {
@@ -86,7 +86,10 @@ fn predict_gives_each_pair_its_masks_and_force() {
         assert_eq!(p.mask_a.len(), size.pixels());
         assert!(close(&p.mask_a, &mask_a[pixels.clone()]), "pair {i}");
         assert!(close(&p.mask_b, &mask_b[pixels]), "pair {i}");
-        assert!(close(&p.force, &force[3 * i..3 * i + 3]), "pair {i}");
+        assert!(
+            close(&p.force.newtons(), &force[3 * i..3 * i + 3]),
+            "pair {i}"
+        );
         // The packed form (the WebGPU worker's) gives the prediction back, and only for its size.
         let packed = p.to_packed();
         assert_eq!(
@@ -118,7 +121,7 @@ fn predict_gives_each_pair_its_masks_and_force() {
     for (p, o) in predictions.iter().zip(&outputs) {
         let [a, b] = o.masks.as_ref().unwrap();
         assert!(close(a, &p.mask_a) && close(b, &p.mask_b));
-        assert!(close(&o.force.unwrap(), &p.force));
+        assert!(close(&o.force.unwrap().newtons(), &p.force.newtons()));
     }
     let known = EntrySetting::Known([CatheterEntry::Bottom; 2]);
     let read = predictor.predict_entry(&inputs, &device, known).unwrap();
@@ -191,7 +194,10 @@ fn one_view_at_a_time_reads_the_pair_as_the_whole_network_does() {
         };
         assert!(close(&joined.mask_a, &whole.mask_a), "shared {shared}");
         assert!(close(&joined.mask_b, &whole.mask_b), "shared {shared}");
-        assert!(close(&joined.force, &whole.force), "shared {shared}");
+        assert!(
+            close(&joined.force.newtons(), &whole.force.newtons()),
+            "shared {shared}"
+        );
         // A reading of another network's shape is refused, naming both views.
         let mut short = b;
         short.pooled.pop();
@@ -386,10 +392,13 @@ fn loss_terms_are_weighted_by_the_betas() {
 #[test]
 fn a_standardised_force_head_answers_in_newtons_and_its_loss_is_standardised() {
     let device = Device::flex();
-    let scale = ForceScale::of([[0.1, -0.2, 0.0], [0.3, 0.2, 0.1], [0.2, 0.0, 0.2]]).unwrap();
-    assert!((scale.mean_n[0] - 0.2).abs() < 1e-12);
+    let scale = ForceScale::of(
+        [[0.1, -0.2, 0.0], [0.3, 0.2, 0.1], [0.2, 0.0, 0.2]].map(TipForce::from_newtons),
+    )
+    .unwrap();
+    assert!((scale.mean_n[0] - 0.2).abs() < 1e-7);
     assert!(
-        ForceScale::of([[0.1, 0.0, 0.0], [0.2, 0.0, 0.0]]).is_none(),
+        ForceScale::of([[0.1, 0.0, 0.0], [0.2, 0.0, 0.0]].map(TipForce::from_newtons)).is_none(),
         "Fy never varies"
     );
     // Same weights with and without the scale: the scaled force is mean + std · raw.
@@ -481,7 +490,7 @@ fn fine_tuning_scores_held_back_pairs_and_keeps_the_best_epoch() {
             view_b: view,
             mask_a: mask.clone(),
             mask_b: mask,
-            force_n: force,
+            force_n: force.map(TipForce::from_newtons),
         }
     };
     let pairs: Vec<TrainingPair> = (0..6)

@@ -18,7 +18,7 @@ use std::collections::BTreeMap;
 
 use burn::tensor::Device;
 use hnet_model::fine_tune::{FineTune, FineTuneSettings, TrainingPair};
-use hnet_units::{ImageSize, with_causes};
+use hnet_units::{ImageSize, TipForce, with_causes};
 use wasm_bindgen::prelude::*;
 
 thread_local! {
@@ -120,10 +120,8 @@ fn unpack(
                 view_b: view_b.to_vec(),
                 mask_a: mask_a.to_vec(),
                 mask_b: mask_b.to_vec(),
-                force_n: force
-                    .iter()
-                    .all(|f| f.is_finite())
-                    .then(|| [force[0], force[1], force[2]]),
+                force_n: Some(TipForce::new(force[0], force[1], force[2]))
+                    .filter(|f| f.is_finite()),
             }
         })
         .collect())

@@ -4,6 +4,7 @@
 
 use core::ops::{Add, AddAssign, Div, Index, Mul, Neg, Sub};
 
+use hnet_units::TipForce;
 use serde::{Deserialize, Serialize};
 
 /// A 3D vector.
@@ -81,6 +82,20 @@ impl Vec3 {
             Self::Y
         };
         self.cross(helper).normalized()
+    }
+}
+
+impl From<TipForce> for Vec3 {
+    /// A tip force as the rod's mechanics hold it, N.
+    fn from(force: TipForce) -> Self {
+        Self(force.to_f64())
+    }
+}
+
+impl From<Vec3> for TipForce {
+    /// A force the rod's mechanics found, N, rounded to the tip force's single precision.
+    fn from(force_n: Vec3) -> Self {
+        TipForce::from_f64(force_n.0)
     }
 }
 

@@ -199,7 +199,7 @@ fn a_simulated_dataset_reads_back_with_splits_masks_and_geometry() {
     assert_eq!(dataset.split(Split::Val).count(), 2);
     assert_eq!(dataset.split(Split::Test).count(), 2);
     let row = &dataset.rows[0];
-    assert!(row.force_n.iter().map(|f| f * f).sum::<f64>().sqrt() <= 0.4 + 1e-9);
+    assert!(row.force_n.magnitude() <= 0.4 + 1e-6);
     let pair = dataset.load_pair(row, None).unwrap();
     assert_eq!(pair.size, hnet_units::ImageSize::square(64));
     assert_eq!(pair.view_a.len(), 64 * 64 * 3);
@@ -313,7 +313,7 @@ fn recordings_import_into_the_same_format_with_thresholded_masks() {
         hnet_units::ImageSize::new(40, 30)
     );
     let row = dataset.rows.iter().find(|r| r.id == "frame_03").unwrap();
-    assert_eq!(row.force_n, [0.3, -0.1, 0.2]);
+    assert_eq!(row.force_n, hnet_units::TipForce::new(0.3, -0.1, 0.2));
     // The forces table does not say where its labels came from: the import's option does.
     assert_eq!(
         row.label_origin(),
@@ -426,7 +426,7 @@ mod properties {
     use hnet_twin::simulator::scene::SceneParams;
     use hnet_twin::simulator::synthetic_xray::{Anatomy, PatchLayout};
     use hnet_twin::vec3::Vec3;
-    use hnet_units::ImageSize;
+    use hnet_units::{ImageSize, TipForce};
     use proptest::prelude::*;
 
     /// A finite `f64` of any magnitude, subnormals and signed zeros included.
@@ -468,7 +468,7 @@ mod properties {
                     proptest::collection::vec(
                         (
                             split(),
-                            [finite(), finite(), finite()],
+                            tip_force(),
                             proptest::collection::vec(text(), n_extra),
                         ),
                         n,
@@ -513,6 +513,20 @@ mod properties {
                 DatasetHeader::new(ImageSize::new(width, height), samples, source)
             },
         )
+    }
+
+    /// A finite force component, N: any finite `f32` (signed zeros included) or a typical one.
+    fn newtons() -> impl Strategy<Value = f32> {
+        prop_oneof![
+            any::<f32>().prop_filter("finite", |v| v.is_finite()),
+            -1.0f32..1.0,
+            Just(0.0),
+            Just(-0.0),
+        ]
+    }
+
+    fn tip_force() -> impl Strategy<Value = TipForce> {
+        [newtons(), newtons(), newtons()].prop_map(TipForce::from_newtons)
     }
 
     fn vec3() -> impl Strategy<Value = Vec3> {
@@ -567,7 +581,7 @@ mod properties {
 
     fn sample_record() -> impl Strategy<Value = SampleRecord> {
         let scene = (
-            vec3(),
+            tip_force(),
             [finite(), finite(), finite()],
             vec3(),
             [finite(), finite(), finite()],
@@ -659,7 +673,7 @@ mod properties {
             let back = back.unwrap();
             // Bit-exact forces (a -0 stays -0).
             for (a, b) in back.iter().zip(&rows) {
-                prop_assert_eq!(a.force_n.map(f64::to_bits), b.force_n.map(f64::to_bits));
+                prop_assert_eq!(a.force_n.newtons().map(f32::to_bits), b.force_n.newtons().map(f32::to_bits));
             }
             prop_assert_eq!(back, rows);
         }
@@ -702,7 +716,7 @@ mod properties {
             let valid = b"image,FX,fy,fz,note\na.png,0.1,-0.2,0.3,x\nb.png,\"0,05\",0,0,\nc.png,1e-3,2,3,y\n";
             if let Ok(rows) = read_force_table(&mutate(valid.to_vec(), &edits), &["image", "id"]) {
                 for row in rows.into_iter().flatten() {
-                    prop_assert!(row.force_n.iter().all(|f| f.is_finite()));
+                    prop_assert!(row.force_n.is_finite());
                     prop_assert!(!row.key.is_empty());
                 }
             }
@@ -710,7 +724,7 @@ mod properties {
 
         #[test]
         fn force_tables_round_trip_exactly(
-            rows in proptest::collection::vec(("[a-zA-Z0-9_.-]{1,16}", [finite(), finite(), finite()]), 0..16)
+            rows in proptest::collection::vec(("[a-zA-Z0-9_.-]{1,16}", [newtons(), newtons(), newtons()]), 0..16)
         ) {
             let mut csv = String::from("id,fx,fy,fz\n");
             for (key, [x, y, z]) in &rows {
@@ -722,14 +736,14 @@ mod properties {
                 let read = read.unwrap();
                 prop_assert_eq!(&read.key, key);
                 prop_assert_eq!(read.line, line as u64 + 2);
-                prop_assert_eq!(read.force_n.map(f64::to_bits), force.map(f64::to_bits));
+                prop_assert_eq!(read.force_n.newtons().map(f32::to_bits), force.map(f32::to_bits));
             }
         }
 
         #[test]
-        fn newtons_parse_exactly_or_not_at_all(value in finite(), text in "\\PC{0,24}") {
-            prop_assert_eq!(parse_newtons(&value.to_string()).map(f64::to_bits), Some(value.to_bits()));
-            prop_assert_eq!(parse_newtons(&format!(" {value} ")).map(f64::to_bits), Some(value.to_bits()));
+        fn newtons_parse_exactly_or_not_at_all(value in newtons(), text in "\\PC{0,24}") {
+            prop_assert_eq!(parse_newtons(&value.to_string()).map(f32::to_bits), Some(value.to_bits()));
+            prop_assert_eq!(parse_newtons(&format!(" {value} ")).map(f32::to_bits), Some(value.to_bits()));
             if let Some(v) = parse_newtons(&text) {
                 prop_assert!(v.is_finite());
             }

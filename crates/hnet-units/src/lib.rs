@@ -14,15 +14,18 @@
 //! `#[serde(deserialize_with = "hnet_units::width_height_or_named")]`, and fields that held a
 //! square's bare side with [`side_or_named`].
 //!
-//! [`mask`] holds the mask threshold: which pixels of a mask are catheter; [`turn`] the quarter
+//! [`TipForce`] is the tip force in newtons. [`mask`] holds the mask threshold: which pixels of a mask are catheter; [`turn`] the quarter
 //! turns of a square image's pixels.
 use core::fmt;
 
 use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
 use serde::{Deserialize, Serialize};
 
+mod force;
 pub mod mask;
 pub mod turn;
+
+pub use force::TipForce;
 
 /// The largest image side accepted, pixels: the page's uploads, and the CLI's training image
 /// size (every pair is resized to it, so a larger one would only exhaust memory).
@@ -44,12 +47,6 @@ pub fn with_causes(error: &dyn core::error::Error) -> String {
         cause = e.source();
     }
     text
-}
-
-/// Magnitude of a tip force `(Fx, Fy, Fz)` in newtons: the one formula of the CLI, the DICOM
-/// force trace and the page.
-pub fn force_magnitude(force_n: [f32; 3]) -> f32 {
-    force_n.iter().map(|f| f * f).sum::<f32>().sqrt()
 }
 
 /// One of the two simultaneous views of a biplane pair: what the page labels, the network reads

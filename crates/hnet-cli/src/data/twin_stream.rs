@@ -309,7 +309,7 @@ impl TwinStream {
         let force = sample.params.tip_force_n;
         Ok(StereoItem::new(
             pair,
-            force.0,
+            force,
             !off_bench,
             format!("stream-{}-{index}", self.config.seed),
         ))
@@ -519,7 +519,7 @@ mod tests {
                 let s = SquareSymmetry::nth(k);
                 let c = StereoItem::new(
                     unturned(&p.view_b, &p.mask_b).with_symmetries([s; 2]),
-                    [0.0; 3],
+                    hnet_units::TipForce::ZERO,
                     false,
                     String::new(),
                 );

@@ -7,7 +7,7 @@ use std::path::Path;
 use anyhow::Context;
 use hnet_model::metrics::{AXES, AxisMetrics, PixelOutcome};
 use hnet_twin::dataset::{ImageRef, encode_png};
-use hnet_units::ImageSize;
+use hnet_units::{ImageSize, TipForce};
 use serde::{Deserialize, Serialize};
 
 use super::Evaluation;
@@ -20,13 +20,13 @@ pub struct PairPrediction {
     /// The pair's id.
     pub id: String,
     /// True force (N).
-    pub truth: [f32; 3],
+    pub truth: TipForce,
     /// Predicted force (N), when the network estimates it.
-    pub predicted: Option<[f32; 3]>,
+    pub predicted: Option<TipForce>,
     /// The physics estimate from the network's own masks (the twin's rod fitted to the catheter
     /// they show, N), when the physics check ran and the pair could be fitted.
     #[serde(default)]
-    pub physics: Option<[f32; 3]>,
+    pub physics: Option<TipForce>,
     /// Its fit's standard error per axis, N (a relative measure; see
     /// `hnet_twin::reconstruction::rod_fit::RodFit::force_sd_n`).
     #[serde(default)]
@@ -34,7 +34,7 @@ pub struct PairPrediction {
     /// The network's force combined with the physics estimate, N, when a combination was
     /// calibrated.
     #[serde(default)]
-    pub combined: Option<[f32; 3]>,
+    pub combined: Option<TipForce>,
     /// The combined estimate's standard error per axis, N.
     #[serde(default)]
     pub combined_sd: Option<[f32; 3]>,
@@ -64,15 +64,15 @@ pub fn predictions_csv(predictions: &[PairPrediction], estimator: &str) -> Strin
         v.map_or_else(|| ",,".to_string(), |[x, y, z]| format!("{x},{y},{z}"))
     };
     for p in predictions {
-        let [tx, ty, tz] = p.truth;
+        let [tx, ty, tz] = p.truth.newtons();
         let _ = writeln!(
             csv,
             "{},{tx},{ty},{tz},{},{},{},{},{},{},{},{estimator}",
             p.id,
-            triple(p.predicted),
-            triple(p.physics),
+            triple(p.predicted.map(TipForce::newtons)),
+            triple(p.physics.map(TipForce::newtons)),
             triple(p.physics_sd),
-            triple(p.combined),
+            triple(p.combined.map(TipForce::newtons)),
             triple(p.combined_sd),
             triple(p.combined_90),
             p.catheter_iou

@@ -8,6 +8,7 @@ use hnet_twin::dataset::{Dataset, Split};
 use hnet_twin::reconstruction::MaskOrigin;
 use hnet_twin::reconstruction::centreline::Mask;
 use hnet_twin::reconstruction::physics_force::{ForceCombination, MIN_CALIBRATION_PAIRS};
+use hnet_units::TipForce;
 
 use crate::data::{StereoItem, StereoSplit};
 use crate::network::predict;
@@ -60,7 +61,7 @@ pub(super) fn calibrate_combination(
     // The force head's own interval is for pairs without a physics estimate: measured on every
     // calibration pair with a network force, fitted or not.
     if let Some(c) = combination.as_mut() {
-        let heads: Vec<([f32; 3], [f32; 3])> = to_check
+        let heads: Vec<(TipForce, TipForce)> = to_check
             .iter()
             .filter_map(|p| Some((p.truth_n, p.network_n?)))
             .collect();

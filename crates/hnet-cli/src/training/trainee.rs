@@ -13,6 +13,7 @@ use hnet_model::architectures::{ModelSpec, StereoInput, StereoModel};
 use hnet_model::inference::host_values;
 use hnet_model::metrics::{ForceAccumulator, SegmentationAccumulator};
 use hnet_model::training::{StepLoss, step_loss};
+use hnet_units::TipForce;
 
 use super::metrics::{StepInput, StepSummary};
 use hnet_model::training::TrainingBatch;
@@ -111,7 +112,10 @@ impl StereoStepOutput {
                         let mut acc = ForceAccumulator::new();
                         let labelled = p.chunks_exact(3).zip(t.chunks_exact(3)).zip(known);
                         for ((p, t), _) in labelled.filter(|(_, k)| *k > 0.5) {
-                            acc.push([p[0], p[1], p[2]], [t[0], t[1], t[2]]);
+                            acc.push(
+                                TipForce::new(p[0], p[1], p[2]),
+                                TipForce::new(t[0], t[1], t[2]),
+                            );
                         }
                         acc.finish().map(|m| m.overall.mae)
                     }

@@ -6,7 +6,7 @@ use alloc::vec::Vec;
 use burn::module::Module;
 use burn::optim::{GradientsParams, ModuleOptimizer};
 use burn::tensor::Device;
-use hnet_units::ImageSize;
+use hnet_units::{ImageSize, TipForce};
 
 use super::{
     EpochReport, FineTuneError, FineTuneSettings, FinishReason, HeldBackScores, TrainingPair,
@@ -299,7 +299,7 @@ fn score(
         }
         if let (Some(estimate), Some(label)) = (step.outputs.force, pair.force_n) {
             let f = host_values(estimate).map_err(readback)?;
-            force.push([f[0], f[1], f[2]], label);
+            force.push(TipForce::new(f[0], f[1], f[2]), label);
         }
     }
     Ok(HeldBackScores {

@@ -91,7 +91,7 @@ mod tests {
             let row = ManifestRow {
                 id: format!("pair-{i}"),
                 split,
-                force_n: [0.1, 0.0, -0.2],
+                force_n: hnet_units::TipForce::new(0.1, 0.0, -0.2),
                 extra: vec![("source".into(), "test".into())],
             };
             let rgb = ImageRef {

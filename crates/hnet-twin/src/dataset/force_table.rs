@@ -6,6 +6,8 @@
 
 use std::sync::Arc;
 
+use hnet_units::TipForce;
+
 use crate::dataset::label_origin::LabelOrigin;
 
 /// The force columns, in the order of the force's components.
@@ -19,7 +21,7 @@ pub struct ForceRow {
     /// Its key: the pair's id or the image's name.
     pub key: String,
     /// Tip force `(Fx, Fy, Fz)`, newtons.
-    pub force_n: [f64; 3],
+    pub force_n: TipForce,
     /// Where it came from, when the table says ([`crate::dataset::label_origin::ORIGIN_COLUMN`]);
     /// [`LabelOrigin::Unrecorded`] otherwise.
     pub origin: LabelOrigin,
@@ -125,7 +127,7 @@ pub fn read_force_table(
                 Ok(ForceRow {
                     line,
                     key: key.to_string(),
-                    force_n,
+                    force_n: TipForce::from_newtons(force_n),
                     origin,
                 })
             });
@@ -136,14 +138,14 @@ pub fn read_force_table(
 
 /// A force component as people write it: a finite number (`nan` and `inf` are refused), with
 /// a point or a comma as the decimal separator (a comma only inside a quoted CSV field).
-pub fn parse_newtons(text: &str) -> Option<f64> {
+pub fn parse_newtons(text: &str) -> Option<f32> {
     let text = text.trim();
     let text = if text.contains(',') && !text.contains('.') {
         std::borrow::Cow::Owned(text.replacen(',', ".", 1))
     } else {
         std::borrow::Cow::Borrowed(text)
     };
-    text.parse::<f64>().ok().filter(|v| v.is_finite())
+    text.parse::<f32>().ok().filter(|v| v.is_finite())
 }
 
 #[cfg(test)]
@@ -163,7 +165,7 @@ mod tests {
             vec![ForceRow {
                 line: 2,
                 key: "a.png".into(),
-                force_n: [0.1, -0.2, 0.3],
+                force_n: TipForce::new(0.1, -0.2, 0.3),
                 origin: LabelOrigin::Unrecorded,
             }]
         );

@@ -29,8 +29,8 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use hnet_units::ImageSize;
 use hnet_units::turn::{TurnError, turn_clockwise};
+use hnet_units::{ImageSize, TipForce};
 use serde::{Deserialize, Serialize};
 
 use crate::dataset::label_origin::{LabelOrigin, UnknownOrigin};
@@ -153,11 +153,11 @@ pub fn next_split(counts: [usize; 3]) -> Split {
 /// Above this magnitude (newtons) a tip-force label is implausible for a cardiac catheter: the
 /// twin draws contact forces up to 0.4 N and ablation needs 0.1-0.3 N (the paper), so a larger
 /// value is most likely a typo or a value in other units (grams-force, millinewtons).
-pub const PLAUSIBLE_TIP_FORCE_MAX_N: f64 = 1.0;
+pub const PLAUSIBLE_TIP_FORCE_MAX_N: f32 = 1.0;
 
 /// Why a tip-force label `(Fx, Fy, Fz)` in newtons is implausible, or `None` when it is not.
-pub fn implausible_tip_force(force_n: [f64; 3]) -> Option<String> {
-    let magnitude = force_n.iter().map(|f| f * f).sum::<f64>().sqrt();
+pub fn implausible_tip_force(force: TipForce) -> Option<String> {
+    let magnitude = force.magnitude();
     (magnitude > PLAUSIBLE_TIP_FORCE_MAX_N).then(|| {
         format!(
             "|F| = {magnitude:.3} N is far above a catheter tip's contact forces (at most \
@@ -175,7 +175,7 @@ pub struct ManifestRow {
     /// Its split.
     pub split: Split,
     /// Tip force `(Fx, Fy, Fz)` in newtons.
-    pub force_n: [f64; 3],
+    pub force_n: TipForce,
     /// Further columns (the pair's parameters), in column order.
     pub extra: Vec<(String, String)>,
 }
@@ -294,7 +294,7 @@ pub fn manifest_csv(rows: &[ManifestRow]) -> Vec<u8> {
         out.push_str(&csv_field(&row.id));
         out.push(',');
         out.push_str(row.split.name());
-        for f in row.force_n {
+        for f in row.force_n.newtons() {
             out.push(',');
             out.push_str(&f.to_string());
         }
@@ -362,7 +362,7 @@ pub fn parse_manifest(bytes: &[u8], path: &Path) -> Result<Vec<ManifestRow>, Dat
             let text = record.get(col).unwrap_or_default();
             *value = text
                 .trim()
-                .parse::<f64>()
+                .parse::<f32>()
                 .ok()
                 .filter(|v| v.is_finite())
                 .ok_or_else(|| {
@@ -389,7 +389,7 @@ pub fn parse_manifest(bytes: &[u8], path: &Path) -> Result<Vec<ManifestRow>, Dat
         let row = ManifestRow {
             id: row_id,
             split,
-            force_n,
+            force_n: TipForce::from_newtons(force_n),
             extra,
         };
         if let Err(e) = row.label_origin() {
@@ -561,7 +561,7 @@ mod tests {
         ManifestRow {
             id: id.into(),
             split,
-            force_n: [0.1, -0.25, 1e-3],
+            force_n: TipForce::new(0.1, -0.25, 1e-3),
             extra: vec![("note".into(), "a, \"quoted\" value".into())],
         }
     }
@@ -620,9 +620,9 @@ mod tests {
 
     #[test]
     fn implausible_force_labels_are_named() {
-        assert_eq!(implausible_tip_force([0.3, -0.2, 0.1]), None);
-        assert_eq!(implausible_tip_force([0.0, 0.0, -1.0]), None);
-        let why = implausible_tip_force([5.0, 0.0, 0.0]).unwrap();
+        assert_eq!(implausible_tip_force(TipForce::new(0.3, -0.2, 0.1)), None);
+        assert_eq!(implausible_tip_force(TipForce::new(0.0, 0.0, -1.0)), None);
+        let why = implausible_tip_force(TipForce::new(5.0, 0.0, 0.0)).unwrap();
         assert!(why.starts_with("|F| = 5.000 N is far above"), "{why}");
     }
 

@@ -45,9 +45,12 @@ pub fn manifest_row(sample: &StereoSample, split: Split) -> ManifestRow {
     ManifestRow {
         id: sample_id(sample.index),
         split,
-        force_n: p.tip_force_n.0,
+        force_n: p.tip_force_n,
         extra: vec![
-            ("force_magnitude_n".into(), number(p.tip_force_n.norm())),
+            (
+                "force_magnitude_n".into(),
+                number(Vec3::from(p.tip_force_n).norm()),
+            ),
             (
                 "bending_stiffness_n_m2".into(),
                 number(p.bending_stiffness_n_m2),

@@ -3,6 +3,7 @@
 //! ([`crate::reconstruction::centreline`]), their epipolar matching and triangulation
 //! ([`crate::reconstruction::epipolar`]), and the twin's rod fitted to the result ([`crate::reconstruction::rod_fit`]).
 
+use hnet_units::TipForce;
 use serde::{Deserialize, Serialize};
 
 use crate::reconstruction::catalogue::CatalogueCatheter;
@@ -286,7 +287,7 @@ impl EstimateKind {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TipForceEstimate {
     /// `(Fx, Fy, Fz)`, N.
-    pub force_n: [f32; 3],
+    pub force_n: TipForce,
     /// Half the width of the 90 % interval per axis, N: the true force lies within
     /// `force_n ± interval_90_n` on each axis for 90 % of pairs like the calibration pairs.
     /// `None` for weights that carry no calibration ([`TipForceEstimate::uncalibrated`]).
@@ -297,7 +298,7 @@ pub struct TipForceEstimate {
 
 impl TipForceEstimate {
     /// The network's force `force_n` (N) from weights that carry no calibration: no interval.
-    pub fn uncalibrated(force_n: [f32; 3]) -> Self {
+    pub fn uncalibrated(force_n: TipForce) -> Self {
         Self {
             force_n,
             interval_90_n: None,
@@ -313,7 +314,7 @@ impl TipForceEstimate {
         let interval = self.interval_90_n?;
         let mut low = 0.0f32;
         let mut high = 0.0f32;
-        for (f, h) in self.force_n.iter().zip(interval) {
+        for (f, h) in self.force_n.newtons().iter().zip(interval) {
             let (a, b) = (f - h, f + h);
             let nearest = if a <= 0.0 && b >= 0.0 {
                 0.0
@@ -336,11 +337,11 @@ fn normal_interval_90() -> [f32; 3] {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CalibrationPair {
     /// True tip force, N.
-    pub truth_n: [f32; 3],
+    pub truth_n: TipForce,
     /// The network's estimate, N.
-    pub network_n: [f32; 3],
+    pub network_n: TipForce,
     /// The physics estimate from the network's masks, N.
-    pub physics_n: [f32; 3],
+    pub physics_n: TipForce,
     /// Its fit's standard error per axis, N.
     pub physics_sd_n: [f32; 3],
 }
@@ -383,7 +384,7 @@ impl ForceCombination {
             interval_90_sd: normal_interval_90(),
             network_interval_90_n: None,
         };
-        let both: Vec<([f32; 3], [f32; 3])> =
+        let both: Vec<(TipForce, TipForce)> =
             pairs.iter().map(|p| (p.truth_n, p.network_n)).collect();
         combination.calibrate_head_interval(&both);
         // Split-conformal: the calibration pairs' normalised errors of the combined estimate.
@@ -411,7 +412,7 @@ impl ForceCombination {
     /// (true force, the network's), N. [`Self::calibrate`] measures it on its pairs, which the rod
     /// fitted; the interval is for pairs without a physics estimate, so `hnet eval` measures it
     /// again on every calibration pair with a network force, fitted or not.
-    pub fn calibrate_head_interval(&mut self, pairs: &[([f32; 3], [f32; 3])]) {
+    pub fn calibrate_head_interval(&mut self, pairs: &[(TipForce, TipForce)]) {
         let mut scores: [Vec<f64>; 3] = std::array::from_fn(|axis| {
             pairs
                 .iter()
@@ -442,8 +443,8 @@ impl ForceCombination {
     /// error); each with its 90 % interval. The one rule of `hnet trace` and the page.
     pub fn estimate(
         &self,
-        network_n: [f32; 3],
-        physics: Option<([f32; 3], Option<[f32; 3]>)>,
+        network_n: TipForce,
+        physics: Option<(TipForce, Option<[f32; 3]>)>,
     ) -> TipForceEstimate {
         match physics {
             Some((physics_n, Some(physics_sd_n))) => {
@@ -473,10 +474,10 @@ impl ForceCombination {
     /// same.
     pub fn combine(
         &self,
-        network_n: [f32; 3],
-        physics_n: [f32; 3],
+        network_n: TipForce,
+        physics_n: TipForce,
         physics_sd_n: Option<[f32; 3]>,
-    ) -> [f32; 3] {
+    ) -> TipForce {
         self.combine_with_sd(network_n, physics_n, physics_sd_n).0
     }
 
@@ -485,10 +486,10 @@ impl ForceCombination {
     /// [`Self::interval_90_sd`] of them either side, [`Self::interval_90_n`]).
     pub fn combine_with_sd(
         &self,
-        network_n: [f32; 3],
-        physics_n: [f32; 3],
+        network_n: TipForce,
+        physics_n: TipForce,
         physics_sd_n: Option<[f32; 3]>,
-    ) -> ([f32; 3], [f32; 3]) {
+    ) -> (TipForce, [f32; 3]) {
         let mut sd = [0.0f32; 3];
         let force = std::array::from_fn(|axis| {
             let network_var = f64::from(self.network_error_n[axis]).powi(2);
@@ -509,7 +510,7 @@ impl ForceCombination {
             };
             (w * f64::from(physics_n[axis]) + (1.0 - w) * f64::from(network_n[axis])) as f32
         });
-        (force, sd)
+        (TipForce::from_newtons(force), sd)
     }
 }
 
@@ -550,7 +551,7 @@ mod tests {
             0.02 * (std::f64::consts::PI * (u - 0.5)).tan().clamp(-20.0, 20.0)
         };
         let mut pair = || {
-            let truth_n = [0.1f32, -0.05, -0.2];
+            let truth_n = TipForce::new(0.1, -0.05, -0.2);
             CalibrationPair {
                 truth_n,
                 network_n: truth_n.map(|t| t + heavy() as f32),
@@ -593,7 +594,7 @@ mod tests {
         let pairs: Vec<CalibrationPair> = (0..20)
             .map(|i| {
                 let sign = if i % 2 == 0 { 1.0 } else { -1.0 };
-                let truth_n = [0.1 * i as f32 / 20.0, -0.05, -0.2];
+                let truth_n = TipForce::new(0.1 * i as f32 / 20.0, -0.05, -0.2);
                 CalibrationPair {
                     truth_n,
                     network_n: truth_n.map(|t| t + 0.06 * sign),
@@ -609,30 +610,31 @@ mod tests {
         }
         assert!((c.physics_sd_scale - 3.0).abs() < 1e-4, "{c:?}");
         // Variances 0.0036 and 0.0009: the physics estimate weighs 0.8.
-        let combined = c.combine([0.1; 3], [0.0; 3], Some([0.01; 3]));
-        for v in combined {
+        let (network, physics) = (TipForce::new(0.1, 0.1, 0.1), TipForce::ZERO);
+        let combined = c.combine(network, physics, Some([0.01; 3]));
+        for v in combined.newtons() {
             assert!((v - 0.02).abs() < 1e-6, "{combined:?}");
         }
         // A fit whose shape says little about an axis leaves it to the network.
-        let vague = c.combine([0.1; 3], [0.0; 3], Some([0.01, 0.01, 1.0]));
+        let vague = c.combine(network, physics, Some([0.01, 0.01, 1.0]));
         assert!(vague[2] > 0.099, "{vague:?}");
         // Without a standard error, both weigh the same.
-        assert_eq!(c.combine([0.1; 3], [0.0; 3], None), [0.05; 3]);
+        assert_eq!(c.combine(network, physics, None), network.map(|f| f / 2.0));
         assert_eq!(ForceCombination::calibrate(&pairs[..9]), None);
         // Without a physics estimate, the network's force with its own interval; with one, the
         // combination with the combined interval.
-        let alone = c.estimate([0.3, 0.0, 0.0], None);
+        let alone = c.estimate(TipForce::new(0.3, 0.0, 0.0), None);
         assert_eq!(alone.kind, EstimateKind::Head);
-        assert_eq!(alone.force_n, [0.3, 0.0, 0.0]);
+        assert_eq!(alone.force_n, TipForce::new(0.3, 0.0, 0.0));
         let head = alone.interval_90_n.unwrap();
         assert!(head.iter().all(|h| (h - 0.06).abs() < 1e-6));
-        let both = c.estimate([0.1; 3], Some(([0.0; 3], Some([0.01; 3]))));
+        let both = c.estimate(network, Some((physics, Some([0.01; 3]))));
         assert_eq!(both.kind, EstimateKind::Combined);
         assert!(both.interval_90_n.unwrap()[0] < head[0]);
         // A fit without a standard error is not combined: the intervals were not calibrated
         // for it.
         assert_eq!(
-            c.estimate([0.1; 3], Some(([0.0; 3], None))).kind,
+            c.estimate(network, Some((physics, None))).kind,
             EstimateKind::Head
         );
         // An older combination without the network's measured interval reads a normal's.
@@ -643,7 +645,7 @@ mod tests {
         assert!((older.head_interval_90_n()[0] - 0.06 * 1.644_853_6).abs() < 1e-6);
         // |F| over the box of the intervals.
         let estimate = TipForceEstimate {
-            force_n: [0.3, 0.0, 0.0],
+            force_n: TipForce::new(0.3, 0.0, 0.0),
             interval_90_n: Some([0.1; 3]),
             kind: EstimateKind::Head,
         };
@@ -651,7 +653,7 @@ mod tests {
         assert!((low - 0.2).abs() < 1e-6, "{low}");
         assert!((high - (0.16f32 + 0.02).sqrt()).abs() < 1e-6, "{high}");
         assert_eq!(
-            TipForceEstimate::uncalibrated([0.1; 3]).magnitude_range_n(),
+            TipForceEstimate::uncalibrated(network).magnitude_range_n(),
             None
         );
     }
@@ -670,7 +672,7 @@ mod tests {
         );
         let mask = |i: usize| Mask::coverage8(128, 128, &sample.views[i].mask);
         let estimate = physics_estimate([mask(0), mask(1)], &setup).unwrap();
-        let error = (estimate.fit.force_n - sample.params.tip_force_n).norm();
+        let error = (estimate.fit.force_n - sample.params.tip_force_n).magnitude();
         assert!(error < 0.03, "force off by {error} N");
 
         let empty = vec![0u8; 128 * 128];

@@ -49,6 +49,7 @@
 
 use std::cell::{Cell, RefCell};
 
+use hnet_units::TipForce;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 use serde::{Deserialize, Serialize};
@@ -129,8 +130,9 @@ pub struct BasePrior {
     pub correlated_points: f64,
 }
 
-/// Consecutive centreline points (about a pixel apart) whose errors count as one by default in a
-/// [`BasePrior`]: a mask's error along the catheter is smooth over several pixels.
+/// Consecutive centreline points (1 mm apart: [`crate::reconstruction::epipolar::ReconstructionSettings::spacing_mm`])
+/// whose errors count as one by default in a [`BasePrior`]: a mask's error along the catheter is
+/// smooth over several points.
 pub const PRIOR_CORRELATED_POINTS: f64 = 8.0;
 
 fn pushing_only_default() -> bool {
@@ -166,7 +168,7 @@ impl Default for RodFitSettings {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RodFit {
     /// The tip force, N (world frame).
-    pub force_n: Vec3,
+    pub force_n: TipForce,
     /// The base: the given one, moved and turned if those were fitted.
     pub base: RodBase,
     /// Bending stiffness EI of the fitted rod, N·mm².
@@ -187,7 +189,7 @@ pub struct RodFit {
     /// Jacobian and residual at the solution: `sqrt(diag(s² (JᵀJ)⁻¹))`, with the other fitted
     /// unknowns (base pose, stiffness) marginalised. `None` when the force was not fitted or
     /// `JᵀJ` is singular.
-    pub force_sd_n: Option<Vec3>,
+    pub force_sd_n: Option<[f32; 3]>,
 }
 
 /// Why no force was fitted.
@@ -450,7 +452,7 @@ pub fn fit_rod(
     let (rms_mm, max_mm) = rms_of(&shape);
     let force_sd_n = problem.force_standard_error();
     Ok(RodFit {
-        force_n: model.force,
+        force_n: model.force.into(),
         base: model.base,
         bending_stiffness_n_mm2: model.config.bending_stiffness_n_mm2(),
         tip_distance_mm: problem.tip.map(|tip| (tip - shape.tip_mm()).norm()),
@@ -493,7 +495,7 @@ mod tests {
     fn bench_rod(index: u64) -> (SceneParams, RodConfig, RodBase, RodShape) {
         let params = SceneSampling::bench().sample(&mut sample_rng(3, index));
         let (config, base) = params.rod(&RodConfig::default());
-        let shape = rod::solve(&config, &base, params.tip_force_n).unwrap();
+        let shape = rod::solve(&config, &base, params.tip_force_n.into()).unwrap();
         (params, config, base, shape)
     }
 
@@ -549,11 +551,15 @@ mod tests {
             fit_rod(&config, &base, &points, true, &settings).unwrap()
         };
         let fit = fit_with(false);
-        assert!((fit.force_n - pull).max_abs() < 1e-3, "{:?}", fit.force_n);
+        assert!(
+            (fit.force_n - pull.into()).max_abs() < 1e-3,
+            "{:?}",
+            fit.force_n
+        );
         let sd = fit.force_sd_n.unwrap();
-        assert!(sd.0.iter().all(|v| (0.0..1e-3).contains(v)), "{sd:?}");
+        assert!(sd.iter().all(|v| (0.0..1e-3).contains(v)), "{sd:?}");
         let held = fit_with(true);
-        let along = held.force_n.dot(axis);
+        let along = Vec3::from(held.force_n).dot(axis);
         assert!(
             (0.0..0.002).contains(&along),
             "{:?}: {along} N along",
@@ -623,7 +629,7 @@ mod tests {
             &points,
             true,
             &RodFitSettings {
-                initial_force_n: params.tip_force_n,
+                initial_force_n: params.tip_force_n.into(),
                 fit_force: false,
                 fit_stiffness: true,
                 ..RodFitSettings::default()
@@ -922,7 +928,7 @@ mod tests {
             if r.tip_seen {
                 tip_errors.push(tip);
             }
-            let f = sample.params.tip_force_n;
+            let f = Vec3::from(sample.params.tip_force_n);
             match fit {
                 Ok(fit) => {
                     println!(
@@ -942,7 +948,7 @@ mod tests {
                         f[2]
                     );
                     truth.push(f);
-                    fitted.push(fit.force_n);
+                    fitted.push(Vec3::from(fit.force_n));
                     fit_rms.push(fit.rms_mm);
                 }
                 Err(e) => failures.push(format!("{index}: {e}")),

@@ -4,6 +4,7 @@
 //! Every random choice of sample `index` comes from its own generator seeded by `(seed, index)`,
 //! so samples can be generated in any order or in parallel and still be identical.
 
+use hnet_units::TipForce;
 use rand::{Rng, RngExt};
 use serde::{Deserialize, Serialize};
 
@@ -254,7 +255,7 @@ impl SceneSampling {
     /// base pointing cranially, the roll at the middle of its range (see [`Self::nominal_base`]).
     pub fn nominal_scene(&self) -> SceneParams {
         let mut scene = SceneParams {
-            tip_force_n: Vec3::ZERO,
+            tip_force_n: TipForce::ZERO,
             bending_stiffness_n_m2: self.bending_stiffness_n_m2[0],
             length_mm: self.length_mm[0],
             precurvature_per_mm: self.precurvature_per_mm[0],
@@ -302,7 +303,7 @@ pub struct NominalBase {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SceneParams {
     /// Tip force `(Fx, Fy, Fz)`, N (x: patient left, y: anterior, z: cranial).
-    pub tip_force_n: Vec3,
+    pub tip_force_n: TipForce,
     /// Bending stiffness EI, N·m².
     pub bending_stiffness_n_m2: f64,
     /// Flexible length, mm.
@@ -474,7 +475,8 @@ impl SceneSampling {
             }
         };
         let mut departures = Vec::new();
-        let force = scene.tip_force_n.norm();
+        let tip_force = Vec3::from(scene.tip_force_n);
+        let force = tip_force.norm();
         if outside(force, self.force_magnitude_n) {
             departures.push(format!(
                 "|F| {force:.2} N (trained on {})",
@@ -483,7 +485,7 @@ impl SceneSampling {
         }
         if force > 1e-9 {
             let axis = scene.base_frame().column(2);
-            let angle = (-scene.tip_force_n.dot(axis) / force)
+            let angle = (-tip_force.dot(axis) / force)
                 .clamp(-1.0, 1.0)
                 .acos()
                 .to_degrees();
@@ -584,7 +586,7 @@ impl SceneSampling {
         let base_azimuth_deg = 360.0 * rng.random::<f64>();
         let base_roll_deg = uniform(rng, self.base_roll_deg);
         let mut params = SceneParams {
-            tip_force_n: Vec3::ZERO,
+            tip_force_n: TipForce::ZERO,
             bending_stiffness_n_m2: uniform(rng, self.bending_stiffness_n_m2),
             length_mm: uniform(rng, self.length_mm),
             precurvature_per_mm: uniform(rng, self.precurvature_per_mm),
@@ -615,7 +617,7 @@ impl SceneSampling {
         let e1 = axis.any_perpendicular();
         let e2 = axis.cross(e1);
         let direction = -axis * cos_theta + (e1 * phi.cos() + e2 * phi.sin()) * sin_theta;
-        params.tip_force_n = direction * uniform(rng, self.force_magnitude_n);
+        params.tip_force_n = (direction * uniform(rng, self.force_magnitude_n)).into();
         // A wall whose normal lies within the friction cone about the force (Coulomb: the
         // tangential part at most μ times the normal part), drawn only for such sets so that
         // the others keep their draws.
@@ -762,7 +764,7 @@ mod tests {
         let pasted = generate(&config, &backgrounds, 5, 1).unwrap();
         let contact = pasted.params.plate.expect("the force comes from the plate");
         assert_ne!(contact.state, sensor_plate::ContactState::Free);
-        assert!(pasted.params.tip_force_n.norm() > 0.0);
+        assert!(pasted.params.tip_force_n.magnitude() > 0.0);
         config.mask = MaskRecipe::Geometry;
         let exact = generate(&config, &backgrounds, 5, 1).unwrap();
         assert_eq!(pasted.params, exact.params);
@@ -810,11 +812,13 @@ mod tests {
             let mut rng = sample_rng(1, 0);
             for _ in 0..500 {
                 let p = sampling.sample(&mut rng);
-                let f = p.tip_force_n.norm();
+                let f = Vec3::from(p.tip_force_n).norm();
                 assert!(f <= 0.4 + 1e-12);
                 let axis = p.base_frame().column(2);
                 if f > 1e-9 {
-                    let angle = (-p.tip_force_n.dot(axis) / f).acos().to_degrees();
+                    let angle = (-Vec3::from(p.tip_force_n).dot(axis) / f)
+                        .acos()
+                        .to_degrees();
                     assert!(angle <= 80.0 + 1e-9, "{angle}");
                 }
                 assert!(p.base_tilt_deg <= tilt + 1e-9);
@@ -839,7 +843,7 @@ mod tests {
         }
         let bench = SceneSampling::bench();
         let mut scene = bench.sample(&mut rng);
-        scene.tip_force_n = Vec3::new(0.6, 0.0, 0.3);
+        scene.tip_force_n = TipForce::new(0.6, 0.0, 0.3);
         scene.bending_stiffness_n_m2 = 0.3e-3;
         let departures = bench.departures(&scene);
         assert_eq!(departures.len(), 3, "{departures:?}");
@@ -871,7 +875,7 @@ mod tests {
         }
         let distinct =
             |f: fn(&SceneParams) -> f64| draws.windows(2).filter(|w| f(&w[0]) != f(&w[1])).count();
-        assert_eq!(distinct(|p| p.tip_force_n.0[0]), 99);
+        assert_eq!(distinct(|p| f64::from(p.tip_force_n.x())), 99);
         assert_eq!(
             SceneSampling::preset("varied"),
             Some(SceneSampling::varied())
@@ -969,7 +973,7 @@ mod tests {
         );
         assert_eq!(touching.params.tip_force_n, plain.params.tip_force_n);
         let wall = touching.params.wall_normal.unwrap();
-        let force = touching.params.tip_force_n.normalized();
+        let force = Vec3::from(touching.params.tip_force_n).normalized();
         assert!(wall.dot(force).clamp(-1.0, 1.0).acos() <= 0.3f64.atan() + 1e-9);
         assert!((touching.shape.tip_mm() - plain.shape.tip_mm()).norm() > 1e-4);
         // Settings that cannot be are refused by name.

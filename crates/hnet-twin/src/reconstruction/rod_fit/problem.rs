@@ -254,9 +254,9 @@ impl Problem<'_> {
     /// (and the tip's) rows, with `s²` their residual variance per degree of freedom (residuals
     /// and Jacobian are scaled by `1/√n` here, which cancels). The contact constraint's row is
     /// left out: this is what the shape says about the force. Points along a centreline are not
-    /// independent (they are 1 px apart and their errors are smooth), so it is a relative
+    /// independent (they are 1 mm apart and their errors are smooth), so it is a relative
     /// measure; [`crate::reconstruction::physics_force::ForceCombination`] scales it on calibration pairs.
-    pub(super) fn force_standard_error(&self) -> Option<Vec3> {
+    pub(super) fn force_standard_error(&self) -> Option<[f32; 3]> {
         let at = self.layout.force?;
         let shape_rows = self.shape_rows();
         let r = self
@@ -274,7 +274,7 @@ impl Problem<'_> {
         let s2 = r.norm_squared() / dof as f64;
         let covariance = (j.transpose() * &j).try_inverse()? * s2;
         let sd = |c: usize| covariance[(at + c, at + c)].max(0.0).sqrt();
-        Some(Vec3::new(sd(0), sd(1), sd(2)))
+        Some([sd(0), sd(1), sd(2)].map(|v| v as f32))
     }
 
     /// Residuals at `x`, or `None` where the rod cannot be solved.

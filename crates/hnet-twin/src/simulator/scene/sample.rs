@@ -444,11 +444,12 @@ pub fn generate(
                 let pose = plate.pose(nominal_base, nominal_rest, contact);
                 sensor_plate::solve(&rod_config, &base, plate, &pose, contact).map(|solution| {
                     contact.state = solution.state;
-                    params.tip_force_n = solution.tip_force_n;
+                    params.tip_force_n = solution.tip_force_n.into();
                     solution.shape
                 })
             }
-            _ => rod::solve(&rod_config, &base, params.tip_force_n).map_err(ContactError::from),
+            _ => rod::solve(&rod_config, &base, params.tip_force_n.into())
+                .map_err(ContactError::from),
         };
         match solved {
             Ok(drawn) => {
