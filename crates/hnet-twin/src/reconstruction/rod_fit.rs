@@ -77,7 +77,9 @@ pub struct RodFitSettings {
     /// Weight of the rod tip's offset from the reconstructed tip, in units of one centreline
     /// point, when the tip is seen. 0 by default: the reconstructed tip is its least precise
     /// point (it is placed from the outline of the tip's rounded end), and on the twin's bench
-    /// pairs any weight made the axial force worse (R² 0.995 at 0, 0.987 at 1, 0.955 at 5).
+    /// pairs with the exact base any weight made the axial force worse (R² 0.995 at 0, 0.987 at
+    /// 1, 0.955 at 5). A blind fit, whose base is fitted too, uses
+    /// [`crate::reconstruction::physics_force::BLIND_TIP_WEIGHT`].
     pub tip_weight: f64,
     /// Hold the force's component along the base's axis at or below zero (a contact pushes the
     /// tip back, it does not pull it on; see the module's "Contact").
