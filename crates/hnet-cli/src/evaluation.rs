@@ -379,6 +379,7 @@ pub fn evaluate(
                 predicted: force,
                 physics: None,
                 physics_sd: None,
+                physics_correlation: None,
                 combined: None,
                 combined_sd: None,
                 combined_90: None,
@@ -438,6 +439,7 @@ pub fn evaluate(
         for (prediction, physics) in predictions.iter_mut().zip(&from_network.force_per_pair) {
             prediction.physics = physics.map(|p| p.force_n);
             prediction.physics_sd = physics.and_then(|p| p.sd_n);
+            prediction.physics_correlation = physics.and_then(|p| p.correlation);
             let combined = physics
                 .zip(from_network.combination)
                 .zip(prediction.predicted)

@@ -170,6 +170,9 @@ pub struct PhysicsForce {
     pub force_n: TipForce,
     /// Its standard error from the fit ([`hnet_twin::reconstruction::rod_fit::RodFit::force_sd_n`]), N.
     pub sd_n: Option<[f32; 3]>,
+    /// The correlations of its errors between axes, x-y, x-z, y-z
+    /// ([`hnet_twin::reconstruction::rod_fit::RodFit::force_correlation`]).
+    pub correlation: Option<[f32; 3]>,
 }
 
 /// One pair to check.
@@ -231,6 +234,7 @@ pub fn check(
                         physics: PhysicsForce {
                             force_n: estimate.fit.force_n,
                             sd_n: estimate.fit.force_sd_n,
+                            correlation: estimate.fit.force_correlation,
                         },
                         centreline_error_mm: distance_from_truth(record, &reconstruction.points_mm),
                         tip_error_mm: reconstruction

@@ -176,15 +176,16 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
         lines.next(),
         Some(
             "id,fx,fy,fz,fx_pred,fy_pred,fz_pred,fx_physics,fy_physics,fz_physics,\
-             fx_physics_sd,fy_physics_sd,fz_physics_sd,fx_combined,fy_combined,fz_combined,\
-             fx_combined_sd,fy_combined_sd,fz_combined_sd,fx_combined_90,fy_combined_90,\
-             fz_combined_90,catheter_iou_a,catheter_iou_b,estimator"
+             fx_physics_sd,fy_physics_sd,fz_physics_sd,physics_corr_xy,physics_corr_xz,\
+             physics_corr_yz,fx_combined,fy_combined,fz_combined,fx_combined_sd,fy_combined_sd,\
+             fz_combined_sd,fx_combined_90,fy_combined_90,fz_combined_90,catheter_iou_a,\
+             catheter_iou_b,estimator"
         )
     );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 40);
-    assert!(rows.iter().all(|r| r.len() == 25 && r[24] == "blind"));
-    assert!(rows.iter().all(|r| r[22..24].iter().all(|v| {
+    assert!(rows.iter().all(|r| r.len() == 28 && r[27] == "blind"));
+    assert!(rows.iter().all(|r| r[25..27].iter().all(|v| {
         let iou: f64 = v.parse().unwrap();
         (0.0..=1.0).contains(&iou)
     })));
@@ -192,7 +193,7 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
     // count the same IoU (white found, blue missed, red spurious).
     assert_eq!(std::fs::read_dir(&masks).unwrap().count(), 40 * 4);
     for row in &rows {
-        for (view, iou) in ["a", "b"].iter().zip(&row[22..24]) {
+        for (view, iou) in ["a", "b"].iter().zip(&row[25..27]) {
             let mask =
                 image::open(masks.join(format!("{}_predicted_mask_{view}.png", row[0]))).unwrap();
             assert_eq!((mask.width(), mask.height()), (48, 32));
@@ -212,6 +213,12 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
     }
     let with_physics = rows.iter().filter(|r| !r[7].is_empty()).count() as u64;
     assert_eq!(with_physics, physics[1]["fitted"].as_u64().unwrap());
+    // The fit's correlations between axes, wherever it has a standard error.
+    assert!(rows.iter().filter(|r| !r[10].is_empty()).all(|r| {
+        r[13..16]
+            .iter()
+            .all(|v| (-1.0..=1.0).contains(&v.parse::<f64>().unwrap()))
+    }));
     assert_eq!(
         csv,
         std::fs::read_to_string(runs.join("predictions-test.csv")).unwrap()

@@ -31,6 +31,10 @@ pub struct PairPrediction {
     /// `hnet_twin::reconstruction::rod_fit::RodFit::force_sd_n`).
     #[serde(default)]
     pub physics_sd: Option<[f32; 3]>,
+    /// The correlations of its errors between axes, x-y, x-z, y-z (from the same fit; see
+    /// `hnet_twin::reconstruction::rod_fit::RodFit::force_correlation`).
+    #[serde(default)]
+    pub physics_correlation: Option<[f32; 3]>,
     /// The network's force combined with the physics estimate, N, when a combination was
     /// calibrated.
     #[serde(default)]
@@ -49,15 +53,16 @@ pub struct PairPrediction {
 }
 
 /// The predictions file: one line per pair, its true force, the network's, the physics estimate
-/// from the network's masks with its fit's standard error, and the two combined with its
+/// from the network's masks with its fit's standard error and the correlations of its errors
+/// between axes (x-y, x-z, y-z), and the two combined with its
 /// standard error and the half-width of its 90 % interval (empty where there is none), N; then
 /// the catheter IoU of its masks in views A and B (empty without masks), and the physics
 /// estimator (`blind` or `oracle`).
 pub fn predictions_csv(predictions: &[PairPrediction], estimator: &str) -> String {
     let mut csv = String::from(
         "id,fx,fy,fz,fx_pred,fy_pred,fz_pred,fx_physics,fy_physics,fz_physics,\
-         fx_physics_sd,fy_physics_sd,fz_physics_sd,fx_combined,fy_combined,fz_combined,\
-         fx_combined_sd,fy_combined_sd,fz_combined_sd,fx_combined_90,fy_combined_90,\
+         fx_physics_sd,fy_physics_sd,fz_physics_sd,physics_corr_xy,physics_corr_xz,\
+         physics_corr_yz,fx_combined,fy_combined,fz_combined,fx_combined_sd,fy_combined_sd,fz_combined_sd,fx_combined_90,fy_combined_90,\
          fz_combined_90,catheter_iou_a,catheter_iou_b,estimator\n",
     );
     let triple = |v: Option<[f32; 3]>| {
@@ -67,11 +72,12 @@ pub fn predictions_csv(predictions: &[PairPrediction], estimator: &str) -> Strin
         let [tx, ty, tz] = p.truth.newtons();
         let _ = writeln!(
             csv,
-            "{},{tx},{ty},{tz},{},{},{},{},{},{},{},{estimator}",
+            "{},{tx},{ty},{tz},{},{},{},{},{},{},{},{},{estimator}",
             p.id,
             triple(p.predicted.map(TipForce::newtons)),
             triple(p.physics.map(TipForce::newtons)),
             triple(p.physics_sd),
+            triple(p.physics_correlation),
             triple(p.combined.map(TipForce::newtons)),
             triple(p.combined_sd),
             triple(p.combined_90),

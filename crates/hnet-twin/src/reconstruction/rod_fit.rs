@@ -192,6 +192,12 @@ pub struct RodFit {
     /// unknowns (base pose, stiffness) marginalised. `None` when the force was not fitted or
     /// `JᵀJ` is singular.
     pub force_sd_n: Option<[f32; 3]>,
+    /// Correlations of the fitted force's errors between axes (x-y, x-z, y-z), dimensionless,
+    /// from the same covariance as [`Self::force_sd_n`]; `None` where it is. Strong within a pair
+    /// (an axial push trades against the base's place), though the errors of many pairs
+    /// correlate little (docs/results.md, "The combined estimate").
+    #[serde(default)]
+    pub force_correlation: Option<[f32; 3]>,
 }
 
 /// Why no force was fitted.
@@ -452,7 +458,7 @@ pub fn fit_rod(
         }
     };
     let (rms_mm, max_mm) = rms_of(&shape);
-    let force_sd_n = problem.force_standard_error();
+    let uncertainty = problem.force_standard_error();
     Ok(RodFit {
         force_n: model.force.into(),
         base: model.base,
@@ -463,7 +469,8 @@ pub fn fit_rod(
         max_mm,
         iterations,
         rod_solves: problem.solves.get(),
-        force_sd_n,
+        force_sd_n: uncertainty.map(|(sd, _)| sd),
+        force_correlation: uncertainty.map(|(_, r)| r),
     })
 }
 
@@ -560,6 +567,8 @@ mod tests {
         );
         let sd = fit.force_sd_n.unwrap();
         assert!(sd.iter().all(|v| (0.0..1e-3).contains(v)), "{sd:?}");
+        let r = fit.force_correlation.unwrap();
+        assert!(r.iter().all(|v| (-1.0..=1.0).contains(v)), "{r:?}");
         let held = fit_with(true);
         let along = Vec3::from(held.force_n).dot(axis);
         assert!(

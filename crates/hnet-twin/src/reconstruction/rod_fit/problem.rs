@@ -256,7 +256,9 @@ impl Problem<'_> {
     /// left out: this is what the shape says about the force. Points along a centreline are not
     /// independent (they are 1 mm apart and their errors are smooth), so it is a relative
     /// measure; [`crate::reconstruction::physics_force::ForceCombination`] scales it on calibration pairs.
-    pub(super) fn force_standard_error(&self) -> Option<[f32; 3]> {
+    /// With it, the correlations of the force's errors between axes (x-y, x-z, y-z) from the same
+    /// covariance.
+    pub(super) fn force_standard_error(&self) -> Option<([f32; 3], [f32; 3])> {
         let at = self.layout.force?;
         let shape_rows = self.shape_rows();
         let r = self
@@ -274,7 +276,18 @@ impl Problem<'_> {
         let s2 = r.norm_squared() / dof as f64;
         let covariance = (j.transpose() * &j).try_inverse()? * s2;
         let sd = |c: usize| covariance[(at + c, at + c)].max(0.0).sqrt();
-        Some([sd(0), sd(1), sd(2)].map(|v| v as f32))
+        let correlation = |a: usize, b: usize| {
+            let r = covariance[(at + a, at + b)] / (sd(a) * sd(b));
+            if r.is_finite() {
+                r.clamp(-1.0, 1.0)
+            } else {
+                0.0
+            }
+        };
+        Some((
+            [sd(0), sd(1), sd(2)].map(|v| v as f32),
+            [correlation(0, 1), correlation(0, 2), correlation(1, 2)].map(|v| v as f32),
+        ))
     }
 
     /// Residuals at `x`, or `None` where the rod cannot be solved.
