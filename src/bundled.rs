@@ -20,11 +20,11 @@ pub const BUNDLED_FORCE_CAVEAT: &str = "The bundled weights were trained on the 
     (RMSE 0.067 N, R² 0.63), and learned on the bench pose alone: read the arrows as a \
     direction and a rough size, not a measurement. The physics estimate, fitted to these masks \
     and read blind (the catalogue's catheter, the base fitted near the bench fixture's pose), is \
-    closer across the catheter (R² 0.83 and 0.86 on x and y on the bench) but not along it (Fz: \
-    R² 0.15). The Combined row (each axis weighted by the inverse of its measured error; shown \
+    closer across the catheter (R² 0.78 and 0.86 on x and y on the bench) but not along it (Fz: \
+    R² 0.11). The Combined row (each axis weighted by the inverse of its measured error; shown \
     when the rod was fitted to these masks: on a twin pair, choose H-Net's masks in the 3D \
     panel) is the closest on twin bench pairs: R² 0.89 / 0.91 / 0.74, RMSE 0.042 N per axis, its \
-    90 % interval holding 85-89 % of true forces; the verdict reads it where it is shown. For \
+    90 % interval holding 86-89 % of true forces; the verdict reads it where it is shown. For \
     uploads the catheter is the twin tab's and nothing was measured.";
 
 /// A file of the page's own that could not be fetched.

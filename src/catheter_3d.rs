@@ -34,7 +34,7 @@ use hnet_twin::reconstruction::catalogue::{
 use hnet_twin::reconstruction::centreline::{CentrelineError, Mask};
 use hnet_twin::reconstruction::epipolar::{EpipolarGeometry, ReconstructionError, clip_line};
 use hnet_twin::reconstruction::physics_force::{
-    MAX_FIT_RMS_MM, PhysicsError, PhysicsEstimate, PhysicsSetup, physics_estimate,
+    MAX_FIT_RMS_MM, PhysicsError, PhysicsEstimate, PhysicsSetup, TipUse, physics_estimate,
 };
 use hnet_twin::reconstruction::rod_fit::RodFitError;
 use hnet_twin::simulator::carm::{Biplane, CArm, CameraMatrix};
@@ -248,6 +248,9 @@ pub struct Catheter3d {
     pub mean_residual_px: f64,
     /// Whether its last point is the tip, seen in both views.
     pub tip_seen: bool,
+    /// What the rod fit made of that tip (a blind fit weighs it, or sets it aside where the
+    /// catalogue's flexible length does not reach it).
+    pub tip: TipUse,
     /// The physics estimate: the tip force of the fitted rod, N (world frame).
     pub force_n: TipForce,
     /// The fit's standard error of each force component, N (a relative measure until scaled by
@@ -294,10 +297,13 @@ impl Catheter3d {
              {:+.3}) N, |F| {magnitude:.3} N, from a rod fitted within {:.2} mm RMS{}",
             self.length_mm,
             self.masks.phrase(),
-            if self.tip_seen {
-                "tip seen in both views"
-            } else {
-                "tip outside a view"
+            match (self.tip_seen, self.tip) {
+                (false, _) => "tip outside a view",
+                (true, TipUse::SetAside) => {
+                    "tip seen in both views, set aside by the fit: the catheter's flexible length \
+                     does not reach it"
+                }
+                (true, _) => "tip seen in both views",
             },
             if self.views_assumed {
                 "C-arms assumed at the page's default angles, not known: no reprojection check"
@@ -384,6 +390,7 @@ pub fn reconstruct_pair(
     let PhysicsEstimate {
         reconstruction,
         fit,
+        tip,
         ..
     } = physics_estimate([masks.mask(0), masks.mask(1)], &setup).map_err(|e| match e {
         PhysicsError::Centreline(source) => Catheter3dError::Centreline {
@@ -401,6 +408,7 @@ pub fn reconstruct_pair(
         length_mm: reconstruction.arc_mm.last().copied().unwrap_or(0.0),
         mean_residual_px: reconstruction.mean_residual_px,
         tip_seen: reconstruction.tip_seen,
+        tip,
         force_n: fit.force_n,
         force_sd_n: fit.force_sd_n,
         rms_mm: fit.rms_mm,

@@ -26,7 +26,10 @@ use crate::simulator::scene::NominalBase;
 /// against; with an exact base the tip only adds its own noise (the default weight, 0).
 /// Measured blind from the bundled weights' masks on fresh bench pairs: the combined estimate's
 /// mean R² 0.77 → 0.82 and 0.80 → 0.83 on two sets at weight 1, no better at 2 or 3, and no
-/// worse from true masks (docs/results.md, "The tip in a blind fit").
+/// worse from true masks (docs/results.md, "The tip in a blind fit"). Where the rod reaches the
+/// tip only with its base out of tolerance, or not at all (a catheter longer than its catalogue
+/// entry), [`physics_estimate`] sets the tip aside ([`TipUse::SetAside`]): weighed always, it
+/// left 3.5 % of the mismatch suite's `length+5mm` pairs with an estimate, set aside 75 %.
 pub const BLIND_TIP_WEIGHT: f64 = 1.0;
 
 /// What the masks are read with: both views' cameras, the catheter as the rod model knows it,
@@ -107,6 +110,21 @@ pub struct PhysicsEstimate {
     pub reconstruction: Reconstruction,
     /// The fitted rod: its tip force (N), shape and distance from the reconstruction.
     pub fit: RodFit,
+    /// What the fit made of the tip seen in both views.
+    pub tip: TipUse,
+}
+
+/// What a blind fit made of the catheter's tip.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TipUse {
+    /// Not weighed: not seen in both views, or a fit that does not weigh it (an exact base).
+    NotWeighed,
+    /// Weighed ([`BLIND_TIP_WEIGHT`]): it pins where along its axis the base sits.
+    Weighed,
+    /// Set aside: the rod reached it only with its base out of tolerance or far from the
+    /// catheter (a flexible length other than the catalogue's), so the shape was read without it.
+    SetAside,
 }
 
 /// Which step could not be done, and why.
@@ -187,7 +205,47 @@ pub fn physics_estimate(
         &setup.cameras[1],
         &setup.reconstruction,
     )?;
-    let fit = fit_rod_to_reconstruction(&setup.rod, &setup.base, &reconstruction, &setup.fit)?;
+    let (fit, tip) = match checked_fit(setup, &reconstruction, &setup.fit) {
+        // The seen tip pins the base only when the catalogue's flexible length agrees with it: a
+        // catheter longer or shorter than its entry fits the tip only with its base pulled out
+        // of tolerance, or not at all. Its shape is read again without the tip.
+        Err(
+            PhysicsError::PoorFit { .. }
+            | PhysicsError::BaseOutsideTolerance { .. }
+            | PhysicsError::Fit(RodFitError::NotConverged { .. }),
+        ) if setup.fit.tip_weight > 0.0 && reconstruction.tip_seen => {
+            let without_tip = RodFitSettings {
+                tip_weight: 0.0,
+                ..setup.fit.clone()
+            };
+            let fit = checked_fit(setup, &reconstruction, &without_tip)?;
+            (fit, TipUse::SetAside)
+        }
+        fit => (
+            fit?,
+            if setup.fit.tip_weight > 0.0 && reconstruction.tip_seen {
+                TipUse::Weighed
+            } else {
+                TipUse::NotWeighed
+            },
+        ),
+    };
+    Ok(PhysicsEstimate {
+        centrelines,
+        reconstruction,
+        fit,
+        tip,
+    })
+}
+
+/// The rod fitted to `reconstruction` with `settings`, refused when it stays far from it or puts
+/// its base outside the nominal pose's tolerance.
+fn checked_fit(
+    setup: &PhysicsSetup,
+    reconstruction: &Reconstruction,
+    settings: &RodFitSettings,
+) -> Result<RodFit, PhysicsError> {
+    let fit = fit_rod_to_reconstruction(&setup.rod, &setup.base, reconstruction, settings)?;
     if let Some(limit_mm) = setup.max_fit_rms_mm
         && (fit.rms_mm.is_nan() || fit.rms_mm > limit_mm)
     {
@@ -196,7 +254,7 @@ pub fn physics_estimate(
             limit_mm,
         });
     }
-    if let Some(prior) = setup.fit.base_prior {
+    if let Some(prior) = settings.base_prior {
         let offset = fit.base.position_mm - setup.base.position_mm;
         let tilt_deg = fit
             .base
@@ -215,11 +273,7 @@ pub fn physics_estimate(
             });
         }
     }
-    Ok(PhysicsEstimate {
-        centrelines,
-        reconstruction,
-        fit,
-    })
+    Ok(fit)
 }
 
 /// Below this many calibration pairs no combination is calibrated.
@@ -718,7 +772,32 @@ mod tests {
             let base_error =
                 (estimate.fit.base.position_mm - sample.params.base_position_mm).norm();
             assert!(base_error < 0.5, "{index}: base off by {base_error} mm");
+            let weighed = if estimate.reconstruction.tip_seen {
+                TipUse::Weighed
+            } else {
+                TipUse::NotWeighed
+            };
+            assert_eq!(estimate.tip, weighed, "{index}");
         }
+        // A catalogue entry 5 mm shorter than the catheter (the mismatch suite's `length+5mm`):
+        // its rod reaches the seen tip only with the base pulled beyond the fixture's play, so
+        // the tip is set aside and the shape read without it.
+        let (config, sample) = bench_sample(128, 11, 1);
+        let short = CatalogueCatheter {
+            flexible_length_mm: catheter.flexible_length_mm - 5.0,
+            ..catheter.clone()
+        };
+        let cameras = [
+            config.views.a.camera_matrix(),
+            config.views.b.camera_matrix(),
+        ];
+        let mask = |i: usize| Mask::coverage8(128, 128, &sample.views[i].mask);
+        let estimate = physics_estimate(
+            [mask(0), mask(1)],
+            &PhysicsSetup::blind(cameras, &short, &nominal),
+        )
+        .unwrap();
+        assert_eq!(estimate.tip, TipUse::SetAside);
         // A catheter the masks do not show (twice as long): it fits only with its base far
         // beyond the fixture's play, and no force is given.
         let (config, sample) = bench_sample(128, 11, 0);
