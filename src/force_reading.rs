@@ -369,6 +369,7 @@ pub(crate) mod tests {
                 pairs: 598,
                 interval_90_sd: [2.129, 2.189, 1.924],
                 network_interval_90_n: None,
+                stack: None,
             },
             head_error_n: 0.117,
             combined_error_n: Some(0.081),

@@ -447,6 +447,7 @@ mod tests {
             pairs: 10,
             interval_90_sd: [1.645; 3],
             network_interval_90_n: None,
+            stack: None,
         };
         let network = check(
             MaskOrigin::Predicted,

@@ -7,6 +7,7 @@ use std::path::Path;
 use anyhow::Context;
 use hnet_model::metrics::{AXES, AxisMetrics, PixelOutcome};
 use hnet_twin::dataset::{ImageRef, encode_png};
+use hnet_twin::reconstruction::physics_force::FOLDS;
 use hnet_units::{ImageSize, TipForce};
 use serde::{Deserialize, Serialize};
 
@@ -242,17 +243,31 @@ pub fn markdown(e: &Evaluation) -> String {
         e.physics.iter().find_map(|check| check.combination),
     ) {
         let [x, y, z] = c.network_error_n;
-        let _ = writeln!(
-            s,
-            "\nCombined: each axis weighted by the inverse of its error variance, calibrated on {} \
-             pairs of the {split} split{} (network error {x:.4} / {y:.4} / {z:.4} N, the fit's \
-             standard error times {:.2}).",
-            c.pairs,
-            e.calibration_data
-                .as_ref()
-                .map_or_else(String::new, |d| format!(" of {}", d.display())),
-            c.physics_sd_scale
-        );
+        let data = e
+            .calibration_data
+            .as_ref()
+            .map_or_else(String::new, |d| format!(" of {}", d.display()));
+        let _ = match c.stack {
+            Some(stack) => writeln!(
+                s,
+                "\nCombined: a linear stack of both estimates, calibrated on {} pairs of the \
+                 {split} split{data}, where {FOLDS}-fold cross-validation read them at mean R² {:.3} \
+                 against the per-axis weights' {:.3} (its error {:.4} / {:.4} / {:.4} N).",
+                c.pairs,
+                stack.cross_validated_r2[0],
+                stack.cross_validated_r2[1],
+                stack.error_n[0],
+                stack.error_n[1],
+                stack.error_n[2],
+            ),
+            None => writeln!(
+                s,
+                "\nCombined: each axis weighted by the inverse of its error variance, calibrated \
+                 on {} pairs of the {split} split{data} (network error {x:.4} / {y:.4} / {z:.4} \
+                 N, the fit's standard error times {:.2}).",
+                c.pairs, c.physics_sd_scale
+            ),
+        };
     }
     s
 }

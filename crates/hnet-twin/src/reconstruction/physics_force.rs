@@ -20,6 +20,9 @@ use crate::simulator::carm::CameraMatrix;
 use crate::simulator::rod::{RodBase, RodConfig};
 use crate::simulator::scene::NominalBase;
 
+mod stack;
+pub use stack::{FOLDS, LinearStack, MIN_STACK_GAIN, MIN_STACK_PAIRS};
+
 /// Weight of the seen tip in a blind fit ([`RodFitSettings::tip_weight`], in centreline
 /// points). With the base fitted, the reconstructed tip pins where along its axis the base sits
 /// (the catheter's flexible length lies between them), which an axial push otherwise trades
@@ -293,7 +296,10 @@ const NORMAL_MEDIAN_ABS: f64 = 0.674_489_75;
 /// pair to pair with how much the reconstructed shape says about the force.
 ///
 /// Both are measured on calibration pairs the estimates are not evaluated on
-/// ([`Self::calibrate`]; `hnet eval` uses the split next to the one it evaluates).
+/// ([`Self::calibrate`]; `hnet eval` uses the split next to the one it evaluates). Where
+/// cross-validation on those pairs says a linear stack of both estimates predicts them better
+/// (an error that mixes axes, which weights per axis cannot undo), the stack replaces the weights
+/// ([`Self::stack`]).
 /// Inverse-variance weights assume the two errors independent; their Fz errors correlate at
 /// -0.01 to 0.15 on the sets measured (docs/results.md, "The combined estimate"), so the
 /// combined error is a little larger than the weights assume.
@@ -324,6 +330,11 @@ pub struct ForceCombination {
     /// ([`Self::head_interval_90_n`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub network_interval_90_n: Option<[f32; 3]>,
+    /// A linear stack of both estimates that replaces the per-axis weights, where it predicted
+    /// the calibration pairs better under cross-validation ([`LinearStack`]); `None` where the
+    /// weights did as well, and for combinations stored before it was tried.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stack: Option<LinearStack>,
 }
 
 /// Which of the product's tip-force estimates a figure is.
@@ -411,9 +422,46 @@ pub struct CalibrationPair {
 }
 
 impl ForceCombination {
-    /// Measures both errors on `pairs`; `None` with fewer than [`MIN_CALIBRATION_PAIRS`] pairs
-    /// (or no usable standard error).
+    /// Measures both errors on `pairs`, and keeps a [`LinearStack`] instead of the per-axis
+    /// weights where cross-validation on them says it predicts better; `None` with fewer than
+    /// [`MIN_CALIBRATION_PAIRS`] pairs (or no usable standard error).
     pub fn calibrate(pairs: &[CalibrationPair]) -> Option<Self> {
+        let mut combination = Self::per_axis_weights(pairs)?;
+        let both: Vec<(TipForce, TipForce)> =
+            pairs.iter().map(|p| (p.truth_n, p.network_n)).collect();
+        combination.calibrate_head_interval(&both);
+        if let Some((stack, interval_90_n)) = stack::choose(pairs) {
+            // Its interval in units of its (cross-validated) error, which `combine_with_sd`
+            // answers as the standard error of a stacked estimate.
+            combination.interval_90_sd =
+                std::array::from_fn(|axis| interval_90_n[axis] / stack.error_n[axis].max(1e-9));
+            combination.stack = Some(stack);
+            return Some(combination);
+        }
+        // Split-conformal: the calibration pairs' normalised errors of the combined estimate.
+        let scores: [Vec<f64>; 3] = std::array::from_fn(|axis| {
+            pairs
+                .iter()
+                .filter_map(|p| {
+                    let (force, sd) =
+                        combination.combine_with_sd(p.network_n, p.physics_n, Some(p.physics_sd_n));
+                    let sd = f64::from(sd[axis]);
+                    let off = f64::from((force[axis] - p.truth_n[axis]).abs());
+                    (sd > 0.0).then_some(off / sd).filter(|s| s.is_finite())
+                })
+                .collect()
+        });
+        for (axis, mut scores) in scores.into_iter().enumerate() {
+            if let Some(q) = conformal_quantile(&mut scores, 0.9) {
+                combination.interval_90_sd[axis] = q as f32;
+            }
+        }
+        Some(combination)
+    }
+
+    /// The per-axis weights alone, measured on `pairs` (the network's RMSE and the physics
+    /// estimate's scale), with a normal's interval.
+    fn per_axis_weights(pairs: &[CalibrationPair]) -> Option<Self> {
         if pairs.len() < MIN_CALIBRATION_PAIRS {
             return None;
         }
@@ -441,35 +489,14 @@ impl ForceCombination {
         }
         let middle = z.len() / 2;
         let (_, median, _) = z.select_nth_unstable_by(middle, f64::total_cmp);
-        let mut combination = Self {
+        Some(Self {
             network_error_n,
             physics_sd_scale: (*median / NORMAL_MEDIAN_ABS) as f32,
             pairs: pairs.len(),
             interval_90_sd: normal_interval_90(),
             network_interval_90_n: None,
-        };
-        let both: Vec<(TipForce, TipForce)> =
-            pairs.iter().map(|p| (p.truth_n, p.network_n)).collect();
-        combination.calibrate_head_interval(&both);
-        // Split-conformal: the calibration pairs' normalised errors of the combined estimate.
-        let scores: [Vec<f64>; 3] = std::array::from_fn(|axis| {
-            pairs
-                .iter()
-                .filter_map(|p| {
-                    let (force, sd) =
-                        combination.combine_with_sd(p.network_n, p.physics_n, Some(p.physics_sd_n));
-                    let sd = f64::from(sd[axis]);
-                    let off = f64::from((force[axis] - p.truth_n[axis]).abs());
-                    (sd > 0.0).then_some(off / sd).filter(|s| s.is_finite())
-                })
-                .collect()
-        });
-        for (axis, mut scores) in scores.into_iter().enumerate() {
-            if let Some(q) = conformal_quantile(&mut scores, 0.9) {
-                combination.interval_90_sd[axis] = q as f32;
-            }
-        }
-        Some(combination)
+            stack: None,
+        })
     }
 
     /// Measures the network's own 90 % interval ([`Self::network_interval_90_n`]) on `pairs` of
@@ -547,13 +574,17 @@ impl ForceCombination {
 
     /// [`Self::combine`] with the combined estimate's standard error per axis, N:
     /// `1/sqrt(1/σn² + 1/σp²)` (both errors taken as independent; the 90 % interval is
-    /// [`Self::interval_90_sd`] of them either side, [`Self::interval_90_n`]).
+    /// [`Self::interval_90_sd`] of them either side, [`Self::interval_90_n`]). With a
+    /// [`Self::stack`], its estimate and its cross-validated error instead.
     pub fn combine_with_sd(
         &self,
         network_n: TipForce,
         physics_n: TipForce,
         physics_sd_n: Option<[f32; 3]>,
     ) -> (TipForce, [f32; 3]) {
+        if let Some(stack) = &self.stack {
+            return (stack.apply(network_n, physics_n), stack.error_n);
+        }
         let mut sd = [0.0f32; 3];
         let force = std::array::from_fn(|axis| {
             let network_var = f64::from(self.network_error_n[axis]).powi(2);
