@@ -299,9 +299,9 @@ pub fn ForcePanel(
                         None,
                         "physics",
                     )}
-                    // Each axis of H-Net's and the physics estimate fitted to its masks, weighted
-                    // by the inverse of its error variance (docs/app.md, "The catheter in 3D and
-                    // the physics estimate").
+                    // H-Net's and the physics estimate fitted to its masks, combined as the
+                    // weights' calibration says: per axis by inverse error variance, or a linear
+                    // stack (docs/app.md, "The catheter in 3D and the physics estimate").
                     {move || reading().filter(|r| r.kind == EstimateKind::Combined).map(|r| {
                         row(EstimateKind::Combined.name().into(), Some(r.force_n), r.interval_90_n, "combined")
                     })}
