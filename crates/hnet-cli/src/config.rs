@@ -257,7 +257,9 @@ mod tests {
                 "force-224-any-pose",
                 "force-224-sideways",
                 "force-224-turned",
-                "imaging-224"
+                "imaging-224",
+                "outline-224",
+                "outline-224-control"
             ]
         );
         let names = names_in(&dir);

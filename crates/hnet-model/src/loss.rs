@@ -29,11 +29,11 @@ pub struct HNetLossConfig {
     /// the force range (set with [`crate::model::HNetConfig::force_scale`]).
     pub force_std_n: Option<[f64; 3]>,
     /// β4: weight of each view's [`outline_divergence`]. The paper has no such term (0, the
-    /// default). The mean BCE over a view weighs the catheter's outline at about 1 % of its
+    /// default, as `None`). The mean BCE over a view weighs the catheter's outline at about 1 % of its
     /// pixels, so a network can leave its edges at whole pixels; the rod fit reads the
-    /// centreline from the edges' grey levels, to a tenth of a pixel.
-    #[config(default = 0.0)]
-    pub outline: f64,
+    /// centreline from the edges' grey levels, to a tenth of a pixel. An option so that
+    /// configs and run folders written before it still load.
+    pub outline: Option<f64>,
 }
 
 impl HNetLossConfig {
@@ -69,6 +69,11 @@ pub struct LossTerms {
 }
 
 impl HNetLoss {
+    /// β4, 0 when unset.
+    fn outline_weight(&self) -> f64 {
+        self.config.outline.unwrap_or(0.0)
+    }
+
     /// The loss of `output` against target masks `[B, 1, H, W]` (values in `[0, 1]`; soft,
     /// anti-aliased masks are allowed) and target forces `[B, 3]` in newtons.
     pub fn forward(
@@ -107,7 +112,7 @@ impl HNetLoss {
         let [mask_a, mask_b] = masks;
         let (bce_a, bce_b, outline) = match mask_logits {
             Some([logits_a, logits_b]) => {
-                let outline = if self.config.outline > 0.0 {
+                let outline = if self.outline_weight() > 0.0 {
                     outline_divergence(logits_a.clone(), mask_a.clone())
                         + outline_divergence(logits_b.clone(), mask_b.clone())
                 } else {
@@ -145,7 +150,7 @@ impl HNetLoss {
         let total = bce_a.clone().mul_scalar(self.config.beta_a)
             + bce_b.clone().mul_scalar(self.config.beta_b)
             + mse.clone().mul_scalar(self.config.beta_force)
-            + outline.clone().mul_scalar(self.config.outline);
+            + outline.clone().mul_scalar(self.outline_weight());
         LossTerms {
             total,
             bce_a,
