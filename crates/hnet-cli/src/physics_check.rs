@@ -106,7 +106,8 @@ pub struct PhysicsEvaluation {
     pub pairs: usize,
     /// Pairs reconstructed and fitted.
     pub fitted: usize,
-    /// Pairs that failed, by the step that failed (`centreline`, `reconstruction`, `fit`).
+    /// Pairs that failed, by the step that failed (`centreline: not a tube`, `reconstruction`,
+    /// `fit`, ...: `PhysicsError::counted_as`).
     pub failures: BTreeMap<String, usize>,
     /// Mean distance of the reconstructed points from the true centreline (its flexible section
     /// and the straight shaft behind the base), mean over fitted pairs, mm.
@@ -208,7 +209,8 @@ enum Outcome {
         centreline_error_mm: Option<f64>,
         tip_error_mm: Option<f64>,
     },
-    Failed(&'static str),
+    /// [`hnet_twin::reconstruction::physics_force::PhysicsError::counted_as`].
+    Failed(String),
 }
 
 /// Checks `pairs` (with their `records`; masks all of `size`) from the masks `origin`; with a
@@ -244,7 +246,7 @@ pub fn check(
                             .map(|tip| (reconstruction.last_mm() - tip).norm()),
                     }
                 }
-                Err(e) => Outcome::Failed(e.step()),
+                Err(e) => Outcome::Failed(e.counted_as()),
             }
         })
         .collect();
@@ -291,7 +293,7 @@ pub fn check(
                 centreline.extend(*centreline_error_mm);
                 tip.extend(*tip_error_mm);
             }
-            Outcome::Failed(step) => *failures.entry(step.to_string()).or_insert(0) += 1,
+            Outcome::Failed(step) => *failures.entry(step.clone()).or_insert(0) += 1,
         }
     }
     let mean = |v: &[f64]| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);

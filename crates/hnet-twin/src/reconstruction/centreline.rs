@@ -234,6 +234,20 @@ pub enum CentrelineError {
     },
 }
 
+impl CentrelineError {
+    /// A short name of the check that failed (`empty`, `several blobs`, `not a tube`, `too
+    /// short`, `wrong size`), for counts.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Self::WrongSize { .. } => "wrong size",
+            Self::Empty { .. } => "empty",
+            Self::SeveralBlobs { .. } => "several blobs",
+            Self::NotATube { .. } => "not a tube",
+            Self::TooShort { .. } => "too short",
+        }
+    }
+}
+
 /// The mask's values with bilinear sampling at continuous pixel coordinates.
 struct Field<'a> {
     width: usize,

@@ -175,6 +175,15 @@ pub enum PhysicsError {
 pub const MAX_BASE_SDS: f64 = 4.0;
 
 impl PhysicsError {
+    /// The failing step, and for a centreline the check that failed (`centreline: not a
+    /// tube`), for counts that say what to fix.
+    pub fn counted_as(&self) -> String {
+        match self {
+            Self::Centreline(e) => format!("{}: {}", self.step(), e.kind()),
+            _ => self.step().to_string(),
+        }
+    }
+
     /// A short name of the failing step (`centreline`, `reconstruction`, `fit`), for counts.
     pub fn step(&self) -> &'static str {
         match self {
@@ -774,6 +783,11 @@ mod tests {
         let err =
             physics_estimate([mask(0), Mask::coverage8(128, 128, &empty)], &setup).unwrap_err();
         assert_eq!(err.step(), "centreline");
+        assert!(
+            err.counted_as().starts_with("centreline: "),
+            "{}",
+            err.counted_as()
+        );
         assert!(err.to_string().starts_with("view B"), "{err}");
     }
 
