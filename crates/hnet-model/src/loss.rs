@@ -1,7 +1,7 @@
 //! The multitask loss of the paper (eq. 7):
 //! `L = β1·BCE(mask A) + β2·BCE(mask B) + β3·MSE(force)`, and optionally our outline term
-//! `+ β4·(outline A + outline B)` ([`outline_divergence`]), which teaches the
-//! masks' sub-pixel edges.
+//! `+ β4·(outline A + outline B)` ([`outline_divergence`]), which teaches the masks' sub-pixel
+//! edges.
 
 use burn::config::Config;
 use burn::tensor::Tensor;
@@ -28,11 +28,11 @@ pub struct HNetLossConfig {
     /// squaring: the force term is then the MSE of standardised forces, of unit scale whatever
     /// the force range (set with [`crate::model::HNetConfig::force_scale`]).
     pub force_std_n: Option<[f64; 3]>,
-    /// β4: weight of each view's [`outline_divergence`]. The paper has no such term (0, the
-    /// default, as `None`). The mean BCE over a view weighs the catheter's outline at about 1 % of its
-    /// pixels, so a network can leave its edges at whole pixels; the rod fit reads the
-    /// centreline from the edges' grey levels, to a tenth of a pixel. An option so that
-    /// configs and run folders written before it still load.
+    /// β4: weight of each view's [`outline_divergence`]; `None` is 0, the paper's loss (an
+    /// option so that configs and run folders written before it still load). The mean BCE over
+    /// a view weighs the catheter's outline at under 1 % of its pixels, so a network can leave
+    /// its edges at whole pixels, while the rod fit reads the centreline from the edges' grey
+    /// levels to a tenth of a pixel.
     pub outline: Option<f64>,
 }
 
@@ -63,8 +63,8 @@ pub struct LossTerms {
     /// Mean squared error of the force over the batch and the three axes, in N² (standardised
     /// units with [`HNetLossConfig::force_std_n`]).
     pub mse: Tensor<1>,
-    /// The two views' [`outline_divergence`]s (divergences), summed (zero when β4 is 0 or the network has
-    /// no masks).
+    /// The two views' [`outline_divergence`]s, summed (zero when β4 is 0 or the network has no
+    /// masks).
     pub outline: Tensor<1>,
 }
 
@@ -168,19 +168,24 @@ pub fn binary_cross_entropy_with_logits<const D: usize>(
     logits: Tensor<D>,
     targets: Tensor<D>,
 ) -> Tensor<1> {
+    cross_entropy_per_element(logits, targets).mean()
+}
+
+/// `-(t·log σ(x) + (1-t)·log σ(-x))` for each element, from the logits.
+fn cross_entropy_per_element<const D: usize>(logits: Tensor<D>, targets: Tensor<D>) -> Tensor<D> {
     let positive = log_sigmoid(logits.clone()) * targets.clone();
     let negative = log_sigmoid(logits.neg()) * targets.neg().add_scalar(1.0);
-    (positive + negative).neg().mean()
+    (positive + negative).neg()
 }
 
 /// Target coverage strictly between this and 1 minus it is the outline (the twin's anti-aliased
 /// edge falls from 1 to 0 over about one pixel).
-const OUTLINE_MIN_COVERAGE: f64 = 0.02;
+pub const OUTLINE_MIN_COVERAGE: f64 = 0.02;
 
 /// The mean Kullback-Leibler divergence of the masks' probabilities `sigmoid(logits)` from the
-/// target coverage over the outline band of masks `[B, 1, H, W]`: the pixels whose target is
-/// strictly between 0.02 and 0.98, and their 8 neighbours (where a network's edge may sit a pixel
-/// off). It is the band's BCE less the targets' own entropy, so it is zero exactly when the
+/// target coverage over the outline band of masks `[B, 1, H, W]`: the pixels whose target lies
+/// strictly between [`OUTLINE_MIN_COVERAGE`] and 1 minus it, and their 8 neighbours (where a
+/// network's edge may sit a pixel off). It is the band's BCE less the targets' own entropy, so it is zero exactly when the
 /// probabilities equal the coverage, and its gradient in the logits is the BCE's, `σ(x) - t`,
 /// which does not vanish for a confident wrong edge. Zero where no target has an outline (binary
 /// or empty masks).
@@ -196,9 +201,7 @@ pub fn outline_divergence(logits: Tensor<4>, targets: Tensor<4>) -> Tensor<1> {
             .with_stride([1, 1])
             .with_padding([1, 1]),
     );
-    let cross_entropy = (log_sigmoid(logits.clone()) * targets.clone()
-        + log_sigmoid(logits.neg()) * targets.clone().neg().add_scalar(1.0))
-    .neg();
+    let cross_entropy = cross_entropy_per_element(logits, targets.clone());
     let t = targets.clamp(1e-6, 1.0 - 1e-6);
     let entropy = (t.clone() * t.clone().log()
         + t.clone().neg().add_scalar(1.0) * t.neg().add_scalar(1.0).log())
