@@ -267,6 +267,10 @@ pub struct Catheter3d {
     /// Whether the views were assumed (the page's default biplane for an upload), so that the
     /// reprojection error checks nothing and is not shown.
     pub views_assumed: bool,
+    /// Sizes in pixels of the blobs set aside beside the catheter in view A and in view B
+    /// (another device, or the background read as catheter:
+    /// [`hnet_twin::reconstruction::centreline`]).
+    pub set_aside_px: [Vec<usize>; 2],
 }
 
 impl Catheter3d {
@@ -288,13 +292,35 @@ impl Catheter3d {
             .expect("a reconstruction has points")
     }
 
+    /// What was set aside beside the catheter, as the end of [`Catheter3d::summary`]'s
+    /// sentence ("; view B: a blob of 120 px beside the catheter set aside"), or nothing.
+    fn set_aside_phrase(&self) -> String {
+        ["A", "B"]
+            .iter()
+            .zip(&self.set_aside_px)
+            .filter(|(_, sizes)| !sizes.is_empty())
+            .map(|(view, sizes)| {
+                let list = sizes
+                    .iter()
+                    .map(|s| format!("{s} px"))
+                    .collect::<Vec<_>>()
+                    .join(", ");
+                if sizes.len() == 1 {
+                    format!("; view {view}: a blob of {list} beside the catheter set aside")
+                } else {
+                    format!("; view {view}: blobs of {list} beside the catheter set aside")
+                }
+            })
+            .collect()
+    }
+
     /// One sentence for screen readers and the panel.
     pub fn summary(&self) -> String {
         let f = self.force_n;
         let magnitude = f.magnitude();
         format!(
             "catheter {:.0} mm reconstructed from {} ({}, {}); physics force ({:+.3}, {:+.3}, \
-             {:+.3}) N, |F| {magnitude:.3} N, from a rod fitted within {:.2} mm RMS{}",
+             {:+.3}) N, |F| {magnitude:.3} N, from a rod fitted within {:.2} mm RMS{}{}",
             self.length_mm,
             self.masks.phrase(),
             match (self.tip_seen, self.tip) {
@@ -323,6 +349,7 @@ impl Catheter3d {
                 (None, true) => " (its base pose fitted too)".to_string(),
                 (None, false) => String::new(),
             },
+            self.set_aside_phrase(),
         )
     }
 }
@@ -388,10 +415,10 @@ pub fn reconstruct_pair(
         }
     };
     let PhysicsEstimate {
+        centrelines,
         reconstruction,
         fit,
         tip,
-        ..
     } = physics_estimate([masks.mask(0), masks.mask(1)], &setup).map_err(|e| match e {
         PhysicsError::Centreline(source) => Catheter3dError::Centreline {
             masks: masks.source(),
@@ -416,6 +443,7 @@ pub fn reconstruct_pair(
         base_fitted: !geometry.base_known,
         blind_catheter: geometry.blind.as_ref().map(|(c, _)| c.name.clone()),
         views_assumed: geometry.views_assumed,
+        set_aside_px: centrelines.map(|c| c.set_aside_px),
     })
 }
 
@@ -716,16 +744,33 @@ mod tests {
              coverage)"
         );
 
-        let mut two = good.clone();
-        crate::workspace::paint_disc(
-            &mut two.mask_a,
-            WORK_SIZE,
-            20.0,
-            20.0,
-            6.0,
-            crate::workspace::Tool::Brush,
+        // A small blob in a corner, beside the catheter: set aside, and said so.
+        let disc = |radius: f64| {
+            let mut two = good.clone();
+            crate::workspace::paint_disc(
+                &mut two.mask_a,
+                WORK_SIZE,
+                20.0,
+                20.0,
+                radius,
+                crate::workspace::Tool::Brush,
+            );
+            two
+        };
+        let small = run(&disc(6.0)).unwrap();
+        assert_eq!(small.set_aside_px[1], Vec::<usize>::new());
+        assert_eq!(small.set_aside_px[0].len(), 1);
+        assert!(
+            small.summary().ends_with(&format!(
+                "; view A: a blob of {} px beside the catheter set aside",
+                small.set_aside_px[0][0]
+            )),
+            "{}",
+            small.summary()
         );
-        let text = message(&two);
+        // A blob as large as the catheter's: which is the catheter is not guessed.
+        let catheter_px = good.mask_a.iter().filter(|&&b| b >= 128).count() as f64;
+        let text = message(&disc((0.7 * catheter_px / std::f64::consts::PI).sqrt()));
         assert!(
             text.starts_with(
                 "no centreline in the label masks: view A: the mask has 2 separate blobs"

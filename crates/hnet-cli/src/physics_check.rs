@@ -106,6 +106,10 @@ pub struct PhysicsEvaluation {
     pub pairs: usize,
     /// Pairs reconstructed and fitted.
     pub fitted: usize,
+    /// Views of the fitted pairs whose mask had blobs set aside beside the catheter (another
+    /// device, or the background read as catheter: `hnet_twin::reconstruction::centreline`).
+    #[serde(default)]
+    pub views_with_blobs_set_aside: usize,
     /// Pairs that failed, by the step that failed (`centreline: not a tube`, `reconstruction`,
     /// `fit`, ...: `PhysicsError::counted_as`).
     pub failures: BTreeMap<String, usize>,
@@ -208,6 +212,8 @@ enum Outcome {
         physics: PhysicsForce,
         centreline_error_mm: Option<f64>,
         tip_error_mm: Option<f64>,
+        /// Of its two views, how many had blobs set aside.
+        views_with_blobs_set_aside: usize,
     },
     /// [`hnet_twin::reconstruction::physics_force::PhysicsError::counted_as`].
     Failed(String),
@@ -244,6 +250,11 @@ pub fn check(
                             .then(|| record.tip_mm())
                             .flatten()
                             .map(|tip| (reconstruction.last_mm() - tip).norm()),
+                        views_with_blobs_set_aside: estimate
+                            .centrelines
+                            .iter()
+                            .filter(|c| !c.set_aside_px.is_empty())
+                            .count(),
                     }
                 }
                 Err(e) => Outcome::Failed(e.counted_as()),
@@ -259,6 +270,7 @@ pub fn check(
         ForceAccumulator::new(),
     );
     let (mut centreline, mut tip) = (Vec::new(), Vec::new());
+    let mut set_aside = 0;
     // (network, physics) Fz errors, N, for the correlation.
     let mut fz_errors = Vec::new();
     // Pairs whose truth lies in the combined 90 % interval, per axis.
@@ -269,7 +281,9 @@ pub fn check(
                 physics: fitted,
                 centreline_error_mm,
                 tip_error_mm,
+                views_with_blobs_set_aside,
             } => {
+                set_aside += views_with_blobs_set_aside;
                 let force_n = fitted.force_n;
                 physics.push(force_n, pair.truth_n);
                 if let Some(n) = pair.network_n {
@@ -302,6 +316,7 @@ pub fn check(
         size,
         pairs: pairs.len(),
         fitted: physics.len() as usize,
+        views_with_blobs_set_aside: set_aside,
         failures,
         centreline_error_mm: mean(&centreline),
         tip_error_mm: mean(&tip),
@@ -386,11 +401,15 @@ pub fn markdown(checks: &[PhysicsEvaluation]) -> String {
         };
         let _ = writeln!(
             s,
-            "| {} ({}) | {} of {} | {} | {} | {} | {} | {} | {} | {} | {:.0} |",
+            "| {} ({}) | {} of {}{} | {} | {} | {} | {} | {} | {} | {} | {:.0} |",
             c.masks.row_name(),
             c.size,
             c.fitted,
             c.pairs,
+            match c.views_with_blobs_set_aside {
+                0 => String::new(),
+                n => format!(" ({n} views with blobs set aside)"),
+            },
             mm(c.centreline_error_mm),
             mm(c.tip_error_mm),
             r2(&c.force),

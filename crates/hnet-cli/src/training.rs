@@ -558,6 +558,10 @@ pub struct TrainArgs {
     /// measure its spread.
     #[arg(long)]
     seed: Option<u64>,
+    /// Override the seed of the config's stream of fresh twin pairs (`stream.seed`): with
+    /// `--seed`, a repeat that trains on other pairs as well as in another order.
+    #[arg(long)]
+    stream_seed: Option<u64>,
     /// Start from the network in this weights file (the config's network, its force statistics
     /// included; an H-Net may come from another input size) instead of a random
     /// initialisation: a recipe's next stage.
@@ -622,6 +626,13 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
     }
     if let Some(seed) = args.seed {
         config.seed = seed;
+    }
+    if let Some(seed) = args.stream_seed {
+        let stream = config
+            .stream
+            .as_mut()
+            .context("--stream-seed needs a config with a `stream` of twin pairs")?;
+        stream.seed = seed;
     }
     if let Some(init) = &args.init {
         config.init_weights = Some(init.clone());

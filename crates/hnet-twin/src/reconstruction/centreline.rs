@@ -8,7 +8,13 @@
 //!
 //! 1. The mask is cut at half coverage; its 8-connected blobs are found. Specks smaller than
 //!    [`CentrelineSettings::min_blob_px`] (and than [`CentrelineSettings::min_blob_fraction`]
-//!    of the largest blob) are ignored; more than one blob left is an error, not a guess.
+//!    of the largest blob) are ignored. The largest blob is the catheter. Another blob is set
+//!    aside (and its pixels no longer read) when it lies beside the catheter: the catheter
+//!    enters from the border, the other blob is smaller than
+//!    [`CentrelineSettings::set_aside_fraction`] of it, and it does not lie beyond the tip, where
+//!    it could be the catheter's own continuation ([`CentrelineSettings::beyond_tip_px`]). Such
+//!    blobs are other devices or structures of the background read as catheter (a chest
+//!    radiograph's edges). Any other blob left is an error, not a guess.
 //! 2. **Ordering.** The proximal end is where the catheter leaves the image: the blob's pixels on
 //!    the image border (if it touches the border in several places, the contact nearest to
 //!    [`CentrelineSettings::proximal_hint_px`] or else the one with the most coverage). A blob
@@ -118,6 +124,15 @@ pub struct CentrelineSettings {
     pub min_blob_px: usize,
     /// Blobs smaller than this fraction of the largest one are specks and ignored.
     pub min_blob_fraction: f64,
+    /// A blob beside the catheter is set aside only when smaller than this fraction of the
+    /// catheter's blob; a larger one leaves the view ambiguous.
+    #[serde(default = "default_set_aside_fraction")]
+    pub set_aside_fraction: f64,
+    /// A blob lies beyond the catheter's tip, and may be its continuation, when its nearest
+    /// pixel to the tip is no more than this many pixels farther than its nearest to the
+    /// catheter.
+    #[serde(default = "default_beyond_tip_px")]
+    pub beyond_tip_px: f64,
     /// Shortest acceptable centreline, pixels.
     pub min_length_px: f64,
     /// If given, the end of the catheter nearest to this point `[u, v]` is the proximal one
@@ -137,12 +152,25 @@ impl Default for CentrelineSettings {
             spacing_px: 1.0,
             min_blob_px: 8,
             min_blob_fraction: 0.1,
+            set_aside_fraction: default_set_aside_fraction(),
+            beyond_tip_px: default_beyond_tip_px(),
             min_length_px: 10.0,
             proximal_hint_px: None,
             max_off_tube_widths2: 2.0,
             max_width_ratio: 1.5,
         }
     }
+}
+
+/// Half: a blob of half the catheter's pixels or more is as likely a second device in view.
+fn default_set_aside_fraction() -> f64 {
+    0.5
+}
+
+/// 4 px: the pieces of a catheter broken where the mask dips below half coverage (seen on
+/// the chest-radiograph bench set) start at the piece before's tip, within a pixel or two.
+fn default_beyond_tip_px() -> f64 {
+    4.0
 }
 
 /// A view's centreline, ordered from the proximal end to the tip.
@@ -159,6 +187,10 @@ pub struct Centreline {
     /// Whether the distal end is on the image border: the tip is outside the image and the last
     /// point is not the tip.
     pub tip_at_border: bool,
+    /// Sizes in pixels of the blobs set aside beside the catheter (largest first; empty when
+    /// the mask was one blob).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub set_aside_px: Vec<usize>,
 }
 
 impl Centreline {
@@ -382,14 +414,21 @@ pub fn extract_centreline(
             values: mask.len(),
         });
     }
-    let values = mask.to_f32();
+    let mut values = mask.to_f32();
+    let inside: Vec<bool> = values.iter().map(|&c| is_catheter(c)).collect();
+    let CatheterBlob {
+        pixels: blob,
+        set_aside,
+    } = catheter_blob(&inside, width, height, view, settings)?;
+    // What was set aside is not the catheter's: the refinement must not read it.
+    for &i in set_aside.iter().flatten() {
+        values[i] = 0.0;
+    }
     let field = Field {
         width,
         height,
         values: &values,
     };
-    let inside: Vec<bool> = values.iter().map(|&c| is_catheter(c)).collect();
-    let blob = largest_blob(&inside, width, height, view, settings)?;
 
     let on_border = |i: usize| {
         let (x, y) = (i % width, i / width);
@@ -549,6 +588,7 @@ pub fn extract_centreline(
         width_px,
         proximal_at_border,
         tip_at_border,
+        set_aside_px: set_aside.iter().map(Vec::len).collect(),
     })
 }
 
@@ -729,6 +769,54 @@ mod tests {
         )
         .unwrap();
         assert!(hinted.points_px[0][0] < 25.0);
+    }
+
+    #[test]
+    fn a_blob_beside_the_catheter_is_set_aside_and_one_beyond_its_tip_is_not() {
+        // A catheter coming up from the bottom edge (u 30-34, tip at v = 20) and, 2 px to its
+        // right, a bar of 45 px beside its shaft: a background's edge read as catheter.
+        let n = 64;
+        let mut mask = vec![0u8; n * n];
+        fill(&mut mask, n, 30..34, 20..n, 255);
+        let mut beside = mask.clone();
+        fill(&mut beside, n, 36..39, 35..50, 255);
+        let line = centreline8(n, n, &beside, "A").unwrap();
+        assert_eq!(line.set_aside_px, vec![45]);
+        // The bar is not read: the centreline keeps to the catheter's axis, u = 32.
+        for p in &line.points_px {
+            assert!((p[0] - 32.0).abs() < 0.05, "{p:?}");
+        }
+        // The tip's centre lies a cap's depth inside the bar's square end, v = 20.
+        assert!(
+            (20.0..22.0).contains(&line.tip_px()[1]),
+            "{:?}",
+            line.tip_px()
+        );
+        assert!(
+            centreline8(n, n, &mask, "A")
+                .unwrap()
+                .set_aside_px
+                .is_empty()
+        );
+
+        // A piece 5 px past the tip may be the catheter's own continuation: ambiguous.
+        let mut beyond = mask.clone();
+        fill(&mut beyond, n, 30..34, 8..15, 255);
+        let err = centreline8(n, n, &beyond, "A").unwrap_err();
+        assert_eq!(
+            err,
+            CentrelineError::SeveralBlobs {
+                view: "A".into(),
+                sizes: vec![176, 28]
+            }
+        );
+        // So is a second blob half the catheter's size or more, even beside it.
+        let mut second = mask.clone();
+        fill(&mut second, n, 50..54, 20..n, 255);
+        assert!(matches!(
+            centreline8(n, n, &second, "A").unwrap_err(),
+            CentrelineError::SeveralBlobs { .. }
+        ));
     }
 
     #[test]

@@ -680,6 +680,7 @@ pub(crate) mod tests {
             width_px: 4.0,
             proximal_at_border: false,
             tip_at_border: false,
+            set_aside_px: Vec::new(),
         }
     }
 

@@ -4,14 +4,25 @@
 
 use super::*;
 
-/// The pixels of the largest blob, or the error when there is none or more than one.
-pub(super) fn largest_blob(
+/// The catheter's blob, and the blobs set aside beside it.
+pub(super) struct CatheterBlob {
+    /// The catheter's pixels, sorted.
+    pub pixels: Vec<usize>,
+    /// The pixels of each significant blob set aside beside the catheter, largest first.
+    pub set_aside: Vec<Vec<usize>>,
+}
+
+/// The pixels of the catheter's blob: the largest one, with any other significant blob set
+/// aside when it lies beside the catheter rather than beyond its tip
+/// ([`CentrelineSettings::set_aside_fraction`], [`CentrelineSettings::beyond_tip_px`]); the
+/// error when there is no blob or the blobs leave it ambiguous.
+pub(super) fn catheter_blob(
     inside: &[bool],
     width: usize,
     height: usize,
     view: &str,
     settings: &CentrelineSettings,
-) -> Result<Vec<usize>, CentrelineError> {
+) -> Result<CatheterBlob, CentrelineError> {
     let mut label = vec![usize::MAX; inside.len()];
     let mut blobs: Vec<Vec<usize>> = Vec::new();
     let mut stack = Vec::new();
@@ -41,24 +52,71 @@ pub(super) fn largest_blob(
     let largest = blobs[0].len();
     let significant =
         (settings.min_blob_px as f64).max(settings.min_blob_fraction * largest as f64);
-    let sizes: Vec<usize> = blobs
-        .iter()
-        .map(Vec::len)
-        .filter(|&n| n as f64 >= significant)
-        .collect();
-    if sizes.is_empty() {
+    blobs.retain(|b| b.len() as f64 >= significant);
+    if blobs.is_empty() {
         // Only specks: nothing that could be a catheter.
         return Err(CentrelineError::Empty { view: view.into() });
     }
-    if sizes.len() > 1 {
+    let mut catheter = blobs.remove(0);
+    catheter.sort_unstable();
+    if !blobs.is_empty() && !all_beside(&catheter, &blobs, width, height, settings) {
+        let mut sizes = vec![catheter.len()];
+        sizes.extend(blobs.iter().map(Vec::len));
         return Err(CentrelineError::SeveralBlobs {
             view: view.into(),
             sizes,
         });
     }
-    let mut blob = blobs.swap_remove(0);
-    blob.sort_unstable();
-    Ok(blob)
+    Ok(CatheterBlob {
+        pixels: catheter,
+        set_aside: blobs,
+    })
+}
+
+/// Whether every one of `others` lies beside the `catheter` blob, so that it can be set aside:
+/// the catheter enters the view from its border, each other blob is smaller than
+/// [`CentrelineSettings::set_aside_fraction`] of it, and none lies beyond its tip (a blob whose
+/// nearest pixel to the tip is within [`CentrelineSettings::beyond_tip_px`] of its nearest to
+/// the catheter may be the catheter's own continuation, broken where the mask dips below half
+/// coverage). A blob beside the shaft is another device or a structure of the background read
+/// as catheter; a catheter cut in two is an error, not a guess.
+fn all_beside(
+    catheter: &[usize],
+    others: &[Vec<usize>],
+    width: usize,
+    height: usize,
+    settings: &CentrelineSettings,
+) -> bool {
+    let on_border = |i: usize| {
+        let (x, y) = (i % width, i / width);
+        x == 0 || y == 0 || x == width - 1 || y == height - 1
+    };
+    let border: Vec<usize> = catheter.iter().copied().filter(|&i| on_border(i)).collect();
+    if border.is_empty() {
+        return false;
+    }
+    let mut in_blob = vec![false; width * height];
+    for &i in catheter {
+        in_blob[i] = true;
+    }
+    let (tip, _, _) = geodesic(&in_blob, width, height, &border);
+    let at = |i: usize| [(i % width) as f64, (i / width) as f64];
+    let distance = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]);
+    let tip = at(tip);
+    others.iter().all(|blob| {
+        if blob.len() as f64 > settings.set_aside_fraction * catheter.len() as f64 {
+            return false;
+        }
+        let to_tip = blob
+            .iter()
+            .map(|&i| distance(at(i), tip))
+            .fold(f64::INFINITY, f64::min);
+        let to_catheter = blob
+            .iter()
+            .flat_map(|&i| catheter.iter().map(move |&j| distance(at(i), at(j))))
+            .fold(f64::INFINITY, f64::min);
+        to_tip > to_catheter + settings.beyond_tip_px
+    })
 }
 
 /// Groups border pixels into runs of 8-connected neighbours.
