@@ -14,7 +14,8 @@ use hnet_units::{ImageSize, TipForce};
 
 /// Why no force is read from a pair whose masks (catheter probabilities of views A and B, `size`
 /// pixels) do not both show a catheter ([`catheter_seen`]: enough catheter pixels, and
-/// not too many, in one blob long enough for a catheter); `None` when both do. The same rule as `hnet study no-catheter` measures.
+/// not too many, in one blob long enough for a catheter, smaller blobs beside it set aside); `None`
+/// when both do. The same rule as `hnet study no-catheter` measures.
 pub fn no_catheter_found(mask_a: &[f32], mask_b: &[f32], size: ImageSize) -> Option<String> {
     let settings = CentrelineSettings::default();
     [(mask_a, "A"), (mask_b, "B")]

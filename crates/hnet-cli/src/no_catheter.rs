@@ -7,7 +7,8 @@
 //! to the network's size, uniform noise, and blank black and white images. For each group, the
 //! share of each view's pixels the network calls catheter, the share of views with at least a
 //! given share at several thresholds, and the share the rule in use calls "catheter found"
-//! (enough pixels and not too many, in one blob long enough for a catheter).
+//! (enough pixels and not too many, in one blob long enough for a catheter, smaller blobs beside
+//! it set aside).
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -222,7 +223,7 @@ pub fn run(args: &NoCatheterArgs) -> anyhow::Result<()> {
     let _ = writeln!(
         report,
         "\nThe rule (`hnet_twin::reconstruction::centreline::catheter_seen`): {:.2} % to {:.0} % of the view's \
-         pixels read as catheter, in one blob long enough for a catheter.",
+         pixels read as catheter, in one blob long enough for a catheter (smaller blobs beside it set aside).",
         MIN_CATHETER_SHARE * 100.0,
         MAX_CATHETER_SHARE * 100.0
     );
