@@ -307,14 +307,10 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
             };
             let off_bench = OffBench::new(config.clone(), radiographs, 1.0);
             let off_bench = match sampling {
-                Some(scenes) => {
-                    // The header records the scenes drawn.
-                    config.scene = scenes.clone();
-                    off_bench.with_scenes(scenes)
-                }
+                Some(scenes) => off_bench.with_scenes(scenes),
                 None => off_bench,
             };
-            simulate_off_bench_dataset(&off_bench, &config, &names, part, &args.out, &progress)?
+            simulate_off_bench_dataset(&off_bench, &names, part, &args.out, &progress)?
         }
     };
     bar.finish_and_clear();

@@ -7,14 +7,14 @@ use std::path::{Path, PathBuf};
 use hnet_twin::dataset::import::{ImportOptions, MaskThreshold, import_recordings};
 use hnet_twin::dataset::shard::{Shard, merge_shards};
 use hnet_twin::dataset::simulate::{
-    OFF_BENCH_VIEWS, Part, read_sample_record, simulate_dataset, simulate_dataset_part,
-    simulate_off_bench_dataset,
+    OFF_BENCH_VIEWS, Part, nominal_base, read_sample_record, simulate_dataset,
+    simulate_dataset_part, simulate_off_bench_dataset,
 };
 use hnet_twin::dataset::{Dataset, LoadedPair, Split};
 use hnet_twin::simulator::carm::triangulate;
 use hnet_twin::simulator::off_bench::OffBench;
 use hnet_twin::simulator::raster::GreyImage;
-use hnet_twin::simulator::scene::{Backgrounds, Modality, TwinConfig};
+use hnet_twin::simulator::scene::{Backgrounds, Modality, SceneSampling, TwinConfig};
 use hnet_twin::simulator::synthetic_xray::BackgroundSource;
 use hnet_units::ImageSize;
 
@@ -242,17 +242,15 @@ fn an_off_bench_dataset_records_each_pairs_own_views() {
     let off_bench = OffBench::new(config.clone(), vec![flat], 1.0);
     let out = scratch("off-bench");
     let names = ["phantom:off-bench".to_string()];
-    simulate_off_bench_dataset(
-        &off_bench,
-        &config,
-        &names,
-        Part::whole(4, 9),
-        &out,
-        &|_| {},
-    )
-    .unwrap();
+    simulate_off_bench_dataset(&off_bench, &names, Part::whole(4, 9), &out, &|_| {}).unwrap();
     let dataset = Dataset::open(&out).unwrap();
     assert_eq!(dataset.header.source["views"], OFF_BENCH_VIEWS);
+    // The header records the scenes drawn (`varied`), not the bench's the look came with: a
+    // blind estimate reads its nominal base and tolerance from them.
+    assert_eq!(
+        nominal_base(&dataset),
+        SceneSampling::varied().nominal_base()
+    );
     let views: Vec<_> = dataset
         .rows
         .iter()

@@ -374,17 +374,18 @@ pub fn simulate_dataset_part(
 /// Generates `part` of a simulation off the bench ([`OffBench`]: varied catheters and poses,
 /// the page's C-arm angle ranges, phantom or radiographs) into `out`, each pair's record holding
 /// its own views. The header marks the dataset `"views": "off-bench"`: its `twin` settings give
-/// the look, not the views.
+/// the look and the scenes drawn ([`OffBench::twin`], what a blind estimate's nominal base is
+/// read from: [`nominal_base`]), not the views.
 pub fn simulate_off_bench_dataset(
     off_bench: &OffBench,
-    base: &TwinConfig,
     background_names: &[String],
     part: Part,
     out: &Path,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<SimulationReport, SimulationError> {
-    let source = header_source(base, background_names, part.seed, Some(OFF_BENCH_VIEWS));
-    write_samples(base, source, part, out, progress, &|index| {
+    let twin = off_bench.twin();
+    let source = header_source(twin, background_names, part.seed, Some(OFF_BENCH_VIEWS));
+    write_samples(twin, source, part, out, progress, &|index| {
         Ok(off_bench.generate(part.seed, index)?)
     })
 }

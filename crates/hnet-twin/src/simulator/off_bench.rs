@@ -72,6 +72,12 @@ impl OffBench {
         self
     }
 
+    /// Its twin settings: the look it was given, with the scenes it draws (each pair's views are
+    /// its own, [`Self::draw`]).
+    pub fn twin(&self) -> &TwinConfig {
+        &self.twin
+    }
+
     /// The chest radiographs it draws on.
     pub fn radiographs(&self) -> usize {
         self.radiographs.len()
