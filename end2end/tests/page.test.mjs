@@ -5,7 +5,7 @@ import { mkdtemp, writeFile, readFile } from "node:fs/promises";
 import { tmpdir } from "node:os";
 import { join } from "node:path";
 import { serveDist, launchBrowser, openPage, waitForModel } from "../harness.mjs";
-import { catheterFrame, readStoredZip } from "../images.mjs";
+import { catheterFrame, png, readStoredZip } from "../images.mjs";
 
 let server;
 let context;
@@ -17,6 +17,9 @@ before(async () => {
   await writeFile(join(files, "frame_a.png"), catheterFrame(300, 0.25));
   await writeFile(join(files, "frame_b.png"), catheterFrame(300, -0.15));
   await writeFile(join(files, "notes.txt"), "not an image");
+  // A pair without a catheter: a plain grey frame in both views.
+  await writeFile(join(files, "empty_a.png"), png(300, 300, () => [128, 128, 128]));
+  await writeFile(join(files, "empty_b.png"), png(300, 300, () => [128, 128, 128]));
 });
 after(async () => {
   await context?.close();
@@ -302,6 +305,14 @@ test("bad input gets a clear message and loses nothing", async () => {
   assert.equal(await page.locator("#pairs li").count(), before);
   await page.click("#keep-draft");
   await page.waitForFunction((n) => document.querySelectorAll("#pairs li").length === n + 1, before);
+
+  // A pair with no catheter in it: H-Net answers a force for any image, and the page reads none.
+  await page.setInputFiles("#file-pair", [join(files, "empty_a.png"), join(files, "empty_b.png")]);
+  await page.waitForSelector("#force-left-out", { timeout: 120_000 });
+  assert.match(await page.textContent("#force-left-out"), /^No force is read: view A: no catheter found \(0\.\d\d % of the pixels read as catheter/);
+  assert.equal(await page.$("#force-verdict"), null);
+  // Back to the pair just kept.
+  await page.click("#pairs li:last-child button.pair");
 
   // Typed labels that are not numbers, or not plausible, are not saved.
   const label = await page.inputValue("#label-fx");

@@ -372,8 +372,9 @@ pub enum NoCatheter {
 
 /// Whether `mask` (view `view`) shows a catheter, or why not: at least [`MIN_CATHETER_SHARE`]
 /// and at most [`MAX_CATHETER_SHARE`] of its pixels at half coverage or more, in one blob long
-/// enough for a catheter (smaller blobs beside it set aside, as [`extract_centreline`] does). A blob that is not a clean tube (a catheter crossing itself, or a mask
-/// wider in places) still counts: it is a catheter the physics estimate cannot fit, not an
+/// enough for a catheter (smaller blobs beside it set aside, as [`extract_centreline`] does).
+/// A blob that is not a clean tube (a catheter crossing itself, or a mask wider in places) still
+/// counts: it is a catheter the physics estimate cannot fit, not an
 /// image without one. The one rule that withholds a force from a view without a catheter (the
 /// page; `hnet study no-catheter` measures it).
 pub fn catheter_seen(
