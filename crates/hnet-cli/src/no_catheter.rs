@@ -17,7 +17,7 @@ use std::sync::Arc;
 use anyhow::Context;
 use hnet_twin::dataset::{Dataset, Split, resized};
 use hnet_twin::reconstruction::centreline::{
-    CentrelineSettings, MAX_CATHETER_SHARE, MIN_CATHETER_SHARE, Mask, catheter_seen,
+    CatheterSeen, CentrelineSettings, MAX_CATHETER_SHARE, MIN_CATHETER_SHARE, Mask, catheter_seen,
 };
 use hnet_twin::simulator::scene::{Modality, TwinConfig, render_empty_xray_view, sample_rng};
 use hnet_twin::simulator::synthetic_xray::BackgroundSource;
@@ -182,18 +182,26 @@ pub fn run(args: &NoCatheterArgs) -> anyhow::Result<()> {
     for t in THRESHOLDS {
         let _ = write!(report, " found at t = {:.2} % |", t * 100.0);
     }
-    let _ = writeln!(report, " found by the rule |");
-    let _ = writeln!(report, "|{}", " --- |".repeat(5 + THRESHOLDS.len()));
+    let _ = writeln!(report, " found by the rule | of them, not a clean tube |");
+    let _ = writeln!(report, "|{}", " --- |".repeat(6 + THRESHOLDS.len()));
     for (name, has_catheter, items) in &groups {
         let mut shares = Vec::new();
         let mut by_rule = 0;
+        let mut tangled = 0;
         predict(&model, items, 16, &device, |_, masks, _| {
             if let Some(masks) = masks {
                 for (mask, view) in masks.iter().zip(["A", "B"]) {
                     let mask = Mask::soft(size.width, size.height, mask);
                     shares.push(mask.share_at_half());
                     let settings = CentrelineSettings::default();
-                    by_rule += usize::from(catheter_seen(&mask, view, &settings).is_ok());
+                    match catheter_seen(&mask, view, &settings) {
+                        Ok(CatheterSeen::Tube) => by_rule += 1,
+                        Ok(CatheterSeen::Tangled(_)) => {
+                            by_rule += 1;
+                            tangled += 1;
+                        }
+                        Err(_) => {}
+                    }
                 }
             }
         })?;
@@ -216,8 +224,9 @@ pub fn run(args: &NoCatheterArgs) -> anyhow::Result<()> {
         }
         let _ = writeln!(
             report,
-            " {:.1} % |",
-            100.0 * by_rule as f64 / shares.len().max(1) as f64
+            " {:.1} % | {:.1} % |",
+            100.0 * by_rule as f64 / shares.len().max(1) as f64,
+            100.0 * tangled as f64 / shares.len().max(1) as f64
         );
     }
     let _ = writeln!(

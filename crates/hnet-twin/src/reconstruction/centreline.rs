@@ -244,13 +244,15 @@ pub enum CentrelineError {
     },
     /// The mask is not one tube of constant width around its centreline.
     #[error(
-        "view {view}: the mask is not one catheter seen once: {problem}; the catheter crosses or overlaps itself in this view, or the mask has a branch"
+        "view {view}: the mask is not one catheter seen once: {misfit}; the catheter crosses or overlaps itself in this view, or the mask has a branch"
     )]
     NotATube {
         /// The view's name.
         view: String,
         /// What does not fit.
-        problem: String,
+        misfit: TubeMisfit,
+        /// The blob's size, its centreline's length and its shaft's width.
+        blob: BlobMeasure,
     },
     /// The centreline is shorter than [`CentrelineSettings::min_length_px`].
     #[error(
@@ -264,6 +266,48 @@ pub enum CentrelineError {
         /// The least accepted, pixels.
         min_px: f64,
     },
+}
+
+/// How a blob fails to be one clean tube around its centreline
+/// ([`CentrelineError::NotATube`]).
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum TubeMisfit {
+    /// Too much of the mask lies off the tube around the centreline (farther than half a width
+    /// plus 1.5 px from it).
+    #[error(
+        "{off_px:.0} px of it lie off the centreline's tube (at most {allowed_px:.0} px allowed)"
+    )]
+    OffTube {
+        /// Coverage off the tube, pixels.
+        off_px: f64,
+        /// The most allowed ([`CentrelineSettings::max_off_tube_widths2`] squared widths),
+        /// pixels.
+        allowed_px: f64,
+    },
+    /// The mask is much wider in places than along most of its length (two stretches side by
+    /// side: a hairpin in the view).
+    #[error(
+        "it is {ratio:.1} times as wide in places as along most of its length (at most {allowed:.1} allowed)"
+    )]
+    Wider {
+        /// Widest place (median over 7 px) over the lower quartile of the widths.
+        ratio: f64,
+        /// The most allowed ([`CentrelineSettings::max_width_ratio`]).
+        allowed: f64,
+    },
+}
+
+/// The size and shape of the blob taken for the catheter, in pixels.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BlobMeasure {
+    /// Its pixels at half coverage or more.
+    pub pixels: usize,
+    /// Its coverage summed, pixels.
+    pub area_px: f64,
+    /// Its centreline's length, pixels.
+    pub length_px: f64,
+    /// Its shaft's width, the median across the centreline, pixels.
+    pub width_px: f64,
 }
 
 impl CentrelineError {
@@ -368,20 +412,43 @@ pub enum NoCatheter {
     /// The pixels do not form one catheter (several blobs, too short).
     #[error("no catheter found")]
     NotACatheter(#[source] CentrelineError),
+    /// The largest blob is not one clean tube, and most of the pixels read as catheter lie
+    /// outside it: a texture painted over the view, not a catheter crossing itself.
+    #[error(
+        "view {view}: no catheter found (the pixels read as catheter are scattered: the largest \
+         blob, not one clean tube, holds {:.0} % of them, at least {:.0} % needed)",
+        in_blob * 100.0,
+        MIN_TANGLED_BLOB_SHARE * 100.0
+    )]
+    Scattered {
+        /// The view's name.
+        view: String,
+        /// Share of the pixels read as catheter that lie in the largest blob, 0-1.
+        in_blob: f64,
+    },
 }
+
+/// Least share of a view's pixels read as catheter that must lie in its largest blob when that
+/// blob is not one clean tube ([`CatheterSeen::Tangled`]). A catheter crossing itself in the
+/// view is one blob with at most a few smaller ones beside it (each under half its size,
+/// [`CentrelineSettings::set_aside_fraction`]); the blobs a network paints on a texture it was
+/// never shown are many. Measured with `hnet study no-catheter` (docs/results.md, "No catheter,
+/// no force"): on uniform noise the outline-term weights' largest blob held 24-46 % of the
+/// pixels they read as catheter, a rendered loop 100 %.
+pub const MIN_TANGLED_BLOB_SHARE: f64 = 0.6;
 
 /// Whether `mask` (view `view`) shows a catheter, or why not: at least [`MIN_CATHETER_SHARE`]
 /// and at most [`MAX_CATHETER_SHARE`] of its pixels at half coverage or more, in one blob long
 /// enough for a catheter (smaller blobs beside it set aside, as [`extract_centreline`] does).
 /// A blob that is not a clean tube (a catheter crossing itself, or a mask wider in places) still
-/// counts: it is a catheter the physics estimate cannot fit, not an
-/// image without one. The one rule that withholds a force from a view without a catheter (the
-/// page; `hnet study no-catheter` measures it).
+/// counts, as a catheter the physics estimate cannot fit, when it holds most of the pixels read
+/// as catheter ([`MIN_TANGLED_BLOB_SHARE`]). The one rule that withholds a force from a view
+/// without a catheter (the page, `hnet trace`; `hnet study no-catheter` measures it).
 pub fn catheter_seen(
     mask: &Mask<'_>,
     view: &str,
     settings: &CentrelineSettings,
-) -> Result<(), NoCatheter> {
+) -> Result<CatheterSeen, NoCatheter> {
     let share = mask.share_at_half();
     if share < MIN_CATHETER_SHARE {
         return Err(NoCatheter::TooFewPixels {
@@ -396,9 +463,31 @@ pub fn catheter_seen(
         });
     }
     match extract_centreline(mask, view, settings) {
-        Ok(_) | Err(CentrelineError::NotATube { .. }) => Ok(()),
+        Ok(_) => Ok(CatheterSeen::Tube),
+        Err(CentrelineError::NotATube { misfit, blob, .. }) => {
+            let read_px = share * (mask.width * mask.height) as f64;
+            let in_blob = blob.pixels as f64 / read_px.max(1.0);
+            if in_blob >= MIN_TANGLED_BLOB_SHARE {
+                Ok(CatheterSeen::Tangled(misfit))
+            } else {
+                Err(NoCatheter::Scattered {
+                    view: view.into(),
+                    in_blob,
+                })
+            }
+        }
         Err(other) => Err(NoCatheter::NotACatheter(other)),
     }
+}
+
+/// How a view shows its catheter ([`catheter_seen`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum CatheterSeen {
+    /// As one clean tube: its centreline can be read.
+    Tube,
+    /// As one blob that is not a clean tube but could be a catheter crossing or overlapping
+    /// itself in the view: a catheter the physics estimate cannot fit.
+    Tangled(TubeMisfit),
 }
 
 /// The catheter's centreline in view `view` of `mask`, in pixels, proximal end first (the
@@ -563,25 +652,30 @@ pub fn extract_centreline(
         .map(|&i| f64::from(values[i]))
         .sum();
     let allowed = settings.max_off_tube_widths2 * width_px * width_px;
-    let not_a_tube = |problem: String| CentrelineError::NotATube {
+    let not_a_tube = |misfit: TubeMisfit| CentrelineError::NotATube {
         view: view.into(),
-        problem,
+        misfit,
+        blob: BlobMeasure {
+            pixels: blob.len(),
+            area_px: covered,
+            length_px,
+            width_px,
+        },
     };
     if off_tube > allowed {
-        return Err(not_a_tube(format!(
-            "{off_tube:.0} px of it lie off the centreline's tube (at most {allowed:.0} px allowed)"
-        )));
+        return Err(not_a_tube(TubeMisfit::OffTube {
+            off_px: off_tube,
+            allowed_px: allowed,
+        }));
     }
     // Where two stretches lie side by side the mask is twice as wide (a hairpin in the view).
     let narrow = quantile(&widths, 0.25);
     let widest = widths.windows(7).map(median).fold(0.0f64, f64::max);
     if narrow > 0.0 && widest > settings.max_width_ratio * narrow {
-        return Err(not_a_tube(format!(
-            "it is {:.1} times as wide in places as along most of its length (at most {:.1} \
-             allowed)",
-            widest / narrow,
-            settings.max_width_ratio
-        )));
+        return Err(not_a_tube(TubeMisfit::Wider {
+            ratio: widest / narrow,
+            allowed: settings.max_width_ratio,
+        }));
     }
     let points_px = resample(&points, settings.spacing_px.max(1e-3));
     let arc_px = arc_lengths(&points_px);
@@ -878,5 +972,96 @@ mod tests {
         let err =
             extract_centreline(&Mask::soft(w, h + 1, &dot), "A", &Default::default()).unwrap_err();
         assert!(matches!(err, CentrelineError::WrongSize { .. }), "{err}");
+    }
+
+    /// A `size` x `size` coverage mask of a tube `width_px` wide around the polyline `line`
+    /// (pixels), each pixel's coverage from 4 x 4 samples.
+    fn tube_mask(size: usize, line: &[[f64; 2]], width_px: f64) -> Vec<f32> {
+        let mut mask = vec![0.0f32; size * size];
+        for (i, value) in mask.iter_mut().enumerate() {
+            let (x, y) = ((i % size) as f64, (i / size) as f64);
+            let inside = (0..16)
+                .filter(|k| {
+                    let p = [
+                        x + (k % 4) as f64 / 4.0 + 0.125,
+                        y + (k / 4) as f64 / 4.0 + 0.125,
+                    ];
+                    distance_to(line, p) <= width_px / 2.0
+                })
+                .count();
+            *value = inside as f32 / 16.0;
+        }
+        mask
+    }
+
+    #[test]
+    fn a_catheter_crossing_itself_is_seen_and_a_painted_patch_is_not() {
+        let size = 224;
+        // Up from the bottom border, then a loop that crosses the shaft (a trochoid).
+        let mut line = vec![[100.0, 224.5]];
+        line.extend((0..=400).map(|k| {
+            let t = k as f64 * 0.02;
+            [
+                100.0 + 28.0 * t.sin(),
+                200.0 - 10.0 * t - 28.0 * (1.0 - t.cos()),
+            ]
+        }));
+        let looped = tube_mask(size, &line, 5.0);
+        let settings = CentrelineSettings::default();
+        let mask = Mask::soft(size, size, &looped);
+        let err = extract_centreline(&mask, "A", &settings).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                CentrelineError::NotATube {
+                    misfit: TubeMisfit::OffTube { .. },
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert!(matches!(
+            catheter_seen(&mask, "A", &settings),
+            Ok(CatheterSeen::Tangled(TubeMisfit::OffTube { .. }))
+        ));
+        // The same blob beside specks (as a network paints uniform noise: each speck too small
+        // to count as a blob, together twice the blob's pixels) is no catheter; a clean tube
+        // beside them still is.
+        let specks = |mut mask: Vec<f32>| {
+            for k in 0..300 {
+                let (x, y) = (150 + 4 * (k % 17), 4 + 4 * (k / 17));
+                for (dx, dy) in [
+                    (0, 0),
+                    (1, 0),
+                    (0, 1),
+                    (1, 1),
+                    (2, 0),
+                    (2, 1),
+                    (0, 2),
+                    (1, 2),
+                    (2, 2),
+                ] {
+                    mask[(y + dy) * size + x + dx] = 1.0;
+                }
+            }
+            mask
+        };
+        let painted = specks(looped);
+        let why = catheter_seen(&Mask::soft(size, size, &painted), "A", &settings).unwrap_err();
+        assert!(
+            matches!(why, NoCatheter::Scattered { in_blob, .. } if in_blob < 0.5),
+            "{why}"
+        );
+        assert!(
+            why.to_string().starts_with(
+                "view A: no catheter found (the pixels read as catheter are scattered"
+            ),
+            "{why}"
+        );
+        let straight = specks(tube_mask(size, &[[100.0, 224.5], [100.0, 60.0]], 5.0));
+        assert_eq!(
+            catheter_seen(&Mask::soft(size, size, &straight), "A", &settings),
+            Ok(CatheterSeen::Tube)
+        );
     }
 }
