@@ -393,8 +393,7 @@ pub enum Catheter3dError {
         /// RMS distance of the reconstruction from the fitted rod, mm.
         rms_mm: f64,
     },
-    /// The pair cannot be read as seen: the views are too close to parallel, or the rod fits
-    /// only where the catheter assumed could not lie.
+    /// The rod fits, but not as the catheter assumed could lie.
     #[error("no physics estimate")]
     Unreadable(#[source] PhysicsError),
 }
@@ -428,9 +427,7 @@ pub fn reconstruct_pair(
         PhysicsError::Reconstruction(e) => Catheter3dError::Reconstruction(e),
         PhysicsError::Fit(e) => Catheter3dError::Fit(e),
         PhysicsError::PoorFit { rms_mm, .. } => Catheter3dError::PoorFit { rms_mm },
-        e @ (PhysicsError::BaseOutsideTolerance { .. } | PhysicsError::ViewsTooClose { .. }) => {
-            Catheter3dError::Unreadable(e)
-        }
+        e @ PhysicsError::BaseOutsideTolerance { .. } => Catheter3dError::Unreadable(e),
     })?;
     Ok(Catheter3d {
         masks: masks.source(),
@@ -781,17 +778,14 @@ mod tests {
             "{text}"
         );
 
-        // Two views from the same place: no depth, refused before any matching (the blind
-        // setup's least angle between the views).
+        // Two views from the same place: no depth.
         let mut same = good.clone();
         if let PairSource::Twin { views, .. } = &mut same.source {
             views.b = views.a;
         }
         let text = message(&same);
         assert!(
-            text.starts_with(
-                "no physics estimate: the views' axes are 0° apart (at least 30° needed)"
-            ),
+            text.starts_with("the two views cannot be matched in 3D: the two views' centres are"),
             "{text}"
         );
 

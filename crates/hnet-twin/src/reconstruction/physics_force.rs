@@ -55,28 +55,6 @@ pub struct PhysicsSetup {
     /// Largest RMS distance of the reconstruction from the fitted rod whose force is given, mm
     /// ([`MAX_FIT_RMS_MM`]); `None` gives every fit's force.
     pub max_fit_rms_mm: Option<f64>,
-    /// Least angle between the two views' axes for which the catheter is reconstructed, degrees
-    /// ([`MIN_VIEW_SEPARATION_DEG`]); `None` reads views at any angle.
-    pub min_view_separation_deg: Option<f64>,
-}
-
-/// Least angle between the two views' axes for a blind estimate, degrees. Views closer to
-/// parallel see the catheter from nearly the same side: its depth, and the force along the
-/// line of sight, are read from a few pixels of parallax. Measured blind on fresh off-bench
-/// pairs at the page's C-arm angles (docs/results.md, "Views close to parallel").
-pub const MIN_VIEW_SEPARATION_DEG: f64 = 30.0;
-
-/// The angle between the axes of the views of `cameras` (projection matrices), folded to
-/// 0-90° (opposite views are parallel for triangulation), degrees. The third row of a
-/// projection matrix `K [R | t]` points along its view's axis.
-pub fn view_separation_deg(cameras: &[CameraMatrix; 2]) -> f64 {
-    let [a, b] = cameras.map(|p| {
-        let axis = [p[2][0], p[2][1], p[2][2]];
-        let norm = axis.iter().map(|x| x * x).sum::<f64>().sqrt();
-        axis.map(|x| x / norm)
-    });
-    let cos = (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]).abs().min(1.0);
-    cos.acos().to_degrees()
 }
 
 /// Largest RMS distance between the reconstruction and the fitted rod for which a blind estimate
@@ -97,7 +75,6 @@ impl PhysicsSetup {
             reconstruction: ReconstructionSettings::default(),
             fit: RodFitSettings::default(),
             max_fit_rms_mm: None,
-            min_view_separation_deg: None,
         }
     }
 
@@ -122,7 +99,6 @@ impl PhysicsSetup {
         setup.fit.base_prior = Some(nominal_base.tolerance);
         setup.fit.start_base_from_centreline = true;
         setup.max_fit_rms_mm = Some(MAX_FIT_RMS_MM);
-        setup.min_view_separation_deg = Some(MIN_VIEW_SEPARATION_DEG);
         setup.fit.tip_weight = BLIND_TIP_WEIGHT;
         setup
     }
@@ -157,18 +133,6 @@ pub enum TipUse {
 /// Which step could not be done, and why.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PhysicsError {
-    /// The views are too close to parallel to reconstruct the catheter in depth.
-    #[error(
-        "the views' axes are {separation_deg:.0}° apart (at least {min_deg:.0}° needed): seen from \
-         nearly the same side, the catheter's depth and the force along the line of sight cannot \
-         be read; turn one C-arm farther from the other"
-    )]
-    ViewsTooClose {
-        /// Angle between the views' axes, folded to 0-90°, degrees.
-        separation_deg: f64,
-        /// The least accepted, degrees.
-        min_deg: f64,
-    },
     /// A mask gives no centreline (empty, several blobs, not a tube, too short).
     #[error(transparent)]
     Centreline(#[from] CentrelineError),
@@ -223,7 +187,6 @@ impl PhysicsError {
     /// A short name of the failing step (`centreline`, `reconstruction`, `fit`), for counts.
     pub fn step(&self) -> &'static str {
         match self {
-            Self::ViewsTooClose { .. } => "views too close",
             Self::Centreline(_) => "centreline",
             Self::Reconstruction(_) => "reconstruction",
             Self::Fit(_) => "fit",
@@ -238,15 +201,6 @@ pub fn physics_estimate(
     masks: [Mask<'_>; 2],
     setup: &PhysicsSetup,
 ) -> Result<PhysicsEstimate, PhysicsError> {
-    if let Some(min_deg) = setup.min_view_separation_deg {
-        let separation_deg = view_separation_deg(&setup.cameras);
-        if separation_deg < min_deg {
-            return Err(PhysicsError::ViewsTooClose {
-                separation_deg,
-                min_deg,
-            });
-        }
-    }
     let [mask_a, mask_b] = masks;
     let centreline = |mask: &Mask<'_>, view: usize, name: &str| {
         let settings = CentrelineSettings {
@@ -915,28 +869,5 @@ mod tests {
                 e.fit.rms_mm
             ),
         }
-        // Views 20° apart are refused before any mask is read; the bench's are 90° apart, and
-        // opposite views count as parallel.
-        let bench = [
-            config.views.a.camera_matrix(),
-            config.views.b.camera_matrix(),
-        ];
-        assert!((view_separation_deg(&bench) - 90.0).abs() < 1e-6);
-        let size = hnet_units::ImageSize::square(128);
-        let carm = |primary: f64| {
-            crate::simulator::carm::CArm::cardiac(primary, 0.0, size).camera_matrix()
-        };
-        assert!((view_separation_deg(&[carm(-10.0), carm(10.0)]) - 20.0).abs() < 1e-6);
-        assert!(view_separation_deg(&[carm(-90.0), carm(90.0)]) < 1e-6);
-        let close = PhysicsSetup::blind([carm(-10.0), carm(10.0)], &short, &nominal);
-        let err = physics_estimate([mask(0), mask(1)], &close).unwrap_err();
-        assert!(
-            matches!(err, PhysicsError::ViewsTooClose { separation_deg, .. } if (separation_deg - 20.0).abs() < 1e-6),
-            "{err}"
-        );
-        assert!(
-            err.to_string().starts_with("the views' axes are 20° apart"),
-            "{err}"
-        );
     }
 }
