@@ -53,8 +53,10 @@ pub struct ReconstructionSettings {
     /// Fewest well-conditioned matches for a reconstruction.
     pub min_matches: usize,
     /// Smallest angle between the two views' rays at the reconstructed points (median over the
-    /// curve), degrees: below it depth is too poorly determined to trust the shape (views a few
-    /// degrees apart can match and triangulate consistently into a stretched, wrong catheter).
+    /// curve; rays nearly opposite count as nearly parallel, so 0-90°), degrees: below it depth
+    /// is too poorly determined to trust the shape (views a few degrees apart can match and
+    /// triangulate consistently into a stretched, wrong catheter). A blind read raises it
+    /// ([`crate::reconstruction::physics_force::BLIND_MIN_TRIANGULATION_DEG`]).
     pub min_triangulation_deg: f64,
 }
 
@@ -475,13 +477,16 @@ pub fn reconstruct(
         residuals.push(residual);
     }
 
-    // The angle between the two rays at each point: too narrow, and depth is guesswork.
+    // The angle between the two rays at each point: too narrow, and depth is guesswork. Rays
+    // nearly opposite (sources on either side of the catheter) are as ill-conditioned as rays
+    // nearly parallel, so the angle is folded to at most 90°.
     let mut angles: Vec<f64> = points
         .iter()
         .map(|p| {
             let (ra, rb) = (*p - geometry.centre_mm(0), *p - geometry.centre_mm(1));
             let cos = ra.dot(rb) / (ra.norm() * rb.norm()).max(1e-12);
-            cos.clamp(-1.0, 1.0).acos().to_degrees()
+            let angle = cos.clamp(-1.0, 1.0).acos().to_degrees();
+            angle.min(180.0 - angle)
         })
         .collect();
     angles.sort_by(f64::total_cmp);
@@ -743,6 +748,20 @@ pub(crate) mod tests {
         .unwrap_err();
         assert!(
             matches!(err, ReconstructionError::NarrowAngle { .. }),
+            "{err}"
+        );
+        // Nor do two views 177° apart, from either side of the catheter.
+        let opposite = crate::simulator::carm::CArm::cardiac(177.0, 0.0, ImageSize::square(128));
+        let err = reconstruct(
+            &centreline_of(&views.a, &curve),
+            &good,
+            &centreline_of(&opposite, &curve),
+            &opposite.camera_matrix(),
+            &settings,
+        )
+        .unwrap_err();
+        assert!(
+            matches!(err, ReconstructionError::NarrowAngle { angle_deg, .. } if angle_deg < 10.0),
             "{err}"
         );
     }

@@ -35,6 +35,15 @@ pub use stack::{FOLDS, LinearStack, MIN_STACK_GAIN, MIN_STACK_PAIRS};
 /// left 3.5 % of the mismatch suite's `length+5mm` pairs with an estimate, set aside 75 %.
 pub const BLIND_TIP_WEIGHT: f64 = 1.0;
 
+/// Least angle between the two views' rays at the catheter for a blind read
+/// ([`ReconstructionSettings::min_triangulation_deg`], degrees; the exact setup keeps the
+/// default 10°). With the base fitted, depth is what places the base and bends the rod: off the
+/// bench (fresh pairs at the page's C-arm angles, a catalogue catheter, the base anywhere), the
+/// physics estimate's R² from the bundled weights' masks was -2.5 to -15 on every axis for views
+/// under 30° apart, and leaving them out lifted the combined estimate's (docs/results.md, "Force
+/// without the twin's answers").
+pub const BLIND_MIN_TRIANGULATION_DEG: f64 = 30.0;
+
 /// What the masks are read with: both views' cameras, the catheter as the rod model knows it,
 /// and how each step works.
 #[derive(Debug, Clone, PartialEq)]
@@ -82,8 +91,9 @@ impl PhysicsSetup {
     /// geometry a DICOM header gives (angles, distances, pixel spacing), the catalogue's
     /// `catheter`, and a `nominal_base` (the fixture's nominal pose, or the page's catheter
     /// settings) whose position and orientation are fitted with the force, kept within its
-    /// tolerance unless the shape says otherwise. Fits farther than [`MAX_FIT_RMS_MM`] from the
-    /// reconstruction give no force.
+    /// tolerance unless the shape says otherwise. Views under [`BLIND_MIN_TRIANGULATION_DEG`]
+    /// apart at the catheter, and fits farther than [`MAX_FIT_RMS_MM`] from the reconstruction,
+    /// give no force.
     pub fn blind(
         cameras: [CameraMatrix; 2],
         catheter: &CatalogueCatheter,
@@ -100,6 +110,7 @@ impl PhysicsSetup {
         setup.fit.start_base_from_centreline = true;
         setup.max_fit_rms_mm = Some(MAX_FIT_RMS_MM);
         setup.fit.tip_weight = BLIND_TIP_WEIGHT;
+        setup.reconstruction.min_triangulation_deg = BLIND_MIN_TRIANGULATION_DEG;
         setup
     }
 }
@@ -810,6 +821,10 @@ mod tests {
             let mask = |i: usize| Mask::coverage8(128, 128, &sample.views[i].mask);
             let blind = PhysicsSetup::blind(cameras, &catheter, &nominal);
             assert_eq!(blind.max_fit_rms_mm, Some(MAX_FIT_RMS_MM));
+            assert_eq!(
+                blind.reconstruction.min_triangulation_deg,
+                BLIND_MIN_TRIANGULATION_DEG
+            );
             let estimate = physics_estimate([mask(0), mask(1)], &blind).unwrap();
             let error = (estimate.fit.force_n - sample.params.tip_force_n).max_abs();
             assert!(error < 0.03, "{index}: force off by {error} N");
