@@ -11,21 +11,22 @@ pub const BUNDLED_WEIGHTS: &str = "assets/hnet-cpu.bpk";
 /// What the bundled weights can and cannot be trusted with, shown beside their force estimate.
 /// Keep in step with the evaluation in `assets/MODEL.md`.
 pub const BUNDLED_FORCE_CAVEAT: &str = "The bundled weights were trained on the CPU, at \
-    128 x 128 px on 84,000 twin pairs and then at 224 x 224 px on 10,000 more (assets/MODEL.md). \
-    On fresh twin pairs their masks are accurate (catheter IoU 0.93-0.94 on the bench, 0.88-0.92 \
-    on other catheters, poses, C-arm angles and chest radiographs, as long as the catheter comes \
-    up from the bottom of the view, as in every training scene: one entering from the top or a \
-    side loses its shaft unless \"Catheter enters from\" names or finds the edge, when each view \
-    is turned for H-Net and its own force is not read) but their force only coarse \
-    (RMSE 0.067 N, R² 0.63), and learned on the bench pose alone: read the arrows as a \
-    direction and a rough size, not a measurement. The physics estimate, fitted to these masks \
-    and read blind (the catalogue's catheter, the base fitted near the bench fixture's pose), is \
-    closer across the catheter (R² 0.78 and 0.86 on x and y on the bench) but not along it (Fz: \
-    R² 0.11). The Combined row (each axis weighted by the inverse of its measured error; shown \
-    when the rod was fitted to these masks: on a twin pair, choose H-Net's masks in the 3D \
-    panel) is the closest on twin bench pairs: R² 0.89 / 0.91 / 0.74, RMSE 0.042 N per axis, its \
-    90 % interval holding 86-89 % of true forces; the verdict reads it where it is shown. For \
-    uploads the catheter is the twin tab's and nothing was measured.";
+    128 x 128 px on 84,000 twin pairs, at 224 x 224 px on 10,000 more, and then 6,000 more with a \
+    term that teaches the masks' sub-pixel edges (assets/MODEL.md). On fresh twin pairs their \
+    masks are accurate (catheter IoU 0.94-0.95 on the bench, 0.86-0.92 on other catheters, \
+    poses, C-arm angles and chest radiographs, as long as the catheter comes up from the bottom \
+    of the view, as in every training scene: one entering from the top or a side loses its shaft \
+    unless \"Catheter enters from\" names or finds the edge, when each view is turned for H-Net \
+    and its own force is not read) but their force only coarse (RMSE 0.067 N, R² 0.63), and \
+    learned on the bench pose alone: read the arrows as a direction and a rough size, not a \
+    measurement. The physics estimate, fitted to these masks and read blind (the catalogue's \
+    catheter, the base fitted near the bench fixture's pose), is closer across the catheter \
+    (R² 0.88 and 0.90 on x and y on the bench) but not along it (Fz: R² 0.51). The Combined row \
+    (each axis weighted by the inverse of its measured error; shown when the rod was fitted to \
+    these masks: on a twin pair, choose H-Net's masks in the 3D panel) is the closest on twin \
+    bench pairs: R² 0.93 / 0.93 / 0.74, RMSE 0.037 N per axis, its 90 % interval holding 88-91 % \
+    of true forces; the verdict reads it where it is shown. For uploads the catheter is the twin \
+    tab's and nothing was measured.";
 
 /// A file of the page's own that could not be fetched.
 #[derive(Debug, thiserror::Error)]

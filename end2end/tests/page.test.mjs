@@ -52,7 +52,7 @@ test("the page loads H-Net, says where it runs, and asks for nothing outside", a
   // The bundled weights load (a build without them would say "untrained").
   assert.match(await page.textContent("#weights"), /hnet-cpu\.bpk/);
   // What the bundled weights file records about its force, read from the file (hnet eval --record).
-  assert.match(await page.textContent("#force-facts"), /^±0\.121 \/ ±0\.130 \/ ±0\.107 N \(90 %, force head; trained on xray2-bench-224-s7\)$/);
+  assert.match(await page.textContent("#force-facts"), /^±0\.122 \/ ±0\.129 \/ ±0\.105 N \(90 %, force head; trained on xray2-bench-224-s7\)$/);
   // The first screen starts somewhere: with nothing saved, a twin pair is on screen with H-Net's
   // estimate, without any action, and says what it is.
   await page.waitForSelector("#force-verdict", { timeout: 120_000 });
