@@ -284,28 +284,28 @@ pub fn physics_estimate(
     })
 }
 
-/// The rod fitted to `reconstruction` with `settings`, refused when its force runs into the fit's
-/// limit, or it stays far from the reconstruction, or puts its base outside the nominal pose's
-/// tolerance.
+/// The rod fitted to `reconstruction` with `settings`, refused when it stays far from the
+/// reconstruction, or its force runs into the fit's limit, or it puts its base outside the
+/// nominal pose's tolerance (checked in that order).
 fn checked_fit(
     setup: &PhysicsSetup,
     reconstruction: &Reconstruction,
     settings: &RodFitSettings,
 ) -> Result<RodFit, PhysicsError> {
     let fit = fit_rod_to_reconstruction(&setup.rod, &setup.base, reconstruction, settings)?;
-    let force_n = f64::from(fit.force_n.magnitude());
-    if settings.fit_force && force_n >= AT_FORCE_LIMIT_SHARE * settings.max_force_n {
-        return Err(PhysicsError::AtForceLimit {
-            force_n,
-            limit_n: settings.max_force_n,
-        });
-    }
     if let Some(limit_mm) = setup.max_fit_rms_mm
         && (fit.rms_mm.is_nan() || fit.rms_mm > limit_mm)
     {
         return Err(PhysicsError::PoorFit {
             rms_mm: fit.rms_mm,
             limit_mm,
+        });
+    }
+    let force_n = f64::from(fit.force_n.magnitude());
+    if settings.fit_force && force_n >= AT_FORCE_LIMIT_SHARE * settings.max_force_n {
+        return Err(PhysicsError::AtForceLimit {
+            force_n,
+            limit_n: settings.max_force_n,
         });
     }
     if let Some(prior) = settings.base_prior {
