@@ -730,40 +730,29 @@ pub(crate) mod tests {
             matches!(err, ReconstructionError::NoBaseline { .. }),
             "{err}"
         );
-        // Two views 3° apart see a curved catheter consistently, but give it no reliable depth.
-        let near = crate::simulator::carm::CArm::cardiac(3.0, 0.0, ImageSize::square(128));
+        // Two views 3° apart see a curved catheter consistently, but give it no reliable depth;
+        // nor do two views 177° apart, from either side of the catheter.
         let curve: Vec<Vec3> = (0..40)
             .map(|k| {
                 let t = k as f64 / 39.0;
                 Vec3::new(20.0 * t * t, 10.0 * t, 40.0 * t - 20.0)
             })
             .collect();
-        let err = reconstruct(
-            &centreline_of(&views.a, &curve),
-            &good,
-            &centreline_of(&near, &curve),
-            &near.camera_matrix(),
-            &settings,
-        )
-        .unwrap_err();
-        assert!(
-            matches!(err, ReconstructionError::NarrowAngle { .. }),
-            "{err}"
-        );
-        // Nor do two views 177° apart, from either side of the catheter.
-        let opposite = crate::simulator::carm::CArm::cardiac(177.0, 0.0, ImageSize::square(128));
-        let err = reconstruct(
-            &centreline_of(&views.a, &curve),
-            &good,
-            &centreline_of(&opposite, &curve),
-            &opposite.camera_matrix(),
-            &settings,
-        )
-        .unwrap_err();
-        assert!(
-            matches!(err, ReconstructionError::NarrowAngle { angle_deg, .. } if angle_deg < 10.0),
-            "{err}"
-        );
+        for primary_deg in [3.0, 177.0] {
+            let b = crate::simulator::carm::CArm::cardiac(primary_deg, 0.0, ImageSize::square(128));
+            let err = reconstruct(
+                &centreline_of(&views.a, &curve),
+                &good,
+                &centreline_of(&b, &curve),
+                &b.camera_matrix(),
+                &settings,
+            )
+            .unwrap_err();
+            assert!(
+                matches!(err, ReconstructionError::NarrowAngle { angle_deg, .. } if angle_deg < 10.0),
+                "{primary_deg}°: {err}"
+            );
+        }
     }
 
     #[test]
