@@ -186,15 +186,15 @@ fn forward_by_winograd(
     let transformed = winograd::transform_weight(weight, g.out_channels, g.in_channels);
     // SAFETY: `winograd::forward_image` writes every value of `y`.
     Some(unsafe {
-        forward_padded(g, x, layout.len(g.in_channels), |x, padded, y| {
-            layout.pad(g, x, padded);
-            winograd::forward_image(g, &layout, padded, &transformed, bias, relu, y);
+        forward_padded(g, x, layout.len(g.in_channels), |x, window, y| {
+            winograd::forward_image(g, &layout, x, window, &transformed, bias, relu, y);
         })
     })
 }
 
 /// Runs `image(x, padded, y)` for every image `x` of the batch, with this thread's buffer of
-/// `padded_len` values for its padded copy and its part `y` of the result.
+/// `padded_len` values for its padded copy (the direct kernels) or its window of padded rows
+/// (Winograd's) and its part `y` of the result.
 ///
 /// # Safety
 ///

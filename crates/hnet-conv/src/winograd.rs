@@ -18,10 +18,12 @@
 //! The work goes by strips of [`STRIP_TILES`] tiles along one row of tiles: the strip's input is
 //! transformed into `V[point][channel][tile]`, multiplied by each point's transformed weight
 //! with the direct kernel's register tile (output channels by two vectors of tiles), and
-//! transformed back into the output, with the bias and the ReLU, while it is in cache. The input
-//! is first copied into a zero-padded buffer whose rows are split into their even and odd
-//! columns ([`WinogradLayout::pad`]), so that the tiles of a strip, two columns apart, load as
-//! whole vectors.
+//! transformed back into the output, with the bias and the ReLU, while it is in cache. Each row
+//! of tiles reads four padded input rows per channel: they are copied, zero-padded and split into
+//! their even and odd columns (so that the tiles of a strip, two columns apart, load as whole
+//! vectors), into a window of [`WINDOW_ROWS`] rows per channel that each row of tiles advances
+//! by two ([`WinogradLayout::pad_rows`]). The window stays in cache; a padded copy of the whole
+//! image did not (reading it back was a fifth of a 224 px pass).
 
 use alloc::vec;
 use alloc::vec::Vec;
@@ -37,7 +39,11 @@ pub const STRIP_TILES: usize = if cfg!(target_arch = "wasm32") { 8 } else { 16 }
 /// Points of the transformed domain per tile (4 x 4).
 const POINTS: usize = 16;
 
-/// Where a convolution's zero-padded input lies in its buffer, for the Winograd kernel.
+/// Padded rows per channel in the window: the four a row of tiles reads, padded row `r` in slot
+/// `r % WINDOW_ROWS`.
+const WINDOW_ROWS: usize = 4;
+
+/// Where a convolution's zero-padded input rows lie in their window, for the Winograd kernel.
 #[derive(Debug, Clone)]
 pub struct WinogradLayout {
     /// Rows of tiles (output height / 2).
@@ -81,42 +87,74 @@ impl WinogradLayout {
         2 * self.half
     }
 
-    /// Values per padded plane.
-    fn plane(&self) -> usize {
-        self.rows * self.row()
+    /// Values per channel in the window.
+    fn window_plane(&self) -> usize {
+        WINDOW_ROWS * self.row()
     }
 
-    /// Length of the buffer for one image of `channels` channels.
+    /// Length of the window for one image of `channels` channels.
     pub fn len(&self, channels: usize) -> usize {
-        channels * self.plane()
+        channels * self.window_plane()
     }
 
-    /// Writes image `image` (`in_channels` planes of the input) into `buffer` ([`Self::len`]
-    /// long): padded row `r` of channel `c` holds the padded image's even columns `0, 2, 4, ...`
-    /// then its odd columns `1, 3, 5, ...`, zero outside the image. Every element is written.
-    pub fn pad(&self, g: &ConvGeometry, image: &[f32], buffer: &mut [f32]) {
+    /// Offset in the window of padded row `r` of channel `c`.
+    fn window_row(&self, c: usize, r: usize) -> usize {
+        c * self.window_plane() + (r % WINDOW_ROWS) * self.row()
+    }
+
+    /// Writes padded rows `rows` (at most [`WINDOW_ROWS`] of them, each below the padded height)
+    /// of image `image` (`in_channels` planes of the input) into `window` ([`Self::len`] long):
+    /// padded row `r` of channel `c` holds the padded image's even columns `0, 2, 4, ...` then
+    /// its odd columns `1, 3, 5, ...`, zero outside the image, every value of it written.
+    pub fn pad_rows(
+        &self,
+        g: &ConvGeometry,
+        image: &[f32],
+        rows: core::ops::Range<usize>,
+        window: &mut [f32],
+    ) {
         let (in_h, in_w) = (g.height.input, g.width.input);
-        let (top, left) = (g.height.padding, g.width.padding);
+        let (top, left) = (g.height.padding, g.width.padding.min(self.row()));
         debug_assert_eq!(image.len(), g.in_channels * in_h * in_w);
-        debug_assert_eq!(buffer.len(), self.len(g.in_channels));
-        // One padded row, contiguous: the image's pixels land in `left .. left + columns`, and
-        // the rest stays zero, as every image row writes the same range.
-        let mut line = vec![0.0f32; self.row()];
-        let left = left.min(line.len());
-        let columns = in_w.min(line.len() - left);
-        for (channel, plane) in image
-            .chunks_exact(in_h * in_w)
-            .zip(buffer.chunks_exact_mut(self.plane()))
-        {
-            for (r, split) in plane.chunks_exact_mut(self.row()).enumerate() {
-                let (even, odd) = split.split_at_mut(self.half);
+        debug_assert_eq!(window.len(), self.len(g.in_channels));
+        debug_assert!(rows.len() <= WINDOW_ROWS && rows.end <= self.rows);
+        // Padded column `p` is image column `p - left`: pairs of padded columns `(2k, 2k + 1)`
+        // read image columns `2k - left` and `2k + 1 - left`. `inside` are the pairs with both
+        // in the image; the rest are written one by one.
+        let first = left.div_ceil(2);
+        let inside = first..(in_w + left) / 2;
+        let inside = inside.start.min(self.half)..inside.end.clamp(inside.start, self.half);
+        let half = self.half;
+        for c in 0..g.in_channels {
+            let channel = &image[c * in_h * in_w..][..in_h * in_w];
+            for r in rows.clone() {
+                let at = self.window_row(c, r);
+                let (even, odd) = window[at..][..2 * half].split_at_mut(half);
                 let Some(i) = r.checked_sub(top).filter(|&i| i < in_h) else {
                     even.fill(0.0);
                     odd.fill(0.0);
                     continue;
                 };
-                line[left..left + columns].copy_from_slice(&channel[i * in_w..][..columns]);
-                for (pair, (even, odd)) in line.chunks_exact(2).zip(even.iter_mut().zip(odd)) {
+                let line = &channel[i * in_w..][..in_w];
+                let pixel = |p: usize| {
+                    p.checked_sub(left)
+                        .and_then(|column| line.get(column))
+                        .copied()
+                        .unwrap_or(0.0)
+                };
+                for k in (0..inside.start).chain(inside.end..half) {
+                    even[k] = pixel(2 * k);
+                    odd[k] = pixel(2 * k + 1);
+                }
+                if inside.is_empty() {
+                    continue;
+                }
+                let pairs = &line[2 * inside.start - left..][..2 * inside.len()];
+                for (pair, (even, odd)) in pairs.chunks_exact(2).zip(
+                    even[inside.clone()]
+                        .iter_mut()
+                        .zip(&mut odd[inside.clone()]),
+                ) {
                     *even = pair[0];
                     *odd = pair[1];
                 }
@@ -172,19 +210,23 @@ pub fn transform_weight(weight: &[f32], out_channels: usize, in_channels: usize)
 }
 
 /// One image's forward convolution `y = W ⋆ x (+ b)`, NCHW, followed by a ReLU when `relu`, from
-/// its padded buffer `padded` ([`WinogradLayout::pad`]) and the weight transformed by
-/// [`transform_weight`]. Every element of `y` (`out_channels x output plane`) is written.
+/// the image `image` (`in_channels` planes), with `window` ([`WinogradLayout::len`] values,
+/// overwritten) for its padded rows, and the weight transformed by [`transform_weight`]. Every
+/// element of `y` (`out_channels x output plane`) is written.
+#[allow(clippy::too_many_arguments)]
 pub fn forward_image(
     g: &ConvGeometry,
     layout: &WinogradLayout,
-    padded: &[f32],
+    image: &[f32],
+    window: &mut [f32],
     weight: &[f32],
     bias: Option<&[f32]>,
     relu: bool,
     y: &mut [MaybeUninit<f32>],
 ) {
     assert!(
-        padded.len() == layout.len(g.in_channels)
+        window.len() == layout.len(g.in_channels)
+            && image.len() == g.in_channels * g.input_plane()
             && weight.len() == g.out_channels * g.in_channels * POINTS
             && y.len() == g.out_channels * g.output_plane()
             && bias.is_none_or(|b| b.len() == g.out_channels)
@@ -195,7 +237,7 @@ pub fn forward_image(
     let run = Run {
         g,
         layout,
-        padded,
+        image,
         weight,
         bias,
         relu,
@@ -203,15 +245,15 @@ pub fn forward_image(
     #[cfg(target_arch = "x86_64")]
     if crate::products::has_avx2() {
         // SAFETY: this CPU has AVX2 and FMA.
-        return unsafe { run.strips::<avx2::Avx2Phases>(y) };
+        return unsafe { run.strips::<avx2::Avx2Phases>(window, y) };
     }
     #[cfg(target_arch = "wasm32")]
     // SAFETY: wasm32 builds enable SIMD128 for the whole crate (.cargo/config.toml).
-    return unsafe { run.strips::<Generic<crate::products::simd128::Simd128, 2>>(y) };
+    return unsafe { run.strips::<Generic<crate::products::simd128::Simd128, 2>>(window, y) };
     #[allow(unreachable_code)]
     // SAFETY: the portable lanes need no instruction set.
     unsafe {
-        run.strips::<Generic<f32, STRIP_TILES>>(y)
+        run.strips::<Generic<f32, STRIP_TILES>>(window, y)
     }
 }
 
@@ -221,7 +263,13 @@ pub fn forward_image(
 ///
 /// Every method may only be called on a CPU that has the implementation's instruction set.
 trait Phases {
-    unsafe fn transform_input(run: &Run, tile_row: usize, first_tile: usize, out: &mut [f32]);
+    unsafe fn transform_input(
+        run: &Run,
+        window: &[f32],
+        tile_row: usize,
+        first_tile: usize,
+        out: &mut [f32],
+    );
     unsafe fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]);
     unsafe fn transform_output(
         run: &Run,
@@ -237,8 +285,14 @@ trait Phases {
 struct Generic<L, const V: usize>(core::marker::PhantomData<L>);
 
 impl<L: Lanes, const V: usize> Phases for Generic<L, V> {
-    unsafe fn transform_input(run: &Run, tile_row: usize, first_tile: usize, out: &mut [f32]) {
-        run.transform_input::<L, V>(tile_row, first_tile, out);
+    unsafe fn transform_input(
+        run: &Run,
+        window: &[f32],
+        tile_row: usize,
+        first_tile: usize,
+        out: &mut [f32],
+    ) {
+        run.transform_input::<L, V>(window, tile_row, first_tile, out);
     }
     unsafe fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]) {
         run.multiply::<L, V>(transformed, products);
@@ -267,9 +321,15 @@ mod avx2 {
     pub(super) struct Avx2Phases;
 
     impl super::Phases for Avx2Phases {
-        unsafe fn transform_input(run: &Run, tile_row: usize, first_tile: usize, out: &mut [f32]) {
+        unsafe fn transform_input(
+            run: &Run,
+            window: &[f32],
+            tile_row: usize,
+            first_tile: usize,
+            out: &mut [f32],
+        ) {
             // SAFETY: the caller checked for AVX2 and FMA (the trait's contract).
-            unsafe { transform_input(run, tile_row, first_tile, out) }
+            unsafe { transform_input(run, window, tile_row, first_tile, out) }
         }
         unsafe fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]) {
             // SAFETY: as above.
@@ -288,8 +348,14 @@ mod avx2 {
     }
 
     #[target_feature(enable = "avx2,fma")]
-    fn transform_input(run: &Run, tile_row: usize, first_tile: usize, out: &mut [f32]) {
-        run.transform_input::<Avx2, 2>(tile_row, first_tile, out);
+    fn transform_input(
+        run: &Run,
+        window: &[f32],
+        tile_row: usize,
+        first_tile: usize,
+        out: &mut [f32],
+    ) {
+        run.transform_input::<Avx2, 2>(window, tile_row, first_tile, out);
     }
 
     #[target_feature(enable = "avx2,fma")]
@@ -320,7 +386,7 @@ fn point_stride(in_channels: usize) -> usize {
 struct Run<'a> {
     g: &'a ConvGeometry,
     layout: &'a WinogradLayout,
-    padded: &'a [f32],
+    image: &'a [f32],
     weight: &'a [f32],
     bias: Option<&'a [f32]>,
     relu: bool,
@@ -332,20 +398,60 @@ impl Run<'_> {
     /// # Safety
     ///
     /// This CPU has `P`'s instruction set ([`Phases`]).
-    unsafe fn strips<P: Phases>(&self, y: &mut [MaybeUninit<f32>]) {
+    unsafe fn strips<P: Phases>(&self, window: &mut [f32], y: &mut [MaybeUninit<f32>]) {
         let (cin, cout) = (self.g.in_channels, self.g.out_channels);
         let mut transformed = vec![0.0f32; POINTS * point_stride(cin)];
         let mut products = vec![0.0f32; cout * POINTS * STRIP_TILES];
         for tile_row in 0..self.layout.tiles_h {
+            // Padded rows `2 · tile_row .. + 4`; the first two are in the window already but
+            // for the first row of tiles.
+            let rows = if tile_row == 0 {
+                0..4
+            } else {
+                2 * tile_row + 2..2 * tile_row + 4
+            };
+            self.layout.pad_rows(self.g, self.image, rows, window);
+            self.prefetch_next(tile_row + 1, y);
             for strip in 0..self.layout.strips {
                 let first_tile = strip * STRIP_TILES;
                 // SAFETY: the caller's promise ([`Self::strips`]).
                 unsafe {
-                    P::transform_input(self, tile_row, first_tile, &mut transformed);
+                    P::transform_input(self, window, tile_row, first_tile, &mut transformed);
                     P::multiply(self, &transformed, &mut products);
                     P::transform_output(self, tile_row, first_tile, &products, y);
                 }
             }
+        }
+    }
+
+    /// Asks the cache for what row of tiles `tile_row` will read and write, one row of tiles
+    /// ahead: its two new image rows of every input channel and its two output rows of every
+    /// output channel. Spread over a channel each, these are too many streams for the hardware's
+    /// prefetcher, and their misses were most of the padding's and the output's time.
+    /// Nothing when the image and its output fit in half a level-2 cache ([`PREFETCH_MIN_VALUES`]).
+    fn prefetch_next(&self, tile_row: usize, y: &[MaybeUninit<f32>]) {
+        if tile_row >= self.layout.tiles_h || self.image.len() + y.len() < PREFETCH_MIN_VALUES {
+            return;
+        }
+        let g = self.g;
+        let (in_h, in_w) = (g.height.input, g.width.input);
+        let (out_w, out_plane) = (g.width.output, g.output_plane());
+        for padded_row in 2 * tile_row + 2..2 * tile_row + 4 {
+            let Some(i) = padded_row
+                .checked_sub(g.height.padding)
+                .filter(|&i| i < in_h)
+            else {
+                continue;
+            };
+            for c in 0..g.in_channels {
+                prefetch(&self.image[(c * in_h + i) * in_w..][..in_w], false);
+            }
+        }
+        for o in 0..g.out_channels {
+            prefetch(
+                &y[o * out_plane + 2 * tile_row * out_w..][..2 * out_w],
+                true,
+            );
         }
     }
 
@@ -354,22 +460,24 @@ impl Run<'_> {
     #[inline(always)]
     fn transform_input<L: Lanes, const V: usize>(
         &self,
+        window: &[f32],
         tile_row: usize,
         first_tile: usize,
         out: &mut [f32],
     ) {
         const { assert!(V * L::WIDTH == STRIP_TILES, "a strip is V vectors") };
         let layout = self.layout;
-        let (row, plane, half) = (layout.row(), layout.plane(), layout.half);
+        let half = layout.half;
         let cin = self.g.in_channels;
         let stride = point_stride(cin);
         debug_assert_eq!(out.len(), POINTS * stride);
         for c in 0..cin {
-            let base = c * plane + 2 * tile_row * row + first_tile;
             // Each strip reads values `first_tile ..= first_tile + STRIP_TILES` of both halves
-            // of four rows: inside the plane (`half = strips · STRIP_TILES + 1`).
-            let rows: [&[f32]; 4] =
-                core::array::from_fn(|r| &self.padded[base + r * row..][..half + STRIP_TILES + 1]);
+            // of four rows: inside each row (`half = strips · STRIP_TILES + 1`).
+            let rows: [&[f32]; 4] = core::array::from_fn(|r| {
+                let at = layout.window_row(c, 2 * tile_row + r) + first_tile;
+                &window[at..][..half + STRIP_TILES + 1]
+            });
             for v in 0..V {
                 let at = v * L::WIDTH;
                 // Column combinations of each row: with e, o the even and odd columns,
@@ -437,9 +545,11 @@ impl Run<'_> {
         let cout = self.g.out_channels;
         let (out_w, out_plane) = (self.g.width.output, self.g.output_plane());
         let tiles = STRIP_TILES.min(self.layout.tiles_w - first_tile);
-        // The strip's two output rows of one channel.
+        // A partial strip's two output rows of one channel.
+        let whole = tiles == STRIP_TILES;
         let mut lines = [[0.0f32; 2 * STRIP_TILES]; 2];
         for o in 0..cout {
+            let plane = y[o * out_plane..][..out_plane].as_mut_ptr().cast::<f32>();
             let b = L::splat(self.bias.map_or(0.0, |bias| bias[o]));
             for v in 0..V {
                 let at = v * L::WIDTH;
@@ -469,26 +579,69 @@ impl Run<'_> {
                         *value = value.relu();
                     }
                 }
-                // Each output row of the strip: its tiles' left and right pixels alternated.
-                for (line, pair) in lines.iter_mut().zip(outputs.chunks_exact(2)) {
+                // Each output row of the strip: its tiles' left and right pixels alternated,
+                // stored straight into the channel's plane when the strip is whole (the copy
+                // through `lines` was a tenth of a 224 px pass), else through `lines`.
+                for (dr, pair) in outputs.chunks_exact(2).enumerate() {
                     let (first, second) = pair[0].interleave(pair[1]);
-                    // SAFETY: `line` holds 2 · STRIP_TILES values and `2 · at + 2 · WIDTH` is at
-                    // most that.
+                    let to = if whole {
+                        // SAFETY: a whole strip's row holds `2 · STRIP_TILES` values from
+                        // `2 · first_tile`, inside the output row (`2 · tiles_w = out_w`), and
+                        // `2 · at + 2 · WIDTH` is at most `2 · STRIP_TILES`; `MaybeUninit<f32>` has
+                        // `f32`'s layout, and a store initialises.
+                        unsafe { plane.add((2 * tile_row + dr) * out_w + 2 * first_tile) }
+                    } else {
+                        lines[dr].as_mut_ptr()
+                    };
+                    // SAFETY: `to` holds `2 · STRIP_TILES` values (above, or `lines`).
                     unsafe {
-                        first.store(line.as_mut_ptr().add(2 * at));
-                        second.store(line.as_mut_ptr().add(2 * at + L::WIDTH));
+                        first.store(to.add(2 * at));
+                        second.store(to.add(2 * at + L::WIDTH));
                     }
                 }
             }
-            let plane = &mut y[o * out_plane..][..out_plane];
-            for (dr, line) in lines.iter().enumerate() {
-                let out = &mut plane[(2 * tile_row + dr) * out_w + 2 * first_tile..][..2 * tiles];
-                for (out, &value) in out.iter_mut().zip(line) {
-                    out.write(value);
+            if !whole {
+                let plane = &mut y[o * out_plane..][..out_plane];
+                for (dr, line) in lines.iter().enumerate() {
+                    let out =
+                        &mut plane[(2 * tile_row + dr) * out_w + 2 * first_tile..][..2 * tiles];
+                    for (out, &value) in out.iter_mut().zip(line) {
+                        out.write(value);
+                    }
                 }
             }
         }
     }
+}
+
+/// Values of an image and its output (1 MiB) under which [`Run::prefetch_next`] asks for nothing:
+/// they stay in a level-2 cache of 1 MiB or more (2 MiB here) from one row of tiles to the next.
+const PREFETCH_MIN_VALUES: usize = 1 << 18;
+
+/// Asks for `values` in the level-2 cache, to be written when `write`; nothing where the target
+/// has no prefetch instruction (WebAssembly).
+#[inline(always)]
+fn prefetch<T>(values: &[T], write: bool) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use core::arch::x86_64::{_MM_HINT_ET1, _MM_HINT_T1, _mm_prefetch};
+        const LINE: usize = 64;
+        let bytes = core::mem::size_of_val(values);
+        let start = values.as_ptr().cast::<i8>();
+        for offset in (0..bytes).step_by(LINE) {
+            // SAFETY: a prefetch has no effect on memory; the address lies in `values`.
+            unsafe {
+                let at = start.add(offset);
+                if write {
+                    _mm_prefetch::<_MM_HINT_ET1>(at);
+                } else {
+                    _mm_prefetch::<_MM_HINT_T1>(at);
+                }
+            }
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (values, write);
 }
 
 /// `out (R x STRIP_TILES) = panel (in_channels steps of R) · input (in_channels x STRIP_TILES)`,
@@ -566,24 +719,23 @@ mod tests {
         portable: bool,
     ) -> Vec<f32> {
         let layout = WinogradLayout::of(g).unwrap();
-        // NaN where the pad writes nothing: a read outside the padded input would show.
-        let mut padded = vec![f32::NAN; layout.len(g.in_channels)];
-        layout.pad(g, x, &mut padded);
+        // NaN where the pad writes nothing: a read outside the padded rows would show.
+        let mut window = vec![f32::NAN; layout.len(g.in_channels)];
         let weight = transform_weight(w, g.out_channels, g.in_channels);
         let mut y = vec![MaybeUninit::uninit(); g.out_channels * g.output_plane()];
         if portable {
             let run = Run {
                 g,
                 layout: &layout,
-                padded: &padded,
+                image: x,
                 weight: &weight,
                 bias,
                 relu,
             };
             // SAFETY: the portable lanes need no instruction set.
-            unsafe { run.strips::<Generic<f32, STRIP_TILES>>(&mut y) };
+            unsafe { run.strips::<Generic<f32, STRIP_TILES>>(&mut window, &mut y) };
         } else {
-            forward_image(g, &layout, &padded, &weight, bias, relu, &mut y);
+            forward_image(g, &layout, x, &mut window, &weight, bias, relu, &mut y);
         }
         y.into_iter().map(|v| unsafe { v.assume_init() }).collect()
     }
