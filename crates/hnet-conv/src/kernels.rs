@@ -291,7 +291,8 @@ fn input_gradient_by_phases(
     let class_bias = bias.filter(|_| covered);
     // Each class's values, `[batch, in_channels, its rows, its columns]` (the columns past the
     // class's count dropped when written).
-    let mut classes = Vec::with_capacity(rows.len() * columns.len());
+    type Class<'a> = (&'a AxisPhase, &'a AxisPhase, usize, usize, Vec<f32>);
+    let mut classes: Vec<Class> = Vec::with_capacity(rows.len() * columns.len());
     for row in rows {
         for column in columns {
             let (Some(height), Some(width)) = (row.axis, column.axis) else {
@@ -320,19 +321,66 @@ fn input_gradient_by_phases(
     if !covered {
         slots.fill(MaybeUninit::new(0.0));
     }
+    // One class's values of image `n` into its positions of dx, every channel.
+    let scatter = |n: usize, class: &Class, dx: &mut [MaybeUninit<f32>]| {
+        let (row, column, phase_plane, phase_w, values) = class;
+        let planes = &values[n * g.in_channels * phase_plane..][..g.in_channels * phase_plane];
+        for (dx, values) in dx
+            .chunks_exact_mut(in_h * in_w)
+            .zip(planes.chunks_exact(*phase_plane))
+        {
+            for m in 0..row.count {
+                let target = &mut dx[(row.first + m * g.height.stride) * in_w..][..in_w];
+                let source = &values[m * phase_w..][..column.count];
+                for (j, &value) in source.iter().enumerate() {
+                    target[column.first + j * g.width.stride].write(value);
+                }
+            }
+        }
+    };
+    // Two classes of one row class, the even and the odd columns of stride 2 (H-Net's
+    // upsampling), into their rows of dx at once: whole rows written in order, where scattering
+    // each class on its own wrote every other value twice over the same cache lines.
+    let interleaves = |even: &Class, odd: &Class| {
+        core::ptr::eq(even.0, odd.0)
+            && g.width.stride == 2
+            && (even.1.first, odd.1.first) == (0, 1)
+            && (even.1.count, odd.1.count) == (in_w.div_ceil(2), in_w / 2)
+    };
+    let interleave = |n: usize, even: &Class, odd: &Class, dx: &mut [MaybeUninit<f32>]| {
+        let row = even.0;
+        let image = g.in_channels * even.2;
+        let even_planes = &even.4[n * image..][..image];
+        let image = g.in_channels * odd.2;
+        let odd_planes = &odd.4[n * image..][..image];
+        for (c, dx) in dx.chunks_exact_mut(in_h * in_w).enumerate() {
+            let even_plane = &even_planes[c * even.2..][..even.2];
+            let odd_plane = &odd_planes[c * odd.2..][..odd.2];
+            for m in 0..row.count {
+                let target = &mut dx[(row.first + m * g.height.stride) * in_w..][..in_w];
+                let evens = &even_plane[m * even.3..][..even.1.count];
+                let odds = &odd_plane[m * odd.3..][..odd.1.count];
+                for (pair, (&e, &o)) in target.chunks_exact_mut(2).zip(evens.iter().zip(odds)) {
+                    pair[0].write(e);
+                    pair[1].write(o);
+                }
+                if in_w % 2 == 1 {
+                    target[in_w - 1].write(evens[in_w / 2]);
+                }
+            }
+        }
+    };
     let write = |n: usize, dx: &mut [MaybeUninit<f32>]| {
-        for (row, column, phase_plane, phase_w, values) in &classes {
-            let planes = &values[n * g.in_channels * phase_plane..][..g.in_channels * phase_plane];
-            for (dx, values) in dx
-                .chunks_exact_mut(in_h * in_w)
-                .zip(planes.chunks_exact(*phase_plane))
-            {
-                for m in 0..row.count {
-                    let target = &mut dx[(row.first + m * g.height.stride) * in_w..][..in_w];
-                    let source = &values[m * phase_w..][..column.count];
-                    for (j, &value) in source.iter().enumerate() {
-                        target[column.first + j * g.width.stride].write(value);
-                    }
+        let mut rest = &classes[..];
+        while let Some((class, tail)) = rest.split_first() {
+            match tail.first() {
+                Some(next) if interleaves(class, next) => {
+                    interleave(n, class, next, dx);
+                    rest = &tail[1..];
+                }
+                _ => {
+                    scatter(n, class, dx);
+                    rest = tail;
                 }
             }
         }
