@@ -271,6 +271,26 @@ pub fn input_gradient(
     dx
 }
 
+/// One class of a strided input gradient's positions ([`input_gradient_by_phases`]): its row and
+/// column classes and its values, `[batch, in_channels, plane]` with rows `width` apart (the
+/// columns past the class's count dropped when written).
+struct PhaseValues<'a> {
+    row: &'a AxisPhase,
+    column: &'a AxisPhase,
+    /// Values per channel plane.
+    plane: usize,
+    /// Values per row of a plane.
+    width: usize,
+    values: Vec<f32>,
+}
+
+impl PhaseValues<'_> {
+    /// Image `n`'s planes (`channels` of them).
+    fn image(&self, n: usize, channels: usize) -> &[f32] {
+        &self.values[n * channels * self.plane..][..channels * self.plane]
+    }
+}
+
 /// The input gradient of a strided convolution (a transposed convolution's forward pass) class
 /// by class of the input positions, its transposed convolution's output positions
 /// ([`crate::geometry::Axis::gradient_phases`]): each class of rows and class of columns is a
@@ -289,10 +309,7 @@ fn input_gradient_by_phases(
     // The bias goes into the classes' stores when they cover every position.
     let covered = rows.iter().chain(columns).all(|class| class.axis.is_some());
     let class_bias = bias.filter(|_| covered);
-    // Each class's values, `[batch, in_channels, its rows, its columns]` (the columns past the
-    // class's count dropped when written).
-    type Class<'a> = (&'a AxisPhase, &'a AxisPhase, usize, usize, Vec<f32>);
-    let mut classes: Vec<Class> = Vec::with_capacity(rows.len() * columns.len());
+    let mut classes = Vec::with_capacity(rows.len() * columns.len());
     for row in rows {
         for column in columns {
             let (Some(height), Some(width)) = (row.axis, column.axis) else {
@@ -310,7 +327,13 @@ fn input_gradient_by_phases(
             // The scatter below reads `count` rows and columns of each class's planes.
             assert!(height.output >= row.count && width.output >= column.count);
             let values = forward(&phase, dy, &phase_weight, class_bias, false);
-            classes.push((row, column, phase.output_plane(), width.output, values));
+            classes.push(PhaseValues {
+                row,
+                column,
+                plane: phase.output_plane(),
+                width: width.output,
+                values,
+            });
         }
     }
     let len = g.batch * g.in_channels * in_h * in_w;
@@ -322,18 +345,17 @@ fn input_gradient_by_phases(
         slots.fill(MaybeUninit::new(0.0));
     }
     // One class's values of image `n` into its positions of dx, every channel.
-    let scatter = |n: usize, class: &Class, dx: &mut [MaybeUninit<f32>]| {
-        let (row, column, phase_plane, phase_w, values) = class;
-        let planes = &values[n * g.in_channels * phase_plane..][..g.in_channels * phase_plane];
+    let scatter = |n: usize, class: &PhaseValues, dx: &mut [MaybeUninit<f32>]| {
+        let planes = class.image(n, g.in_channels);
         for (dx, values) in dx
             .chunks_exact_mut(in_h * in_w)
-            .zip(planes.chunks_exact(*phase_plane))
+            .zip(planes.chunks_exact(class.plane))
         {
-            for m in 0..row.count {
-                let target = &mut dx[(row.first + m * g.height.stride) * in_w..][..in_w];
-                let source = &values[m * phase_w..][..column.count];
+            for m in 0..class.row.count {
+                let target = &mut dx[(class.row.first + m * g.height.stride) * in_w..][..in_w];
+                let source = &values[m * class.width..][..class.column.count];
                 for (j, &value) in source.iter().enumerate() {
-                    target[column.first + j * g.width.stride].write(value);
+                    target[class.column.first + j * g.width.stride].write(value);
                 }
             }
         }
@@ -341,35 +363,34 @@ fn input_gradient_by_phases(
     // Two classes of one row class, the even and the odd columns of stride 2 (H-Net's
     // upsampling), into their rows of dx at once: whole rows written in order, where scattering
     // each class on its own wrote every other value twice over the same cache lines.
-    let interleaves = |even: &Class, odd: &Class| {
-        core::ptr::eq(even.0, odd.0)
+    let interleaves = |even: &PhaseValues, odd: &PhaseValues| {
+        core::ptr::eq(even.row, odd.row)
             && g.width.stride == 2
-            && (even.1.first, odd.1.first) == (0, 1)
-            && (even.1.count, odd.1.count) == (in_w.div_ceil(2), in_w / 2)
+            && (even.column.first, odd.column.first) == (0, 1)
+            && (even.column.count, odd.column.count) == (in_w.div_ceil(2), in_w / 2)
     };
-    let interleave = |n: usize, even: &Class, odd: &Class, dx: &mut [MaybeUninit<f32>]| {
-        let row = even.0;
-        let image = g.in_channels * even.2;
-        let even_planes = &even.4[n * image..][..image];
-        let image = g.in_channels * odd.2;
-        let odd_planes = &odd.4[n * image..][..image];
-        for (c, dx) in dx.chunks_exact_mut(in_h * in_w).enumerate() {
-            let even_plane = &even_planes[c * even.2..][..even.2];
-            let odd_plane = &odd_planes[c * odd.2..][..odd.2];
-            for m in 0..row.count {
-                let target = &mut dx[(row.first + m * g.height.stride) * in_w..][..in_w];
-                let evens = &even_plane[m * even.3..][..even.1.count];
-                let odds = &odd_plane[m * odd.3..][..odd.1.count];
-                for (pair, (&e, &o)) in target.chunks_exact_mut(2).zip(evens.iter().zip(odds)) {
-                    pair[0].write(e);
-                    pair[1].write(o);
-                }
-                if in_w % 2 == 1 {
-                    target[in_w - 1].write(evens[in_w / 2]);
+    let interleave =
+        |n: usize, even: &PhaseValues, odd: &PhaseValues, dx: &mut [MaybeUninit<f32>]| {
+            let row = even.row;
+            let (even_planes, odd_planes) =
+                (even.image(n, g.in_channels), odd.image(n, g.in_channels));
+            for (c, dx) in dx.chunks_exact_mut(in_h * in_w).enumerate() {
+                let even_plane = &even_planes[c * even.plane..][..even.plane];
+                let odd_plane = &odd_planes[c * odd.plane..][..odd.plane];
+                for m in 0..row.count {
+                    let target = &mut dx[(row.first + m * g.height.stride) * in_w..][..in_w];
+                    let evens = &even_plane[m * even.width..][..even.column.count];
+                    let odds = &odd_plane[m * odd.width..][..odd.column.count];
+                    for (pair, (&e, &o)) in target.chunks_exact_mut(2).zip(evens.iter().zip(odds)) {
+                        pair[0].write(e);
+                        pair[1].write(o);
+                    }
+                    if in_w % 2 == 1 {
+                        target[in_w - 1].write(evens[in_w / 2]);
+                    }
                 }
             }
-        }
-    };
+        };
     let write = |n: usize, dx: &mut [MaybeUninit<f32>]| {
         let mut rest = &classes[..];
         while let Some((class, tail)) = rest.split_first() {
