@@ -235,6 +235,35 @@ fn swapping_the_views_swaps_the_masks_exactly() {
 }
 
 #[test]
+fn the_views_on_two_threads_read_as_in_one_batch() {
+    // Natively with no gradient recorded, `forward` runs each view on its own thread; recording
+    // gradients, both views go through as one batch (with shared weights). Same outputs.
+    let device = Device::flex();
+    let recording = Device::flex().autodiff();
+    for shared in [true, false] {
+        let model = small_config()
+            .with_share_weights(shared)
+            .init(&device)
+            .unwrap();
+        let (a, b) = random_views(&device, 2, 16);
+        let threads = model.forward(a.clone(), b.clone());
+        let batch = model
+            .to_device(&recording)
+            .forward(a.to_device(&recording), b.to_device(&recording));
+        let same = |x: Tensor<4>, y: Tensor<4>| {
+            x.into_data()
+                .assert_approx_eq::<f32>(&y.into_data(), Tolerance::absolute(1e-6))
+        };
+        same(threads.mask_logits_a, batch.mask_logits_a);
+        same(threads.mask_logits_b, batch.mask_logits_b);
+        threads
+            .force
+            .into_data()
+            .assert_approx_eq::<f32>(&batch.force.into_data(), Tolerance::absolute(1e-6));
+    }
+}
+
+#[test]
 fn without_sharing_each_view_has_its_own_weights() {
     let device = Device::flex();
     let model = small_config()
