@@ -428,7 +428,7 @@ impl Run<'_> {
     /// ahead: its two new image rows of every input channel and its two output rows of every
     /// output channel. Spread over a channel each, these are too many streams for the hardware's
     /// prefetcher, and their misses were most of the padding's and the output's time.
-    /// Nothing when the image and its output fit in half a level-2 cache ([`PREFETCH_MIN_VALUES`]).
+    /// Nothing when the image and its output fit in 1 MiB ([`PREFETCH_MIN_VALUES`]).
     fn prefetch_next(&self, tile_row: usize, y: &[MaybeUninit<f32>]) {
         if tile_row >= self.layout.tiles_h || self.image.len() + y.len() < PREFETCH_MIN_VALUES {
             return;
@@ -545,8 +545,8 @@ impl Run<'_> {
         let cout = self.g.out_channels;
         let (out_w, out_plane) = (self.g.width.output, self.g.output_plane());
         let tiles = STRIP_TILES.min(self.layout.tiles_w - first_tile);
-        // A partial strip's two output rows of one channel.
         let whole = tiles == STRIP_TILES;
+        // A partial strip's two output rows of one channel.
         let mut lines = [[0.0f32; 2 * STRIP_TILES]; 2];
         for o in 0..cout {
             let plane = y[o * out_plane..][..out_plane].as_mut_ptr().cast::<f32>();

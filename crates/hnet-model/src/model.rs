@@ -438,8 +438,8 @@ impl HNet {
 
     /// Both views through their branches. Natively (the `rayon` feature) and with no gradient
     /// recorded, each view runs on its own thread, every layer of it on one core: at 64 px a
-    /// pair took 7.3 ms as one batch of both views, each layer split between the cores and
-    /// handed back, against 5.0 ms so (224 px: 65 against 56 ms; docs/benchmarks.md). Else,
+    /// pair took 6.9 ms as one batch of both views, each layer split between the cores and
+    /// handed back, against 4.9 ms so (224 px: 70.5 against 57.2 ms; docs/benchmarks.md). Else,
     /// with shared weights, both views go through as one batch of `2B`. Either way each view's
     /// result is the same: no layer mixes the images of a batch.
     fn branches(&self, view_a: Tensor<4>, view_b: Tensor<4>) -> (BranchOutput, BranchOutput) {

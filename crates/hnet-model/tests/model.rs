@@ -237,7 +237,9 @@ fn swapping_the_views_swaps_the_masks_exactly() {
 #[test]
 fn the_views_on_two_threads_read_as_in_one_batch() {
     // Natively with no gradient recorded, `forward` runs each view on its own thread; recording
-    // gradients, both views go through as one batch (with shared weights). Same outputs.
+    // gradients, both views go through as one batch (with shared weights). Same outputs. The
+    // threads need hnet-model's `rayon` feature: on in `scripts/test.sh`'s workspace run (hnet-cli
+    // asks for it); `cargo test -p hnet-model` alone compares the batch with itself.
     let device = Device::flex();
     let recording = Device::flex().autodiff();
     for shared in [true, false] {
