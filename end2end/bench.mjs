@@ -11,6 +11,7 @@
 // HNET_DIST=<folder> times another build (e.g. scripts/bundle-size.sh's release page).
 // HNET_WEIGHTS=<model.bpk> loads those weights through the model bar first (e.g. a 128 px model
 // from `hnet train`), so that the page's time for another network size is measured.
+// HNET_PAGE_QUERY=<query> opens the page with that query (src/page_query.rs).
 // HNET_NO_WORKERS=1 deletes window.Worker first: the page's thread alone, one core.
 // HNET_BACKENDS=cpu times the CPU path only (the software WebGPU adapter takes seconds a run).
 // HNET_CATHETER_ENTRY=<value of the model bar's "Catheter enters from": bottom, auto, left, ...>
@@ -36,6 +37,9 @@ function backends() {
   return chosen;
 }
 const server = await serveDist();
+// HNET_PAGE_QUERY=<query> opens the page with that query, e.g. `?cpu-fused=0` for the CPU workers
+// without relaxed SIMD in a browser that has it (src/page_query.rs).
+const pageUrl = server.url + (process.env.HNET_PAGE_QUERY ?? "");
 const context = await launchBrowser();
 // HNET_NO_WORKERS=1: a browser without Web Workers, so H-Net runs on the page's thread (the
 // single-core path, to compare with the workers in the same build).
@@ -44,7 +48,7 @@ const results = [];
 try {
   for (const choice of backends()) {
     const opened = performance.now();
-    const { page } = await openPage(context, server.url);
+    const { page } = await openPage(context, pageUrl);
     await waitForModel(page);
     const modelReadyMs = performance.now() - opened;
     const chosen = performance.now();
@@ -104,7 +108,7 @@ try {
   // The cine trace: the twin's 24-frame sample cine traced on the CPU (its workers settled),
   // then traced again while it plays, the playback's frame intervals recorded.
   {
-    const { page } = await openPage(context, server.url);
+    const { page } = await openPage(context, pageUrl);
     await waitForModel(page);
     await page.selectOption("#backend-choice", "cpu");
     await waitForModel(page);
@@ -143,7 +147,7 @@ try {
     await page.close();
   }
   // The catheter in 3D: each Fx step of the twin's slider renders a new pair, reconstructed once.
-  const { page } = await openPage(context, server.url);
+  const { page } = await openPage(context, pageUrl);
   await waitForModel(page);
   await page.click("#tab-twin");
   await page.waitForSelector("#catheter-3d[data-state=ready]", { timeout: 60_000 });

@@ -29,10 +29,12 @@ page_code=(hnet-studio-*_bg.wasm hnet-studio-*.js boot.js style-*.css index.html
 weights=(assets/hnet-cpu.bpk)
 gpu=(hnet-gpu_bg.wasm hnet-gpu.js module-worker.js)
 cpu=(hnet-cpu_bg.wasm hnet-cpu.js)
+cpu_fused=(hnet-cpu-fused_bg.wasm hnet-cpu-fused.js)
 echo "release page: $dist"
 printf '  page code (wasm, JS, CSS, HTML): %s\n' "$(sizes "${page_code[@]}")"
 printf '  bundled weights:                 %s\n' "$(sizes "${weights[@]}")"
 printf '  every visitor (the two above):   %s\n' "$(sizes "${page_code[@]}" "${weights[@]}")"
 printf '  CPU workers, after the first estimate (one fetch, compiled per worker): %s\n' "$(sizes "${cpu[@]}")"
+printf '    or, where WebAssembly has relaxed SIMD, their fused build instead: %s\n' "$(sizes "${cpu_fused[@]}")"
 printf '  WebGPU worker, when used:        %s\n' "$(sizes "${gpu[@]}")"
 printf '  a visitor on WebGPU (all):       %s\n' "$(sizes "${page_code[@]}" "${weights[@]}" "${gpu[@]}")"

@@ -48,6 +48,82 @@ fn view_timeout_s() -> u32 {
         })
 }
 
+/// Which build of the CPU workers' module the pool runs. Both read the same network with the
+/// same kernels; they differ in the multiply-adds of the convolutions' products.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CpuModule {
+    /// crates/hnet-cpu-fused: built with WebAssembly relaxed SIMD, whose `f32x4.relaxed_madd`
+    /// the browser compiles to the CPU's fused multiply-add where it has one.
+    Fused,
+    /// crates/hnet-cpu: SIMD128 only, a multiply and an add; every browser with WebAssembly SIMD.
+    Plain,
+}
+
+/// The smallest module that uses relaxed SIMD: a function returning `f32x4.relaxed_madd` of
+/// three zero vectors. `WebAssembly.validate` accepts it only where relaxed SIMD is on.
+const RELAXED_SIMD_PROBE: [u8; 82] = {
+    let mut module = [0u8; 82];
+    let head = [
+        0x00, 0x61, 0x73, 0x6d, 0x01, 0x00, 0x00, 0x00, // magic, version 1
+        0x01, 0x05, 0x01, 0x60, 0x00, 0x01, 0x7b, // types: () -> v128
+        0x03, 0x02, 0x01, 0x00, // functions: one, of type 0
+        0x0a, 0x3d, 0x01, 0x3b, 0x00, // code: one body of 59 bytes, no locals
+    ];
+    let mut i = 0;
+    while i < head.len() {
+        module[i] = head[i];
+        i += 1;
+    }
+    // Three `v128.const` of 16 zero bytes (0xfd 0x0c), then `f32x4.relaxed_madd` (0xfd 0x105)
+    // and `end`.
+    let mut at = head.len();
+    let mut constant = 0;
+    while constant < 3 {
+        module[at] = 0xfd;
+        module[at + 1] = 0x0c;
+        at += 18;
+        constant += 1;
+    }
+    module[at] = 0xfd;
+    module[at + 1] = 0x85;
+    module[at + 2] = 0x02;
+    module[at + 3] = 0x0b;
+    module
+};
+
+impl CpuModule {
+    /// The fused module where this browser's WebAssembly has relaxed SIMD (and the page's
+    /// address does not turn it off: [`page_query::CPU_FUSED`]), else the plain one.
+    pub fn for_this_browser() -> Self {
+        let allowed = web_sys::window()
+            .and_then(|w| w.location().search().ok())
+            .is_none_or(|query| page_query::cpu_fused_allowed(&query));
+        let relaxed = js_sys::WebAssembly::validate(&Uint8Array::from(&RELAXED_SIMD_PROBE[..]))
+            .unwrap_or(false);
+        if allowed && relaxed {
+            Self::Fused
+        } else {
+            Self::Plain
+        }
+    }
+
+    /// The module's name for `www/module-worker.js` (its trunk build's file names).
+    fn name(self) -> &'static str {
+        match self {
+            Self::Fused => "hnet-cpu-fused",
+            Self::Plain => "hnet-cpu",
+        }
+    }
+
+    /// In words, for the model bar.
+    pub fn text(self) -> &'static str {
+        match self {
+            Self::Fused => "fused multiply-adds (WebAssembly relaxed SIMD)",
+            Self::Plain => "multiplies and adds apart (no WebAssembly relaxed SIMD)",
+        }
+    }
+}
+
 /// Why the pool gave no reading.
 #[derive(Debug, thiserror::Error)]
 pub enum PoolError {
@@ -99,9 +175,14 @@ struct Member {
 }
 
 impl Member {
-    /// A fresh worker with the weights `weights` (`name` names them in errors) loaded.
-    async fn start(weights: &[u8], name: &str) -> Result<Self, ModuleWorkerError> {
-        let worker = ModuleWorker::spawn("hnet-cpu", NAME)?;
+    /// A fresh worker of `module` with the weights `weights` (`name` names them in errors)
+    /// loaded.
+    async fn start(
+        module: CpuModule,
+        weights: &[u8],
+        name: &str,
+    ) -> Result<Self, ModuleWorkerError> {
+        let worker = ModuleWorker::spawn(module.name(), NAME)?;
         worker.call("start", &Array::new(), &Array::new()).await?;
         let bytes = Uint8Array::from(weights);
         let args = Array::of2(&bytes, &JsValue::from_str(name));
@@ -171,12 +252,15 @@ pub enum WorkersStatus {
     NotUsed,
     /// Workers are being started; the page's thread runs H-Net meanwhile.
     Starting(usize),
-    /// `running` workers read the views; `replaced` of them replaced a worker that stopped.
+    /// `running` workers of `module` read the views; `replaced` of them replaced a worker that
+    /// stopped.
     Running {
         /// Workers running.
         running: usize,
         /// Workers started again after one stopped, since the weights were loaded.
         replaced: usize,
+        /// The module they run.
+        module: CpuModule,
     },
     /// The page's thread runs H-Net, one core, for this reason.
     PageThread(String),
@@ -200,10 +284,16 @@ impl WorkersStatus {
             Self::Running {
                 running,
                 replaced: 0,
-            } => format!("{running} workers, one per core"),
-            Self::Running { running, replaced } => {
-                format!("{running} workers, one per core; {replaced} replaced after stopping")
-            }
+                module,
+            } => format!("{running} workers, one per core, {}", module.text()),
+            Self::Running {
+                running,
+                replaced,
+                module,
+            } => format!(
+                "{running} workers, one per core, {}; {replaced} replaced after stopping",
+                module.text()
+            ),
             Self::PageThread(why) => format!("no workers: the page's thread, one core; {why}"),
         }
     }
@@ -211,6 +301,7 @@ impl WorkersStatus {
 
 /// The pool: a queue of views and the workers that read them.
 pub struct CpuPool {
+    module: CpuModule,
     weights: Rc<[u8]>,
     name: String,
     input: ImageSize,
@@ -257,8 +348,10 @@ impl CpuPool {
         if !has_workers() {
             return Err(PoolError::NoWorkers);
         }
+        let module = CpuModule::for_this_browser();
         let started =
-            futures::future::join_all((0..size).map(|_| Member::start(&weights, &name))).await;
+            futures::future::join_all((0..size).map(|_| Member::start(module, &weights, &name)))
+                .await;
         let mut members = Vec::with_capacity(size);
         let mut failure = None;
         for member in started {
@@ -276,6 +369,7 @@ impl CpuPool {
             )));
         }
         let pool = Rc::new(Self {
+            module,
             weights,
             name,
             input,
@@ -301,6 +395,7 @@ impl CpuPool {
         WorkersStatus::Running {
             running: self.running(),
             replaced: self.replaced.get(),
+            module: self.module,
         }
     }
 
@@ -411,7 +506,7 @@ impl CpuPool {
         (self.on_change)(self.status());
         let pool = self.clone();
         leptos::task::spawn_local(async move {
-            let fresh = Member::start(&pool.weights, &pool.name).await;
+            let fresh = Member::start(pool.module, &pool.weights, &pool.name).await;
             pool.replacing.set(pool.replacing.get() - 1);
             if let Ok(member) = fresh {
                 pool.members.borrow_mut()[slot] = Some(Rc::new(member));

@@ -15,6 +15,11 @@ pub const CPU_VIEW_TIMEOUT: &str = "cpu-view-timeout-s";
 /// a second (docs/benchmarks.md).
 pub const CPU_VIEW_TIMEOUT_S: u32 = 60;
 
+/// `cpu-fused=0` keeps the CPU workers on the module without relaxed SIMD (crates/hnet-cpu) in
+/// a browser that has it, so that both modules can be timed and tested in one browser. Any other
+/// value, or none, lets the page choose ([`crate::cpu_pool::CpuModule::for_this_browser`]).
+pub const CPU_FUSED: &str = "cpu-fused";
+
 /// The value of parameter `key` in `query` (with or without its leading `?`), if given.
 fn value<'a>(query: &'a str, key: &str) -> Option<&'a str> {
     query
@@ -42,6 +47,11 @@ pub fn cpu_view_timeout_s(query: &str) -> u32 {
         .unwrap_or(CPU_VIEW_TIMEOUT_S)
 }
 
+/// False when the query turns the fused CPU module off ([`CPU_FUSED`]`=0`).
+pub fn cpu_fused_allowed(query: &str) -> bool {
+    value(query, CPU_FUSED) != Some("0")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -53,6 +63,8 @@ mod tests {
         assert_eq!(webgpu_tolerance_scale("?a=b&webgpu-tolerance-scale=0"), 0.0);
         assert_eq!(webgpu_tolerance_scale("?webgpu-tolerance-scale=inf"), 1.0);
         assert_eq!(webgpu_tolerance_scale("?webgpu-tolerance-scale"), 1.0);
+        assert!(cpu_fused_allowed("") && cpu_fused_allowed("?cpu-fused=1"));
+        assert!(!cpu_fused_allowed("?a=b&cpu-fused=0"));
         assert_eq!(cpu_view_timeout_s(""), CPU_VIEW_TIMEOUT_S);
         assert_eq!(cpu_view_timeout_s("?cpu-view-timeout-s=5"), 5);
         assert_eq!(

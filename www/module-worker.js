@@ -4,7 +4,7 @@
 // The page's side is src/module_worker.rs. Each message `{ id, call, args }` calls the module's
 // export `call`; the reply is `{ id, value }` or `{ id, error }`. A module that fails to load
 // answers every call with why.
-const MODULES = ["hnet-cpu", "hnet-gpu", "hnet-tune"];
+const MODULES = ["hnet-cpu", "hnet-cpu-fused", "hnet-gpu", "hnet-tune"];
 const name = new URL(self.location.href).searchParams.get("module");
 
 const ready = MODULES.includes(name)

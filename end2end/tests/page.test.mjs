@@ -665,12 +665,33 @@ test("every core: one CPU worker per core reads the views as the page's thread d
   await page.selectOption("#catheter-entry", "bottom");
   await page.waitForFunction(() => / workers$/.test(document.querySelector("#inference-time").textContent) && !document.querySelector("#busy"), null, { timeout: 60_000 });
   assert.equal(await page.textContent("#force-table"), onPageThread);
+  // Chromium's WebAssembly has relaxed SIMD: the workers run the fused module, and read what the
+  // page's thread (plain SIMD128) read above.
+  assert.match(await page.getAttribute("#cpu-workers", "title"), /^\d+ workers, one per core, fused multiply-adds \(WebAssembly relaxed SIMD\)/);
+  assert.ok(page.workers().some((w) => w.url().includes("module=hnet-cpu-fused")));
   assert.deepEqual(errors, []);
   await page.close();
 
+  // The plain module, as a browser without relaxed SIMD runs it (`?cpu-fused=0`): the same
+  // masks and force.
+  {
+    const page = await context.newPage();
+    await page.goto(`${server.url}?cpu-fused=0`);
+    await waitForModel(page);
+    await page.waitForSelector("#force-verdict", { timeout: 120_000 });
+    await page.waitForFunction(() => /multiplies and adds apart/.test(document.querySelector("#cpu-workers").title), null, { timeout: 60_000 });
+    await page.selectOption("#catheter-entry", "left");
+    await page.waitForFunction(() => !document.querySelector("#busy"));
+    await page.selectOption("#catheter-entry", "bottom");
+    await page.waitForFunction(() => / workers$/.test(document.querySelector("#inference-time").textContent) && !document.querySelector("#busy"), null, { timeout: 60_000 });
+    assert.equal(await page.textContent("#force-table"), onPageThread);
+    assert.ok(!page.workers().some((w) => w.url().includes("module=hnet-cpu-fused")));
+    await page.close();
+  }
+
   // Workers whose module cannot be fetched, and a browser without workers: the page's thread.
   for (const [setup, why] of [
-    [async (p) => p.route("**/hnet-cpu_bg.wasm", (route) => route.abort()), /^no workers: the page's thread, one core; no CPU worker could be started: .+\. H-Net's views/],
+    [async (p) => p.route(/hnet-cpu(-fused)?_bg\.wasm/, (route) => route.abort()), /^no workers: the page's thread, one core; no CPU worker could be started: .+\. H-Net's views/],
     [async (p) => p.addInitScript(() => delete window.Worker), /^no workers: the page's thread, one core; this browser runs no Web Workers\. H-Net's views/],
   ]) {
     const page = await context.newPage();

@@ -208,7 +208,9 @@ pub fn forward_image(
         unsafe { forward_avx2(g, layout, padded, packed_weight, bias, relu, y) };
         return;
     }
-    #[cfg(target_arch = "wasm32")]
+    #[cfg(all(target_arch = "wasm32", feature = "relaxed-simd"))]
+    return forward_fused(g, layout, padded, packed_weight, bias, relu, y);
+    #[cfg(all(target_arch = "wasm32", not(feature = "relaxed-simd")))]
     return forward_body::<crate::products::simd128::Simd128, 2>(
         g,
         layout,
@@ -235,6 +237,29 @@ fn forward_avx2(
 ) {
     // Up to 6 channels x 2 vectors of 8: twelve accumulators, two loaded vectors and a broadcast.
     forward_body::<crate::products::avx2::Avx2, 2>(g, layout, padded, packed_weight, bias, relu, y)
+}
+
+/// [`forward_body`] with relaxed SIMD's fused multiply-adds (the crate's `relaxed-simd` feature).
+#[cfg(all(target_arch = "wasm32", feature = "relaxed-simd"))]
+#[target_feature(enable = "simd128,relaxed-simd")]
+fn forward_fused(
+    g: &ConvGeometry,
+    layout: &PaddedLayout,
+    padded: &[f32],
+    packed_weight: &[f32],
+    bias: Option<&[f32]>,
+    relu: bool,
+    y: &mut [MaybeUninit<f32>],
+) {
+    forward_body::<crate::products::simd128::FusedSimd128, 2>(
+        g,
+        layout,
+        padded,
+        packed_weight,
+        bias,
+        relu,
+        y,
+    )
 }
 
 /// The body of [`forward_image`]: strips of `V · WIDTH` flat positions, each multiplied by every

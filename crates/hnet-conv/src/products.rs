@@ -171,11 +171,20 @@ pub(crate) mod avx2 {
 pub(crate) mod simd128 {
     use core::arch::wasm32::*;
 
-    /// Four lanes of WebAssembly SIMD128 (no FMA: a multiply and an add).
+    /// Four lanes of WebAssembly SIMD128. Plain SIMD128 has no fused multiply-add, so
+    /// [`multiply_add`](super::Lanes::multiply_add) is a multiply and an add; with `FUSED` (the
+    /// crate's `relaxed-simd` feature) it is relaxed SIMD's `f32x4.relaxed_madd`, one
+    /// instruction that the browser compiles to the CPU's FMA where it has one (then one
+    /// rounding, else two). `FUSED` lanes are only used inside functions compiled with
+    /// `relaxed-simd` ([`fused`]), where the instruction is inlined.
     #[derive(Clone, Copy)]
-    pub struct Simd128(v128);
+    pub struct Simd128<const FUSED: bool = false>(v128);
 
-    impl super::Lanes for Simd128 {
+    /// SIMD128 with relaxed SIMD's fused multiply-add.
+    #[cfg(feature = "relaxed-simd")]
+    pub type FusedSimd128 = Simd128<true>;
+
+    impl<const FUSED: bool> super::Lanes for Simd128<FUSED> {
         const WIDTH: usize = 4;
         #[inline(always)]
         fn zero() -> Self {
@@ -197,6 +206,10 @@ pub(crate) mod simd128 {
         }
         #[inline(always)]
         fn multiply_add(self, a: Self, b: Self) -> Self {
+            #[cfg(feature = "relaxed-simd")]
+            if FUSED {
+                return Self(f32x4_relaxed_madd(a.0, b.0, self.0));
+            }
             Self(f32x4_add(self.0, f32x4_mul(a.0, b.0)))
         }
         #[inline(always)]
@@ -219,6 +232,28 @@ pub(crate) mod simd128 {
             // f32x4.max returns NaN when either lane is NaN.
             Self(f32x4_max(self.0, f32x4_splat(0.0)))
         }
+    }
+}
+
+/// The kernels' WebAssembly entry points compiled with relaxed SIMD (the crate's `relaxed-simd`
+/// feature), so that [`simd128::FusedSimd128`]'s `f32x4.relaxed_madd` is inlined into their
+/// loops. A module built with the feature does not compile in a browser without relaxed SIMD:
+/// the page builds its CPU workers both ways and picks one (src/cpu_pool.rs).
+#[cfg(all(target_arch = "wasm32", feature = "relaxed-simd"))]
+pub(crate) mod fused {
+    use super::simd128::FusedSimd128;
+
+    /// [`super::broadcast_product`]'s body with fused multiply-adds.
+    #[target_feature(enable = "simd128,relaxed-simd")]
+    pub(crate) fn broadcast(
+        c: (&mut [f32], usize),
+        accumulate: bool,
+        shape: (usize, usize, usize),
+        a: &[f32],
+        a_strides: (usize, usize),
+        b: &[f32],
+    ) {
+        super::broadcast_body::<FusedSimd128, 4, 3>(c, accumulate, shape, a, a_strides, b)
     }
 }
 
@@ -254,7 +289,9 @@ pub fn broadcast_product(
         unsafe { broadcast_avx2((c, c_stride), accumulate, shape, a, (a_row, a_col), b) };
         return;
     }
-    #[cfg(target_arch = "wasm32")]
+    #[cfg(all(target_arch = "wasm32", feature = "relaxed-simd"))]
+    return fused::broadcast((c, c_stride), accumulate, shape, a, (a_row, a_col), b);
+    #[cfg(all(target_arch = "wasm32", not(feature = "relaxed-simd")))]
     return broadcast_body::<simd128::Simd128, 4, 3>(
         (c, c_stride),
         accumulate,

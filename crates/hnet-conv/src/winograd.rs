@@ -247,7 +247,10 @@ pub fn forward_image(
         // SAFETY: this CPU has AVX2 and FMA.
         return unsafe { run.strips::<avx2::Avx2Phases>(window, y) };
     }
-    #[cfg(target_arch = "wasm32")]
+    #[cfg(all(target_arch = "wasm32", feature = "relaxed-simd"))]
+    // SAFETY: a module built with `relaxed-simd` only compiles where the browser has it.
+    return unsafe { run.strips::<fused::FusedPhases>(window, y) };
+    #[cfg(all(target_arch = "wasm32", not(feature = "relaxed-simd")))]
     // SAFETY: wasm32 builds enable SIMD128 for the whole crate (.cargo/config.toml).
     return unsafe { run.strips::<Generic<crate::products::simd128::Simd128, 2>>(window, y) };
     #[allow(unreachable_code)]
@@ -372,6 +375,71 @@ mod avx2 {
         y: &mut [MaybeUninit<f32>],
     ) {
         run.transform_output::<Avx2, 2>(tile_row, first_tile, products, y);
+    }
+}
+
+/// The phases with relaxed SIMD's fused multiply-adds (the crate's `relaxed-simd` feature), each
+/// compiled with it on its own, as for AVX2 above.
+#[cfg(all(target_arch = "wasm32", feature = "relaxed-simd"))]
+mod fused {
+    use core::mem::MaybeUninit;
+
+    use super::Run;
+    use crate::products::simd128::FusedSimd128;
+
+    /// The phases for SIMD128 with relaxed SIMD (the trait's contract: only in a module the
+    /// browser compiled, which it does only where it has relaxed SIMD).
+    pub(super) struct FusedPhases;
+
+    impl super::Phases for FusedPhases {
+        unsafe fn transform_input(
+            run: &Run,
+            window: &[f32],
+            tile_row: usize,
+            first_tile: usize,
+            out: &mut [f32],
+        ) {
+            transform_input(run, window, tile_row, first_tile, out)
+        }
+        unsafe fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]) {
+            multiply(run, transformed, products)
+        }
+        unsafe fn transform_output(
+            run: &Run,
+            tile_row: usize,
+            first_tile: usize,
+            products: &[f32],
+            y: &mut [MaybeUninit<f32>],
+        ) {
+            transform_output(run, tile_row, first_tile, products, y)
+        }
+    }
+
+    #[target_feature(enable = "simd128,relaxed-simd")]
+    fn transform_input(
+        run: &Run,
+        window: &[f32],
+        tile_row: usize,
+        first_tile: usize,
+        out: &mut [f32],
+    ) {
+        run.transform_input::<FusedSimd128, 2>(window, tile_row, first_tile, out);
+    }
+
+    #[target_feature(enable = "simd128,relaxed-simd")]
+    fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]) {
+        run.multiply::<FusedSimd128, 2>(transformed, products);
+    }
+
+    #[target_feature(enable = "simd128,relaxed-simd")]
+    fn transform_output(
+        run: &Run,
+        tile_row: usize,
+        first_tile: usize,
+        products: &[f32],
+        y: &mut [MaybeUninit<f32>],
+    ) {
+        run.transform_output::<FusedSimd128, 2>(tile_row, first_tile, products, y);
     }
 }
 
