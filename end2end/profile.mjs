@@ -10,6 +10,9 @@ const runs = Number(process.argv[2] ?? 10);
 const top = Number(process.argv[3] ?? 25);
 const server = await serveDist();
 const context = await launchBrowser();
+// H-Net's views run in CPU workers, which this profiler does not see: the page's thread reads
+// them here, with the plain SIMD128 kernels (the workers' relaxed-SIMD build is not profiled).
+await context.addInitScript(() => delete window.Worker);
 try {
   const { page } = await openPage(context, server.url);
   await waitForModel(page);
