@@ -59,37 +59,24 @@ pub enum CpuModule {
     Plain,
 }
 
-/// The smallest module that uses relaxed SIMD: a function returning `f32x4.relaxed_madd` of
-/// three zero vectors. `WebAssembly.validate` accepts it only where relaxed SIMD is on.
-const RELAXED_SIMD_PROBE: [u8; 82] = {
-    let mut module = [0u8; 82];
-    let head = [
+/// The smallest module that uses relaxed SIMD: one function returning `f32x4.relaxed_madd` of
+/// three zero vectors. `WebAssembly.validate` accepts it only where relaxed SIMD is on (checked in
+/// Node 20, whose V8 has it behind `--experimental-wasm-relaxed-simd`:
+/// docs/log/2026-12-07-fused-multiply-adds-in-the-page.md).
+fn relaxed_simd_probe() -> Vec<u8> {
+    let mut module = vec![
         0x00, 0x61, 0x73, 0x6d, 0x01, 0x00, 0x00, 0x00, // magic, version 1
         0x01, 0x05, 0x01, 0x60, 0x00, 0x01, 0x7b, // types: () -> v128
         0x03, 0x02, 0x01, 0x00, // functions: one, of type 0
         0x0a, 0x3d, 0x01, 0x3b, 0x00, // code: one body of 59 bytes, no locals
     ];
-    let mut i = 0;
-    while i < head.len() {
-        module[i] = head[i];
-        i += 1;
+    for _ in 0..3 {
+        module.extend([0xfd, 0x0c]); // v128.const
+        module.extend([0x00; 16]);
     }
-    // Three `v128.const` of 16 zero bytes (0xfd 0x0c), then `f32x4.relaxed_madd` (0xfd 0x105)
-    // and `end`.
-    let mut at = head.len();
-    let mut constant = 0;
-    while constant < 3 {
-        module[at] = 0xfd;
-        module[at + 1] = 0x0c;
-        at += 18;
-        constant += 1;
-    }
-    module[at] = 0xfd;
-    module[at + 1] = 0x85;
-    module[at + 2] = 0x02;
-    module[at + 3] = 0x0b;
+    module.extend([0xfd, 0x85, 0x02, 0x0b]); // f32x4.relaxed_madd (0xfd 0x105), end
     module
-};
+}
 
 impl CpuModule {
     /// The fused module where this browser's WebAssembly has relaxed SIMD (and the page's
@@ -98,7 +85,7 @@ impl CpuModule {
         let allowed = web_sys::window()
             .and_then(|w| w.location().search().ok())
             .is_none_or(|query| page_query::cpu_fused_allowed(&query));
-        let relaxed = js_sys::WebAssembly::validate(&Uint8Array::from(&RELAXED_SIMD_PROBE[..]))
+        let relaxed = js_sys::WebAssembly::validate(&Uint8Array::from(&relaxed_simd_probe()[..]))
             .unwrap_or(false);
         if allowed && relaxed {
             Self::Fused
