@@ -176,7 +176,7 @@ pub(crate) mod simd128 {
     /// crate's `relaxed-simd` feature) it is relaxed SIMD's `f32x4.relaxed_madd`, one
     /// instruction that the browser compiles to the CPU's FMA where it has one (then one
     /// rounding, else two). `FUSED` lanes are only used inside functions compiled with
-    /// `relaxed-simd` ([`fused`]), where the instruction is inlined.
+    /// `relaxed-simd` (`products::fused`), where the instruction is inlined.
     #[derive(Clone, Copy)]
     pub struct Simd128<const FUSED: bool = false>(v128);
 
