@@ -311,137 +311,100 @@ impl<L: Lanes, const V: usize> Phases for Generic<L, V> {
     }
 }
 
-/// The phases with AVX2 and FMA, each compiled for them on its own: inlined into one function,
-/// the compiler left the vector intrinsics as calls (a third of the time in `perf`).
-#[cfg(target_arch = "x86_64")]
-mod avx2 {
-    use core::mem::MaybeUninit;
+/// A module `$module` with `$phases`, the three phases over lanes `$lanes`, each compiled with
+/// `$features` on its own: inlined into one function, the compiler left the vector intrinsics as
+/// calls (a third of the time in `perf`, AVX2). One definition for every instruction set that needs
+/// its features enabled per function.
+#[cfg(any(target_arch = "x86_64", all(target_arch = "wasm32", feature = "relaxed-simd")))]
+macro_rules! phases_compiled_for {
+    ($(#[$doc:meta])* $module:ident, $phases:ident, $lanes:path, $features:literal) => {
+        mod $module {
+            use core::mem::MaybeUninit;
 
-    use super::Run;
-    use crate::products::avx2::Avx2;
+            use super::Run;
 
-    /// The phases for AVX2 and FMA (the trait's contract: only on CPUs that have them).
-    pub(super) struct Avx2Phases;
+            $(#[$doc])*
+            pub(super) struct $phases;
 
-    impl super::Phases for Avx2Phases {
-        unsafe fn transform_input(
-            run: &Run,
-            window: &[f32],
-            tile_row: usize,
-            first_tile: usize,
-            out: &mut [f32],
-        ) {
-            // SAFETY: the caller checked for AVX2 and FMA (the trait's contract).
-            unsafe { transform_input(run, window, tile_row, first_tile, out) }
+            // `unsafe` calls: a target-feature function is unsafe to call on x86-64 and safe on
+            // wasm32 (where the module would not compile without the features).
+            #[allow(unused_unsafe)]
+            impl super::Phases for $phases {
+                unsafe fn transform_input(
+                    run: &Run,
+                    window: &[f32],
+                    tile_row: usize,
+                    first_tile: usize,
+                    out: &mut [f32],
+                ) {
+                    // SAFETY: this CPU has the features (the trait's contract).
+                    unsafe { transform_input(run, window, tile_row, first_tile, out) }
+                }
+                unsafe fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]) {
+                    // SAFETY: as above.
+                    unsafe { multiply(run, transformed, products) }
+                }
+                unsafe fn transform_output(
+                    run: &Run,
+                    tile_row: usize,
+                    first_tile: usize,
+                    products: &[f32],
+                    y: &mut [MaybeUninit<f32>],
+                ) {
+                    // SAFETY: as above.
+                    unsafe { transform_output(run, tile_row, first_tile, products, y) }
+                }
+            }
+
+            #[target_feature(enable = $features)]
+            fn transform_input(
+                run: &Run,
+                window: &[f32],
+                tile_row: usize,
+                first_tile: usize,
+                out: &mut [f32],
+            ) {
+                run.transform_input::<$lanes, 2>(window, tile_row, first_tile, out);
+            }
+
+            #[target_feature(enable = $features)]
+            fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]) {
+                run.multiply::<$lanes, 2>(transformed, products);
+            }
+
+            #[target_feature(enable = $features)]
+            fn transform_output(
+                run: &Run,
+                tile_row: usize,
+                first_tile: usize,
+                products: &[f32],
+                y: &mut [MaybeUninit<f32>],
+            ) {
+                run.transform_output::<$lanes, 2>(tile_row, first_tile, products, y);
+            }
         }
-        unsafe fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]) {
-            // SAFETY: as above.
-            unsafe { multiply(run, transformed, products) }
-        }
-        unsafe fn transform_output(
-            run: &Run,
-            tile_row: usize,
-            first_tile: usize,
-            products: &[f32],
-            y: &mut [MaybeUninit<f32>],
-        ) {
-            // SAFETY: as above.
-            unsafe { transform_output(run, tile_row, first_tile, products, y) }
-        }
-    }
-
-    #[target_feature(enable = "avx2,fma")]
-    fn transform_input(
-        run: &Run,
-        window: &[f32],
-        tile_row: usize,
-        first_tile: usize,
-        out: &mut [f32],
-    ) {
-        run.transform_input::<Avx2, 2>(window, tile_row, first_tile, out);
-    }
-
-    #[target_feature(enable = "avx2,fma")]
-    fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]) {
-        run.multiply::<Avx2, 2>(transformed, products);
-    }
-
-    #[target_feature(enable = "avx2,fma")]
-    fn transform_output(
-        run: &Run,
-        tile_row: usize,
-        first_tile: usize,
-        products: &[f32],
-        y: &mut [MaybeUninit<f32>],
-    ) {
-        run.transform_output::<Avx2, 2>(tile_row, first_tile, products, y);
-    }
+    };
 }
 
-/// The phases with relaxed SIMD's fused multiply-adds (the crate's `relaxed-simd` feature), each
-/// compiled with it on its own, as for AVX2 above.
+#[cfg(target_arch = "x86_64")]
+phases_compiled_for!(
+    /// The phases for AVX2 and FMA (the trait's contract: only on CPUs that have them).
+    avx2,
+    Avx2Phases,
+    crate::products::avx2::Avx2,
+    "avx2,fma"
+);
+
+// The crate's `relaxed-simd` feature: relaxed SIMD's fused multiply-adds.
 #[cfg(all(target_arch = "wasm32", feature = "relaxed-simd"))]
-mod fused {
-    use core::mem::MaybeUninit;
-
-    use super::Run;
-    use crate::products::simd128::FusedSimd128;
-
+phases_compiled_for!(
     /// The phases for SIMD128 with relaxed SIMD (the trait's contract: only in a module the
     /// browser compiled, which it does only where it has relaxed SIMD).
-    pub(super) struct FusedPhases;
-
-    impl super::Phases for FusedPhases {
-        unsafe fn transform_input(
-            run: &Run,
-            window: &[f32],
-            tile_row: usize,
-            first_tile: usize,
-            out: &mut [f32],
-        ) {
-            transform_input(run, window, tile_row, first_tile, out)
-        }
-        unsafe fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]) {
-            multiply(run, transformed, products)
-        }
-        unsafe fn transform_output(
-            run: &Run,
-            tile_row: usize,
-            first_tile: usize,
-            products: &[f32],
-            y: &mut [MaybeUninit<f32>],
-        ) {
-            transform_output(run, tile_row, first_tile, products, y)
-        }
-    }
-
-    #[target_feature(enable = "simd128,relaxed-simd")]
-    fn transform_input(
-        run: &Run,
-        window: &[f32],
-        tile_row: usize,
-        first_tile: usize,
-        out: &mut [f32],
-    ) {
-        run.transform_input::<FusedSimd128, 2>(window, tile_row, first_tile, out);
-    }
-
-    #[target_feature(enable = "simd128,relaxed-simd")]
-    fn multiply(run: &Run, transformed: &[f32], products: &mut [f32]) {
-        run.multiply::<FusedSimd128, 2>(transformed, products);
-    }
-
-    #[target_feature(enable = "simd128,relaxed-simd")]
-    fn transform_output(
-        run: &Run,
-        tile_row: usize,
-        first_tile: usize,
-        products: &[f32],
-        y: &mut [MaybeUninit<f32>],
-    ) {
-        run.transform_output::<FusedSimd128, 2>(tile_row, first_tile, products, y);
-    }
-}
+    fused,
+    FusedPhases,
+    crate::products::simd128::FusedSimd128,
+    "simd128,relaxed-simd"
+);
 
 /// Values between consecutive points of the transformed input: one strip row more than the
 /// channels need, so that the 16 points of one channel (written together by the input transform)
