@@ -315,7 +315,10 @@ impl<L: Lanes, const V: usize> Phases for Generic<L, V> {
 /// `$features` on its own: inlined into one function, the compiler left the vector intrinsics as
 /// calls (a third of the time in `perf`, AVX2). One definition for every instruction set that needs
 /// its features enabled per function.
-#[cfg(any(target_arch = "x86_64", all(target_arch = "wasm32", feature = "relaxed-simd")))]
+#[cfg(any(
+    target_arch = "x86_64",
+    all(target_arch = "wasm32", feature = "relaxed-simd")
+))]
 macro_rules! phases_compiled_for {
     ($(#[$doc:meta])* $module:ident, $phases:ident, $lanes:path, $features:literal) => {
         mod $module {
