@@ -131,8 +131,8 @@ pub struct CinePlayer {
     pub frame: usize,
     /// Each frame's tip-force estimate (the verdict's: combined where the rod was fitted to
     /// H-Net's masks, else H-Net's force head; with its 90 % intervals where the weights carry
-    /// their calibration), once traced.
-    pub estimates: Vec<Option<TipForceEstimate>>,
+    /// their calibration), or why it has none, once traced.
+    pub estimates: Vec<Option<Result<TipForceEstimate, String>>>,
     /// The weights file (its name) the trace was made with.
     pub traced_with: String,
     /// What the user should know: geometry the headers lacked, how frames were paired.
@@ -285,8 +285,8 @@ impl CinePlayer {
         self.windows = Plane::BOTH.map(|plane| self.cine.series(plane).initial_window(self.frame));
     }
 
-    /// Records frame `frame`'s tip-force estimate.
-    pub fn record_estimate(&mut self, frame: usize, estimate: TipForceEstimate) {
+    /// Records frame `frame`'s tip-force estimate, or why it has none.
+    pub fn record_estimate(&mut self, frame: usize, estimate: Result<TipForceEstimate, String>) {
         if let Some(slot) = self.estimates.get_mut(frame) {
             *slot = Some(estimate);
         }
@@ -299,23 +299,23 @@ impl CinePlayer {
         self.traced_with = weights.to_string();
     }
 
-    /// The frames with an estimate, in order.
+    /// The traced frames, in order: each with its estimate, or why it has none.
     pub fn trace(&self) -> Vec<TracePoint> {
         self.estimates
             .iter()
             .enumerate()
             .filter_map(|(frame, estimate)| {
-                estimate.map(|estimate| TracePoint {
+                estimate.as_ref().map(|estimate| TracePoint {
                     frame,
                     time_s: self.time_s(frame),
-                    estimate: Ok(estimate),
+                    estimate: estimate.clone(),
                 })
             })
             .collect()
     }
 
-    /// The force trace as CSV (`hnet trace`'s format, naming the weights that traced it):
-    /// frames with a force only.
+    /// The force trace as CSV (`hnet trace`'s format, naming the weights that traced it): the
+    /// traced frames, those without a force with why.
     pub fn trace_csv(&self) -> String {
         trace_csv(&self.trace(), &self.traced_with)
     }
@@ -408,16 +408,23 @@ mod tests {
         player.start_trace("hnet-cpu.bpk");
         player.record_estimate(
             1,
-            TipForceEstimate::uncalibrated(TipForce::new(0.1, 0.0, 0.0)),
+            Ok(TipForceEstimate::uncalibrated(TipForce::new(0.1, 0.0, 0.0))),
         );
         let combination = crate::force_reading::tests::bench_domain().combination;
-        player.record_estimate(0, combination.estimate(TipForce::new(0.0, 0.0, 0.2), None));
+        player.record_estimate(
+            0,
+            Ok(combination.estimate(TipForce::new(0.0, 0.0, 0.2), None)),
+        );
         assert_eq!(player.next_untraced(1), Some(2));
+        // A frame without a force is traced, with why.
+        player.record_estimate(2, Err("why".into()));
+        assert_eq!(player.next_untraced(1), None);
         assert_eq!(
             player.trace_csv(),
             "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,fx_90_n,fy_90_n,fz_90_n,estimator,weights,note\n\
              1,0.0000,0.0000,0.0000,0.2000,0.2000,0.1217,0.1230,0.1133,H-Net force head,\"hnet-cpu.bpk\",\n\
-             2,0.0667,0.1000,0.0000,0.0000,0.1000,,,,H-Net force head,\"hnet-cpu.bpk\",\n"
+             2,0.0667,0.1000,0.0000,0.0000,0.1000,,,,H-Net force head,\"hnet-cpu.bpk\",\n\
+             3,0.1334,,,,,,,,,\"hnet-cpu.bpk\",\"why\"\n"
         );
         player.step(-1);
         assert_eq!(player.frame, 2);

@@ -154,22 +154,39 @@ impl TrainingDomain {
         departures
     }
 
-    /// The views whose C-arm angles differ from the trained ones by more than half a degree.
+    /// The views whose C-arm angles differ from the trained ones
+    /// ([`hnet_twin::model_facts::ForceDomain::view_departures`]).
     fn view_departures(&self, views: &Biplane) -> Vec<String> {
-        let mut departures = Vec::new();
-        for (letter, (view, trained)) in ["A", "B"]
-            .iter()
-            .zip([views.a, views.b].iter().zip(self.domain.views_deg))
-        {
-            let angles = [view.primary_deg, view.secondary_deg];
-            if (angles[0] - trained[0]).abs() > 0.5 || (angles[1] - trained[1]).abs() > 0.5 {
-                departures.push(format!(
-                    "view {letter} at {:+.0}°/{:+.0}° (trained at {:+.0}°/{:+.0}°)",
-                    angles[0], angles[1], trained[0], trained[1]
-                ));
+        self.domain.view_departures(views)
+    }
+
+    /// How `pair`'s views depart from the C-arm angles the force head was trained at, one
+    /// phrase each: a twin pair's and a DICOM frame's views, an upload's stated ones (an upload
+    /// that states none is read with the default biplane, at which these weights may have been
+    /// trained). Where they depart, the head's force is not shown on its own
+    /// ([`Self::estimate_at`]).
+    pub fn head_departures(&self, pair: &LabeledPair) -> Vec<String> {
+        match &pair.source {
+            PairSource::Twin { views, .. } | PairSource::Dicom { views, .. } => {
+                self.view_departures(views)
+            }
+            PairSource::Upload { views, .. } => {
+                self.view_departures(&views.unwrap_or_else(crate::catheter_3d::default_views))
             }
         }
-        departures
+    }
+
+    /// [`Self::estimate`] for `pair`: no estimate, and why, where it would be the force head
+    /// alone at C-arm angles it was not trained at
+    /// ([`hnet_twin::reconstruction::physics_force::ForceCombination::estimate_at`]).
+    pub fn estimate_at(
+        &self,
+        hnet_n: TipForce,
+        physics: Option<(TipForce, Option<[f32; 3]>)>,
+        pair: &LabeledPair,
+    ) -> Result<TipForceEstimate, String> {
+        self.combination
+            .estimate_at(hnet_n, physics, &self.head_departures(pair))
     }
 }
 
@@ -460,6 +477,28 @@ pub(crate) mod tests {
                 .any(|d| d.starts_with("view A at +30°/+0°"))
         );
         assert!(verdict.text(&estimate).contains("no verdict"));
+        // View A turned 30°: the head's force alone is withheld there, saying why; combined
+        // with a physics estimate it stands. At the trained angles the head alone stands.
+        let head = TipForce::new(0.1, 0.1, 0.1);
+        let why = domain.estimate_at(head, None, &pair).unwrap_err();
+        assert!(
+            why.contains("view A at +30°/+0° (trained at +0°/+0°)"),
+            "{why}"
+        );
+        let physics = Some((TipForce::new(0.2, 0.1, 0.0), Some([0.01; 3])));
+        assert_eq!(
+            domain.estimate_at(head, physics, &pair),
+            Ok(domain.estimate(head, physics))
+        );
+        let at_trained_angles = twin(TwinControls::default());
+        assert_eq!(
+            domain.head_departures(&at_trained_angles),
+            Vec::<String>::new()
+        );
+        assert_eq!(
+            domain.estimate_at(head, None, &at_trained_angles),
+            Ok(estimate)
+        );
         // Beside it, how far to trust it in plain words: none of the project's own terms.
         for v in [
             verdict.clone(),
@@ -501,6 +540,25 @@ pub(crate) mod tests {
         );
         let domain = bench_domain();
         let estimate = domain.estimate(TipForce::new(0.5, 0.0, 0.0), None);
+        // Read with the default biplane, the trained one: the head alone is shown (with no
+        // verdict); stated at other angles, it is withheld.
+        assert_eq!(domain.head_departures(&upload), Vec::<String>::new());
+        let mut stated = upload.clone();
+        stated.source = PairSource::Upload {
+            view_a: "a.png".into(),
+            view_b: "b.png".into(),
+            views: Some(
+                TwinControls {
+                    view_b_deg: [60.0, 10.0],
+                    ..TwinControls::default()
+                }
+                .views(),
+            ),
+        };
+        assert_eq!(
+            domain.head_departures(&stated),
+            vec!["view B at +60°/+10° (trained at +90°/+0°)".to_string()]
+        );
         let verdict = Verdict::of(&estimate, Some(&domain), &upload);
         assert!(
             verdict

@@ -88,16 +88,24 @@ pub fn ForcePanel(
             _ => None,
         })
     };
-    let reading = move || -> Option<TipForceEstimate> {
+    // How the pair's views depart from the C-arm angles the force head was trained at: there
+    // its force is not shown on its own (`TrainingDomain::head_departures`).
+    let head_departures = move || {
+        domain()
+            .and_then(|d| pairs.with_shown(|p| p.map(|p| d.head_departures(p))))
+            .unwrap_or_default()
+    };
+    let head_shown = move || estimate().filter(|_| head_departures().is_empty());
+    // The estimate, or why there is none where it would be the head alone at other angles.
+    let reading_or_why = move || -> Option<Result<TipForceEstimate, String>> {
         let e = estimate()?;
+        let physics = shown_reading(pairs, catheter, fit_masks, |r| r.physics_for(e));
         Some(match combination() {
-            Some(c) => c.estimate(
-                e,
-                shown_reading(pairs, catheter, fit_masks, |r| r.physics_for(e)),
-            ),
-            None => TipForceEstimate::uncalibrated(e),
+            Some(c) => c.estimate_at(e, physics, &head_departures()),
+            None => Ok(TipForceEstimate::uncalibrated(e)),
         })
     };
+    let reading = move || reading_or_why().and_then(Result::ok);
     // H-Net's own interval, for its row of the table.
     let head_interval = move || Some(combination()?.head_interval_90_n());
     let label = move || pairs.with_shown(|p| p.and_then(|p| p.force_n));
@@ -133,7 +141,7 @@ pub fn ForcePanel(
     // H-Net's estimate as the label, marked as a model's estimate with the weights that made it
     // (the export says so, and `hnet train` leaves it out unless asked).
     let estimate_label = move || {
-        let force = estimate()?;
+        let force = head_shown()?;
         let weights = network.model.with(|m| match m {
             ModelState::Ready(e) => Some(e.weights_name.clone()),
             _ => None,
@@ -287,7 +295,16 @@ pub fn ForcePanel(
             <table id="force-table">
                 <thead><tr><th></th><th>"Fx (N)"</th><th>"Fy (N)"</th><th>"Fz (N)"</th><th>"|F| (N)"</th></tr></thead>
                 <tbody>
-                    {move || row(EstimateKind::Head.name().into(), estimate(), head_interval(), "estimate")}
+                    {move || row(
+                        if estimate().is_some() && head_shown().is_none() {
+                            format!("{} (withheld at these C-arm angles)", EstimateKind::Head.name())
+                        } else {
+                            EstimateKind::Head.name().into()
+                        },
+                        head_shown(),
+                        head_interval(),
+                        "estimate",
+                    )}
                     // Named by the masks the rod was fitted to: painting a correction changes
                     // them from H-Net's to the labels, and the row says so rather than vanish.
                     {move || row(
@@ -319,10 +336,14 @@ pub fn ForcePanel(
                 </tbody>
             </table>
             {move || {
-                let why = prediction.with(|p| p.as_ref().and_then(|p| p.force_left_out()))?;
+                let why = prediction
+                    .with(|p| p.as_ref().and_then(|p| p.force_left_out()))
+                    .or_else(|| {
+                        reading_or_why()?.err().map(|why| format!("No force is read: {why}."))
+                    })?;
                 Some(view! { <p id="force-left-out" class="why">{why}</p> })
             }}
-            {move || match (estimate(), physics()) {
+            {move || match (head_shown(), physics()) {
                 (Some(e), Some(p)) => {
                     let d = Disagreement::between(e, p);
                     Some(view! {

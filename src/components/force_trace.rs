@@ -9,7 +9,7 @@ use wasm_bindgen::JsCast;
 use crate::cine::CinePlayer;
 use crate::force_reading::ABLATION_BAND_N;
 use crate::studio::{CineStore, Studio};
-use hnet_twin::reconstruction::physics_force::EstimateKind;
+use hnet_twin::reconstruction::physics_force::{EstimateKind, TipForceEstimate};
 use hnet_units::TipForce;
 
 /// The plot's size in SVG units, and its margins (left, right, top, bottom).
@@ -44,8 +44,11 @@ struct Plot {
     frames: usize,
     /// The frame on screen.
     frame: usize,
-    /// Frames with a force.
+    /// Frames traced, with a force or without one.
     traced: usize,
+    /// Traced frames without a force (the force head alone withheld at C-arm angles it was not
+    /// trained at).
+    without: usize,
     /// The last frame's time, seconds, when known.
     end_s: Option<f64>,
 }
@@ -66,12 +69,16 @@ impl Plot {
         let forces: Vec<Option<TipForce>> = cine
             .estimates
             .iter()
-            .map(|e| e.map(|e| e.force_n))
+            .map(|e| e.as_ref().and_then(|e| e.as_ref().ok()).map(|e| e.force_n))
             .collect();
         let ranges: Vec<Option<(f32, f32)>> = cine
             .estimates
             .iter()
-            .map(|e| e.and_then(|e| e.magnitude_range_n()))
+            .map(|e| {
+                e.as_ref()
+                    .and_then(|e| e.as_ref().ok())
+                    .and_then(TipForceEstimate::magnitude_range_n)
+            })
             .collect();
         let largest = forces
             .iter()
@@ -129,7 +136,7 @@ impl Plot {
             .estimates
             .iter()
             .flatten()
-            .filter(|e| e.kind == EstimateKind::Combined)
+            .filter(|e| e.as_ref().is_ok_and(|e| e.kind == EstimateKind::Combined))
             .count();
         Self {
             paths,
@@ -138,7 +145,13 @@ impl Plot {
             top_n,
             frames,
             frame: cine.frame,
-            traced: forces.iter().flatten().count(),
+            traced: cine.estimates.iter().flatten().count(),
+            without: cine
+                .estimates
+                .iter()
+                .flatten()
+                .filter(|e| e.is_err())
+                .count(),
             end_s: cine.time_s(frames.saturating_sub(1)),
         }
     }
@@ -178,10 +191,10 @@ pub fn ForceTracePlot(cine: CineStore, studio: Studio) -> impl IntoView {
                         role="img" data-traced=p.traced data-frame=p.frame data-combined=p.combined
                         aria-label=format!(
                             "Force trace: Fx, Fy, Fz and |F| in newtons over {} frames, {} traced \
-                             ({} combined with the physics estimate, the rest H-Net's force head); \
-                             the range of |F| within the 90 % intervals and the ablation band \
-                             0.1-0.3 N shaded; frame {} marked",
-                            p.frames, p.traced, p.combined, p.frame + 1)
+                             ({} combined with the physics estimate, {} without a force, the rest \
+                             H-Net's force head); the range of |F| within the 90 % intervals and \
+                             the ablation band 0.1-0.3 N shaded; frame {} marked",
+                            p.frames, p.traced, p.combined, p.without, p.frame + 1)
                         on:click=on_click>
                         <rect class="band" x=MARGIN[0] width=WIDTH - MARGIN[0] - MARGIN[1]
                             y=band[0] height=band[1] - band[0]></rect>

@@ -266,6 +266,8 @@ impl Studio {
             // Frames with a force of H-Net's: under a search, a frame with a view read turned
             // has none.
             let mut traced = 0;
+            // Why the first traced frame without a force has none.
+            let mut withheld: Option<String> = None;
             let mut failure = None;
             // Frames read again after a worker stopped, and why the first one did.
             let mut redone: Vec<usize> = Vec::new();
@@ -280,9 +282,12 @@ impl Studio {
                             redone_why.get_or_insert_with(|| why.clone());
                         }
                         if let Some(estimate) = studio.frame_estimate(engine, frame, &prediction) {
+                            if let Err(why) = &estimate {
+                                withheld.get_or_insert_with(|| why.clone());
+                            }
                             studio.cine.player.update(|c| {
                                 c.iter_mut()
-                                    .for_each(|c| c.record_estimate(frame, estimate))
+                                    .for_each(|c| c.record_estimate(frame, estimate.clone()))
                             });
                             traced += 1;
                         }
@@ -313,23 +318,33 @@ impl Studio {
                 )
             });
             let redone_text = redone_text.unwrap_or_default();
+            let without = studio.cine.player.with_untracked(|c| {
+                c.as_ref().map_or(0, |c| {
+                    c.estimates.iter().flatten().filter(|e| e.is_err()).count()
+                })
+            });
+            // What else the user should know: frames without a force, frames read again.
+            let details = match withheld {
+                Some(why) => format!(". {without} of them without a force ({why}){redone_text}"),
+                None => redone_text,
+            };
             match failure {
-                Some(text) => studio.notices.error(format!(
-                    "{text}; {done} of {total} frames traced{redone_text}"
-                )),
+                Some(text) => studio
+                    .notices
+                    .error(format!("{text}; {done} of {total} frames traced{details}")),
                 None if !same_cine() => {}
                 None if done < total => studio.notices.info(format!(
-                    "trace stopped: {done} of {total} frames traced in {seconds:.1} s{redone_text}"
+                    "trace stopped: {done} of {total} frames traced in {seconds:.1} s{details}"
                 )),
                 None if traced < total => studio.notices.info(format!(
                     "tip force traced over {traced} of {total} frames in {seconds:.1} s: the \
                      other {} got no force (a view showed no catheter, or was read \
-                     turned){redone_text}",
+                     turned){details}",
                     total - traced
                 )),
                 None => studio.notices.info(format!(
                     "tip force traced over {total} frames in {seconds:.1} s ({:.0} ms per \
-                     frame){redone_text}",
+                     frame){details}",
                     seconds * 1000.0 / total.max(1) as f64
                 )),
             }
@@ -361,22 +376,27 @@ impl Studio {
     /// verdict reads a pair: combined with the physics estimate where the rod could be fitted to
     /// H-Net's masks with the frame's C-arms (the twin tab's catheter, the base fitted) and the
     /// weights carry their calibration, else H-Net's force head with its interval (none for
-    /// weights without recorded facts). `None` where H-Net's force is not read (a view shows no
-    /// catheter, or was read turned).
+    /// weights without recorded facts), or why there is none where that would be the head alone
+    /// at C-arm angles it was not trained at (`TrainingDomain::estimate_at`). `None` where
+    /// H-Net's force is not read (a view shows no catheter, or was read turned).
     fn frame_estimate(
         &self,
         engine: &Engine,
         frame: usize,
         prediction: &Prediction,
-    ) -> Option<TipForceEstimate> {
+    ) -> Option<Result<TipForceEstimate, String>> {
         let force = prediction.force_n?;
         let Some(combination) = &engine.combination else {
-            return Some(TipForceEstimate::uncalibrated(force));
+            return Some(Ok(TipForceEstimate::uncalibrated(force)));
         };
         let pair = self
             .cine
             .player
             .with_untracked(|c| c.as_ref()?.pair(frame, format!("trace-{frame}")))?;
+        let estimate = |physics| match &engine.domain {
+            Some(domain) => domain.estimate_at(force, physics, &pair),
+            None => Ok(combination.estimate(force, physics)),
+        };
         // Headers without the geometry: the C-arms are the defaults, and the physics estimate
         // would only reflect them (`hnet trace` does the same).
         if let PairSource::Dicom {
@@ -384,7 +404,7 @@ impl Studio {
         } = &pair.source
             && missing_geometry.iter().any(|m| !m.is_empty())
         {
-            return Some(combination.estimate(force, None));
+            return Some(estimate(None));
         }
         let controls = self.twin.controls.get_untracked();
         let calibration = self.twin.calibration.get_untracked();
@@ -398,6 +418,6 @@ impl Studio {
             })
             .ok()
             .and_then(|catheter| catheter.for_combination());
-        Some(combination.estimate(force, physics))
+        Some(estimate(physics))
     }
 }

@@ -28,9 +28,10 @@ use crate::network::{load_run, load_weights, predict_entry};
 use crate::physics_check::{self, BlindEstimator, Estimator, PhysicsEvaluation};
 use crate::run_dir::RunDir;
 use hnet_twin::dataset::simulate::nominal_base;
+use hnet_twin::model_facts::ModelFacts;
 use hnet_twin::reconstruction::MaskOrigin;
 use hnet_twin::reconstruction::catalogue::{BENCH_CATHETER, CatalogueCatheter};
-use hnet_twin::simulator::carm::HeaderError;
+use hnet_twin::simulator::carm::{Biplane, HeaderError};
 
 #[derive(clap::Args, Debug)]
 #[command(group(clap::ArgGroup::new("model").required(true).args(["run", "weights"])))]
@@ -188,6 +189,13 @@ pub struct Evaluation {
     /// The error the C-arm settings were read with (a blind estimate in the mismatch suite).
     #[serde(default, skip_serializing_if = "HeaderError::is_none")]
     pub header_error: HeaderError,
+    /// Evaluated pairs whose C-arm angles are not the ones the weights' force head was trained
+    /// at (their file's facts): there the product shows its force only combined with the
+    /// physics estimate, never alone (`ForceCombination::estimate_at`), so Table I measures
+    /// the head on them without being what a user is shown. `None` where the weights record no
+    /// training domain or the pairs no twin records.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pairs_at_other_angles: Option<usize>,
 }
 
 fn oracle_name() -> String {
@@ -420,6 +428,24 @@ pub fn evaluate(
         }
         _ => None,
     };
+    // Pairs at C-arm angles the force head was not trained at.
+    let pairs_at_other_angles = records.as_ref().and_then(|records| {
+        let domain = ModelFacts::read(&model.header.provenance)
+            .ok()?
+            .force_domain?;
+        Some(
+            records
+                .iter()
+                .filter(|r| {
+                    let views = Biplane {
+                        a: r.views[0].carm,
+                        b: r.views[1].carm,
+                    };
+                    !domain.view_departures(&views).is_empty()
+                })
+                .count(),
+        )
+    });
     let physics = match &records {
         Some(records) => physics_checks(
             &dataset,
@@ -488,6 +514,7 @@ pub fn evaluate(
             estimator: estimator.name().into(),
             catheter: options.catheter.clone(),
             header_error: options.header_error,
+            pairs_at_other_angles,
         },
         predictions,
     ))

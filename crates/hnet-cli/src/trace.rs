@@ -71,12 +71,19 @@ pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
         .planes
         .iter()
         .any(|series| !series.geometry.missing.is_empty());
+    let carm = |plane| cine.series(plane).geometry.carm.with_image_size(size);
+    let views = Biplane {
+        a: carm(Plane::A),
+        b: carm(Plane::B),
+    };
+    // Where the headers' C-arm angles are not the ones the force head was trained at, its
+    // force alone is no estimate ([`ForceCombination::estimate_at`]).
+    let head_departures = facts
+        .force_domain
+        .as_ref()
+        .map(|domain| domain.view_departures(&views))
+        .unwrap_or_default();
     let setup = (!missing_geometry && combination.is_some()).then(|| {
-        let carm = |plane| cine.series(plane).geometry.carm.with_image_size(size);
-        let views = Biplane {
-            a: carm(Plane::A),
-            b: carm(Plane::B),
-        };
         // The base where the weights' force learned it (the dataset's fixture), as `hnet eval`
         // calibrated the combination with; the twin's bench for weights that do not say.
         let scenes = facts
@@ -128,6 +135,7 @@ pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
                     size,
                     combination.as_ref(),
                     setup.as_ref(),
+                    &head_departures,
                 ))
             })
             .collect();
@@ -157,7 +165,8 @@ pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
     let without = trace.len() - combined - head;
     eprintln!(
         "force trace of {} frame pairs written to {}: {combined} combined, {head} from the force \
-         head alone, {without} without a force (a view shows no catheter){}",
+         head alone, {without} without a force (a view shows no catheter, or the force head alone \
+         at C-arm angles it was not trained at){}",
         pairs.len(),
         args.out.display(),
         match (&combination, missing_geometry) {
@@ -175,13 +184,15 @@ pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
 
 /// One frame's estimate from the network's force `head_n` (N) and masks (catheter probabilities
 /// at `size`): none where a view shows no catheter; combined where the rod could be fitted to
-/// the masks with `setup` and the weights carry a `combination`; else the head alone.
+/// the masks with `setup` and the weights carry a `combination`; else the head alone, but not at
+/// C-arm angles it was not trained at (`head_departures`, [`ForceCombination::estimate_at`]).
 fn frame_estimate(
     head_n: TipForce,
     masks: Option<&[Vec<f32>; 2]>,
     size: hnet_units::ImageSize,
     combination: Option<&ForceCombination>,
     setup: Option<&PhysicsSetup>,
+    head_departures: &[String],
 ) -> Result<TipForceEstimate, String> {
     let masks = masks.map(|[a, b]| [a, b].map(|m| Mask::soft(size.width, size.height, m)));
     if let Some(masks) = &masks {
@@ -200,5 +211,5 @@ fn frame_estimate(
             let fit = estimate.fit;
             (fit.force_n, fit.force_sd_n)
         });
-    Ok(combination.estimate(head_n, physics))
+    combination.estimate_at(head_n, physics, head_departures)
 }

@@ -10,6 +10,7 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use crate::reconstruction::physics_force::ForceCombination;
+use crate::simulator::carm::Biplane;
 use crate::simulator::scene::{Modality, SceneSampling};
 
 /// The provenance entry that holds a weights file's [`ModelFacts`].
@@ -138,7 +139,34 @@ pub fn error_length_n(mse_n2: [f32; 3]) -> f32 {
     mse_n2.iter().sum::<f32>().sqrt()
 }
 
+/// How far a view's C-arm angles (primary or secondary), degrees, may lie from the ones a force
+/// head was trained at and still count as its view.
+pub const VIEW_ANGLE_TOLERANCE_DEG: f64 = 0.5;
+
 impl ForceDomain {
+    /// The views of `views` whose C-arm angles differ from the trained ones by more than
+    /// [`VIEW_ANGLE_TOLERANCE_DEG`], one phrase each (`view A at -20°/+10° (trained at
+    /// +0°/+0°)`); empty at the trained angles. Where they differ, the force head alone gives no
+    /// estimate ([`ForceCombination::estimate_at`]).
+    pub fn view_departures(&self, views: &Biplane) -> Vec<String> {
+        let mut departures = Vec::new();
+        for (letter, (view, trained)) in ["A", "B"]
+            .iter()
+            .zip([views.a, views.b].iter().zip(self.views_deg))
+        {
+            let angles = [view.primary_deg, view.secondary_deg];
+            if (angles[0] - trained[0]).abs() > VIEW_ANGLE_TOLERANCE_DEG
+                || (angles[1] - trained[1]).abs() > VIEW_ANGLE_TOLERANCE_DEG
+            {
+                departures.push(format!(
+                    "view {letter} at {:+.0}°/{:+.0}° (trained at {:+.0}°/{:+.0}°)",
+                    angles[0], angles[1], trained[0], trained[1]
+                ));
+            }
+        }
+        departures
+    }
+
     /// The domain of a twin dataset, from its header's `source` (what `hnet simulate` records),
     /// named `data`; `None` for a dataset the twin did not make.
     pub fn of_twin_source(data: &str, source: &serde_json::Value) -> Option<Self> {

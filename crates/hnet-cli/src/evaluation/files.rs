@@ -203,6 +203,15 @@ pub fn markdown(e: &Evaluation) -> String {
         }
         row(&mut s, "mean", &f.overall);
         s.push('\n');
+        if let Some(n) = e.pairs_at_other_angles.filter(|&n| n > 0) {
+            let _ = writeln!(
+                s,
+                "{n} of these {} pairs are at C-arm angles the force head was not trained at: \
+                 there its force is shown only combined with the physics estimate, never \
+                 alone.\n",
+                f.samples
+            );
+        }
     }
     if let (Some(heads), Some(mean)) = (&e.segmentation, &e.segmentation_mean) {
         let _ = writeln!(s, "Table II: segmentation\n");

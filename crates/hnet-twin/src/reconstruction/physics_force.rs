@@ -409,6 +409,17 @@ impl EstimateKind {
     }
 }
 
+/// Why the force head gives no estimate on its own for a pair whose views depart from the C-arm
+/// angles it was trained at as `view_departures` say: what the page, its cine trace and `hnet
+/// trace` show in its place.
+pub fn head_withheld(view_departures: &[String]) -> String {
+    format!(
+        "the rod could not be fitted to H-Net's masks, and the force head alone is withheld at \
+         C-arm angles it was not trained at ({}), where its R² was below zero",
+        view_departures.join("; ")
+    )
+}
+
 /// A tip-force estimate with its 90 % interval.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TipForceEstimate {
@@ -605,6 +616,26 @@ impl ForceCombination {
         }
     }
 
+    /// [`Self::estimate`] for a pair whose views depart from the force head's trained C-arm
+    /// angles as `view_departures` say ([`crate::model_facts::ForceDomain::view_departures`];
+    /// empty at the trained angles): where that would be the force head alone at other angles,
+    /// no estimate, and why ([`head_withheld`]). The head learnt the force from how the catheter
+    /// looks in its trained views; at the page's other C-arm angles its R² was below zero
+    /// (docs/results.md, `off-bench`). Combined with the physics estimate it stays, weighed by
+    /// the calibration. The one rule of the page's force panel, its cine trace and `hnet trace`.
+    pub fn estimate_at(
+        &self,
+        network_n: TipForce,
+        physics: Option<(TipForce, Option<[f32; 3]>)>,
+        view_departures: &[String],
+    ) -> Result<TipForceEstimate, String> {
+        let estimate = self.estimate(network_n, physics);
+        if estimate.kind == EstimateKind::Head && !view_departures.is_empty() {
+            return Err(head_withheld(view_departures));
+        }
+        Ok(estimate)
+    }
+
     /// Half the width of the 90 % interval per axis, N, for the combined standard error `sd_n`.
     pub fn interval_90_n(&self, sd_n: [f32; 3]) -> [f32; 3] {
         std::array::from_fn(|axis| sd_n[axis] * self.interval_90_sd[axis])
@@ -782,6 +813,22 @@ mod tests {
         assert_eq!(
             c.estimate(network, Some((physics, None))).kind,
             EstimateKind::Head
+        );
+        // At C-arm angles the head was not trained at, the head alone is withheld, saying
+        // why; combined, the estimate stands.
+        let off = ["view A at -20°/+10° (trained at +0°/+0°)".to_string()];
+        let why = c.estimate_at(network, None, &off).unwrap_err();
+        assert!(
+            why.starts_with("the rod could not") && why.contains(&off[0]),
+            "{why}"
+        );
+        assert_eq!(
+            c.estimate_at(network, None, &[]),
+            Ok(c.estimate(network, None))
+        );
+        assert_eq!(
+            c.estimate_at(network, Some((physics, Some([0.01; 3]))), &off),
+            Ok(both)
         );
         // An older combination without the network's measured interval reads a normal's.
         let older = ForceCombination {
