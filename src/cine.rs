@@ -320,7 +320,16 @@ impl CinePlayer {
         trace_csv(&self.trace(), &self.traced_with)
     }
 
-    /// The first frame without a force at or after `from`, wrapping around, if any.
+    /// Traced frames without a force (each with why).
+    pub fn frames_without_force(&self) -> usize {
+        self.estimates
+            .iter()
+            .flatten()
+            .filter(|e| e.is_err())
+            .count()
+    }
+
+    /// The first frame not yet traced at or after `from`, wrapping around, if any.
     pub fn next_untraced(&self, from: usize) -> Option<usize> {
         let count = self.frame_count();
         (0..count)
@@ -419,6 +428,7 @@ mod tests {
         // A frame without a force is traced, with why.
         player.record_estimate(2, Err("why".into()));
         assert_eq!(player.next_untraced(1), None);
+        assert_eq!(player.frames_without_force(), 1);
         assert_eq!(
             player.trace_csv(),
             "frame,time_s,fx_n,fy_n,fz_n,magnitude_n,fx_90_n,fy_90_n,fz_90_n,estimator,weights,note\n\

@@ -6,7 +6,6 @@
 use hnet_twin::model_facts::{ForceDomain, ModelFacts};
 use hnet_twin::reconstruction::centreline::{CentrelineSettings, Mask, catheter_seen};
 use hnet_twin::reconstruction::physics_force::{ForceCombination, TipForceEstimate};
-use hnet_twin::simulator::carm::Biplane;
 use hnet_twin::simulator::scene::{Modality, SceneParams};
 
 use crate::workspace::{LabeledPair, PairSource};
@@ -120,7 +119,7 @@ impl TrainingDomain {
             } => (views, settings),
             PairSource::Dicom { views, .. } => {
                 let mut departures = vec![not_twin()];
-                departures.extend(self.view_departures(views));
+                departures.extend(self.domain.view_departures(views));
                 return departures;
             }
             PairSource::Upload { .. } => return vec![not_twin()],
@@ -140,7 +139,7 @@ impl TrainingDomain {
             Ok(scene) => departures.extend(self.domain.scenes.departures(&scene)),
             Err(_) => departures.push("the pair's twin settings cannot be read".into()),
         }
-        departures.extend(self.view_departures(views));
+        departures.extend(self.domain.view_departures(views));
         let source = settings["background"]["source"].as_str();
         if self.domain.phantom_backgrounds
             && modality.is_xray()
@@ -154,12 +153,6 @@ impl TrainingDomain {
         departures
     }
 
-    /// The views whose C-arm angles differ from the trained ones
-    /// ([`hnet_twin::model_facts::ForceDomain::view_departures`]).
-    fn view_departures(&self, views: &Biplane) -> Vec<String> {
-        self.domain.view_departures(views)
-    }
-
     /// How `pair`'s views depart from the C-arm angles the force head was trained at, one
     /// phrase each: a twin pair's and a DICOM frame's views, an upload's stated ones (an upload
     /// that states none is read with the default biplane, at which these weights may have been
@@ -168,11 +161,11 @@ impl TrainingDomain {
     pub fn head_departures(&self, pair: &LabeledPair) -> Vec<String> {
         match &pair.source {
             PairSource::Twin { views, .. } | PairSource::Dicom { views, .. } => {
-                self.view_departures(views)
+                self.domain.view_departures(views)
             }
-            PairSource::Upload { views, .. } => {
-                self.view_departures(&views.unwrap_or_else(crate::catheter_3d::default_views))
-            }
+            PairSource::Upload { views, .. } => self
+                .domain
+                .view_departures(&views.unwrap_or_else(crate::catheter_3d::default_views)),
         }
     }
 

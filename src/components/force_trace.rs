@@ -146,12 +146,7 @@ impl Plot {
             frames,
             frame: cine.frame,
             traced: cine.estimates.iter().flatten().count(),
-            without: cine
-                .estimates
-                .iter()
-                .flatten()
-                .filter(|e| e.is_err())
-                .count(),
+            without: cine.frames_without_force(),
             end_s: cine.time_s(frames.saturating_sub(1)),
         }
     }

@@ -263,8 +263,9 @@ impl Studio {
                 .buffer_unordered(in_flight);
             futures::pin_mut!(frames);
             let mut done = 0;
-            // Frames with a force of H-Net's: under a search, a frame with a view read turned
-            // has none.
+            // Frames traced, with a force or with why it has none (the force head alone at C-arm
+            // angles it was not trained at); under a search, a frame with a view read turned is
+            // not traced.
             let mut traced = 0;
             // Why the first traced frame without a force has none.
             let mut withheld: Option<String> = None;
@@ -318,11 +319,10 @@ impl Studio {
                 )
             });
             let redone_text = redone_text.unwrap_or_default();
-            let without = studio.cine.player.with_untracked(|c| {
-                c.as_ref().map_or(0, |c| {
-                    c.estimates.iter().flatten().filter(|e| e.is_err()).count()
-                })
-            });
+            let without = studio
+                .cine
+                .player
+                .with_untracked(|c| c.as_ref().map_or(0, CinePlayer::frames_without_force));
             // What else the user should know: frames without a force, frames read again.
             let details = match withheld {
                 Some(why) => format!(". {without} of them without a force ({why}){redone_text}"),

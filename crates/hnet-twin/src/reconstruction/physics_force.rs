@@ -414,8 +414,8 @@ impl EstimateKind {
 /// trace` show in its place.
 pub fn head_withheld(view_departures: &[String]) -> String {
     format!(
-        "the rod could not be fitted to H-Net's masks, and the force head alone is withheld at \
-         C-arm angles it was not trained at ({}), where its R² was below zero",
+        "no physics estimate from H-Net's masks to combine it with, and the force head alone is \
+         withheld at C-arm angles it was not trained at ({}), where its R² was below zero",
         view_departures.join("; ")
     )
 }
@@ -819,7 +819,7 @@ mod tests {
         let off = ["view A at -20°/+10° (trained at +0°/+0°)".to_string()];
         let why = c.estimate_at(network, None, &off).unwrap_err();
         assert!(
-            why.starts_with("the rod could not") && why.contains(&off[0]),
+            why.starts_with("no physics estimate") && why.contains(&off[0]),
             "{why}"
         );
         assert_eq!(
