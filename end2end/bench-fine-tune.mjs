@@ -51,7 +51,8 @@ try {
     return { samples: sorted.length, p99: sorted[Math.floor(sorted.length * 0.99)], max: sorted[sorted.length - 1] };
   });
   const rows = await page.$$eval("#tune-table tbody tr", (trs) => trs.map((tr) => [...tr.cells].map((c) => c.textContent)));
-  console.log(JSON.stringify({ pairs, epochs, seconds, clicks_ms: clicks, event_loop_lag_ms: lags, table: rows, reference: await page.textContent("#tune-reference") }));
+  const caption = await page.textContent("#tune-table caption");
+  console.log(JSON.stringify({ pairs, epochs, seconds, caption, clicks_ms: clicks, event_loop_lag_ms: lags, table: rows, reference: await page.textContent("#tune-reference") }));
 } finally {
   await context.close();
   await server.close();

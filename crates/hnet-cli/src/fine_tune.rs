@@ -47,6 +47,10 @@ pub struct FineTuneArgs {
     /// Train the encoders too (the page freezes them).
     #[arg(long)]
     train_encoders: bool,
+    /// Seed of the order the pairs are visited in (the page's: 0); a run-to-run spread
+    /// comes from several.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
     /// Most epochs without a better held-back loss (the page's default when absent).
     #[arg(long)]
     patience: Option<usize>,
@@ -121,6 +125,7 @@ pub fn run(args: &FineTuneArgs) -> anyhow::Result<()> {
         learning_rate: args.learning_rate.unwrap_or(defaults.learning_rate),
         patience: args.patience.unwrap_or(defaults.patience),
         freeze_encoders: !args.train_encoders,
+        seed: args.seed,
         ..defaults
     };
     let count = pairs.len();
