@@ -34,9 +34,9 @@ pub struct FineTuneSettings {
     pub patience: usize,
     /// Pairs per step.
     pub batch_size: usize,
-    /// RMSprop's learning rate. The default, 2e-4, twice the bundled model's last stage's:
-    /// on 20 pairs of a blurrier detector it reached the same catheter IoU as 3e-4 and more than
-    /// 1e-4 in 12 epochs (docs/results.md, "Fine-tuning on a few pairs").
+    /// RMSprop's learning rate. The default, 2e-4, twice the bundled model's last stage's: on 20
+    /// pairs of a blurrier detector it learned more than 1e-4 in 12 epochs and nearly what 3e-4
+    /// did, at a smaller cost to the bench (docs/results.md, "Fine-tuning on a few pairs").
     pub learning_rate: f64,
     /// Keep the encoders' weights as they are (the decoders and heads learn).
     pub freeze_encoders: bool,
