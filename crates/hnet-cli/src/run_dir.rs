@@ -248,20 +248,23 @@ impl RunDir {
     }
 
     /// Sets aside epoch `epoch`'s checkpoint (each part renamed to `*.bpk.non-finite`, kept for
-    /// inspection), so that `--resume` continues from the last checkpoint before it.
-    pub fn set_aside_checkpoint(&self, epoch: usize) -> anyhow::Result<()> {
+    /// inspection), so that `--resume` continues from the last checkpoint before it; whether it
+    /// had one (an epoch stopped at a diverged step has none).
+    pub fn set_aside_checkpoint(&self, epoch: usize) -> anyhow::Result<bool> {
         self.set_aside(epoch, "non-finite")
     }
 
-    /// Renames each part of epoch `epoch`'s checkpoint to `*.bpk.<why>`.
-    fn set_aside(&self, epoch: usize, why: &str) -> anyhow::Result<()> {
+    /// Renames each part of epoch `epoch`'s checkpoint to `*.bpk.<why>`; whether it had any.
+    fn set_aside(&self, epoch: usize, why: &str) -> anyhow::Result<bool> {
         let dir = self.checkpoint_dir();
+        let mut any = false;
         for part in CHECKPOINT_PARTS {
             let file = self.checkpoint_file(part, epoch);
             if file.is_file() {
                 let aside = dir.join(format!("{part}-{epoch}.bpk.{why}"));
                 std::fs::rename(&file, &aside)
                     .with_context(|| format!("cannot set aside '{}'", file.display()))?;
+                any = true;
             }
             let checksum = self.checkpoint_checksum_file(part, epoch);
             if checksum.is_file() {
@@ -271,7 +274,7 @@ impl RunDir {
                     .with_context(|| format!("cannot set aside '{}'", checksum.display()))?;
             }
         }
-        Ok(())
+        Ok(any)
     }
 
     /// Per-epoch means of every logged metric, from burn-train's logs, by epoch then split.

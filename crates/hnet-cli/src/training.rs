@@ -28,7 +28,9 @@ use burn::optim::lr_scheduler::module_lr_scheduler::{ModuleLrScheduler, ModuleLr
 use burn::tensor::Device;
 use burn::train::metric::LossMetric;
 use burn::train::metric::store::{Aggregate, Direction, Split as MetricSplit};
-use burn::train::{Learner, MetricEarlyStoppingStrategy, StoppingCondition, SupervisedTraining};
+use burn::train::{
+    Interrupter, Learner, MetricEarlyStoppingStrategy, StoppingCondition, SupervisedTraining,
+};
 use hnet_model::HNet;
 use hnet_model::architectures::{ModelSpec, StereoModel};
 use hnet_model::model::ForceScale;
@@ -236,7 +238,9 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
             .init(&device.clone().autodiff())
             .map_err(anyhow::Error::msg)?,
     };
-    let trainee = StereoTrainee::new(net, &config.model, config.loss.clone());
+    let interrupter = Interrupter::new();
+    let trainee = StereoTrainee::new(net, &config.model, config.loss.clone())
+        .stopping_on_divergence(interrupter.clone());
     let optimizer = RmsPropSettings {
         alpha: config.rmsprop_alpha,
         momentum: config.rmsprop_momentum,
@@ -269,6 +273,7 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
                 .map(|limit| TimeBudget::new(limit, session_started, Instant::now())),
             &write_failure,
         ))
+        .with_interrupter(interrupter)
         .num_epochs(config.epochs)
         .renderer(Box::new(crate::progress_renderer::TrainingDisplay::new()));
     // A baseline without a head logs nothing for it (rather than NaN or zero every epoch).
@@ -293,10 +298,17 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
     if let Some(error) = result.error {
         bail!("training failed: {error}");
     }
-    // A diverged epoch's checkpoint is set aside: `--resume` and the export use the ones before.
+    if let Some(reason) = result.interrupted.and_then(|i| i.reason) {
+        eprintln!("stopping in the middle of an epoch: {reason}");
+    }
+    // A diverged epoch's checkpoint is set aside (an epoch stopped at its diverged step has
+    // none): `--resume` and the export use the ones before.
     for epoch in non_finite_epochs(&run.epoch_metrics()?) {
-        run.set_aside_checkpoint(epoch)?;
-        eprintln!("epoch {epoch}'s loss was not finite: its checkpoint is set aside");
+        if run.set_aside_checkpoint(epoch)? {
+            eprintln!("epoch {epoch}'s loss was not finite: its checkpoint is set aside");
+        } else {
+            eprintln!("epoch {epoch}'s loss was not finite: it was stopped before its checkpoint");
+        }
     }
 
     export_best(request, &run, &device, started)
@@ -690,7 +702,9 @@ mod tests {
         config.force_head_learning_rate = Some(1e-4);
         let device = Device::flex();
         let net = config.model.init(&device).unwrap();
-        let trainee = StereoTrainee::new(net, &config.model, config.loss.clone());
+        let interrupter = Interrupter::new();
+        let trainee = StereoTrainee::new(net, &config.model, config.loss.clone())
+            .stopping_on_divergence(interrupter.clone());
         let mut paths = Paths::default();
         trainee.visit(&mut paths);
         let rates = learning_rates(&config, 100).unwrap().step();

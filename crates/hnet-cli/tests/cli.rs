@@ -733,7 +733,7 @@ fn edited_config(dir: &Path, name: &str, edit: impl FnOnce(&mut serde_json::Valu
 }
 
 #[test]
-fn a_stream_trains_on_fresh_twin_pairs_and_a_diverged_epoch_is_set_aside() {
+fn a_stream_trains_on_fresh_twin_pairs_and_a_diverged_run_stops_at_its_step() {
     let dir = scratch("stream");
     let data = simulate(&dir, 40);
     // A small radiograph for the off-bench pairs (the phantom is slow to render in a debug build).
@@ -765,16 +765,19 @@ fn a_stream_trains_on_fresh_twin_pairs_and_a_diverged_epoch_is_set_aside() {
     assert!(err.contains("stream.seed 5"), "{err}");
     assert!(!dir.join("refused").exists());
 
-    // Weights that blow up: the run stops after the epoch and sets its checkpoint aside, so
-    // that `--resume` cannot continue from it.
+    // Weights that blow up: the run stops at the step whose loss is not finite (the second of
+    // the first epoch's four), not at the epoch's end, and writes no checkpoint of that epoch,
+    // so that neither `--resume` nor the export can use it.
     let diverging = edited_config(&dir, "diverging", |c| c["learning_rate"] = 1e30.into());
     let runs = dir.join("diverged");
     let err = fails(&mut train(&data, &runs, &diverging));
+    assert!(err.contains("stopping in the middle of an epoch"), "{err}");
     assert!(err.contains("loss is not finite"), "{err}");
+    assert!(err.contains("stopped before its checkpoint"), "{err}");
     assert!(err.contains("no usable checkpoint"), "{err}");
     let checkpoints = runs.join("checkpoint");
-    assert!(checkpoints.join("model-1.bpk.non-finite").is_file());
     assert!(!checkpoints.join("model-1.bpk").exists());
+    assert!(!checkpoints.join("model-1.bpk.non-finite").exists());
     std::fs::remove_dir_all(dir).ok();
 }
 

@@ -7,7 +7,7 @@ use std::sync::{Arc, OnceLock};
 use burn::module::Module;
 use burn::tensor::{ExecutionError, Tensor};
 use burn::train::metric::{Adaptor, ItemLazy, LossInput};
-use burn::train::{InferenceStep, TrainOutput, TrainStep};
+use burn::train::{InferenceStep, Interrupter, TrainOutput, TrainStep};
 use hnet_model::HNetLossConfig;
 use hnet_model::architectures::{ModelSpec, StereoInput, StereoModel};
 use hnet_model::inference::host_values;
@@ -29,6 +29,44 @@ pub struct StereoTrainee {
     input: StereoInput,
     #[module(skip)]
     heads: (bool, bool),
+    #[module(skip)]
+    divergence: DivergenceStop,
+}
+
+/// Stops the run at the first training step whose loss is not finite, rather than at the end
+/// of its epoch: every step after it would train on NaN weights.
+#[derive(Clone, Default)]
+struct DivergenceStop(Option<Interrupter>);
+
+impl core::fmt::Debug for DivergenceStop {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(if self.0.is_some() {
+            "DivergenceStop(on)"
+        } else {
+            "DivergenceStop(off)"
+        })
+    }
+}
+
+/// Why a run stopped mid-epoch (`hnet train` prints it).
+const DIVERGED_STEP: &str = "a training step's loss is not finite (the weights diverged; a \
+                                 smaller learning rate may help)";
+
+impl DivergenceStop {
+    /// Stops the run when `loss` is not finite (a loss that cannot be read back is left to the
+    /// epoch's end).
+    fn check(&self, loss: &Tensor<1>) {
+        let Some(interrupter) = &self.0 else {
+            return;
+        };
+        let finite = loss
+            .clone()
+            .try_into_scalar::<f64>()
+            .map_or(true, f64::is_finite);
+        if !finite && !interrupter.should_stop() {
+            interrupter.stop(Some(DIVERGED_STEP));
+        }
+    }
 }
 
 impl StereoTrainee {
@@ -39,7 +77,15 @@ impl StereoTrainee {
             loss,
             input: spec.input(),
             heads: spec.heads(),
+            divergence: DivergenceStop::default(),
         }
+    }
+
+    /// The same, stopping `interrupter`'s run at the first training step whose loss is not
+    /// finite.
+    pub fn stopping_on_divergence(mut self, interrupter: Interrupter) -> Self {
+        self.divergence = DivergenceStop(Some(interrupter));
+        self
     }
 
     fn run(&self, batch: TrainingBatch) -> StereoStepOutput {
@@ -159,6 +205,7 @@ impl TrainStep for StereoTrainee {
 
     fn step(&self, batch: TrainingBatch) -> TrainOutput<StereoStepOutput> {
         let output = self.run(batch);
+        self.divergence.check(&output.total);
         let grads = output.total.backward();
         TrainOutput::new(self, grads, output)
     }
