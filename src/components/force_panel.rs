@@ -297,7 +297,7 @@ pub fn ForcePanel(
                 <tbody>
                     {move || row(
                         if estimate().is_some() && head_shown().is_none() {
-                            format!("{} (withheld at these C-arm angles)", EstimateKind::Head.name())
+                            format!("{} (withheld for this pair)", EstimateKind::Head.name())
                         } else {
                             EstimateKind::Head.name().into()
                         },

@@ -46,8 +46,8 @@ struct Plot {
     frame: usize,
     /// Frames traced, with a force or without one.
     traced: usize,
-    /// Traced frames without a force (the force head alone withheld at C-arm angles it was not
-    /// trained at).
+    /// Traced frames without a force (the force head alone withheld on frames unlike those it
+    /// was trained on).
     without: usize,
     /// The last frame's time, seconds, when known.
     end_s: Option<f64>,

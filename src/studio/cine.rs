@@ -377,7 +377,7 @@ impl Studio {
     /// H-Net's masks with the frame's C-arms (the twin tab's catheter, the base fitted) and the
     /// weights carry their calibration, else H-Net's force head with its interval (none for
     /// weights without recorded facts), or why there is none where that would be the head alone
-    /// at C-arm angles it was not trained at (`TrainingDomain::estimate_at`). `None` where
+    /// on frames unlike those it was trained on (`TrainingDomain::estimate_at`). `None` where
     /// H-Net's force is not read (a view shows no catheter, or was read turned).
     fn frame_estimate(
         &self,

@@ -409,14 +409,14 @@ impl EstimateKind {
     }
 }
 
-/// Why the force head gives no estimate on its own for a pair whose views depart from the C-arm
-/// angles it was trained at as `view_departures` say: what the page, its cine trace and `hnet
-/// trace` show in its place.
-pub fn head_withheld(view_departures: &[String]) -> String {
+/// Why the force head gives no estimate on its own for a pair unlike those it was trained on as
+/// `departures` say (C-arm angles; for a twin pair, its catheter and pose): what the page, its
+/// cine trace and `hnet trace` show in its place.
+pub fn head_withheld(departures: &[String]) -> String {
     format!(
         "no physics estimate from H-Net's masks to combine it with, and the force head alone is \
-         withheld at C-arm angles it was not trained at ({}), where its R² was below zero",
-        view_departures.join("; ")
+         withheld for pairs unlike those it was trained on ({}), where its R² was below zero",
+        departures.join("; ")
     )
 }
 
@@ -616,22 +616,25 @@ impl ForceCombination {
         }
     }
 
-    /// [`Self::estimate`] for a pair whose views depart from the force head's trained C-arm
-    /// angles as `view_departures` say ([`crate::model_facts::ForceDomain::view_departures`];
-    /// empty at the trained angles): where that would be the force head alone at other angles,
-    /// no estimate, and why ([`head_withheld`]). The head learnt the force from how the catheter
-    /// looks in its trained views; at the page's other C-arm angles its R² was below zero
-    /// (docs/results.md, `off-bench`). Combined with the physics estimate it stays, weighed by
-    /// the calibration. The one rule of the page's force panel, its cine trace and `hnet trace`.
+    /// [`Self::estimate`] for a pair unlike those the force head was trained on as `departures`
+    /// say (its views' C-arm angles, [`crate::model_facts::ForceDomain::view_departures`]; for a
+    /// twin pair also its catheter and pose,
+    /// [`crate::simulator::scene::SceneSampling::catheter_departures`]; empty for a pair like
+    /// them): where that would be the force head alone, no estimate, and
+    /// why ([`head_withheld`]). The head learnt the force from how its training catheter looks
+    /// in its trained views; at the page's other C-arm angles its R² was below zero, and so it
+    /// was with other catheters and poses (docs/results.md, `off-bench` and `varied`). Combined
+    /// with the physics estimate it stays, weighed by the calibration. The one rule of the
+    /// page's force panel, its cine trace and `hnet trace`.
     pub fn estimate_at(
         &self,
         network_n: TipForce,
         physics: Option<(TipForce, Option<[f32; 3]>)>,
-        view_departures: &[String],
+        departures: &[String],
     ) -> Result<TipForceEstimate, String> {
         let estimate = self.estimate(network_n, physics);
-        if estimate.kind == EstimateKind::Head && !view_departures.is_empty() {
-            return Err(head_withheld(view_departures));
+        if estimate.kind == EstimateKind::Head && !departures.is_empty() {
+            return Err(head_withheld(departures));
         }
         Ok(estimate)
     }

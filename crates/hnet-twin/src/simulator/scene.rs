@@ -461,19 +461,17 @@ impl SceneSampling {
 
     /// How `scene` lies outside what this sampling draws, one phrase per departure (empty when
     /// it could have been drawn): a network trained on these scenes has not seen such a one.
+    /// The tip force's departures first, then the catheter's and its pose's
+    /// ([`Self::catheter_departures`]).
     pub fn departures(&self, scene: &SceneParams) -> Vec<String> {
-        const TOLERANCE: f64 = 1e-6;
-        let outside = |value: f64, range: [f64; 2]| {
-            value < range[0] - TOLERANCE * range[0].abs().max(1e-3)
-                || value > range[1] + TOLERANCE * range[1].abs().max(1e-3)
-        };
-        let range_text = |range: [f64; 2], scale: f64, unit: &str| {
-            if range[0] == range[1] {
-                format!("{:.2} {unit}", range[0] * scale)
-            } else {
-                format!("{:.2}-{:.2} {unit}", range[0] * scale, range[1] * scale)
-            }
-        };
+        let mut departures = self.force_departures(scene);
+        departures.extend(self.catheter_departures(scene));
+        departures
+    }
+
+    /// How `scene`'s tip force lies outside what this sampling draws (its magnitude, its
+    /// direction).
+    fn force_departures(&self, scene: &SceneParams) -> Vec<String> {
         let mut departures = Vec::new();
         let tip_force = Vec3::from(scene.tip_force_n);
         let force = tip_force.norm();
@@ -497,6 +495,14 @@ impl SceneSampling {
                 ));
             }
         }
+        departures
+    }
+
+    /// How `scene`'s catheter (stiffness, length, pre-curvature) and its pose (the base's place,
+    /// tilt and roll) lie outside what this sampling draws: what a reader of the images is told
+    /// about the scene, never its force.
+    pub fn catheter_departures(&self, scene: &SceneParams) -> Vec<String> {
+        let mut departures = Vec::new();
         let mut check = |name: &str, value: f64, range: [f64; 2], scale: f64, unit: &str| {
             if outside(value, range) {
                 departures.push(format!(
@@ -568,6 +574,22 @@ impl SceneSampling {
             ));
         }
         departures
+    }
+}
+
+/// Whether `value` lies outside `range`, allowing for rounding.
+fn outside(value: f64, range: [f64; 2]) -> bool {
+    const TOLERANCE: f64 = 1e-6;
+    value < range[0] - TOLERANCE * range[0].abs().max(1e-3)
+        || value > range[1] + TOLERANCE * range[1].abs().max(1e-3)
+}
+
+/// `range` scaled by `scale`, as `a-b unit` (or `a unit` when it is one value).
+fn range_text(range: [f64; 2], scale: f64, unit: &str) -> String {
+    if range[0] == range[1] {
+        format!("{:.2} {unit}", range[0] * scale)
+    } else {
+        format!("{:.2}-{:.2} {unit}", range[0] * scale, range[1] * scale)
     }
 }
 
