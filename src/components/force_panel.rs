@@ -88,15 +88,16 @@ pub fn ForcePanel(
             _ => None,
         })
     };
-    // How the pair's views depart from the C-arm angles the force head was trained at: there
-    // its force is not shown on its own (`TrainingDomain::head_departures`).
+    // How the pair departs from what the force head was trained on (C-arm angles; a twin
+    // pair's catheter and pose): there its force is not shown on its own
+    // (`TrainingDomain::head_departures`).
     let head_departures = move || {
         domain()
             .and_then(|d| pairs.with_shown(|p| p.map(|p| d.head_departures(p))))
             .unwrap_or_default()
     };
     let head_shown = move || estimate().filter(|_| head_departures().is_empty());
-    // The estimate, or why there is none where it would be the head alone at other angles.
+    // The estimate, or why there is none where it would be the head alone on such a pair.
     let reading_or_why = move || -> Option<Result<TipForceEstimate, String>> {
         let e = estimate()?;
         let physics = shown_reading(pairs, catheter, fit_masks, |r| r.physics_for(e));

@@ -702,9 +702,7 @@ mod tests {
         config.force_head_learning_rate = Some(1e-4);
         let device = Device::flex();
         let net = config.model.init(&device).unwrap();
-        let interrupter = Interrupter::new();
-        let trainee = StereoTrainee::new(net, &config.model, config.loss.clone())
-            .stopping_on_divergence(interrupter.clone());
+        let trainee = StereoTrainee::new(net, &config.model, config.loss.clone());
         let mut paths = Paths::default();
         trainee.visit(&mut paths);
         let rates = learning_rates(&config, 100).unwrap().step();

@@ -765,9 +765,9 @@ fn a_stream_trains_on_fresh_twin_pairs_and_a_diverged_run_stops_at_its_step() {
     assert!(err.contains("stream.seed 5"), "{err}");
     assert!(!dir.join("refused").exists());
 
-    // Weights that blow up: the run stops at the step whose loss is not finite (the second of
-    // the first epoch's four), not at the epoch's end, and writes no checkpoint of that epoch,
-    // so that neither `--resume` nor the export can use it.
+    // Weights that blow up: the run stops at the first step whose loss is not finite, within
+    // the first epoch (four steps), not at the epoch's end, and writes no checkpoint of that
+    // epoch, so that neither `--resume` nor the export can use it.
     let diverging = edited_config(&dir, "diverging", |c| c["learning_rate"] = 1e30.into());
     let runs = dir.join("diverged");
     let err = fails(&mut train(&data, &runs, &diverging));

@@ -49,8 +49,8 @@ impl core::fmt::Debug for DivergenceStop {
 }
 
 /// Why a run stopped mid-epoch (`hnet train` prints it).
-const DIVERGED_STEP: &str = "a training step's loss is not finite (the weights diverged; a \
-                                 smaller learning rate may help)";
+const DIVERGED_STEP: &str =
+    "a training step's loss is not finite (the weights diverged; a smaller learning rate may help)";
 
 impl DivergenceStop {
     /// Stops the run when `loss` is not finite (a loss that cannot be read back is left to the
