@@ -170,7 +170,11 @@ impl Member {
         name: &str,
     ) -> Result<Self, ModuleWorkerError> {
         let worker = ModuleWorker::spawn(module.name(), NAME)?;
-        worker.call("start", &Array::new(), &Array::new()).await?;
+        let large_tiles = web_sys::window()
+            .and_then(|w| w.location().search().ok())
+            .is_none_or(|query| page_query::large_winograd_tiles_allowed(&query));
+        let start = Array::of1(&JsValue::from_bool(large_tiles));
+        worker.call("start", &start, &Array::new()).await?;
         let bytes = Uint8Array::from(weights);
         let args = Array::of2(&bytes, &JsValue::from_str(name));
         let handle = worker

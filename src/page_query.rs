@@ -20,6 +20,11 @@ pub const CPU_VIEW_TIMEOUT_S: u32 = 60;
 /// value, or none, lets the page choose ([`crate::cpu_pool::CpuModule::for_this_browser`]).
 pub const CPU_FUSED: &str = "cpu-fused";
 
+/// `winograd-tiles=2` keeps the CPU workers' convolutions on Winograd's F(2x2, 3x3) tiles
+/// rather than F(4x4, 3x3) where those serve (`hnet_conv::use_large_winograd_tiles`), so that
+/// both can be timed in one build. Any other value, or none, lets the kernels choose.
+pub const WINOGRAD_TILES: &str = "winograd-tiles";
+
 /// The value of parameter `key` in `query` (with or without its leading `?`), if given.
 fn value<'a>(query: &'a str, key: &str) -> Option<&'a str> {
     query
@@ -52,6 +57,11 @@ pub fn cpu_fused_allowed(query: &str) -> bool {
     value(query, CPU_FUSED) != Some("0")
 }
 
+/// False when the query keeps the CPU workers on F(2x2, 3x3) tiles ([`WINOGRAD_TILES`]`=2`).
+pub fn large_winograd_tiles_allowed(query: &str) -> bool {
+    value(query, WINOGRAD_TILES) != Some("2")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -65,6 +75,12 @@ mod tests {
         assert_eq!(webgpu_tolerance_scale("?webgpu-tolerance-scale"), 1.0);
         assert!(cpu_fused_allowed("") && cpu_fused_allowed("?cpu-fused=1"));
         assert!(!cpu_fused_allowed("?a=b&cpu-fused=0"));
+        assert!(
+            large_winograd_tiles_allowed("") && large_winograd_tiles_allowed("?winograd-tiles=4")
+        );
+        assert!(!large_winograd_tiles_allowed(
+            "?cpu-fused=0&winograd-tiles=2"
+        ));
         assert_eq!(cpu_view_timeout_s(""), CPU_VIEW_TIMEOUT_S);
         assert_eq!(cpu_view_timeout_s("?cpu-view-timeout-s=5"), 5);
         assert_eq!(

@@ -11,8 +11,9 @@
 //! other stride-1 convolution (all of H-Net's but the upsampling) computes its forward pass and
 //! weight gradient with no lowered matrix at all, straight from the zero-padded image
 //! ([`crate::direct`]), and its input gradient as the forward pass of the turned kernel. Those
-//! forward passes go by Winograd's F(2x2, 3x3) ([`crate::winograd`]) where it serves the shape (3 x
-//! 3, undilated, an even output at least one strip wide) and by the direct kernel elsewhere.
+//! forward passes go by Winograd's F(4x4, 3x3) or F(2x2, 3x3) ([`crate::winograd`]) where one
+//! serves the shape (3 x 3, undilated, an output of whole tiles at least one strip wide) and by the
+//! direct kernel elsewhere.
 //! A strided convolution's input gradient (a transposed convolution's forward pass, H-Net's
 //! upsampling) is one direct stride-1 convolution per class of positions
 //! ([`crate::geometry::Axis::gradient_phases`]); raise (col2im) is left for dilated axes.
@@ -170,8 +171,8 @@ fn forward_direct(
     }
 }
 
-/// The forward convolution by Winograd's F(2x2, 3x3) ([`winograd`]), when it serves `g` and is
-/// switched on ([`crate::use_winograd`]).
+/// The forward convolution by Winograd's F(4x4, 3x3) or F(2x2, 3x3) ([`winograd`]), the largest
+/// tile that serves `g`, when the kernel is switched on ([`crate::use_winograd`]).
 fn forward_by_winograd(
     g: &ConvGeometry,
     x: &[f32],
@@ -182,8 +183,9 @@ fn forward_by_winograd(
     if !crate::winograd_enabled() {
         return None;
     }
-    let layout = WinogradLayout::of(g)?;
-    let transformed = winograd::transform_weight(weight, g.out_channels, g.in_channels);
+    let layout = WinogradLayout::of(g, crate::largest_winograd_tile())?;
+    let transformed =
+        winograd::transform_weight(weight, g.out_channels, g.in_channels, layout.tile());
     // SAFETY: `winograd::forward_image` writes every value of `y`.
     Some(unsafe {
         forward_padded(g, x, layout.len(g.in_channels), |x, window, y| {

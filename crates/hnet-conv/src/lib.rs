@@ -50,10 +50,14 @@ static PROJECT_KERNELS: AtomicBool = AtomicBool::new(true);
 /// Off only for A/B measurements of the Winograd kernel against the direct one ([`use_winograd`]).
 static WINOGRAD: AtomicBool = AtomicBool::new(true);
 
-/// Whether the project's kernels compute the convolutions Winograd's F(2x2, 3x3) serves (stride-1,
-/// undilated 3 x 3 with an even output at least one strip wide, [`winograd::WinogradLayout::of`])
-/// by it ([`winograd`], the default) or directly ([`direct`]), for the whole process: the switch
-/// behind `hnet bench --kernels direct`.
+/// Off only for A/B measurements of Winograd's F(4x4, 3x3) against F(2x2, 3x3)
+/// ([`use_large_winograd_tiles`]).
+static LARGE_WINOGRAD_TILES: AtomicBool = AtomicBool::new(true);
+
+/// Whether the project's kernels compute the convolutions Winograd's kernel serves (stride-1,
+/// undilated 3 x 3 with an output of whole tiles at least one strip wide,
+/// [`winograd::WinogradLayout::of`]) by it ([`winograd`], the default) or directly ([`direct`]),
+/// for the whole process: the switch behind `hnet bench --kernels direct`.
 pub fn use_winograd(enabled: bool) {
     WINOGRAD.store(enabled, Ordering::Relaxed);
 }
@@ -61,6 +65,21 @@ pub fn use_winograd(enabled: bool) {
 /// True unless [`use_winograd`] turned the Winograd kernel off.
 pub(crate) fn winograd_enabled() -> bool {
     WINOGRAD.load(Ordering::Relaxed)
+}
+
+/// Whether the Winograd kernel uses F(4x4, 3x3) where it serves (the default) or only
+/// F(2x2, 3x3), for the whole process: the switch behind `hnet bench --kernels winograd2x2`.
+pub fn use_large_winograd_tiles(enabled: bool) {
+    LARGE_WINOGRAD_TILES.store(enabled, Ordering::Relaxed);
+}
+
+/// The largest Winograd tile [`use_large_winograd_tiles`] allows.
+pub(crate) fn largest_winograd_tile() -> winograd::Tile {
+    if LARGE_WINOGRAD_TILES.load(Ordering::Relaxed) {
+        winograd::Tile::Four
+    } else {
+        winograd::Tile::Two
+    }
 }
 
 /// Whether flex convolutions use the project's kernels (the default) or Burn's own, for the whole

@@ -98,10 +98,10 @@ fn direct_stride_1_convolutions_match_burn() {
 /// turns it off, and the one that must run through the Winograd kernel.
 static WINOGRAD_SWITCH: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
-/// Stride-1 3x3 convolutions with even outputs at least one strip wide go to Winograd's
-/// F(2x2, 3x3) (`hnet_conv::winograd`), forward and input gradient: paddings 1 (the browser
-/// tests' case), 0 and 2, on one side only, a partial last strip, channel counts that leave
-/// uneven register tiles; and the same with the kernel switched off (the direct path). The switch
+/// Stride-1 3x3 convolutions with outputs of whole tiles at least one strip wide go to Winograd's
+/// F(4x4, 3x3) or F(2x2, 3x3) (`hnet_conv::winograd`), forward and input gradient: paddings 1
+/// (the browser tests' case), 0 and 2, on one side only, a partial last strip, channel counts that
+/// leave uneven register tiles; and the same with the kernel switched off (the direct path). The switch
 /// is process-wide: other tests running meanwhile may take either path, both of which must match
 /// Burn.
 #[test]
@@ -112,6 +112,8 @@ fn winograd_convolutions_match_burn() {
         ([8, wide + 2], [(0, 0), (0, 0)], 3, 13),
         ([4, wide], [(2, 2), (2, 2)], 8, 32),
         ([8, wide + 2], [(2, 0), (0, 2)], 2, 6),
+        ([8, 2 * wide + 4], [(1, 1), (1, 1)], 5, 7),
+        ([8, 2 * wide], [(2, 0), (0, 2)], 3, 13),
     ];
     let others = cases.map(|(size, padding, in_channels, out_channels)| ConvCase {
         size,

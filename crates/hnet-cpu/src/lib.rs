@@ -44,10 +44,12 @@ fn js_error(error: &dyn std::error::Error) -> JsError {
 }
 
 /// Installs the panic hook: a panic's message goes to the worker's console (the page then
-/// replaces the worker).
+/// replaces the worker). `large_winograd_tiles` false keeps the convolutions on Winograd's
+/// F(2x2, 3x3) tiles (the page's `?winograd-tiles=2`, for A/B timings).
 #[wasm_bindgen]
-pub fn start() {
+pub fn start(large_winograd_tiles: bool) {
     console_error_panic_hook::set_once();
+    hnet_conv::use_large_winograd_tiles(large_winograd_tiles);
 }
 
 /// Loads H-Net from a weights file's bytes (`name` names it in errors). Returns the network's

@@ -36,8 +36,10 @@ enum BenchCommand {
 pub enum Kernels {
     /// The project's (crates/hnet-conv), as every other command uses.
     Project,
+    /// The project's, with Winograd's F(2x2, 3x3) only, never F(4x4, 3x3).
+    Winograd2x2,
     /// The project's, with stride-1 3x3 convolutions computed directly instead of by
-    /// Winograd's F(2x2, 3x3).
+    /// Winograd's kernel.
     Direct,
     /// Burn flex's own convolutions.
     Burn,
@@ -47,7 +49,8 @@ impl Kernels {
     /// Makes the whole process use these kernels.
     pub fn select(self) {
         hnet_conv::use_project_kernels(self != Kernels::Burn);
-        hnet_conv::use_winograd(self == Kernels::Project);
+        hnet_conv::use_winograd(matches!(self, Kernels::Project | Kernels::Winograd2x2));
+        hnet_conv::use_large_winograd_tiles(self == Kernels::Project);
     }
 }
 
