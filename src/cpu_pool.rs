@@ -3,7 +3,10 @@
 //!
 //! The unit of work is one view of one pair ([`hnet_model::HNet::read_view`]): a pair's two
 //! views go to two workers at once, and a cine's frames keep every worker busy. The page joins a
-//! pair's views with the force head on its own thread ([`hnet_model::HNet::join_views`]).
+//! pair's views with the force head on its own thread ([`hnet_model::HNet::join_views`]). Each
+//! worker holds up to two views at once ([`page_query::CPU_VIEWS_PER_WORKER_DEFAULT`]), so that it
+//! starts its next view the moment it finishes one, even while the page's thread is busy (fitting
+//! a traced frame's rod).
 //!
 //! A worker that stops (its module trapped, the browser killed it, a call failed, no answer
 //! within a minute) is replaced by
@@ -34,10 +37,21 @@ pub const MAX_WORKERS: usize = 8;
 /// after the first one stopped.
 const ATTEMPTS: u32 = 2;
 
+/// Views handed to one worker at once ([`page_query::CPU_VIEWS_PER_WORKER_DEFAULT`], unless the
+/// page's address sets [`page_query::CPU_VIEWS_PER_WORKER`]).
+fn views_per_worker() -> usize {
+    web_sys::window()
+        .and_then(|w| w.location().search().ok())
+        .map_or(page_query::CPU_VIEWS_PER_WORKER_DEFAULT, |query| {
+            page_query::cpu_views_per_worker(&query)
+        })
+}
+
 /// A worker, in words.
 const NAME: &str = "a CPU worker";
 
-/// How long a worker may take to read one view before it counts as stopped, seconds
+/// How long a worker may take to answer a view handed to it (reading the views handed to it
+/// before, [`views_per_worker`]) before it counts as stopped, seconds
 /// ([`page_query::CPU_VIEW_TIMEOUT_S`], unless the page's address sets
 /// [`page_query::CPU_VIEW_TIMEOUT`]).
 fn view_timeout_s() -> u32 {
@@ -299,8 +313,10 @@ pub struct CpuPool {
     pooled: usize,
     /// One slot per worker; `None` while it is replaced, or once it could not be.
     members: RefCell<Vec<Option<Rc<Member>>>>,
-    /// Slots whose worker waits for a view.
-    idle: RefCell<Vec<usize>>,
+    /// Views handed to each slot's worker and not yet answered.
+    in_flight: RefCell<Vec<usize>>,
+    /// The most views a worker holds at once ([`views_per_worker`]).
+    views_per_worker: usize,
     queue: RefCell<VecDeque<Task>>,
     /// Workers being started again.
     replacing: Cell<usize>,
@@ -365,7 +381,8 @@ impl CpuPool {
             name,
             input,
             pooled,
-            idle: RefCell::new((0..members.len()).rev().collect()),
+            in_flight: RefCell::new(vec![0; members.len()]),
+            views_per_worker: views_per_worker(),
             members: RefCell::new(members),
             queue: RefCell::default(),
             replacing: Cell::new(0),
@@ -422,20 +439,32 @@ impl CpuPool {
         })
     }
 
-    /// Hands queued views to idle workers.
+    /// Hands queued views to the workers, each to the running one with the fewest views in hand
+    /// (so that a pair's two views go to two workers), up to [`Self::views_per_worker`] each.
     fn pump(self: &Rc<Self>) {
         loop {
-            let Some(slot) = self.idle.borrow_mut().pop() else {
+            if self.queue.borrow().is_empty() {
+                break;
+            }
+            let chosen = {
+                let (members, in_flight) = (self.members.borrow(), self.in_flight.borrow());
+                members
+                    .iter()
+                    .zip(in_flight.iter())
+                    .enumerate()
+                    .filter(|(_, (member, views))| {
+                        member.is_some() && **views < self.views_per_worker
+                    })
+                    .min_by_key(|(_, (_, views))| **views)
+                    .and_then(|(slot, (member, _))| Some((slot, member.clone()?)))
+            };
+            let Some((slot, member)) = chosen else {
                 break;
             };
             let Some(task) = self.queue.borrow_mut().pop_front() else {
-                self.idle.borrow_mut().push(slot);
                 break;
             };
-            let Some(member) = self.members.borrow()[slot].clone() else {
-                self.queue.borrow_mut().push_front(task);
-                continue;
-            };
+            self.in_flight.borrow_mut()[slot] += 1;
             let pool = self.clone();
             leptos::task::spawn_local(async move { pool.run(slot, member, task).await });
         }
@@ -456,6 +485,10 @@ impl CpuPool {
         let result = member
             .read(task.view, &task.image, self.input, self.pooled)
             .await;
+        // A replaced worker's views no longer count against its slot (reset by `replace`).
+        if self.holds(slot, &member) {
+            self.in_flight.borrow_mut()[slot] -= 1;
+        }
         match result {
             Ok(reading) => {
                 task.reply
@@ -464,7 +497,6 @@ impl CpuPool {
                         redone: task.redone,
                     }))
                     .ok();
-                self.idle.borrow_mut().push(slot);
             }
             Err(cause) => {
                 task.attempts += 1;
@@ -482,17 +514,29 @@ impl CpuPool {
                     });
                     self.queue.borrow_mut().push_front(task);
                 }
-                self.replace(slot);
+                self.replace(slot, &member);
             }
         }
         self.pump();
     }
 
-    /// Stops the worker of `slot` for good and starts a fresh one there.
-    fn replace(self: &Rc<Self>, slot: usize) {
+    /// Whether `member` is the worker in `slot` now (not one replaced since).
+    fn holds(&self, slot: usize, member: &Rc<Member>) -> bool {
+        self.members.borrow()[slot]
+            .as_ref()
+            .is_some_and(|current| Rc::ptr_eq(current, member))
+    }
+
+    /// Stops `failed`, the worker of `slot`, for good and starts a fresh one there; nothing when
+    /// it was replaced already (each view it held fails, and each asks).
+    fn replace(self: &Rc<Self>, slot: usize, failed: &Rc<Member>) {
+        if !self.holds(slot, failed) {
+            return;
+        }
         if let Some(member) = self.members.borrow_mut()[slot].take() {
             member.worker.stop("replaced after a failure");
         }
+        self.in_flight.borrow_mut()[slot] = 0;
         self.replacing.set(self.replacing.get() + 1);
         (self.on_change)(self.status());
         let pool = self.clone();
@@ -502,7 +546,6 @@ impl CpuPool {
             if let Ok(member) = fresh {
                 pool.members.borrow_mut()[slot] = Some(Rc::new(member));
                 pool.replaced.set(pool.replaced.get() + 1);
-                pool.idle.borrow_mut().push(slot);
             }
             (pool.on_change)(pool.status());
             pool.pump();

@@ -15,6 +15,16 @@ pub const CPU_VIEW_TIMEOUT: &str = "cpu-view-timeout-s";
 /// a second (docs/benchmarks.md).
 pub const CPU_VIEW_TIMEOUT_S: u32 = 60;
 
+/// Views handed to one CPU worker at once (a whole number, at least 1): the one it reads and the
+/// next, waiting in its message queue, so that it starts the next the moment it finishes one,
+/// even while the page's thread is busy. Default [`CPU_VIEWS_PER_WORKER_DEFAULT`]; `1` hands a
+/// worker its next view only once it has answered (the pool before 2026-12-07), for A/B timings.
+pub const CPU_VIEWS_PER_WORKER: &str = "cpu-views-per-worker";
+
+/// A CPU worker's default views in hand: with one, a worker that finished while the page's thread
+/// fitted a traced frame's rod (30-40 ms) sat idle until the page handed it another view.
+pub const CPU_VIEWS_PER_WORKER_DEFAULT: usize = 2;
+
 /// `cpu-fused=0` keeps the CPU workers on the module without relaxed SIMD (crates/hnet-cpu) in
 /// a browser that has it, so that both modules can be timed and tested in one browser. Any other
 /// value, or none, lets the page choose ([`crate::cpu_pool::CpuModule::for_this_browser`]).
@@ -52,6 +62,15 @@ pub fn cpu_view_timeout_s(query: &str) -> u32 {
         .unwrap_or(CPU_VIEW_TIMEOUT_S)
 }
 
+/// The views a CPU worker holds at once that `query` asks for; [`CPU_VIEWS_PER_WORKER_DEFAULT`]
+/// when absent, zero or unreadable.
+pub fn cpu_views_per_worker(query: &str) -> usize {
+    value(query, CPU_VIEWS_PER_WORKER)
+        .and_then(|value| value.parse::<usize>().ok())
+        .filter(|&views| views >= 1)
+        .unwrap_or(CPU_VIEWS_PER_WORKER_DEFAULT)
+}
+
 /// False when the query turns the fused CPU module off ([`CPU_FUSED`]`=0`).
 pub fn cpu_fused_allowed(query: &str) -> bool {
     value(query, CPU_FUSED) != Some("0")
@@ -81,6 +100,12 @@ mod tests {
         assert!(!large_winograd_tiles_allowed(
             "?cpu-fused=0&winograd-tiles=2"
         ));
+        assert_eq!(cpu_views_per_worker(""), CPU_VIEWS_PER_WORKER_DEFAULT);
+        assert_eq!(
+            cpu_views_per_worker("?cpu-views-per-worker=0"),
+            CPU_VIEWS_PER_WORKER_DEFAULT
+        );
+        assert_eq!(cpu_views_per_worker("?cpu-views-per-worker=1"), 1);
         assert_eq!(cpu_view_timeout_s(""), CPU_VIEW_TIMEOUT_S);
         assert_eq!(cpu_view_timeout_s("?cpu-view-timeout-s=5"), 5);
         assert_eq!(
