@@ -13,10 +13,11 @@
 //! where the direct kernel ([`crate::direct`]) needs 9. F(2x2, 3x3)'s transforms only add and
 //! subtract (and halve, for the weight); F(4x4, 3x3)'s scale by 2, 4, 5 and 8 (the points 0, ±1,
 //! ±2 and infinity), so its f32 rounding is about ten times F(2x2, 3x3)'s: up to 1e-6 of the sum
-//! of the window's magnitudes against 1e-7 (the tests bound both against the direct kernel). For finite inputs well below
-//! `f32::MAX` each output depends on exactly the inputs of its 3 x 3 window: a NaN reaches the
-//! same outputs as in the direct kernel. An infinite input is another matter: the transforms take
-//! differences of neighbours, and `inf - inf` makes NaN where the direct kernel gives an infinity.
+//! of the window's magnitudes against 1e-7 (the tests bound both against the direct kernel).
+//! For finite inputs well below `f32::MAX` each output depends on exactly the inputs of its
+//! 3 x 3 window: a NaN reaches the same outputs as in the direct kernel. An infinite input is
+//! another matter: the transforms take differences of neighbours, and `inf - inf` makes NaN where
+//! the direct kernel gives an infinity.
 //!
 //! The work goes by strips of [`STRIP_TILES`] tiles along one row of tiles: the strip's input is
 //! transformed into `V[point][channel][tile]`, multiplied by each point's transformed weight
