@@ -37,7 +37,8 @@ use crate::direct::{forward_blocks, with_block_rows};
 use crate::geometry::ConvGeometry;
 use crate::products::Lanes;
 
-/// Tiles per strip: two vectors of tiles (AVX2: 2 x 8; WebAssembly SIMD128: 2 x 4).
+/// Tiles per strip: two vectors of tiles (AVX2: 2 x 8; WebAssembly SIMD128: 2 x 4), or one of
+/// AVX-512's 16.
 pub const STRIP_TILES: usize = if cfg!(target_arch = "wasm32") { 8 } else { 16 };
 
 /// Output pixels a side of a tile: Winograd's F(2x2, 3x3) or F(4x4, 3x3).
@@ -394,8 +395,8 @@ impl<L: Lanes, const V: usize> Phases for Generic<L, V> {
     }
 }
 
-/// A module `$module` with `$phases`, the three phases over lanes `$lanes`, each compiled with
-/// `$features` on its own: inlined into one function, the compiler left the vector intrinsics as
+/// A module `$module` with `$phases`, the three phases over `$vectors` vectors of lanes `$lanes`
+/// per strip, each compiled with `$features` on its own: inlined into one function, the compiler left the vector intrinsics as
 /// calls (a third of the time in `perf`, AVX2). One definition for every instruction set that needs
 /// its features enabled per function.
 #[cfg(any(
@@ -403,7 +404,7 @@ impl<L: Lanes, const V: usize> Phases for Generic<L, V> {
     all(target_arch = "wasm32", feature = "relaxed-simd")
 ))]
 macro_rules! phases_compiled_for {
-    ($(#[$doc:meta])* $module:ident, $phases:ident, $lanes:path, $features:literal) => {
+    ($(#[$doc:meta])* $module:ident, $phases:ident, $lanes:path, $vectors:literal, $features:literal) => {
         mod $module {
             use core::mem::MaybeUninit;
 
@@ -454,12 +455,12 @@ macro_rules! phases_compiled_for {
                 first_tile: usize,
                 out: &mut [f32],
             ) {
-                run.transform_input::<$lanes, 2, M>(window, tile_row, first_tile, out);
+                run.transform_input::<$lanes, $vectors, M>(window, tile_row, first_tile, out);
             }
 
             #[target_feature(enable = $features)]
             fn multiply<const M: usize>(run: &Run, transformed: &[f32], products: &mut [f32]) {
-                run.multiply::<$lanes, 2, M>(transformed, products);
+                run.multiply::<$lanes, $vectors, M>(transformed, products);
             }
 
             #[target_feature(enable = $features)]
@@ -470,7 +471,7 @@ macro_rules! phases_compiled_for {
                 products: &[f32],
                 y: &mut [MaybeUninit<f32>],
             ) {
-                run.transform_output::<$lanes, 2, M>(tile_row, first_tile, products, y);
+                run.transform_output::<$lanes, $vectors, M>(tile_row, first_tile, products, y);
             }
         }
     };
@@ -482,7 +483,19 @@ phases_compiled_for!(
     avx2,
     Avx2Phases,
     crate::products::avx2::Avx2,
+    2,
     "avx2,fma"
+);
+
+#[cfg(target_arch = "x86_64")]
+phases_compiled_for!(
+    /// The phases for AVX-512F, one vector a strip (the trait's contract: only on CPUs that have
+    /// it).
+    avx512,
+    Avx512Phases,
+    crate::products::avx512::Avx512,
+    1,
+    "avx512f,avx2,fma"
 );
 
 // The crate's `relaxed-simd` feature: relaxed SIMD's fused multiply-adds.
@@ -493,6 +506,7 @@ phases_compiled_for!(
     fused,
     FusedPhases,
     crate::products::simd128::FusedSimd128,
+    2,
     "simd128,relaxed-simd"
 );
 
@@ -598,6 +612,11 @@ impl Run<'_> {
         y: &mut [MaybeUninit<f32>],
     ) {
         debug_assert_eq!(M, self.layout.tile.side());
+        #[cfg(target_arch = "x86_64")]
+        if crate::products::has_avx512() {
+            // SAFETY: this CPU has AVX-512F, AVX2 and FMA.
+            return unsafe { self.strips::<avx512::Avx512Phases, M>(window, y) };
+        }
         #[cfg(target_arch = "x86_64")]
         if crate::products::has_avx2() {
             // SAFETY: this CPU has AVX2 and FMA.
@@ -940,9 +959,29 @@ mod tests {
         y.into_iter().map(|v| unsafe { v.assume_init() }).collect()
     }
 
-    /// The Winograd kernel's result for the same convolution with tiles of `tile`: by
-    /// `forward_image` (the path this machine runs) when `portable` is false, else by the
-    /// portable f32 lanes.
+    /// Which phases compute a test's convolution.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    enum Path {
+        /// `forward_image`'s: the best this machine has.
+        Best,
+        /// AVX2's, where this machine has it (its best may be AVX-512's).
+        #[cfg(target_arch = "x86_64")]
+        Avx2,
+        /// The portable f32 lanes.
+        Portable,
+    }
+
+    /// The paths this machine can run.
+    fn paths() -> Vec<Path> {
+        let mut paths = vec![Path::Best, Path::Portable];
+        #[cfg(target_arch = "x86_64")]
+        if crate::products::has_avx2() {
+            paths.push(Path::Avx2);
+        }
+        paths
+    }
+
+    /// The Winograd kernel's result for the same convolution with tiles of `tile`, by `path`.
     fn winograd_forward(
         g: &ConvGeometry,
         x: &[f32],
@@ -950,37 +989,45 @@ mod tests {
         bias: Option<&[f32]>,
         relu: bool,
         tile: Tile,
-        portable: bool,
+        path: Path,
     ) -> Vec<f32> {
         let layout = WinogradLayout::of_tile(g, tile).unwrap();
         // NaN where the pad writes nothing: a read outside the padded rows would show.
         let mut window = vec![f32::NAN; layout.len(g.in_channels)];
         let weight = transform_weight(w, g.out_channels, g.in_channels, tile);
         let mut y = vec![MaybeUninit::uninit(); g.out_channels * g.output_plane()];
-        if portable {
-            let run = Run {
-                g,
-                layout: &layout,
-                image: x,
-                weight: &weight,
-                bias,
-                relu,
-            };
-            // SAFETY: the portable lanes need no instruction set; the sides are the layout's.
-            unsafe {
-                match tile {
-                    Tile::Two => run.strips::<Generic<f32, STRIP_TILES>, 2>(&mut window, &mut y),
-                    Tile::Four => run.strips::<Generic<f32, STRIP_TILES>, 4>(&mut window, &mut y),
+        let run = Run {
+            g,
+            layout: &layout,
+            image: x,
+            weight: &weight,
+            bias,
+            relu,
+        };
+        // SAFETY: the portable lanes need no instruction set, and AVX2's path is only taken
+        // where this CPU has it ([`paths`]); the sides are the layout's.
+        unsafe {
+            match (path, tile) {
+                (Path::Best, _) => {
+                    forward_image(g, &layout, x, &mut window, &weight, bias, relu, &mut y)
                 }
+                (Path::Portable, Tile::Two) => {
+                    run.strips::<Generic<f32, STRIP_TILES>, 2>(&mut window, &mut y)
+                }
+                (Path::Portable, Tile::Four) => {
+                    run.strips::<Generic<f32, STRIP_TILES>, 4>(&mut window, &mut y)
+                }
+                #[cfg(target_arch = "x86_64")]
+                (Path::Avx2, Tile::Two) => run.strips::<avx2::Avx2Phases, 2>(&mut window, &mut y),
+                #[cfg(target_arch = "x86_64")]
+                (Path::Avx2, Tile::Four) => run.strips::<avx2::Avx2Phases, 4>(&mut window, &mut y),
             }
-        } else {
-            forward_image(g, &layout, x, &mut window, &weight, bias, relu, &mut y);
         }
         y.into_iter().map(|v| unsafe { v.assume_init() }).collect()
     }
 
-    /// Both tiles, by the SIMD path this machine runs and by the portable one, agree with the
-    /// direct kernel, over paddings of 0, 1 and 2, a partial last strip and channel counts that
+    /// Both tiles, by the SIMD path this machine runs (AVX-512, AVX2, SIMD128), by AVX2's where
+    /// that is not it, and by the portable one, agree with the direct kernel, over paddings of 0, 1 and 2, a partial last strip and channel counts that
     /// leave uneven register tiles (one-sided paddings: `tests/against_burn.rs`). F(4x4, 3x3)'s
     /// transforms scale by up to 8: its rounding is bounded at 2e-6 of the sum of the window's
     /// magnitudes (at most `9 · in_channels` here), F(2x2, 3x3)'s at 1e-7.
@@ -1010,8 +1057,8 @@ mod tests {
                 }
                 for relu in [false, true] {
                     let expected = direct_forward(&g, &x, &w, Some(&bias), relu);
-                    for portable in [false, true] {
-                        let ours = winograd_forward(&g, &x, &w, Some(&bias), relu, tile, portable);
+                    for path in paths() {
+                        let ours = winograd_forward(&g, &x, &w, Some(&bias), relu, tile, path);
                         let error = ours
                             .iter()
                             .zip(&expected)
@@ -1019,7 +1066,7 @@ mod tests {
                             .fold(0.0f32, f32::max);
                         assert!(
                             error < bound * scale,
-                            "{tile:?} portable {portable} {size:?} {padding:?}: {error:e}"
+                            "{tile:?} {path:?} {size:?} {padding:?}: {error:e}"
                         );
                     }
                 }
