@@ -47,9 +47,9 @@ fn hnet_forward_pass_on_the_cpu_backend() {
 
 /// The project's convolution kernels (crates/hnet-conv) give Burn's results in the browser too,
 /// built for wasm32 with SIMD128: forward passes of random convolutions, of H-Net's two layer
-/// shapes and of a layer wide enough for the Winograd kernel on flex, within the native tests'
-/// tolerance (the gradients, which the page never computes, are checked natively:
-/// crates/hnet-conv/tests/against_burn.rs).
+/// shapes and of layers wide enough for the Winograd kernel's 2 x 2 and 4 x 4 tiles on flex,
+/// within the native tests' tolerance (the gradients, which the page never computes, are checked
+/// natively: crates/hnet-conv/tests/against_burn.rs).
 #[wasm_bindgen_test]
 fn the_project_convolutions_compute_what_burn_computes() {
     use hnet_conv::conformance::{ConvCase, TOLERANCE};
@@ -58,7 +58,10 @@ fn the_project_convolutions_compute_what_burn_computes() {
         .map(ConvCase::from_seed)
         .filter(ConvCase::is_valid)
         .chain([false, true].map(|transposed| ConvCase::h_net_layer(transposed, 3)))
-        .chain([ConvCase::winograd_layer(3)]);
+        .chain([
+            ConvCase::winograd_layer(3),
+            ConvCase::winograd_large_tile_layer(3),
+        ]);
     let mut checked = 0;
     for case in cases {
         let error = case.forward_error(&device);

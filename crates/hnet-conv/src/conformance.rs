@@ -143,6 +143,15 @@ impl ConvCase {
         }
     }
 
+    /// The same on an image whose output is whole 4 x 4 tiles at least a strip of them wide, so
+    /// that the Winograd kernel takes F(4x4, 3x3), its last strip partial.
+    pub fn winograd_large_tile_layer(seed: u64) -> Self {
+        Self {
+            size: [8, 4 * crate::winograd::STRIP_TILES + 4],
+            ..Self::winograd_layer(seed)
+        }
+    }
+
     /// True when Burn itself gives a result (an output of at least one pixel).
     pub fn is_valid(&self) -> bool {
         (0..2).all(|a| {

@@ -122,7 +122,11 @@ fn winograd_convolutions_match_burn() {
         out_channels,
         ..ConvCase::h_net_layer(false, 23)
     });
-    for case in [ConvCase::winograd_layer(23)].into_iter().chain(others) {
+    let layers = [
+        ConvCase::winograd_layer(23),
+        ConvCase::winograd_large_tile_layer(23),
+    ];
+    for case in layers.into_iter().chain(others) {
         check(&case).unwrap();
         hnet_conv::use_winograd(false);
         let direct = check(&case);
