@@ -203,6 +203,12 @@ pub fn forward_image(
         "direct forward: buffer sizes"
     );
     #[cfg(target_arch = "x86_64")]
+    if crate::products::has_avx512() {
+        // SAFETY: this CPU has AVX-512F, AVX2 and FMA (checked just above).
+        unsafe { forward_avx512(g, layout, padded, packed_weight, bias, relu, y) };
+        return;
+    }
+    #[cfg(target_arch = "x86_64")]
     if crate::products::has_avx2() {
         // SAFETY: this CPU has AVX2 and FMA (checked just above).
         unsafe { forward_avx2(g, layout, padded, packed_weight, bias, relu, y) };
@@ -237,6 +243,30 @@ fn forward_avx2(
 ) {
     // Up to 6 channels x 2 vectors of 8: twelve accumulators, two loaded vectors and a broadcast.
     forward_body::<crate::products::avx2::Avx2, 2>(g, layout, padded, packed_weight, bias, relu, y)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+fn forward_avx512(
+    g: &ConvGeometry,
+    layout: &PaddedLayout,
+    padded: &[f32],
+    packed_weight: &[f32],
+    bias: Option<&[f32]>,
+    relu: bool,
+    y: &mut [MaybeUninit<f32>],
+) {
+    // Up to 6 channels x 1 vector of 16: the strip AVX2 takes in two vectors, in half the
+    // multiply-adds.
+    forward_body::<crate::products::avx512::Avx512, 1>(
+        g,
+        layout,
+        padded,
+        packed_weight,
+        bias,
+        relu,
+        y,
+    )
 }
 
 /// [`forward_body`] with relaxed SIMD's fused multiply-adds (the crate's `relaxed-simd` feature).
