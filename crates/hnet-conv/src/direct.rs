@@ -608,6 +608,51 @@ fn weight_gradient_body<L: Lanes>(
 mod tests {
     use super::{FORWARD_ROWS, forward_blocks};
 
+    /// On a CPU with AVX-512, the AVX2 forward pass (the one CPUs without it run) agrees with
+    /// the AVX-512 one `forward_image` takes: H-Net's 3 x 3 layer on a 16 px image, with 5 and 7
+    /// channels (uneven register tiles), bias and ReLU.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn avx2_and_avx512_forward_passes_agree() {
+        use super::{PaddedLayout, forward_avx2, forward_image, pack_weight};
+        use crate::geometry::ConvGeometry;
+        use burn::tensor::ops::ConvOptions;
+        use core::mem::MaybeUninit;
+        if !crate::products::has_avx512() {
+            return;
+        }
+        let options = ConvOptions::new([1, 1], [1, 1], [1, 1], 1);
+        let g = ConvGeometry::of_conv2d([1, 5, 16, 16], [7, 5, 3, 3], &options).unwrap();
+        let value = |i: usize| ((i * 2_654_435_761) % 2001) as f32 / 1000.0 - 1.0;
+        let x: alloc::vec::Vec<f32> = (0..5 * 16 * 16).map(value).collect();
+        let w: alloc::vec::Vec<f32> = (0..7 * 5 * 9).map(|i| value(i + 7)).collect();
+        let bias: alloc::vec::Vec<f32> = (0..7).map(|i| value(i + 3)).collect();
+        let layout = PaddedLayout::of(&g).unwrap();
+        let mut padded = alloc::vec![0.0; layout.len(5)];
+        layout.pad(&g, &x, &mut padded);
+        let packed = pack_weight(&w, 7, g.taps());
+        let run = |avx2: bool| {
+            let mut y = alloc::vec![MaybeUninit::uninit(); 7 * g.output_plane()];
+            if avx2 {
+                // SAFETY: a CPU with AVX-512F has AVX2 and FMA (`has_avx512`).
+                unsafe { forward_avx2(&g, &layout, &padded, &packed, Some(&bias), true, &mut y) };
+            } else {
+                forward_image(&g, &layout, &padded, &packed, Some(&bias), true, &mut y);
+            }
+            // SAFETY: both write every value.
+            y.into_iter()
+                .map(|v| unsafe { v.assume_init() })
+                .collect::<alloc::vec::Vec<f32>>()
+        };
+        let (avx2, avx512) = (run(true), run(false));
+        let error = avx2
+            .iter()
+            .zip(&avx512)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        assert!(error < 1e-5, "{error:e}");
+    }
+
     #[test]
     fn forward_blocks_cover_every_channel_once_in_even_tiles() {
         for channels in 1..=70 {
