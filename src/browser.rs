@@ -87,6 +87,13 @@ pub fn now_ms() -> f64 {
         .unwrap_or(0.0)
 }
 
+/// The page address's query (`?a=1&b=2`; empty where it has none), read by [`crate::page_query`].
+pub fn page_query() -> String {
+    web_sys::window()
+        .and_then(|w| w.location().search().ok())
+        .unwrap_or_default()
+}
+
 /// The bytes of a file the user picked or dropped.
 pub async fn read_file(file: &web_sys::File) -> Result<Vec<u8>, FileReadError> {
     let buffer = JsFuture::from(file.array_buffer())

@@ -25,7 +25,7 @@ use hnet_units::{ImageSize, View, with_causes};
 use js_sys::{Array, Float32Array, Reflect, Uint8Array};
 use wasm_bindgen::prelude::*;
 
-use crate::browser::JsError;
+use crate::browser::{self, JsError};
 use crate::module_worker::{ModuleWorker, ModuleWorkerError, within};
 use crate::page_query;
 
@@ -37,29 +37,15 @@ pub const MAX_WORKERS: usize = 8;
 /// after the first one stopped.
 const ATTEMPTS: u32 = 2;
 
-/// Views handed to one worker at once ([`page_query::CPU_VIEWS_PER_WORKER_DEFAULT`], unless the
-/// page's address sets [`page_query::CPU_VIEWS_PER_WORKER`]).
-fn views_per_worker() -> usize {
-    web_sys::window()
-        .and_then(|w| w.location().search().ok())
-        .map_or(page_query::CPU_VIEWS_PER_WORKER_DEFAULT, |query| {
-            page_query::cpu_views_per_worker(&query)
-        })
-}
-
 /// A worker, in words.
 const NAME: &str = "a CPU worker";
 
 /// How long a worker may take to answer a view handed to it (reading the views handed to it
-/// before, [`views_per_worker`]) before it counts as stopped, seconds
+/// before, [`CpuPool::views_per_worker`]) before it counts as stopped, seconds
 /// ([`page_query::CPU_VIEW_TIMEOUT_S`], unless the page's address sets
 /// [`page_query::CPU_VIEW_TIMEOUT`]).
 fn view_timeout_s() -> u32 {
-    web_sys::window()
-        .and_then(|w| w.location().search().ok())
-        .map_or(page_query::CPU_VIEW_TIMEOUT_S, |query| {
-            page_query::cpu_view_timeout_s(&query)
-        })
+    page_query::cpu_view_timeout_s(&browser::page_query())
 }
 
 /// Which build of the CPU workers' module the pool runs. Both read the same network with the
@@ -96,9 +82,7 @@ impl CpuModule {
     /// The fused module where this browser's WebAssembly has relaxed SIMD (and the page's
     /// address does not turn it off: [`page_query::CPU_FUSED`]), else the plain one.
     pub fn for_this_browser() -> Self {
-        let allowed = web_sys::window()
-            .and_then(|w| w.location().search().ok())
-            .is_none_or(|query| page_query::cpu_fused_allowed(&query));
+        let allowed = page_query::cpu_fused_allowed(&browser::page_query());
         let relaxed = js_sys::WebAssembly::validate(&Uint8Array::from(&relaxed_simd_probe()[..]))
             .unwrap_or(false);
         if allowed && relaxed {
@@ -184,9 +168,7 @@ impl Member {
         name: &str,
     ) -> Result<Self, ModuleWorkerError> {
         let worker = ModuleWorker::spawn(module.name(), NAME)?;
-        let large_tiles = web_sys::window()
-            .and_then(|w| w.location().search().ok())
-            .is_none_or(|query| page_query::large_winograd_tiles_allowed(&query));
+        let large_tiles = page_query::large_winograd_tiles_allowed(&browser::page_query());
         let start = Array::of1(&JsValue::from_bool(large_tiles));
         worker.call("start", &start, &Array::new()).await?;
         let bytes = Uint8Array::from(weights);
@@ -315,7 +297,8 @@ pub struct CpuPool {
     members: RefCell<Vec<Option<Rc<Member>>>>,
     /// Views handed to each slot's worker and not yet answered.
     in_flight: RefCell<Vec<usize>>,
-    /// The most views a worker holds at once ([`views_per_worker`]).
+    /// The most views a worker holds at once ([`page_query::CPU_VIEWS_PER_WORKER_DEFAULT`],
+    /// unless the page's address sets [`page_query::CPU_VIEWS_PER_WORKER`]).
     views_per_worker: usize,
     queue: RefCell<VecDeque<Task>>,
     /// Workers being started again.
@@ -382,7 +365,7 @@ impl CpuPool {
             input,
             pooled,
             in_flight: RefCell::new(vec![0; members.len()]),
-            views_per_worker: views_per_worker(),
+            views_per_worker: page_query::cpu_views_per_worker(&browser::page_query()),
             members: RefCell::new(members),
             queue: RefCell::default(),
             replacing: Cell::new(0),

@@ -288,9 +288,7 @@ async fn checked_on_webgpu(cpu: &Engine) -> Result<Engine, String> {
                 .unwrap_or(TipForce::new(f32::NAN, f32::NAN, f32::NAN)),
         }
     }
-    let scale = web_sys::window()
-        .and_then(|w| w.location().search().ok())
-        .map_or(1.0, |query| page_query::webgpu_tolerance_scale(&query));
+    let scale = page_query::webgpu_tolerance_scale(&crate::browser::page_query());
     let difference = webgpu_check::Difference::between(output(&expected), output(&found));
     if !difference.within(scale) {
         return Err(difference.refusal(scale));

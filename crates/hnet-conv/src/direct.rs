@@ -230,67 +230,54 @@ pub fn forward_image(
     forward_body::<f32, 8>(g, layout, padded, packed_weight, bias, relu, y)
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn forward_avx2(
-    g: &ConvGeometry,
-    layout: &PaddedLayout,
-    padded: &[f32],
-    packed_weight: &[f32],
-    bias: Option<&[f32]>,
-    relu: bool,
-    y: &mut [MaybeUninit<f32>],
-) {
-    // Up to 6 channels x 2 vectors of 8: twelve accumulators, two loaded vectors and a broadcast.
-    forward_body::<crate::products::avx2::Avx2, 2>(g, layout, padded, packed_weight, bias, relu, y)
+/// `$name`: [`forward_body`] over `$vectors` vectors of lanes `$lanes`, compiled with
+/// `$features` (only callable where the CPU or module has them).
+macro_rules! forward_compiled_for {
+    ($(#[$attr:meta])* $name:ident, $lanes:path, $vectors:literal, $features:literal) => {
+        $(#[$attr])*
+        #[target_feature(enable = $features)]
+        fn $name(
+            g: &ConvGeometry,
+            layout: &PaddedLayout,
+            padded: &[f32],
+            packed_weight: &[f32],
+            bias: Option<&[f32]>,
+            relu: bool,
+            y: &mut [MaybeUninit<f32>],
+        ) {
+            forward_body::<$lanes, $vectors>(g, layout, padded, packed_weight, bias, relu, y)
+        }
+    };
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx2,fma")]
-fn forward_avx512(
-    g: &ConvGeometry,
-    layout: &PaddedLayout,
-    padded: &[f32],
-    packed_weight: &[f32],
-    bias: Option<&[f32]>,
-    relu: bool,
-    y: &mut [MaybeUninit<f32>],
-) {
-    // Up to 6 channels x 1 vector of 16: the strip AVX2 takes in two vectors, in half the
-    // multiply-adds.
-    forward_body::<crate::products::avx512::Avx512, 1>(
-        g,
-        layout,
-        padded,
-        packed_weight,
-        bias,
-        relu,
-        y,
-    )
-}
+forward_compiled_for!(
+    /// Up to 6 channels x 2 vectors of 8: twelve accumulators, two loaded vectors and a
+    /// broadcast.
+    #[cfg(target_arch = "x86_64")]
+    forward_avx2,
+    crate::products::avx2::Avx2,
+    2,
+    "avx2,fma"
+);
 
-/// [`forward_body`] with relaxed SIMD's fused multiply-adds (the crate's `relaxed-simd` feature).
-#[cfg(all(target_arch = "wasm32", feature = "relaxed-simd"))]
-#[target_feature(enable = "simd128,relaxed-simd")]
-fn forward_fused(
-    g: &ConvGeometry,
-    layout: &PaddedLayout,
-    padded: &[f32],
-    packed_weight: &[f32],
-    bias: Option<&[f32]>,
-    relu: bool,
-    y: &mut [MaybeUninit<f32>],
-) {
-    forward_body::<crate::products::simd128::FusedSimd128, 2>(
-        g,
-        layout,
-        padded,
-        packed_weight,
-        bias,
-        relu,
-        y,
-    )
-}
+forward_compiled_for!(
+    /// Up to 6 channels x 1 vector of 16: the strip AVX2 takes in two vectors, in half the
+    /// multiply-adds.
+    #[cfg(target_arch = "x86_64")]
+    forward_avx512,
+    crate::products::avx512::Avx512,
+    1,
+    "avx512f,avx2,fma"
+);
+
+forward_compiled_for!(
+    /// With relaxed SIMD's fused multiply-adds (the crate's `relaxed-simd` feature).
+    #[cfg(all(target_arch = "wasm32", feature = "relaxed-simd"))]
+    forward_fused,
+    crate::products::simd128::FusedSimd128,
+    2,
+    "simd128,relaxed-simd"
+);
 
 /// The body of [`forward_image`]: strips of `V · WIDTH` flat positions, each multiplied by every
 /// block of output channels ([`forward_blocks`]) while it is in cache.

@@ -41,7 +41,8 @@ use crate::products::Lanes;
 /// AVX-512's 16.
 pub const STRIP_TILES: usize = if cfg!(target_arch = "wasm32") { 8 } else { 16 };
 
-/// Output pixels a side of a tile: Winograd's F(2x2, 3x3) or F(4x4, 3x3).
+/// Output pixels a side of a tile: Winograd's F(2x2, 3x3) or F(4x4, 3x3), ordered by side
+/// ([`WinogradLayout::of`] takes the largest allowed).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Tile {
     /// F(2x2, 3x3): 16 points per 4 output pixels.
