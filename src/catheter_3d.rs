@@ -427,9 +427,9 @@ pub fn reconstruct_pair(
         PhysicsError::Reconstruction(e) => Catheter3dError::Reconstruction(e),
         PhysicsError::Fit(e) => Catheter3dError::Fit(e),
         PhysicsError::PoorFit { rms_mm, .. } => Catheter3dError::PoorFit { rms_mm },
-        e @ (PhysicsError::BaseOutsideTolerance { .. } | PhysicsError::AtForceLimit { .. }) => {
-            Catheter3dError::Unreadable(e)
-        }
+        e @ (PhysicsError::BaseOutsideTolerance { .. }
+        | PhysicsError::AtForceLimit { .. }
+        | PhysicsError::RodBeyondSeenTip { .. }) => Catheter3dError::Unreadable(e),
     })?;
     Ok(Catheter3d {
         masks: masks.source(),

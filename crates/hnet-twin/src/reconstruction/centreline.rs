@@ -337,7 +337,8 @@ impl Field<'_> {
     fn sample(&self, u: f64, v: f64) -> f64 {
         let fx = (u - 0.5).clamp(0.0, (self.width - 1) as f64);
         let fy = (v - 0.5).clamp(0.0, (self.height - 1) as f64);
-        let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
+        // Truncation is the floor here: both are clamped to be non-negative.
+        let (x0, y0) = (fx as usize, fy as usize);
         let (x1, y1) = ((x0 + 1).min(self.width - 1), (y0 + 1).min(self.height - 1));
         let (tx, ty) = (fx - x0 as f64, fy - y0 as f64);
         let at = |x: usize, y: usize| f64::from(self.values[y * self.width + x]);

@@ -17,8 +17,9 @@ use crate::reconstruction::rod_fit::{
     RodFit, RodFitError, RodFitSettings, fit_rod_to_reconstruction,
 };
 use crate::simulator::carm::CameraMatrix;
-use crate::simulator::rod::{RodBase, RodConfig};
+use crate::simulator::rod::{RodBase, RodConfig, RodShape};
 use crate::simulator::scene::NominalBase;
+use crate::vec3::Vec3;
 
 mod stack;
 pub use stack::{FOLDS, LinearStack, MIN_STACK_GAIN, MIN_STACK_PAIRS};
@@ -193,6 +194,35 @@ pub enum PhysicsError {
         /// The fit's limit, N.
         limit_n: f64,
     },
+    /// With the seen tip set aside, the rod fits only by running on past where both views show
+    /// the catheter end: the catheter assumed is longer than this one.
+    #[error(
+        "the rod fits only by running {beyond_mm:.0} mm past the tip both views show (at most \
+         {MAX_ROD_BEYOND_SEEN_TIP_MM} mm accepted): the catheter assumed is longer than this one"
+    )]
+    RodBeyondSeenTip {
+        /// The rod's length beyond its point nearest the seen tip, mm.
+        beyond_mm: f64,
+    },
+}
+
+/// How far a rod fitted with the seen tip set aside ([`TipUse::SetAside`]) may run on past the
+/// point nearest that tip, mm: twice the catalogue's realistic error in flexible length (±5 mm,
+/// the mismatch suite's `length+5mm`). Beyond it, the catheter assumed is longer than the one
+/// both views show ending there ([`PhysicsError::RodBeyondSeenTip`]).
+pub const MAX_ROD_BEYOND_SEEN_TIP_MM: f64 = 10.0;
+
+/// The arc length of `shape` beyond its point nearest `seen_tip_mm`, mm.
+fn rod_beyond_mm(shape: &RodShape, seen_tip_mm: Vec3) -> f64 {
+    let nearest = shape
+        .points_mm
+        .iter()
+        .map(|p| (*p - seen_tip_mm).norm())
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map_or(0, |(at, _)| at);
+    let length = shape.arc_mm.last().copied().unwrap_or(0.0);
+    length - shape.arc_mm.get(nearest).copied().unwrap_or(length)
 }
 
 /// Share of [`RodFitSettings::max_force_n`] at which a fitted force counts as stopped by that
@@ -225,6 +255,7 @@ impl PhysicsError {
             Self::PoorFit { .. } => "poor fit",
             Self::BaseOutsideTolerance { .. } => "base outside tolerance",
             Self::AtForceLimit { .. } => "force at the fit's limit",
+            Self::RodBeyondSeenTip { .. } => "rod beyond the seen tip",
         }
     }
 }
@@ -265,6 +296,13 @@ pub fn physics_estimate(
                 ..setup.fit.clone()
             };
             let fit = checked_fit(setup, &reconstruction, &without_tip)?;
+            // Set aside, the tip no longer stops a catalogue's catheter longer than the one
+            // seen from running on past where both views show it end.
+            let seen_tip = reconstruction.points_mm[reconstruction.points_mm.len() - 1];
+            let beyond_mm = rod_beyond_mm(&fit.shape, seen_tip);
+            if beyond_mm > MAX_ROD_BEYOND_SEEN_TIP_MM {
+                return Err(PhysicsError::RodBeyondSeenTip { beyond_mm });
+            }
             (fit, TipUse::SetAside)
         }
         fit => (
@@ -1001,7 +1039,7 @@ mod tests {
         .unwrap();
         assert_eq!(estimate.tip, TipUse::SetAside);
         // A catheter the masks do not show (twice as long): it fits only with its base far
-        // beyond the fixture's play, and no force is given.
+        // beyond the fixture's play, or by running on past the seen tip, and no force is given.
         let (config, sample) = bench_sample(128, 11, 0);
         let long = CatalogueCatheter {
             flexible_length_mm: 100.0,
@@ -1019,6 +1057,9 @@ mod tests {
         match physics_estimate([mask(0), mask(1)], &setup) {
             Err(PhysicsError::BaseOutsideTolerance { offset_mm, .. }) => {
                 assert!(offset_mm > 10.0, "{offset_mm}")
+            }
+            Err(PhysicsError::RodBeyondSeenTip { beyond_mm }) => {
+                assert!(beyond_mm > 40.0, "{beyond_mm}")
             }
             Err(other) => panic!("{other}"),
             Ok(e) => panic!(

@@ -56,7 +56,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::reconstruction::epipolar::Reconstruction;
 use crate::simulator::render::PROXIMAL_SHAFT_MM;
-use crate::simulator::rod::{self, RodBase, RodConfig, RodError, RodShape};
+use crate::simulator::rod::{self, NewtonStart, RodBase, RodConfig, RodError, RodShape};
 use crate::vec3::{Mat3, Vec3};
 
 /// What is fitted and how.
@@ -424,10 +424,14 @@ pub fn fit_rod(
     let converged = termination.was_successful()
         || matches!(termination, TerminationReason::NoImprovementPossible(_));
     // The fitted rod with the configuration's own steps (or, should that solve fail, with the
-    // fit's, whose shape differs by far less than a micrometre).
+    // fit's, whose shape differs by far less than a micrometre), from the fit's last rod.
+    let near = problem
+        .evaluated(&problem.params)
+        .map(|evaluated| evaluated.end);
     let solved = problem
-        .solve_with(&problem.params, config)
-        .or_else(|_| problem.solve_with(&problem.params, &problem.config));
+        .solve_with(&problem.params, config, near.as_ref())
+        .or_else(|_| problem.solve_with(&problem.params, &problem.config, near.as_ref()))
+        .map(|(model, shape, _)| (model, shape));
     let rms_of = |shape: &RodShape| {
         let d = distances_to_rod(shape, settings.proximal_shaft_mm, centreline_mm);
         let rms = (d.iter().map(|v| v * v).sum::<f64>() / d.len() as f64).sqrt();

@@ -467,44 +467,94 @@ fn solve3(a: [[f64; 3]; 3], b: Vec3) -> Option<Vec3> {
     x.iter().all(|v| v.is_finite()).then_some(Vec3(x))
 }
 
-/// Newton's method on the base moment for one load. Returns the base moment, the iterations
-/// used, and the final residual; `Err` carries the best residual when it fails.
+/// Where Newton's method on the base moment ended for one solved rod: the start for rods whose
+/// settings, base and load differ little from its own ([`solve_near`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NewtonStart {
+    /// The base moment, N·mm (world frame).
+    pub base_moment_n_mm: Vec3,
+    /// The last Jacobian of the tip's moment with respect to the base moment (dimensionless),
+    /// when one was computed: reused for a nearby rod while it converges (the chord method),
+    /// instead of three integrations an iteration.
+    jacobian: Option<[[f64; 3]; 3]>,
+}
+
+/// Where Newton's method ended for one load: there, the shape there, the iterations used and the
+/// tip moment left, N·mm.
+type Solved = (NewtonStart, RodShape, usize, f64);
+
+/// Newton's method on the base moment for one load, from `start` (and its Jacobian, while that
+/// halves the residual at each full step). `Err` carries the iterations and the best residual
+/// when it fails.
 fn newton(
     problem: &Problem<'_>,
-    mut m0: Vec3,
+    start: NewtonStart,
     tolerance: f64,
     scale: f64,
-) -> Result<(Vec3, usize, f64), (usize, f64)> {
-    let mut residual = problem.shoot(m0, false).0;
+) -> Result<Solved, (usize, f64)> {
+    let NewtonStart {
+        base_moment_n_mm: mut m0,
+        mut jacobian,
+    } = start;
+    // The shots at the iterates record their shape, so that the last one is the solution's.
+    let shot = |m0: Vec3| {
+        let (residual, shape) = problem.shoot(m0, true);
+        (residual, shape.expect("recorded"))
+    };
+    let (mut residual, mut shape) = shot(m0);
     let mut norm = residual.norm();
+    // Whether `jacobian` was computed at one of this load's iterates.
+    let mut fresh = false;
     for iteration in 0..problem.config.max_newton_iterations {
         if !norm.is_finite() {
             return Err((iteration, norm));
         }
+        let ended = |m0, jacobian| NewtonStart {
+            base_moment_n_mm: m0,
+            jacobian,
+        };
         if norm <= tolerance {
-            return Ok((m0, iteration, norm));
+            return Ok((ended(m0, jacobian), shape, iteration, norm));
+        }
+        if let Some(known) = jacobian.filter(|_| !fresh) {
+            // The chord step: kept at full length only where it halves the residual.
+            if let Some(step) = solve3(known, -residual) {
+                let candidate = m0 + step;
+                let (r, candidate_shape) = shot(candidate);
+                let n = r.norm();
+                if n.is_finite() && n <= 0.5 * norm {
+                    m0 = candidate;
+                    residual = r;
+                    shape = candidate_shape;
+                    norm = n;
+                    continue;
+                }
+            }
         }
         let h = 1e-7 * m0.max_abs().max(scale);
-        let mut jacobian = [[0.0; 3]; 3];
+        let mut fd = [[0.0; 3]; 3];
         for j in 0..3 {
             let mut probe = m0;
             probe.0[j] += h;
             let column = (problem.shoot(probe, false).0 - residual) / h;
-            for (i, row) in jacobian.iter_mut().enumerate() {
+            for (i, row) in fd.iter_mut().enumerate() {
                 row[j] = column[i];
             }
         }
-        let Some(step) = solve3(jacobian, -residual) else {
+        jacobian = Some(fd);
+        fresh = true;
+        let Some(step) = solve3(fd, -residual) else {
             return Err((iteration, norm));
         };
         let mut alpha = 1.0;
         loop {
             let candidate = m0 + step * alpha;
-            let r = problem.shoot(candidate, false).0;
+            let (r, candidate_shape) = shot(candidate);
             let n = r.norm();
             if n.is_finite() && n < (1.0 - 1e-4 * alpha) * norm {
                 m0 = candidate;
                 residual = r;
+                shape = candidate_shape;
                 norm = n;
                 break;
             }
@@ -515,7 +565,11 @@ fn newton(
         }
     }
     if norm <= tolerance {
-        Ok((m0, problem.config.max_newton_iterations, norm))
+        let end = NewtonStart {
+            base_moment_n_mm: m0,
+            jacobian,
+        };
+        Ok((end, shape, problem.config.max_newton_iterations, norm))
     } else {
         Err((problem.config.max_newton_iterations, norm))
     }
@@ -523,100 +577,166 @@ fn newton(
 
 /// Solves the static shape of the rod clamped at `base` under `tip_force_n` (N, world frame).
 pub fn solve(config: &RodConfig, base: &RodBase, tip_force_n: Vec3) -> Result<RodShape, RodError> {
-    config.validate()?;
-    if !tip_force_n.0.iter().all(|f| f.is_finite()) {
-        return Err(RodError::InvalidConfig(format!(
-            "tip force must be finite, got {:?} N",
-            tip_force_n.0
-        )));
+    Loads::new(config, base, tip_force_n)?
+        .solve()
+        .map(|(shape, _)| shape)
+}
+
+/// Solves as [`solve`], starting Newton's method at full load from `start`: where it ended for a
+/// solved rod whose settings, base and load differ little from these, as a rod fit's
+/// finite-difference probe differs from the rod it probes. From there Newton's method needs an
+/// iteration or two and no new Jacobian, where [`solve`] needs several iterations from the rigid
+/// rod's moment. The tolerance is [`solve`]'s; without `start`, or where it does not converge
+/// from there, [`solve`]'s own path is taken. Also returns where this rod's solve ended.
+pub fn solve_near(
+    config: &RodConfig,
+    base: &RodBase,
+    tip_force_n: Vec3,
+    start: Option<&NewtonStart>,
+) -> Result<(RodShape, NewtonStart), RodError> {
+    let loads = Loads::new(config, base, tip_force_n)?;
+    let near = start
+        .and_then(|start| newton(&loads.at(1.0), *start, loads.tolerance * 1e-3, loads.scale).ok());
+    match near {
+        Some((end, shape, iterations, residual)) => {
+            Ok((Loads::finished(shape, iterations, residual), end))
+        }
+        None => loads.solve(),
     }
-    let ei = config.bending_stiffness_n_mm2();
-    let stiffness = Vec3::new(ei, ei, config.torsional_stiffness_n_mm2());
-    let weight = config.weight_per_mm();
-    let length = config.length_mm;
-    let scale = (tip_force_n.norm() * length)
-        .max(ei / length)
-        .max(weight.norm() * length * length);
-    let tolerance = 1e-10 * scale;
+}
 
-    // The unloaded shape gives the first guess: the moment of the loads about the base for a
-    // rigid rod of that shape, m(0) = ∫ p' × n ds.
-    let at_load = |fraction: f64| Problem {
-        config,
-        base,
-        tip_force: tip_force_n * fraction,
-        weight: weight * fraction,
-        stiffness,
-    };
-    let rest = at_load(0.0).shoot(Vec3::ZERO, true).1.expect("recorded");
-    let guess = |fraction: f64| {
-        let problem = at_load(fraction);
-        let h = length / config.steps as f64;
-        rest.tangents
-            .windows(2)
-            .enumerate()
-            .fold(Vec3::ZERO, |acc, (i, t)| {
-                let s = (i as f64 + 0.5) * h;
-                let n = problem.tip_force + problem.weight * (length - s);
-                acc + ((t[0] + t[1]) * 0.5).cross(n) * h
-            })
-    };
+/// One rod under one load, checked, with the scale of its moments.
+struct Loads<'a> {
+    config: &'a RodConfig,
+    base: &'a RodBase,
+    tip_force: Vec3,
+    weight: Vec3,
+    stiffness: Vec3,
+    /// The moments' scale, N·mm: the largest of the tip force's and the weight's moments over the
+    /// rod and its stiffness over its length.
+    scale: f64,
+    /// Newton's tolerance on the tip's moment, N·mm.
+    tolerance: f64,
+}
 
-    let mut total_iterations = 0;
-    let mut best_residual = f64::INFINITY;
-    // Full load first; then load continuation in ever finer steps.
-    for load_steps in [1usize, 4, 16, 64] {
-        let mut m0 = guess(1.0 / load_steps as f64);
-        let mut previous = Vec3::ZERO;
-        let mut solved = None;
-        for step in 1..=load_steps {
-            let fraction = step as f64 / load_steps as f64;
-            let problem = at_load(fraction);
-            match newton(&problem, m0, tolerance, scale) {
-                Ok((m, iterations, residual)) => {
-                    total_iterations += iterations;
-                    // Extrapolate linearly to the next load step.
-                    let next = m + (m - previous);
-                    previous = m;
-                    m0 = next;
-                    if step == load_steps {
-                        solved = Some((m, residual));
+impl<'a> Loads<'a> {
+    fn new(config: &'a RodConfig, base: &'a RodBase, tip_force_n: Vec3) -> Result<Self, RodError> {
+        config.validate()?;
+        if !tip_force_n.0.iter().all(|f| f.is_finite()) {
+            return Err(RodError::InvalidConfig(format!(
+                "tip force must be finite, got {:?} N",
+                tip_force_n.0
+            )));
+        }
+        let ei = config.bending_stiffness_n_mm2();
+        let weight = config.weight_per_mm();
+        let length = config.length_mm;
+        let scale = (tip_force_n.norm() * length)
+            .max(ei / length)
+            .max(weight.norm() * length * length);
+        Ok(Self {
+            config,
+            base,
+            tip_force: tip_force_n,
+            weight,
+            stiffness: Vec3::new(ei, ei, config.torsional_stiffness_n_mm2()),
+            scale,
+            tolerance: 1e-10 * scale,
+        })
+    }
+
+    /// The problem with `fraction` of the loads.
+    fn at(&self, fraction: f64) -> Problem<'a> {
+        Problem {
+            config: self.config,
+            base: self.base,
+            tip_force: self.tip_force * fraction,
+            weight: self.weight * fraction,
+            stiffness: self.stiffness,
+        }
+    }
+
+    /// The solution's `shape`, reached after `iterations` Newton iterations with `residual`
+    /// left (N·mm).
+    fn finished(mut shape: RodShape, iterations: usize, residual: f64) -> RodShape {
+        shape.newton_iterations = iterations;
+        shape.residual_n_mm = residual;
+        shape
+    }
+
+    /// Newton's method from the rigid rod's moment, at full load, then with load continuation in
+    /// ever finer steps.
+    fn solve(&self) -> Result<(RodShape, NewtonStart), RodError> {
+        let length = self.config.length_mm;
+        // The unloaded shape gives the first guess: the moment of the loads about the base for a
+        // rigid rod of that shape, m(0) = ∫ p' × n ds.
+        let rest = self.at(0.0).shoot(Vec3::ZERO, true).1.expect("recorded");
+        let guess = |fraction: f64| {
+            let problem = self.at(fraction);
+            let h = length / self.config.steps as f64;
+            rest.tangents
+                .windows(2)
+                .enumerate()
+                .fold(Vec3::ZERO, |acc, (i, t)| {
+                    let s = (i as f64 + 0.5) * h;
+                    let n = problem.tip_force + problem.weight * (length - s);
+                    acc + ((t[0] + t[1]) * 0.5).cross(n) * h
+                })
+        };
+
+        let mut total_iterations = 0;
+        let mut best_residual = f64::INFINITY;
+        // Full load first; then load continuation in ever finer steps.
+        for load_steps in [1usize, 4, 16, 64] {
+            let mut m0 = guess(1.0 / load_steps as f64);
+            let mut previous = Vec3::ZERO;
+            let mut solved = None;
+            for step in 1..=load_steps {
+                let fraction = step as f64 / load_steps as f64;
+                let start = NewtonStart {
+                    base_moment_n_mm: m0,
+                    jacobian: None,
+                };
+                match newton(&self.at(fraction), start, self.tolerance, self.scale) {
+                    Ok((end, shape, iterations, residual)) => {
+                        let m = end.base_moment_n_mm;
+                        total_iterations += iterations;
+                        // Extrapolate linearly to the next load step.
+                        let next = m + (m - previous);
+                        previous = m;
+                        m0 = next;
+                        if step == load_steps {
+                            solved = Some((end, shape, residual));
+                        }
+                    }
+                    Err((iterations, residual)) => {
+                        total_iterations += iterations;
+                        best_residual = best_residual.min(residual);
+                        break;
                     }
                 }
-                Err((iterations, residual)) => {
-                    total_iterations += iterations;
-                    best_residual = best_residual.min(residual);
-                    break;
-                }
+            }
+            if let Some((end, shape, residual)) = solved {
+                return Ok((Self::finished(shape, total_iterations, residual), end));
             }
         }
-        if let Some((m, residual)) = solved {
-            let mut shape = at_load(1.0).shoot(m, true).1.expect("recorded");
-            shape.newton_iterations = total_iterations;
-            shape.residual_n_mm = residual;
-            return Ok(shape);
-        }
+        Err(RodError::NotConverged {
+            iterations: total_iterations,
+            residual_n_mm: best_residual,
+            tolerance_n_mm: self.tolerance,
+        })
     }
-    Err(RodError::NotConverged {
-        iterations: total_iterations,
-        residual_n_mm: best_residual,
-        tolerance_n_mm: tolerance,
-    })
 }
 
 /// The frame of the rod's tip under no tip load (columns: the cross-section's x and y axes and
 /// the tangent, world frame).
 pub fn rest_tip_frame(config: &RodConfig, base: &RodBase) -> Result<Mat3, RodError> {
-    let rest = solve(config, base, Vec3::ZERO)?;
-    let ei = config.bending_stiffness_n_mm2();
-    let problem = Problem {
-        config,
-        base,
-        tip_force: Vec3::ZERO,
-        weight: config.weight_per_mm(),
-        stiffness: Vec3::new(ei, ei, config.torsional_stiffness_n_mm2()),
-    };
-    Ok(problem.integrate(rest.base_moment_n_mm, false).tip_frame)
+    let loads = Loads::new(config, base, Vec3::ZERO)?;
+    let (rest, _) = loads.solve()?;
+    Ok(loads
+        .at(1.0)
+        .integrate(rest.base_moment_n_mm, false)
+        .tip_frame)
 }
 
 #[cfg(test)]
@@ -685,6 +805,45 @@ mod tests {
                 relative_error(s, shortening) < 0.01,
                 "PL²/EI = {alpha}: shortening {s} L, expected {shortening} L"
             );
+        }
+    }
+
+    /// A rod fit's probe: started from where a nearby rod's solve ended, the solve reaches the
+    /// same shape as from scratch, in fewer iterations, and falls back to the full path from a
+    /// start far away.
+    #[test]
+    fn a_solve_near_a_solved_rod_gives_the_same_shape() {
+        let config = RodConfig {
+            precurvature_per_mm: [1.0 / 60.0, 0.0],
+            ..beam()
+        };
+        let base = RodBase::default();
+        let force = Vec3::new(0.15, -0.05, -0.1);
+        let (solved, end) = solve_near(&config, &base, force, None).unwrap();
+        assert_eq!(solved, solve(&config, &base, force).unwrap());
+        let probe = force + Vec3::new(1e-6, 0.0, 0.0);
+        let cold = solve(&config, &base, probe).unwrap();
+        for start in [
+            end,
+            NewtonStart {
+                jacobian: None,
+                ..end
+            },
+        ] {
+            let (near, _) = solve_near(&config, &base, probe, Some(&start)).unwrap();
+            for (a, b) in near.points_mm.iter().zip(&cold.points_mm) {
+                assert!((*a - *b).max_abs() < 1e-9, "{a:?} vs {b:?}");
+            }
+            assert!(near.newton_iterations < cold.newton_iterations);
+        }
+        // A start from another load entirely still converges, to the same shape.
+        let far = NewtonStart {
+            base_moment_n_mm: Vec3::new(50.0, -80.0, 3.0),
+            ..end
+        };
+        let (from_far, _) = solve_near(&config, &base, probe, Some(&far)).unwrap();
+        for (a, b) in from_far.points_mm.iter().zip(&cold.points_mm) {
+            assert!((*a - *b).max_abs() < 1e-9, "{a:?} vs {b:?}");
         }
     }
 

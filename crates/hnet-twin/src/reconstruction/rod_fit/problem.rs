@@ -86,8 +86,8 @@ pub(super) struct Problem<'a> {
     pub(super) layout: Layout,
     pub(super) pairing: Pairing,
     pub(super) params: DVector<f64>,
-    /// Residuals at `params` when last computed.
-    pub(super) cache: RefCell<Option<(DVector<f64>, DVector<f64>)>>,
+    /// The residuals last computed, where, and the solved rod's base moment there.
+    pub(super) cache: RefCell<Option<Evaluated>>,
     pub(super) solves: Cell<usize>,
     pub(super) jacobians: Cell<usize>,
     /// The first rod failure met.
@@ -128,23 +128,22 @@ impl Problem<'_> {
         }
     }
 
-    /// The rod at `x`, solved with `config`'s steps.
+    /// The rod at `x`, solved with `config`'s steps, from where a solved rod's solve ended
+    /// where `x` is close to that rod's point ([`rod::solve_near`]).
     pub(super) fn solve_with(
         &self,
         x: &DVector<f64>,
         config: &RodConfig,
-    ) -> Result<(Model, RodShape), Unsolved> {
+        near: Option<&NewtonStart>,
+    ) -> Result<(Model, RodShape, NewtonStart), Unsolved> {
         let model = self.model(x, config);
         if model.force.norm() > self.settings.max_force_n {
             return Err(Unsolved::TooLarge);
         }
         self.solves.set(self.solves.get() + 1);
-        let shape = rod::solve(&model.config, &model.base, model.force).map_err(Unsolved::Rod)?;
-        Ok((model, shape))
-    }
-
-    pub(super) fn solve(&self, x: &DVector<f64>) -> Result<(Model, RodShape), Unsolved> {
-        self.solve_with(x, &self.config)
+        let (shape, end) = rod::solve_near(&model.config, &model.base, model.force, near)
+            .map_err(Unsolved::Rod)?;
+        Ok((model, shape, end))
     }
 
     /// Number of residuals: three per point, three for the tip when it counts, one for the
@@ -292,16 +291,26 @@ impl Problem<'_> {
 
     /// Residuals at `x`, or `None` where the rod cannot be solved.
     pub(super) fn evaluate(&self, x: &DVector<f64>) -> Option<DVector<f64>> {
-        if let Some((at, r)) = &*self.cache.borrow()
-            && at == x
+        self.evaluated(x).map(|evaluated| evaluated.residuals)
+    }
+
+    /// Residuals at `x` and the solved rod's base moment, or `None` where the rod cannot be
+    /// solved.
+    pub(super) fn evaluated(&self, x: &DVector<f64>) -> Option<Evaluated> {
+        if let Some(evaluated) = &*self.cache.borrow()
+            && evaluated.at == *x
         {
-            return Some(r.clone());
+            return Some(evaluated.clone());
         }
-        match self.solve(x) {
-            Ok((model, shape)) => {
-                let r = self.residuals_of(x, &shape, &model);
-                *self.cache.borrow_mut() = Some((x.clone(), r.clone()));
-                Some(r)
+        match self.solve_with(x, &self.config, None) {
+            Ok((model, shape, end)) => {
+                let evaluated = Evaluated {
+                    at: x.clone(),
+                    residuals: self.residuals_of(x, &shape, &model),
+                    end,
+                };
+                *self.cache.borrow_mut() = Some(evaluated.clone());
+                Some(evaluated)
             }
             Err(Unsolved::Rod(e)) => {
                 self.failure.borrow_mut().get_or_insert(e);
@@ -310,6 +319,16 @@ impl Problem<'_> {
             Err(Unsolved::TooLarge) => None,
         }
     }
+}
+
+/// The residuals at one point of the fit.
+#[derive(Clone)]
+pub(super) struct Evaluated {
+    pub(super) at: DVector<f64>,
+    pub(super) residuals: DVector<f64>,
+    /// Where the solved rod's Newton's method ended there: where the probes of the Jacobian
+    /// about that point start theirs.
+    pub(super) end: NewtonStart,
 }
 
 /// The size of the residual answered for a step where the rod cannot be solved, mm: far worse
@@ -339,16 +358,19 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
     fn jacobian(&self) -> Option<DMatrix<f64>> {
         self.jacobians.set(self.jacobians.get() + 1);
         let x = self.params.clone();
-        let r0 = self.evaluate(&x)?;
+        let Evaluated {
+            residuals: r0, end, ..
+        } = self.evaluated(&x)?;
+        let near = |probe: &DVector<f64>| self.solve_with(probe, &self.config, Some(&end));
         let mut jacobian = DMatrix::zeros(r0.len(), x.len());
         for (j, h) in self.layout.steps().into_iter().enumerate() {
             let mut probe = x.clone();
             probe[j] += h;
-            let column = match self.solve(&probe) {
-                Ok((model, shape)) => (self.residuals_of(&probe, &shape, &model) - &r0) / h,
+            let column = match near(&probe) {
+                Ok((model, shape, _)) => (self.residuals_of(&probe, &shape, &model) - &r0) / h,
                 Err(_) => {
                     probe[j] = x[j] - h;
-                    let (model, shape) = self.solve(&probe).ok()?;
+                    let (model, shape, _) = near(&probe).ok()?;
                     (&r0 - self.residuals_of(&probe, &shape, &model)) / h
                 }
             };
