@@ -310,9 +310,16 @@ impl ConvGeometry {
     /// This convolution's OIHW weight turned by 180 degrees with its channel axes swapped: the
     /// weight of [`Self::input_gradient_as_convolution`].
     pub fn flipped_weight(&self, weight: &[f32]) -> alloc::vec::Vec<f32> {
-        let rows: alloc::vec::Vec<usize> = (0..self.height.kernel).rev().collect();
-        let columns: alloc::vec::Vec<usize> = (0..self.width.kernel).rev().collect();
+        let (rows, columns) = self.flipped_taps();
         self.gathered_weight(weight, &rows, &columns)
+    }
+
+    /// The kernel rows and columns of [`Self::flipped_weight`], in its order: both reversed.
+    pub fn flipped_taps(&self) -> (alloc::vec::Vec<usize>, alloc::vec::Vec<usize>) {
+        (
+            (0..self.height.kernel).rev().collect(),
+            (0..self.width.kernel).rev().collect(),
+        )
     }
 
     /// The weight of a convolution from this one's output space back onto its input space that

@@ -26,9 +26,12 @@ use alloc::vec::Vec;
 use core::cell::Cell;
 use core::mem::MaybeUninit;
 
+use alloc::sync::Arc;
+
 use crate::direct::{self, PaddedLayout};
 use crate::geometry::{AxisPhase, ConvGeometry};
 use crate::lowering::{lower, raise_adding};
+use crate::prepared::{kind, prepared};
 use crate::products::{Lanes, MatrixView, Threads, broadcast_product, gemm_product};
 use crate::winograd::{self, WinogradLayout};
 
@@ -105,7 +108,7 @@ pub fn forward(
         return y;
     }
     if let Some(layout) = PaddedLayout::of(g) {
-        let packed = direct::pack_weight(weight, g.out_channels, taps);
+        let packed = packed_weight(weight, g.out_channels, taps);
         return forward_direct(g, &layout, x, &packed, bias, relu);
     }
     if relu {
@@ -150,6 +153,30 @@ pub fn forward(
     y
 }
 
+/// [`direct::pack_weight`], kept for the next call with the same weight ([`prepared`]).
+fn packed_weight(weight: &[f32], out_channels: usize, taps: usize) -> Arc<[f32]> {
+    prepared(weight, vec![kind::PACKED, out_channels, taps], |weight| {
+        direct::pack_weight(weight, out_channels, taps)
+    })
+}
+
+/// [`ConvGeometry::gathered_weight`], kept for the next call with the same weight
+/// ([`prepared`]).
+fn gathered_weight(
+    g: &ConvGeometry,
+    weight: &[f32],
+    rows: &[usize],
+    columns: &[usize],
+) -> Arc<[f32]> {
+    let mut recipe = vec![kind::GATHERED];
+    recipe.extend(g.weight_shape());
+    recipe.push(rows.len());
+    recipe.extend(rows.iter().chain(columns));
+    prepared(weight, recipe, |weight| {
+        g.gathered_weight(weight, rows, columns)
+    })
+}
+
 /// Output pixels per band of the forward pass (at least one output row).
 const BAND_PIXELS: usize = 256;
 
@@ -184,8 +211,11 @@ fn forward_by_winograd(
         return None;
     }
     let layout = WinogradLayout::of(g, crate::largest_winograd_tile())?;
-    let transformed =
-        winograd::transform_weight(weight, g.out_channels, g.in_channels, layout.tile());
+    let tile = layout.tile();
+    let recipe = vec![kind::WINOGRAD, g.out_channels, g.in_channels, tile.side()];
+    let transformed = prepared(weight, recipe, |weight| {
+        winograd::transform_weight(weight, g.out_channels, g.in_channels, tile)
+    });
     // SAFETY: `winograd::forward_image` writes every value of `y`.
     Some(unsafe {
         forward_padded(g, x, layout.len(g.in_channels), |x, window, y| {
@@ -239,12 +269,13 @@ pub fn input_gradient(
     );
     assert_eq!(weight.len(), g.out_channels * taps, "weight size");
     if let Some(adjoint) = g.input_gradient_as_convolution() {
-        let flipped = g.flipped_weight(weight);
+        let (rows, columns) = g.flipped_taps();
+        let flipped = gathered_weight(g, weight, &rows, &columns);
         if let Some(dx) = forward_by_winograd(&adjoint, dy, &flipped, bias, false) {
             return dx;
         }
         if let Some(layout) = PaddedLayout::of(&adjoint) {
-            let packed = direct::pack_weight(&flipped, adjoint.out_channels, adjoint.taps());
+            let packed = packed_weight(&flipped, adjoint.out_channels, adjoint.taps());
             return forward_direct(&adjoint, &layout, dy, &packed, bias, false);
         }
     }
@@ -325,7 +356,7 @@ fn input_gradient_by_phases(
                 height,
                 width,
             };
-            let phase_weight = g.gathered_weight(weight, &row.taps, &column.taps);
+            let phase_weight = gathered_weight(g, weight, &row.taps, &column.taps);
             // The scatter below reads `count` rows and columns of each class's planes.
             assert!(height.output >= row.count && width.output >= column.count);
             let values = forward(&phase, dy, &phase_weight, class_bias, false);

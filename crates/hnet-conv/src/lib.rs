@@ -13,6 +13,8 @@
 //! stride 2; [`geometry::Axis::gradient_phases`]), which the direct kernels compute. The 2 x 2
 //! max pooling between the encoder's blocks has its own kernel too
 //! ([`pooling`], [`max_pool2x2`]): flex pools through a general 3-D max pooling with indices.
+//! Each thread keeps the weights it prepared (Winograd-transformed, packed, turned) for its next
+//! call with the same weight, checked bit for bit against a copy (`prepared.rs`).
 //!
 //! Model code calls [`conv2d_module`] / [`conv_transpose2d_module`] where it would call a
 //! burn-nn module's `forward` (or [`conv2d`] / [`conv_transpose2d`] where it would call Burn's
@@ -31,6 +33,7 @@ pub mod geometry;
 pub mod kernels;
 pub mod lowering;
 pub mod pooling;
+mod prepared;
 pub mod products;
 pub mod winograd;
 
