@@ -168,6 +168,13 @@ pub struct TwinDomainSampler {
 impl TwinDomainSampler {
     /// The sampler of `domain`; `None` when it is not the twin's phantom bench.
     pub fn new(domain: &ForceDomain) -> Option<Self> {
+        let config = Self::config(domain)?;
+        let backgrounds = Backgrounds::phantom(&config.views);
+        Some(Self::with_backgrounds(config, backgrounds))
+    }
+
+    /// The twin settings of `domain`'s pairs; `None` when it is not the twin's phantom bench.
+    pub fn config(domain: &ForceDomain) -> Option<TwinConfig> {
         if !domain.phantom_backgrounds || domain.scenes.plate.is_some() {
             return None;
         }
@@ -184,11 +191,16 @@ impl TwinDomainSampler {
             a: view(domain.views_deg[0]),
             b: view(domain.views_deg[1]),
         };
-        let backgrounds = Backgrounds::phantom(&config.views);
-        Some(Self {
+        Some(config)
+    }
+
+    /// The sampler of `config`'s pairs on `backgrounds` (its views' phantoms:
+    /// [`Backgrounds::phantom`], or [`Backgrounds::phantom_view`] for each).
+    pub fn with_backgrounds(config: TwinConfig, backgrounds: Backgrounds) -> Self {
+        Self {
             config,
             backgrounds,
-        })
+        }
     }
 
     /// Adds pair `index` of the run seeded `seed` to `set`, with its masks and true force.

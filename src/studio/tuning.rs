@@ -24,7 +24,7 @@ use crate::module_worker::{ModuleWorker, ModuleWorkerError};
 use crate::storage::{self, KeptWeights};
 use hnet_twin::model_facts::ForceDomain;
 use hnet_twin::model_facts::ModelFacts;
-use hnet_twin::simulator::scene::TwinError;
+use hnet_twin::simulator::scene::{Backgrounds, TwinError};
 
 /// The kept weights' file name.
 pub const KEPT_NAME: &str = "hnet-fine-tuned.bpk";
@@ -325,9 +325,15 @@ async fn twin_pairs(
     rehearse: bool,
 ) -> Result<(Option<TuningSet>, Option<TuningSet>), TwinError> {
     yield_to_browser().await;
-    let Some(sampler) = domain.and_then(TwinDomainSampler::new) else {
+    let Some(config) = domain.and_then(TwinDomainSampler::config) else {
         return Ok((None, None));
     };
+    // Each view's phantom takes about 70 ms to render on the page's thread: the browser answers
+    // in between.
+    let a = Backgrounds::phantom_view(&config.views.a);
+    yield_to_browser().await;
+    let b = Backgrounds::phantom_view(&config.views.b);
+    let sampler = TwinDomainSampler::with_backgrounds(config, Backgrounds::of_views(a, b));
     let mut sets = Vec::new();
     let wanted = [
         (REFERENCE_PAIRS, REFERENCE_SEED, true),

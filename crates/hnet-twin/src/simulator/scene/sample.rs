@@ -130,11 +130,19 @@ pub struct Backgrounds {
 impl Backgrounds {
     /// The built-in phantom, rendered in each view's direction.
     pub fn phantom(views: &Biplane) -> Self {
+        Self::of_views(Self::phantom_view(&views.a), Self::phantom_view(&views.b))
+    }
+
+    /// The built-in phantom rendered in `view`'s direction (512 px): one view's share of
+    /// [`Self::phantom`], for callers that must answer between the two (the page's thread).
+    pub fn phantom_view(view: &CArm) -> BackgroundSource {
+        BackgroundSource::phantom(view, 512)
+    }
+
+    /// One source for each view.
+    pub fn of_views(a: BackgroundSource, b: BackgroundSource) -> Self {
         Self {
-            per_view: [
-                vec![BackgroundSource::phantom(&views.a, 512)],
-                vec![BackgroundSource::phantom(&views.b, 512)],
-            ],
+            per_view: [vec![a], vec![b]],
         }
     }
 
