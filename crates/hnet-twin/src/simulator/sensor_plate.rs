@@ -423,8 +423,12 @@ fn contact_step(
     // and the tip comes to rest λ behind the anchor, against it: q = anchor - λ·u.
     let direction = |psi: f64| e1 * psi.cos() + e2 * psi.sin();
     let force_of = |x: Vec3| n * x.x() + direction(x.y()) * (friction * x.x());
-    let tip_under = |force: Vec3| rod::solve(config, base, force).map(|s| s.tip_mm());
-    let tip = tip_under(at.force)?;
+    // The rod under the last force, then its compliance's probes from where that solve ended.
+    let (last, end) = rod::solve_near(config, base, at.force, None)?;
+    let tip = last.tip_mm();
+    let tip_under = |force: Vec3| {
+        rod::solve_near(config, base, force, Some(&end)).map(|(shape, _)| shape.tip_mm())
+    };
     let model = TipModel {
         compliance: compliance(&tip_under, at.force, tip)?,
         tip,
