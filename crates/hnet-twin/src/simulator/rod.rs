@@ -31,7 +31,7 @@ use crate::vec3::{Mat3, Quat, Vec3};
 
 mod held;
 
-pub use held::{HeldRod, solve_held};
+pub use held::{HeldJacobian, HeldRod, HeldStart, solve_held};
 
 /// Mechanical and numerical settings of the rod.
 ///

@@ -26,7 +26,9 @@ use nalgebra::{Matrix3, Vector3};
 use rand::{Rng, RngExt};
 use serde::{Deserialize, Serialize};
 
-use crate::simulator::rod::{self, RodBase, RodConfig, RodError, RodShape};
+use crate::simulator::rod::{
+    self, HeldJacobian, HeldStart, RodBase, RodConfig, RodError, RodShape,
+};
 use crate::vec3::Vec3;
 
 /// The sensor plate and its two actuators: the settings of a set.
@@ -329,6 +331,7 @@ pub fn solve(
         anchor: rest_tip,
         force: Vec3::ZERO,
         base_moment: Some(rest.base_moment_n_mm),
+        jacobians: Jacobians::default(),
         state: ContactState::Stick,
     };
     let mut pending: Vec<Vec3> = moves.collect();
@@ -377,8 +380,20 @@ struct Rest {
     force: Vec3,
     /// The rod's base moment there, N·mm (a start for the next step).
     base_moment: Option<Vec3>,
+    /// The last Jacobians of the held solves that sticking and sliding take (a start for the
+    /// next step's of the same kind).
+    jacobians: Jacobians,
     /// Whether it got there sticking or sliding.
     state: ContactState,
+}
+
+/// The last Jacobians of the two holds along the path ([`HeldStart::jacobian`]): their
+/// parameters mean different things (the force when sticking; the normal force, the slide's
+/// direction and its length when sliding), so each is reused only by its own kind.
+#[derive(Debug, Clone, Copy, Default)]
+struct Jacobians {
+    stick: Option<HeldJacobian>,
+    slip: Option<HeldJacobian>,
 }
 
 /// A step of the loading path smaller than this that fails is an error, mm.
@@ -402,9 +417,17 @@ fn contact_step(
         config,
         base,
         &|force| (force, anchor),
-        (at.force, at.base_moment),
+        HeldStart {
+            parameters: at.force,
+            base_moment_n_mm: at.base_moment,
+            jacobian: at.jacobians.stick,
+        },
         [1e-5; 3],
     );
+    let stick_jacobian = match &stick {
+        Ok(held) => held.jacobian,
+        Err(_) => at.jacobians.stick,
+    };
     let inside_cone = |f: Vec3| {
         let normal = f.dot(n);
         (f - n * normal).norm() <= friction * normal
@@ -416,6 +439,10 @@ fn contact_step(
             anchor,
             force: held.parameters,
             base_moment: Some(held.shape.base_moment_n_mm),
+            jacobians: Jacobians {
+                stick: stick_jacobian,
+                slip: at.jacobians.slip,
+            },
             state: ContactState::Stick,
         });
     }
@@ -445,7 +472,11 @@ fn contact_step(
         config,
         base,
         &|x| (force_of(x), anchor - direction(x.y()) * x.z()),
-        (guess, at.base_moment),
+        HeldStart {
+            parameters: guess,
+            base_moment_n_mm: at.base_moment,
+            jacobian: at.jacobians.slip,
+        },
         [1e-6, 1e-5, 1e-5],
     )
     .map_err(|e| match e {
@@ -466,6 +497,10 @@ fn contact_step(
         anchor: anchor - direction(x.y()) * x.z(),
         force: force_of(x),
         base_moment: Some(held.shape.base_moment_n_mm),
+        jacobians: Jacobians {
+            stick: stick_jacobian,
+            slip: held.jacobian,
+        },
         state: ContactState::Slip,
     })
 }
