@@ -178,9 +178,14 @@ fn offer_download(name: &str, bytes: &[u8], mime: &str) -> Result<(), JsError> {
 /// Waits for the browser to run its event loop once (so that a busy indicator set just before
 /// is painted before long work starts).
 pub async fn yield_to_browser() {
+    sleep_ms(0).await;
+}
+
+/// Waits `ms` milliseconds on the browser's timer, the page answering meanwhile.
+pub async fn sleep_ms(ms: i32) {
     let promise = Promise::new(&mut |resolve, _| {
         if let Some(window) = web_sys::window() {
-            let _ = window.set_timeout_with_callback_and_timeout_and_arguments_0(&resolve, 0);
+            let _ = window.set_timeout_with_callback_and_timeout_and_arguments_0(&resolve, ms);
         }
     });
     let _ = JsFuture::from(promise).await;

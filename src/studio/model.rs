@@ -7,6 +7,7 @@ use std::rc::Rc;
 use leptos::prelude::*;
 
 use super::{PairStore, Studio};
+use crate::browser::sleep_ms;
 use crate::bundled::{self, FetchError};
 use crate::compute::BackendChoice;
 use crate::compute::{self, Backend};
@@ -309,6 +310,10 @@ pub fn load_model(studio: Studio, weights: Option<(Rc<[u8]>, String, WeightsOrig
         match load_engine(studio, weights).await {
             Ok(engine) => {
                 let engine = Rc::new(engine);
+                let had_workers = matches!(
+                    studio.network.cpu_workers.get_untracked(),
+                    WorkersStatus::Running { .. }
+                );
                 studio.network.cpu_workers.set(WorkersStatus::NotUsed);
                 studio.network.model.set(ModelState::Ready(engine.clone()));
                 if name.is_some() {
@@ -317,6 +322,22 @@ pub fn load_model(studio: Studio, weights: Option<(Rc<[u8]>, String, WeightsOrig
                         .info(format!("Loaded {}", engine.weights_name));
                 }
                 studio.network.predictions.set(HashMap::new());
+                if had_workers {
+                    // Mid-session (weights chosen or kept) the page already read on workers:
+                    // the new weights' first estimate waits for their own workers instead of
+                    // holding the page's thread for a whole pass (about 0.25 s at 224 px). When
+                    // the page opens, its thread reads first, so that the workers' start never
+                    // delays the first estimate.
+                    studio.start_workers(&engine);
+                    while studio.network.uses(&engine)
+                        && matches!(
+                            studio.network.cpu_workers.get_untracked(),
+                            WorkersStatus::Starting(_)
+                        )
+                    {
+                        sleep_ms(50).await;
+                    }
+                }
                 studio.run_model();
             }
             Err(e) => {
