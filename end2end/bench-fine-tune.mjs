@@ -1,7 +1,39 @@
 // The page's fine-tune on this machine (docs/benchmarks.md, "Fine-tuning in the page"): how long
-// its epochs take and whether the page keeps answering while the worker trains.
+// its epochs take and whether the page keeps answering while the worker trains, and when the
+// result is kept. Clicks are timed twice: by Playwright (its own checks and polling included)
+// and inside the page, from the click to the next frame drawn, idle and while it trains. The
+// browser's long tasks (over 50 ms) are listed from the start of the run, and after Keep.
 // Usage, after `trunk build --release` (or `trunk build`): node end2end/bench-fine-tune.mjs [PAIRS] [EPOCHS]
 import { serveDist, launchBrowser, openPage, waitForModel } from "./harness.mjs";
+
+const TABS = ["#tab-images", "#tab-twin", "#tab-images", "#tab-twin", "#tab-images", "#tab-twin"];
+
+/// Each of `tabs` clicked inside the page, the time from the click to the next frame drawn, ms.
+async function clicksToFrame(page, tabs) {
+  const times = [];
+  for (const tab of tabs) {
+    await page.waitForTimeout(300);
+    times.push(await page.evaluate(async (selector) => {
+      const t0 = performance.now();
+      document.querySelector(selector).click();
+      await new Promise((frame) => requestAnimationFrame(() => setTimeout(frame, 0)));
+      return Math.round(performance.now() - t0);
+    }, tab));
+  }
+  return times;
+}
+
+/// Each of `tabs` clicked by Playwright, until the tab reads as selected, ms.
+async function playwrightClicks(page, tabs) {
+  const times = [];
+  for (const tab of tabs) {
+    const t0 = Date.now();
+    await page.click(tab);
+    await page.waitForSelector(`${tab}[aria-selected=true]`);
+    times.push(Date.now() - t0);
+  }
+  return times;
+}
 
 const pairs = Number(process.argv[2] ?? 10);
 const epochs = Number(process.argv[3] ?? 2);
@@ -18,12 +50,18 @@ try {
     await page.click("#keep-draft");
     await page.waitForFunction((n) => document.querySelectorAll("#pairs li[data-id]").length === n, i + 1);
   }
+  const idle = { clicks_ms: await playwrightClicks(page, TABS), click_to_frame_ms: await clicksToFrame(page, TABS) };
   await page.click("#tune-epochs", { clickCount: 3 });
   await page.keyboard.type(String(epochs));
   await page.keyboard.press("Tab");
   // The page's event loop, sampled every 50 ms while the worker trains: the longest wait for a
   // timer is the longest the page could not answer input.
   await page.evaluate(() => {
+    window.__start = performance.now();
+    window.__longTasks = [];
+    new PerformanceObserver((list) => {
+      for (const task of list.getEntries()) window.__longTasks.push([Math.round(task.startTime - window.__start), Math.round(task.duration)]);
+    }).observe({ type: "longtask" });
     window.__lags = [];
     let last = performance.now();
     window.__lagTimer = setInterval(() => {
@@ -36,26 +74,8 @@ try {
   await page.click("#tune-start");
   // A click on a tab answers while it trains.
   await page.waitForFunction(() => /Epoch 1 of/.test(document.querySelector("#tune-progress-text")?.textContent ?? ""), null, { timeout: 600_000 });
-  const clicks = [];
-  for (const tab of ["#tab-images", "#tab-twin", "#tab-images", "#tab-twin"]) {
-    const t0 = Date.now();
-    await page.click(tab);
-    await page.waitForSelector(`${tab}[aria-selected=true]`);
-    clicks.push(Date.now() - t0);
-  }
-  // The same tabs clicked inside the page, timed from the click to the next frame drawn: what
-  // the page itself takes to answer, without Playwright's own checks and polling (which take
-  // 30-120 ms on an idle page here).
-  const clickToFrame = [];
-  for (const tab of ["#tab-images", "#tab-twin", "#tab-images", "#tab-twin", "#tab-images", "#tab-twin"]) {
-    await page.waitForTimeout(300);
-    clickToFrame.push(await page.evaluate(async (selector) => {
-      const t0 = performance.now();
-      document.querySelector(selector).click();
-      await new Promise((frame) => requestAnimationFrame(() => setTimeout(frame, 0)));
-      return Math.round(performance.now() - t0);
-    }, tab));
-  }
+  const clicks = await playwrightClicks(page, TABS.slice(0, 4));
+  const clickToFrame = await clicksToFrame(page, TABS);
   await page.waitForSelector("#tune-table", { timeout: 1_800_000 });
   const seconds = (Date.now() - started) / 1000;
   const lags = await page.evaluate(() => {
@@ -65,7 +85,18 @@ try {
   });
   const rows = await page.$$eval("#tune-table tbody tr", (trs) => trs.map((tr) => [...tr.cells].map((c) => c.textContent)));
   const caption = await page.textContent("#tune-table caption");
-  console.log(JSON.stringify({ pairs, epochs, seconds, caption, clicks_ms: clicks, click_to_frame_ms: clickToFrame, event_loop_lag_ms: lags, table: rows, reference: await page.textContent("#tune-reference") }));
+  const reference = await page.textContent("#tune-reference");
+  // Keep: the result stored, chosen and loaded.
+  const longTasksWhileTuning = await page.evaluate(() => window.__longTasks.splice(0));
+  const kept = await page.evaluate(() => performance.now() - window.__start);
+  await page.click("#tune-keep");
+  await page.waitForFunction(() => document.querySelector("#weights")?.textContent === "hnet-fine-tuned.bpk", null, { timeout: 60_000 });
+  await page.waitForTimeout(5000);
+  const longTasksAfterKeep = await page.evaluate((kept) => window.__longTasks.map(([at, ms]) => [Math.round(at - kept), ms]), kept);
+  console.log(JSON.stringify({
+    pairs, epochs, seconds, caption, idle, clicks_ms: clicks, click_to_frame_ms: clickToFrame, event_loop_lag_ms: lags,
+    long_tasks_ms: { while_tuning: longTasksWhileTuning, after_keep: longTasksAfterKeep }, table: rows, reference,
+  }));
 } finally {
   await context.close();
   await server.close();

@@ -328,7 +328,7 @@ async fn twin_pairs(
     let Some(config) = domain.and_then(TwinDomainSampler::config) else {
         return Ok((None, None));
     };
-    // Each view's phantom takes about 70 ms to render on the page's thread: the browser answers
+    // Each view's phantom takes about 0.1 s to render on the page's thread: the browser answers
     // in between.
     let a = Backgrounds::phantom_view(&config.views.a);
     yield_to_browser().await;

@@ -1038,6 +1038,24 @@ mod tests {
         )
         .unwrap();
         assert_eq!(estimate.tip, TipUse::SetAside);
+        // A catalogue entry 5 mm longer than the catheter: the rod may run on past the seen tip
+        // by that much (`MAX_ROD_BEYOND_SEEN_TIP_MM`), so it is not refused for it.
+        let long_by_5 = CatalogueCatheter {
+            flexible_length_mm: catheter.flexible_length_mm + 5.0,
+            ..catheter.clone()
+        };
+        let read = physics_estimate(
+            [mask(0), mask(1)],
+            &PhysicsSetup::blind(cameras, &long_by_5, &nominal),
+        )
+        .unwrap();
+        assert_eq!(read.tip, TipUse::SetAside);
+        let seen_tip = read.reconstruction.points_mm[read.reconstruction.points_mm.len() - 1];
+        let beyond_mm = rod_beyond_mm(&read.fit.shape, seen_tip);
+        assert!(
+            (1.0..=MAX_ROD_BEYOND_SEEN_TIP_MM).contains(&beyond_mm),
+            "{beyond_mm} mm"
+        );
         // A catheter the masks do not show (twice as long): it fits only with its base far
         // beyond the fixture's play, or by running on past the seen tip, and no force is given.
         let (config, sample) = bench_sample(128, 11, 0);

@@ -467,6 +467,11 @@ fn solve3(a: [[f64; 3]; 3], b: Vec3) -> Option<Vec3> {
     x.iter().all(|v| v.is_finite()).then_some(Vec3(x))
 }
 
+/// How far a chord step (Newton's step with a Jacobian reused from a nearby solve) must bring the
+/// residual down, as a share of where it was, to be kept: else a fresh Jacobian is computed.
+/// [`solve_near`]'s and [`solve_held`]'s.
+const CHORD_KEPT_BELOW: f64 = 0.5;
+
 /// Where Newton's method on the base moment ended for one solved rod: the start for rods whose
 /// settings, base and load differ little from its own ([`solve_near`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -522,7 +527,7 @@ fn newton(
                 let candidate = m0 + step;
                 let (r, candidate_shape) = shot(candidate);
                 let n = r.norm();
-                if n.is_finite() && n <= 0.5 * norm {
+                if n.is_finite() && n <= CHORD_KEPT_BELOW * norm {
                     m0 = candidate;
                     residual = r;
                     shape = candidate_shape;

@@ -86,7 +86,7 @@ pub(super) struct Problem<'a> {
     pub(super) layout: Layout,
     pub(super) pairing: Pairing,
     pub(super) params: DVector<f64>,
-    /// The residuals last computed, where, and the solved rod's base moment there.
+    /// The residuals last computed, where, and where the rod's solve there ended.
     pub(super) cache: RefCell<Option<Evaluated>>,
     pub(super) solves: Cell<usize>,
     pub(super) jacobians: Cell<usize>,
@@ -294,8 +294,8 @@ impl Problem<'_> {
         self.evaluated(x).map(|evaluated| evaluated.residuals)
     }
 
-    /// Residuals at `x` and the solved rod's base moment, or `None` where the rod cannot be
-    /// solved.
+    /// Residuals at `x` and where the rod's solve there ended, or `None` where the rod cannot
+    /// be solved.
     pub(super) fn evaluated(&self, x: &DVector<f64>) -> Option<Evaluated> {
         if let Some(evaluated) = &*self.cache.borrow()
             && evaluated.at == *x

@@ -117,7 +117,7 @@ pub fn solve_held(
                 let m = m0 + Vec3([delta[0], delta[1], delta[2]]);
                 let t = theta + Vec3([delta[3], delta[4], delta[5]]);
                 let trial = residual(m, t);
-                if trial.norm().is_finite() && trial.norm() <= 0.5 * norm {
+                if trial.norm().is_finite() && trial.norm() <= CHORD_KEPT_BELOW * norm {
                     (m0, theta, r, norm) = (m, t, trial, trial.norm());
                     continue;
                 }
