@@ -74,6 +74,9 @@ try {
   await page.click("#tune-start");
   // A click on a tab answers while it trains.
   await page.waitForFunction(() => /Epoch 1 of/.test(document.querySelector("#tune-progress-text")?.textContent ?? ""), null, { timeout: 600_000 });
+  // The start (twin pairs drawn, workers loaded, the starting network scored) ends here.
+  const trainingFrom = (Date.now() - started) / 1000;
+  const workers = Number((await page.textContent("#tune-progress-text")).match(/ · (\d+) workers?$/)?.[1]);
   const clicks = await playwrightClicks(page, TABS.slice(0, 4));
   const clickToFrame = await clicksToFrame(page, TABS);
   await page.waitForSelector("#tune-table", { timeout: 1_800_000 });
@@ -94,7 +97,7 @@ try {
   await page.waitForTimeout(5000);
   const longTasksAfterKeep = await page.evaluate((kept) => window.__longTasks.map(([at, ms]) => [Math.round(at - kept), ms]), kept);
   console.log(JSON.stringify({
-    pairs, epochs, seconds, caption, idle, clicks_ms: clicks, click_to_frame_ms: clickToFrame, event_loop_lag_ms: lags,
+    pairs, epochs, workers, seconds, training_from_s: trainingFrom, caption, idle, clicks_ms: clicks, click_to_frame_ms: clickToFrame, event_loop_lag_ms: lags,
     long_tasks_ms: { while_tuning: longTasksWhileTuning, after_keep: longTasksAfterKeep }, table: rows, reference,
   }));
 } finally {

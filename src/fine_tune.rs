@@ -195,7 +195,7 @@ impl TwinDomainSampler {
     }
 
     /// The sampler of `config`'s pairs on `backgrounds` (its views' phantoms:
-    /// [`Backgrounds::phantom`], or [`Backgrounds::phantom_view`] for each).
+    /// [`Backgrounds::phantom`], or [`Backgrounds::phantom_view_in_bands`] for each).
     pub fn with_backgrounds(config: TwinConfig, backgrounds: Backgrounds) -> Self {
         Self {
             config,

@@ -1032,6 +1032,9 @@ test("fine-tune on my pairs: refused without labelled pairs, a one-epoch run wit
     await page.waitForSelector("#tune-progress");
     assert.match(await page.textContent("#tune-progress-text"), /^3 labelled pairs \(3 with a force label\)\. Scoring/);
     await page.waitForFunction(() => /^2 of your pairs trained on and 8 twin pairs rehearsed, 1 held back \(3 with a force label\)\. Epoch 1 of at most 1/.test(document.querySelector("#tune-progress-text")?.textContent), null, { timeout: 120_000 });
+    // Each step is split between the tuning workers: one per core, at most the batch of 2.
+    const tuningWorkers = await page.evaluate(() => Math.min(Math.max(navigator.hardwareConcurrency || 1, 1), 2));
+    assert.match(await page.textContent("#tune-progress-text"), tuningWorkers === 1 ? / · 1 worker$/ : / · 2 workers$/);
     // The page answers while the worker trains.
     await page.click("#tab-images");
     await page.waitForSelector("#tune-table", { timeout: 300_000 });

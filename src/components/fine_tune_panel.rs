@@ -110,11 +110,15 @@ fn running(studio: Studio, p: TuningProgress) -> impl IntoView {
     let left = p
         .seconds_left
         .map(|s| format!(" · at most {} left", minutes(s)));
+    let workers = match p.workers {
+        1 => " · 1 worker".to_string(),
+        n => format!(" · {n} workers"),
+    };
     let what = if p.before.is_none() {
         "Scoring the held-back pairs…".to_string()
     } else {
         format!(
-            "Epoch {epoch} of at most {max_epochs} · step {} of {}{}{}{}",
+            "Epoch {epoch} of at most {max_epochs} · step {} of {}{}{}{}{workers}",
             p.steps.0,
             p.steps.1,
             loss.unwrap_or_default(),

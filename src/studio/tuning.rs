@@ -1,6 +1,7 @@
-//! "Fine-tune on my pairs" on the page's state: the fine-tuning worker (crates/hnet-tune in a
-//! [`ModuleWorker`]) driven step by step, its progress, the result kept or discarded, and the
-//! kept weights chosen in the model bar. Nothing is stored until the user keeps a result: a tab
+//! "Fine-tune on my pairs" on the page's state: the fine-tuning workers (crates/hnet-tune, one
+//! [`ModuleWorker`] per core, at most the batch) driven step by step, each step split between
+//! them and the average of their gradients relayed to each ([`hnet_model::fine_tune::Share`]),
+//! its progress, the result kept or discarded, and the kept weights chosen in the model bar. Nothing is stored until the user keeps a result: a tab
 //! closed or a run stopped midway leaves the weights in use, and those kept before, as they were.
 
 use std::rc::Rc;
@@ -8,11 +9,13 @@ use std::rc::Rc;
 use hnet_model::fine_tune::{EpochReport, FineTuneSettings, FinishReason, HeldBackScores};
 use js_sys::{Array, Float32Array, Uint8Array};
 use leptos::prelude::*;
+use wasm_bindgen::JsCast;
 use wasm_bindgen::JsValue;
 
 use super::{ModelState, Studio, load_model};
 use crate::browser::now_ms;
 use crate::browser::yield_to_browser;
+use crate::cpu_pool::pool_size;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
 use crate::fine_tune::{
@@ -25,6 +28,7 @@ use crate::storage::{self, KeptWeights};
 use hnet_twin::model_facts::ForceDomain;
 use hnet_twin::model_facts::ModelFacts;
 use hnet_twin::simulator::scene::{Backgrounds, TwinError};
+use hnet_twin::simulator::synthetic_xray::BackgroundSource;
 
 /// The kept weights' file name.
 pub const KEPT_NAME: &str = "hnet-fine-tuned.bpk";
@@ -46,6 +50,8 @@ pub enum TuningState {
 pub struct TuningProgress {
     /// Pairs trained on and held back, and those with a force label.
     pub split: (usize, usize),
+    /// Workers each step is split between (one per core, at most the batch).
+    pub workers: usize,
     /// Pairs in the set, and of them with a force label.
     pub pairs: usize,
     /// Twin pairs rehearsed beside them (counted in `split`'s trained-on pairs).
@@ -87,13 +93,13 @@ pub struct TuningResult {
     pub weights: Option<Rc<[u8]>>,
 }
 
-/// The fine-tune's state: the run and its worker, and the weights kept from an earlier one.
+/// The fine-tune's state: the run and its workers, and the weights kept from an earlier one.
 #[derive(Clone, Copy)]
 pub struct TuningStore {
     /// The fine-tune running or ended.
     pub state: RwSignal<TuningState, LocalStorage>,
-    /// Its worker, while it runs.
-    worker: StoredValue<Option<Rc<ModuleWorker>>, LocalStorage>,
+    /// Its workers, while it runs (the first scores the epochs and holds the best weights).
+    workers: StoredValue<Vec<Rc<ModuleWorker>>, LocalStorage>,
     /// The fine-tuned weights kept in the browser, if any.
     pub kept: RwSignal<Option<Rc<KeptWeights>>, LocalStorage>,
 }
@@ -103,7 +109,7 @@ impl TuningStore {
     pub fn new() -> Self {
         Self {
             state: RwSignal::new_local(TuningState::Idle),
-            worker: StoredValue::new_local(None),
+            workers: StoredValue::new_local(Vec::new()),
             kept: RwSignal::new_local(None),
         }
     }
@@ -116,8 +122,8 @@ impl Default for TuningStore {
 }
 
 impl Studio {
-    /// Starts fine-tuning the loaded network on the page's labelled pairs with `settings`, in a
-    /// worker of its own; with `rehearse`, on twin pairs of the weights' own domain too (when
+    /// Starts fine-tuning the loaded network on the page's labelled pairs with `settings`, in
+    /// workers of its own, one per core (at most the batch), each step split between them; with `rehearse`, on twin pairs of the weights' own domain too (when
     /// their file records it). Says why when it cannot.
     pub fn start_tuning(&self, settings: FineTuneSettings, rehearse: bool) {
         if matches!(self.tuning.state.get_untracked(), TuningState::Running(_)) {
@@ -144,15 +150,25 @@ impl Studio {
             .as_ref()
             .and_then(|h| ModelFacts::read(&h.provenance).ok())
             .and_then(|facts| facts.force_domain);
-        let worker = match ModuleWorker::spawn("hnet-tune", "the fine-tuning worker") {
-            Ok(worker) => Rc::new(worker),
-            Err(e) => {
-                self.notices
-                    .error(format!("Cannot fine-tune: {}", with_causes(&e)));
-                return;
+        // One worker per core, at most one per pair of the batch; the run goes on with those
+        // that started.
+        let mut workers = Vec::new();
+        for _ in 0..pool_size().clamp(1, settings.batch_size.max(1)) {
+            match ModuleWorker::spawn("hnet-tune", "the fine-tuning worker") {
+                Ok(worker) => workers.push(Rc::new(worker)),
+                Err(e) if workers.is_empty() => {
+                    self.notices
+                        .error(format!("Cannot fine-tune: {}", with_causes(&e)));
+                    return;
+                }
+                Err(_) => break,
             }
+        }
+        let settings = FineTuneSettings {
+            replicas: workers.len(),
+            ..settings
         };
-        self.tuning.worker.set_value(Some(worker.clone()));
+        self.tuning.workers.set_value(workers.clone());
         let studio = *self;
         let (start_name, start_provenance) = (
             engine.weights_name.clone(),
@@ -164,6 +180,7 @@ impl Studio {
         );
         self.tuning.state.set(TuningState::Running(TuningProgress {
             split: (0, 0),
+            workers: workers.len(),
             pairs: set.pairs,
             rehearsed: 0,
             with_force: set.with_force,
@@ -180,8 +197,8 @@ impl Studio {
             let (reference, rehearsal) = match twin_pairs(domain.as_ref(), rehearse).await {
                 Ok(sets) => sets,
                 Err(e) => {
-                    worker.stop("the fine-tune did not start");
-                    studio.tuning.worker.set_value(None);
+                    stop_all(&workers, "the fine-tune did not start");
+                    studio.tuning.workers.set_value(Vec::new());
                     studio.tuning.state.set(TuningState::Idle);
                     studio.notices.error(format!(
                         "Cannot fine-tune: the twin pairs of the weights' domain: {e}"
@@ -204,9 +221,9 @@ impl Studio {
                 rehearsal: rehearsal.as_ref(),
                 settings,
             };
-            let outcome = run(studio, &worker, &start).await;
-            worker.stop("the fine-tune is over");
-            studio.tuning.worker.set_value(None);
+            let outcome = run(studio, &workers, &start).await;
+            stop_all(&workers, "the fine-tune is over");
+            studio.tuning.workers.set_value(Vec::new());
             match outcome {
                 Ok(result) => {
                     let said = match (result.reason, &result.best) {
@@ -239,9 +256,7 @@ impl Studio {
 
     /// Stops the running fine-tune: its best epoch so far, if any, can still be kept.
     pub fn stop_tuning(&self) {
-        if let Some(worker) = self.tuning.worker.get_value() {
-            worker.stop("stopped by the user");
-        }
+        stop_all(&self.tuning.workers.get_value(), STOPPED_BY_USER);
     }
 
     /// Keeps the ended fine-tune's weights: stored in the browser, chosen, and loaded.
@@ -318,6 +333,10 @@ impl Studio {
     }
 }
 
+/// Rows of the phantom rendered between two answers of the browser: an eighth of a view, about
+/// 15 ms on the page's thread.
+const PHANTOM_BAND_ROWS: usize = 64;
+
 /// The reference twin pairs of `domain` (when it is the twin's) and, with `rehearse`, the pairs
 /// rehearsed, drawn one at a time with the browser answering in between.
 async fn twin_pairs(
@@ -328,11 +347,17 @@ async fn twin_pairs(
     let Some(config) = domain.and_then(TwinDomainSampler::config) else {
         return Ok((None, None));
     };
-    // Each view's phantom takes about 0.1 s to render on the page's thread: the browser answers
-    // in between.
-    let a = Backgrounds::phantom_view(&config.views.a);
-    yield_to_browser().await;
-    let b = Backgrounds::phantom_view(&config.views.b);
+    // Each view's phantom takes about 0.1 s to render on the page's thread: it is rendered a
+    // band of rows at a time, the browser answering in between.
+    let mut phantoms = Vec::with_capacity(2);
+    for view in [&config.views.a, &config.views.b] {
+        let mut bands = Backgrounds::phantom_view_in_bands(view);
+        while bands.render_rows(PHANTOM_BAND_ROWS) {
+            yield_to_browser().await;
+        }
+        phantoms.push(BackgroundSource::of_phantom(view, bands));
+    }
+    let [a, b] = <[BackgroundSource; 2]>::try_from(phantoms).expect("two views");
     let sampler = TwinDomainSampler::with_backgrounds(config, Backgrounds::of_views(a, b));
     let mut sets = Vec::new();
     let wanted = [
@@ -371,12 +396,53 @@ struct TuningStart<'a> {
     settings: FineTuneSettings,
 }
 
-/// Runs the fine-tune in `worker` to its end (or until the worker is stopped), updating the
-/// page's progress; the best epoch's weights are fetched as soon as it is best, so that a
-/// stopped run keeps them.
+/// Why a run stopped when the user stopped it.
+const STOPPED_BY_USER: &str = "stopped by the user";
+
+/// Stops every worker of a run for `why`.
+fn stop_all(workers: &[Rc<ModuleWorker>], why: &str) {
+    for worker in workers {
+        worker.stop(why);
+    }
+}
+
+/// Calls `call` on every worker at once, worker `i` with the arguments and the buffers to hand
+/// over that `args(i)` gives, and waits for every reply, in worker order. A failed call stops
+/// its worker, as [`ModuleWorker::call`] does.
+async fn call_each(
+    workers: &[Rc<ModuleWorker>],
+    call: &'static str,
+    args: impl Fn(usize) -> (Array, Array),
+) -> Result<Vec<JsValue>, ModuleWorkerError> {
+    let sent: Vec<_> = workers
+        .iter()
+        .enumerate()
+        .map(|(i, worker)| {
+            let (args, transfer) = args(i);
+            worker.send(call, &args, &transfer)
+        })
+        .collect();
+    let mut replies = Vec::with_capacity(workers.len());
+    for (worker, sent) in workers.iter().zip(sent) {
+        let reply = match sent {
+            Ok(promise) => worker.reply(call, promise).await,
+            Err(e) => Err(e),
+        };
+        if let Err(e) = &reply {
+            worker.stop(&with_causes(e));
+        }
+        replies.push(reply?);
+    }
+    Ok(replies)
+}
+
+/// Runs the fine-tune in `workers` to its end (or until they are stopped), updating the page's
+/// progress; the best epoch's weights are fetched as soon as it is best, so that a stopped run
+/// keeps them. Each step: every worker computes its share, and every worker applies all of
+/// them, relayed by the page.
 async fn run(
     studio: Studio,
-    worker: &ModuleWorker,
+    workers: &[Rc<ModuleWorker>],
     start: &TuningStart<'_>,
 ) -> Result<TuningResult, ModuleWorkerError> {
     let TuningStart {
@@ -388,45 +454,42 @@ async fn run(
         rehearsal,
         settings,
     } = *start;
-    let images = Uint8Array::from(set.images.as_slice());
-    let forces = Float32Array::from(set.forces.as_slice());
-    let reference_images = Uint8Array::from(reference.map_or(&[][..], |r| &r.images[..]));
-    let reference_forces = Float32Array::from(reference.map_or(&[][..], |r| &r.forces[..]));
-    let rehearsal_images = Uint8Array::from(rehearsal.map_or(&[][..], |r| &r.images[..]));
-    let rehearsal_forces = Float32Array::from(rehearsal.map_or(&[][..], |r| &r.forces[..]));
     let settings_json = serde_json::to_string(&settings).unwrap_or_else(|_| "{}".into());
-    let args = Array::new();
-    for value in [
-        Uint8Array::from(weights).into(),
-        JsValue::from_str(start_name),
-        JsValue::from(WORK_SIZE.width as u32),
-        JsValue::from(WORK_SIZE.height as u32),
-        images.clone().into(),
-        forces.clone().into(),
-        reference_images.clone().into(),
-        reference_forces.clone().into(),
-        rehearsal_images.clone().into(),
-        rehearsal_forces.clone().into(),
-        JsValue::from_str(&settings_json),
-    ] {
-        args.push(&value);
-    }
-    let transfer = Array::new();
-    for buffer in [&images, &reference_images, &rehearsal_images] {
-        transfer.push(&buffer.buffer());
-    }
-    for buffer in [&forces, &reference_forces, &rehearsal_forces] {
-        transfer.push(&buffer.buffer());
-    }
-    let started: serde_json::Value = json_reply(
-        worker
-            .call(
-                "start",
-                &args,
-                &Array::of2(&images.buffer(), &forces.buffer()),
-            )
-            .await?,
-    );
+    // Each worker gets its own copy of the pairs, handed over.
+    let started = call_each(workers, "start", |i| {
+        let images = Uint8Array::from(set.images.as_slice());
+        let forces = Float32Array::from(set.forces.as_slice());
+        let reference_images = Uint8Array::from(reference.map_or(&[][..], |r| &r.images[..]));
+        let reference_forces = Float32Array::from(reference.map_or(&[][..], |r| &r.forces[..]));
+        let rehearsal_images = Uint8Array::from(rehearsal.map_or(&[][..], |r| &r.images[..]));
+        let rehearsal_forces = Float32Array::from(rehearsal.map_or(&[][..], |r| &r.forces[..]));
+        let (args, transfer) = (Array::new(), Array::new());
+        for buffer in [&images, &reference_images, &rehearsal_images] {
+            transfer.push(&buffer.buffer());
+        }
+        for buffer in [&forces, &reference_forces, &rehearsal_forces] {
+            transfer.push(&buffer.buffer());
+        }
+        for value in [
+            Uint8Array::from(weights).into(),
+            JsValue::from_str(start_name),
+            JsValue::from(WORK_SIZE.width as u32),
+            JsValue::from(WORK_SIZE.height as u32),
+            images.into(),
+            forces.into(),
+            reference_images.into(),
+            reference_forces.into(),
+            rehearsal_images.into(),
+            rehearsal_forces.into(),
+            JsValue::from_str(&settings_json),
+            JsValue::from_bool(i > 0),
+        ] {
+            args.push(&value);
+        }
+        (args, transfer)
+    })
+    .await?;
+    let started = json_reply(started.into_iter().next().unwrap_or_default());
     let split = (
         started["train"].as_u64().unwrap_or(0) as usize,
         started["held_back"].as_u64().unwrap_or(0) as usize,
@@ -455,17 +518,17 @@ async fn run(
     let (mut epochs, mut best, mut kept) = (Vec::<EpochReport>::new(), None, None);
     let mut done = 0;
     let reason = loop {
-        let reply = match worker.call("step", &Array::new(), &Array::new()).await {
+        let reply = match step(workers).await {
             Ok(reply) => reply,
             // Stopped by the user: the best epoch so far stands.
-            Err(ModuleWorkerError::Stopped { why, .. }) if why == "stopped by the user" => {
+            Err(ModuleWorkerError::Stopped { why, .. }) if why == STOPPED_BY_USER => {
                 break None;
             }
             Err(e) => return Err(e),
         };
         done += 1;
         let report: Option<EpochReport> = serde_json::from_value(json_reply(reply))
-            .map_err(|e| reply_error("step", &e.to_string()))?;
+            .map_err(|e| reply_error("apply", &e.to_string()))?;
         let elapsed_s = (now_ms() - began) / 1000.0;
         let in_epoch = (done % steps_per_epoch.max(1)) * settings.batch_size.max(1);
         let trained = done / steps_per_epoch.max(1) * split.0 + in_epoch.min(split.0);
@@ -475,7 +538,7 @@ async fn run(
                 let provenance =
                     kept_provenance(start_provenance, start_name, set, split.1, &before, &report);
                 let provenance = serde_json::to_string(&provenance).unwrap_or_default();
-                let bytes = worker
+                let bytes = workers[0]
                     .call(
                         "best_weights",
                         &Array::of1(&provenance.into()),
@@ -509,6 +572,30 @@ async fn run(
         reason,
         weights: kept,
     })
+}
+
+/// One training step on `workers`: each worker's share of its gradients, then every share,
+/// one after another, applied by each. Returns the first worker's reply (the epoch's report
+/// as JSON, or `null`).
+async fn step(workers: &[Rc<ModuleWorker>]) -> Result<JsValue, ModuleWorkerError> {
+    let shares = call_each(workers, "share", |i| {
+        (Array::of1(&JsValue::from(i as u32)), Array::new())
+    })
+    .await?;
+    let shares: Vec<Float32Array> = shares.into_iter().map(JsCast::unchecked_into).collect();
+    let length = shares.iter().map(Float32Array::length).sum();
+    let all = Float32Array::new_with_length(length);
+    let mut at = 0;
+    for share in &shares {
+        all.set(share, at);
+        at += share.length();
+    }
+    let applied = call_each(workers, "apply", |_| {
+        let copy = Float32Array::new(&all);
+        (Array::of1(&copy), Array::of1(&copy.buffer()))
+    })
+    .await?;
+    Ok(applied.into_iter().next().unwrap_or_default())
 }
 
 /// A worker's JSON reply, parsed (`null` when it is not JSON text).

@@ -66,6 +66,11 @@ pub struct FineTuneArgs {
     /// Rehearse the masks only: leave the rehearsed pairs' force labels out.
     #[arg(long)]
     replay_masks_only: bool,
+    /// Split each step between this many replicas, their gradients averaged, as the page's
+    /// tuning workers (one per core, at most the batch of 2) do: the same numbers as the page on
+    /// a machine with that many cores. The replicas run one after another here.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+    replicas: u64,
     /// The weights file to write (the best epoch's network).
     #[arg(long)]
     out: PathBuf,
@@ -126,6 +131,7 @@ pub fn run(args: &FineTuneArgs) -> anyhow::Result<()> {
         patience: args.patience.unwrap_or(defaults.patience),
         freeze_encoders: !args.train_encoders,
         seed: args.seed,
+        replicas: args.replicas as usize,
         ..defaults
     };
     let count = pairs.len();
@@ -134,10 +140,11 @@ pub fn run(args: &FineTuneArgs) -> anyhow::Result<()> {
     let (train, held) = run.split();
     let before = run.score()?;
     eprintln!(
-        "{count} pairs of {} ({train} trained on, {held} held back), learning rate {}, encoders \
-         {}; before: {}",
+        "{count} pairs of {} ({train} trained on, {held} held back), learning rate {}, {} \
+         replica(s), encoders {}; before: {}",
         args.data.display(),
         settings.learning_rate,
+        run.replicas(),
         if settings.freeze_encoders {
             "frozen"
         } else {

@@ -20,7 +20,11 @@ use crate::training::LabelledPair;
 use crate::weights::WeightsError;
 
 #[cfg(feature = "training")]
+mod replicas;
+#[cfg(feature = "training")]
 mod run;
+#[cfg(feature = "training")]
+pub use replicas::{Share, share_range};
 #[cfg(feature = "training")]
 pub use run::FineTune;
 
@@ -44,6 +48,11 @@ pub struct FineTuneSettings {
     pub hold_back_every: usize,
     /// Seed of the order the pairs are visited in.
     pub seed: u64,
+    /// Replicas each step's batch is split between, their gradients averaged (weighted by
+    /// their pairs): the page's tuning workers, one per core and at most [`Self::batch_size`].
+    /// Natively the replicas run one after another, so the same settings give the same
+    /// numbers on either side. With 1 (the default) the step is `hnet train`'s.
+    pub replicas: usize,
 }
 
 impl Default for FineTuneSettings {
@@ -56,6 +65,7 @@ impl Default for FineTuneSettings {
             freeze_encoders: true,
             hold_back_every: 5,
             seed: 0,
+            replicas: 1,
         }
     }
 }
@@ -121,6 +131,26 @@ pub enum FineTuneError {
     /// The weights could not be written.
     #[error("the fine-tuned weights cannot be written")]
     Write(#[source] WeightsError),
+    /// The replicas' shares of a step do not fit this network (another network's, or none with
+    /// a pair).
+    #[error(
+        "the replicas' shares of a step do not fit this network: {pairs} pairs, gradients of \
+         {lengths:?} values"
+    )]
+    Shares {
+        /// Pairs over all shares.
+        pairs: usize,
+        /// Each share's gradient values.
+        lengths: Vec<usize>,
+    },
+    /// A replica was asked for a share beyond the settings' replicas.
+    #[error("replica {replica} asked for, of {replicas}")]
+    NoSuchReplica {
+        /// The replica asked for, from 0.
+        replica: usize,
+        /// Replicas in the settings.
+        replicas: usize,
+    },
 }
 
 /// How the network does on the held-back pairs.

@@ -616,6 +616,92 @@ fn fine_tuning_scores_held_back_pairs_and_keeps_the_best_epoch() {
     assert!(!last.unwrap().best);
 }
 
+/// The page's tuning workers split each step between them: each computes its share's gradients
+/// and every worker applies the same average. Two workers so driven (one scoring, one only
+/// training) keep the same weights as each other and as `hnet fine-tune --replicas 2`'s run,
+/// which computes the shares one after another, bit for bit.
+#[cfg(feature = "training")]
+#[test]
+fn replicas_in_two_workers_train_as_one_run_does() {
+    use hnet_model::fine_tune::{FineTune, FineTuneError, FineTuneSettings, TrainingPair};
+    use std::collections::BTreeMap;
+
+    let device = Device::flex();
+    let net: HNet = small_config().init(&device).unwrap();
+    let weights = net
+        .to_weights_bytes(&small_config(), &BTreeMap::new())
+        .unwrap();
+    let side = 16;
+    let pairs: Vec<TrainingPair> = (0..7)
+        .map(|i| {
+            let (mut view, mut mask) = (vec![20u8; side * side * 3], vec![0u8; side * side]);
+            for row in 0..side {
+                let x = 2 + i + row / 4;
+                view[(row * side + x) * 3..][..3].fill(230);
+                mask[row * side + x] = 255;
+            }
+            TrainingPair {
+                view_a: view.clone(),
+                view_b: view,
+                mask_a: mask.clone(),
+                mask_b: mask,
+                force_n: (i % 2 == 0).then(|| TipForce::from_newtons([0.05 * i as f32, 0.0, 0.1])),
+            }
+        })
+        .collect();
+    let settings = FineTuneSettings {
+        max_epochs: 2,
+        batch_size: 2,
+        learning_rate: 1e-3,
+        hold_back_every: 3,
+        replicas: 2,
+        ..FineTuneSettings::default()
+    };
+    let new = || FineTune::new(&weights, "small.bpk", pairs.clone(), settings, &device).unwrap();
+    let mut native = new();
+    // 5 pairs trained on in steps of 2: the last step's second share is empty.
+    assert_eq!((native.split(), native.replicas()), ((5, 2), 2));
+    let mut native_reports = Vec::new();
+    while native.finished().is_none() {
+        native_reports.extend(native.step().unwrap());
+    }
+    let (mut first, mut second) = (new(), new().as_follower());
+    let mut reports = Vec::new();
+    while first.finished().is_none() {
+        let shares = [first.share(0).unwrap(), second.share(1).unwrap()];
+        reports.extend(first.apply(&shares).unwrap());
+        assert_eq!(
+            second.apply(&shares).unwrap(),
+            None,
+            "the follower scores nothing"
+        );
+        // Both hold the same weights: the same share, computed by either, is the same.
+        if first.finished().is_none() {
+            assert_eq!(first.share(1).unwrap(), second.share(1).unwrap());
+        }
+    }
+    assert_eq!(reports, native_reports);
+    assert_eq!(
+        first.best_weights(&BTreeMap::new()).unwrap(),
+        native.best_weights(&BTreeMap::new()).unwrap()
+    );
+    assert!(matches!(
+        first.share(2),
+        Err(FineTuneError::NoSuchReplica {
+            replica: 2,
+            replicas: 2
+        })
+    ));
+    // Shares of another network's size are refused, and change nothing.
+    let mut other = new();
+    let mut share = other.share(0).unwrap();
+    share.gradients.pop();
+    assert!(matches!(
+        other.apply(&[share]),
+        Err(FineTuneError::Shares { .. })
+    ));
+}
+
 /// The values of the first float parameter a visitor meets (the first encoder convolution).
 #[cfg(feature = "training")]
 #[derive(Default)]

@@ -5,19 +5,22 @@
 //!
 //! 1. [`start`] takes the weights file, the labelled pairs and the settings, splits the pairs
 //!    into trained-on and held-back ones, and scores the starting network on the held-back ones;
-//! 2. [`step`] takes one training step, and at the end of an epoch scores the held-back pairs
-//!    again; the page calls it until the run has finished (or stops the worker);
-//! 3. [`best_weights`] writes the best epoch's network as a weights file.
+//! 2. each training step is split between the page's tuning workers, one per core
+//!    ([`hnet_model::fine_tune::Share`]): [`share`] computes this worker's share of the step's
+//!    gradients, and [`apply`] applies the average of every worker's share, which the page
+//!    relays to each; at the end of an epoch the first worker scores the held-back pairs again.
+//!    The page calls them until the run has finished (or stops the workers);
+//! 3. [`best_weights`] writes the best epoch's network as a weights file (the first worker's).
 //!
-//! One fine-tune per worker: the page starts a fresh worker for each run and stops it by
-//! terminating it, which leaves every weights file the page holds as it was.
+//! One fine-tune per worker: the page starts fresh workers for each run and stops them by
+//! terminating them, which leaves every weights file the page holds as it was.
 #![cfg(target_arch = "wasm32")]
 
 use std::cell::RefCell;
 use std::collections::BTreeMap;
 
 use burn::tensor::Device;
-use hnet_model::fine_tune::{FineTune, FineTuneSettings, TrainingPair};
+use hnet_model::fine_tune::{FineTune, FineTuneSettings, Share, TrainingPair};
 use hnet_units::{ImageSize, TipForce, with_causes};
 use wasm_bindgen::prelude::*;
 
@@ -39,7 +42,9 @@ fn json<T: serde::Serialize>(value: &T) -> Result<String, JsError> {
 /// `images` and `forces`, scoring the reference pairs in `reference_images` and
 /// `reference_forces` after every epoch without training on them, and training on the pairs in
 /// `rehearsal_images` and `rehearsal_forces` without holding any back, with the settings in
-/// `settings_json` ([`FineTuneSettings`]; fields left out keep their defaults).
+/// `settings_json` ([`FineTuneSettings`]; fields left out keep their defaults; `replicas` is the
+/// number of tuning workers the page runs). A `follower` (every worker but the first) only
+/// trains: it scores nothing, before or after an epoch.
 ///
 /// `images` holds each pair in turn at `width`×`height` pixels (row-major, `height` rows of
 /// `width` pixels): view A and view B as 8-bit RGB, then mask A and mask B (255 catheter).
@@ -48,7 +53,7 @@ fn json<T: serde::Serialize>(value: &T) -> Result<String, JsError> {
 ///
 /// Returns, as JSON, the split (`train`, `held_back`), `steps_per_epoch` and the starting
 /// network's scores on the held-back pairs (`before`) and the reference pairs
-/// (`before_reference`, `null` without any).
+/// (`before_reference`, `null` without any); both `null` for a follower.
 #[wasm_bindgen]
 #[allow(clippy::too_many_arguments)]
 pub fn start(
@@ -63,6 +68,7 @@ pub fn start(
     rehearsal_images: &[u8],
     rehearsal_forces: &[f32],
     settings_json: &str,
+    follower: bool,
 ) -> Result<String, JsError> {
     console_error_panic_hook::set_once();
     let settings: FineTuneSettings = serde_json::from_str(settings_json)
@@ -74,9 +80,17 @@ pub fn start(
     let run = FineTune::new(weights, name, pairs, settings, &Device::flex())
         .and_then(|run| run.with_reference(reference))
         .and_then(|run| run.with_rehearsal(rehearsal))
+        .map(|run| if follower { run.as_follower() } else { run })
         .map_err(|e| js_error(&e))?;
-    let before = run.score().map_err(|e| js_error(&e))?;
-    let before_reference = run.score_reference().map_err(|e| js_error(&e))?;
+    let (before, before_reference) = if follower {
+        (None, None)
+    } else {
+        let before = run.score().map_err(|e| js_error(&e))?;
+        (
+            Some(before),
+            run.score_reference().map_err(|e| js_error(&e))?,
+        )
+    };
     let (train, held_back) = run.split();
     let reply = serde_json::json!({
         "train": train,
@@ -127,16 +141,35 @@ fn unpack(
         .collect())
 }
 
-/// One training step. Returns, as JSON, the epoch's report when the step ended an epoch
-/// ([`hnet_model::fine_tune::EpochReport`]), or `null`.
+/// This worker's share of the next training step, replica `replica` of the settings'
+/// `replicas`, as [`Share::to_message`] writes it.
 #[wasm_bindgen]
-pub fn step() -> Result<String, JsError> {
-    RUN.with_borrow_mut(|run| {
-        let run = run
-            .as_mut()
-            .ok_or_else(|| JsError::new("no fine-tune has been started in this worker"))?;
-        let report = run.step().map_err(|e| js_error(&e))?;
+pub fn share(replica: u32) -> Result<Vec<f32>, JsError> {
+    with_run(|run| {
+        run.share(replica as usize)
+            .map(|share| share.to_message())
+            .map_err(|e| js_error(&e))
+    })
+}
+
+/// Applies the step whose shares are `messages` (every worker's [`share`], in replica order,
+/// one after another). Returns, as JSON, the epoch's report when the step ended an epoch on
+/// the first worker ([`hnet_model::fine_tune::EpochReport`]), or `null`.
+#[wasm_bindgen]
+pub fn apply(messages: &[f32]) -> Result<String, JsError> {
+    with_run(|run| {
+        let shares = Share::from_messages(messages).map_err(|e| js_error(&e))?;
+        let report = run.apply(&shares).map_err(|e| js_error(&e))?;
         json(&report)
+    })
+}
+
+/// `f` on the run [`start`] began.
+fn with_run<T>(f: impl FnOnce(&mut FineTune) -> Result<T, JsError>) -> Result<T, JsError> {
+    RUN.with_borrow_mut(|run| {
+        f(run
+            .as_mut()
+            .ok_or_else(|| JsError::new("no fine-tune has been started in this worker"))?)
     })
 }
 
@@ -146,10 +179,7 @@ pub fn step() -> Result<String, JsError> {
 pub fn best_weights(provenance_json: &str) -> Result<Vec<u8>, JsError> {
     let provenance: BTreeMap<String, String> = serde_json::from_str(provenance_json)
         .map_err(|e| JsError::new(&format!("the provenance is not readable: {e}")))?;
-    RUN.with_borrow(|run| {
-        let run = run
-            .as_ref()
-            .ok_or_else(|| JsError::new("no fine-tune has been started in this worker"))?;
+    with_run(|run| {
         Ok(run
             .best_weights(&provenance)
             .map_err(|e| js_error(&e))?

@@ -8,6 +8,7 @@ use burn::optim::{GradientsParams, ModuleOptimizer};
 use burn::tensor::Device;
 use hnet_units::{ImageSize, TipForce};
 
+use super::replicas::{Share, average, flatten, share_range};
 use super::{
     EpochReport, FineTuneError, FineTuneSettings, FinishReason, HeldBackScores, TrainingPair,
 };
@@ -39,8 +40,11 @@ pub struct FineTune {
     epoch: usize,
     /// Steps taken in the current epoch, and the sum of their losses.
     in_epoch: (usize, f64),
-    /// The order of this epoch's training pairs.
-    order: Vec<usize>,
+    /// The order of this epoch's training pairs, and the epoch it was drawn for.
+    order: (Vec<usize>, Option<usize>),
+    /// Whether this replica scores the held-back and reference pairs after each epoch and
+    /// keeps the best network (the page's first tuning worker; the others only train).
+    scores_epochs: bool,
     best: Option<(f64, StereoModel)>,
     since_best: usize,
     finished: Option<FinishReason>,
@@ -103,7 +107,8 @@ impl FineTune {
             plain,
             epoch: 0,
             in_epoch: (0, 0.0),
-            order: Vec::new(),
+            order: (Vec::new(), None),
+            scores_epochs: true,
             best: None,
             since_best: 0,
             finished: None,
@@ -129,6 +134,21 @@ impl FineTune {
         self.train.extend(first..first + pairs.len());
         self.pairs.extend(pairs);
         Ok(self)
+    }
+
+    /// This run as a replica that only trains: it applies every step as the scoring replica
+    /// does, and so holds the same weights, but scores nothing and keeps no best network
+    /// ([`Self::apply`] returns no epoch report). The page's tuning workers after the first.
+    pub fn as_follower(mut self) -> Self {
+        self.scores_epochs = false;
+        self
+    }
+
+    /// Replicas each step is split between ([`FineTuneSettings::replicas`], at most the batch).
+    pub fn replicas(&self) -> usize {
+        self.settings
+            .replicas
+            .clamp(1, self.settings.batch_size.max(1))
     }
 
     /// The current network's scores on the reference pairs, when there are some.
@@ -171,21 +191,46 @@ impl FineTune {
         score(&net, input, &self.loss, at, &self.held_back)
     }
 
-    /// One training step on the next batch. Returns the epoch's report when the step ended an
-    /// epoch, `None` otherwise (and after the run has finished).
+    /// One training step on the next batch: every replica's share, one after another, then
+    /// their average applied. Returns the epoch's report when the step ended an epoch, `None`
+    /// otherwise (and after the run has finished).
     pub fn step(&mut self) -> Result<Option<EpochReport>, FineTuneError> {
         if self.finished.is_some() {
             return Ok(None);
         }
-        if self.in_epoch.0 == 0 {
-            self.order = self.train.clone();
-            shuffle(&mut self.order, &mut self.rng);
+        let shares = (0..self.replicas())
+            .map(|replica| self.share(replica))
+            .collect::<Result<Vec<_>, _>>()?;
+        self.apply(&shares)
+    }
+
+    /// Replica `replica`'s share of the next step ([`share_range`] of its batch): the mean loss
+    /// over its pairs and its gradients. Changes nothing but the epoch's visiting order, drawn
+    /// once an epoch from the seed, so every replica draws the same.
+    pub fn share(&mut self, replica: usize) -> Result<Share, FineTuneError> {
+        let replicas = self.replicas();
+        if replica >= replicas {
+            return Err(FineTuneError::NoSuchReplica { replica, replicas });
+        }
+        if self.order.1 != Some(self.epoch) {
+            let mut order = self.train.clone();
+            shuffle(&mut order, &mut self.rng);
+            self.order = (order, Some(self.epoch));
         }
         let batch_size = self.settings.batch_size.max(1);
         let at = self.in_epoch.0 * batch_size;
-        let indices = &self.order[at..(at + batch_size).min(self.order.len())];
+        let batch =
+            &self.order.0[at.min(self.order.0.len())..(at + batch_size).min(self.order.0.len())];
+        let mine = &batch[share_range(batch.len(), replica, replicas)];
+        if self.finished.is_some() || mine.is_empty() {
+            return Ok(Share {
+                pairs: 0,
+                loss: 0.0,
+                gradients: Vec::new(),
+            });
+        }
         let labelled: Vec<LabelledPair<'_>> =
-            indices.iter().map(|&i| self.pairs[i].labelled()).collect();
+            mine.iter().map(|&i| self.pairs[i].labelled()).collect();
         let batch = TrainingBatch::of(&labelled, self.size, &self.device).map_err(|cause| {
             FineTuneError::OtherSize {
                 size: self.size,
@@ -194,24 +239,52 @@ impl FineTune {
         })?;
         let step = step_loss(&self.net, self.spec.input(), &self.loss, &batch);
         let loss = scalar(&step.terms.total)?;
-        self.in_epoch.0 += 1;
-        self.in_epoch.1 += loss;
-        if !loss.is_finite() {
-            return self.end_epoch(Some(FinishReason::Diverged)).map(Some);
-        }
         let grads = GradientsParams::from_grads(step.terms.total.backward(), &self.net);
+        Ok(Share {
+            pairs: mine.len(),
+            loss,
+            gradients: flatten(&self.net, &grads)?,
+        })
+    }
+
+    /// Applies the step whose shares are `shares` (every replica's, in replica order): their
+    /// average, weighted by pairs, through the optimiser. Returns the epoch's report when the
+    /// step ended an epoch and this replica scores epochs, `None` otherwise. A loss that is not
+    /// finite ends the run ([`FinishReason::Diverged`]) without applying the step.
+    pub fn apply(&mut self, shares: &[Share]) -> Result<Option<EpochReport>, FineTuneError> {
+        if self.finished.is_some() {
+            return Ok(None);
+        }
+        let pairs: usize = shares.iter().map(|s| s.pairs).sum();
+        let loss =
+            shares.iter().map(|s| s.pairs as f64 * s.loss).sum::<f64>() / pairs.max(1) as f64;
+        if !loss.is_finite() {
+            self.in_epoch = (self.in_epoch.0 + 1, self.in_epoch.1 + loss);
+            return self.end_epoch(Some(FinishReason::Diverged));
+        }
+        let grads = average(&self.net, shares, &self.plain)?;
+        self.in_epoch = (self.in_epoch.0 + 1, self.in_epoch.1 + loss);
         let net = self.net.clone();
         self.net = self.optimizer.step(self.settings.learning_rate, net, grads);
         if self.in_epoch.0 >= self.steps_per_epoch() {
-            return self.end_epoch(None).map(Some);
+            return self.end_epoch(None);
         }
         Ok(None)
     }
 
-    fn end_epoch(&mut self, diverged: Option<FinishReason>) -> Result<EpochReport, FineTuneError> {
+    fn end_epoch(
+        &mut self,
+        diverged: Option<FinishReason>,
+    ) -> Result<Option<EpochReport>, FineTuneError> {
         self.epoch += 1;
         let (steps, sum) = core::mem::replace(&mut self.in_epoch, (0, 0.0));
         let train_loss = sum / steps.max(1) as f64;
+        if !self.scores_epochs {
+            self.finished = diverged.or_else(|| {
+                (self.epoch >= self.settings.max_epochs).then_some(FinishReason::LastEpoch)
+            });
+            return Ok(None);
+        }
         let held_back = self.score()?;
         let reference = self.score_reference()?;
         let improved = diverged.is_none()
@@ -236,7 +309,7 @@ impl FineTune {
                 (self.epoch >= self.settings.max_epochs).then_some(FinishReason::LastEpoch)
             });
         self.finished = finished;
-        Ok(EpochReport {
+        Ok(Some(EpochReport {
             epoch: self.epoch,
             train_loss,
             held_back,
@@ -244,7 +317,7 @@ impl FineTune {
             best: improved,
             finished: finished.is_some(),
             finished_because: finished,
-        })
+        }))
     }
 
     /// The best epoch's network as a weights file: the starting file's header with

@@ -357,6 +357,19 @@ impl Thorax {
     ///
     /// Returns the image and the wide view it was rendered with (to locate landmarks in it).
     pub fn radiograph(&self, view: &CArm, field_mm: f64, size_px: usize) -> (GreyImage, CArm) {
+        let mut render = self.clone().radiograph_in_bands(view, field_mm, size_px);
+        while render.render_rows(size_px) {}
+        render.finish()
+    }
+
+    /// [`Self::radiograph`] rendered a band of rows at a time ([`RadiographInBands`]), for a
+    /// caller that must answer in between (the page's thread); the same image to the bit.
+    pub fn radiograph_in_bands(
+        self,
+        view: &CArm,
+        field_mm: f64,
+        size_px: usize,
+    ) -> RadiographInBands {
         let wide = CArm {
             pixel_pitch_mm: field_mm * view.source_to_detector_mm
                 / view.source_to_isocentre_mm
@@ -364,35 +377,88 @@ impl Thorax {
             image_size: ImageSize::square(size_px),
             ..*view
         };
-        let source = wide.source_mm();
+        // Each part's bounding box in pixels, rows and columns inclusive.
         let focal = wide.focal_px();
-        let mut line_integral = vec![0.0f64; size_px * size_px];
-        for part in &self.parts {
-            let (centre, radius) = part.shape.bounds();
-            let p = wide.project(centre);
-            let reach = radius * focal / (p.depth_mm - radius).max(1.0) + 1.0;
-            let x0 = (p.u - reach).floor().max(0.0) as usize;
-            let y0 = (p.v - reach).floor().max(0.0) as usize;
-            let x1 = ((p.u + reach).ceil() as isize).min(size_px as isize - 1);
-            let y1 = ((p.v + reach).ceil() as isize).min(size_px as isize - 1);
-            if x1 < 0 || y1 < 0 {
+        let boxes = self
+            .parts
+            .iter()
+            .map(|part| {
+                let (centre, radius) = part.shape.bounds();
+                let p = wide.project(centre);
+                let reach = radius * focal / (p.depth_mm - radius).max(1.0) + 1.0;
+                let x0 = (p.u - reach).floor().max(0.0) as usize;
+                let y0 = (p.v - reach).floor().max(0.0) as usize;
+                let x1 = ((p.u + reach).ceil() as isize).min(size_px as isize - 1);
+                let y1 = ((p.v + reach).ceil() as isize).min(size_px as isize - 1);
+                (x1 >= 0 && y1 >= 0).then_some([x0, y0, x1 as usize, y1 as usize])
+            })
+            .collect();
+        RadiographInBands {
+            thorax: self,
+            wide,
+            boxes,
+            line_integral: vec![0.0; size_px * size_px],
+            next_row: 0,
+        }
+    }
+}
+
+/// A radiograph of the phantom being rendered a band of rows at a time
+/// ([`Thorax::radiograph_in_bands`]): each pixel sums the same parts in the same order as one
+/// pass would, so the bands make no difference to the image.
+pub struct RadiographInBands {
+    thorax: Thorax,
+    /// The view rendered with, over the whole field.
+    wide: CArm,
+    /// Each part's pixel box `[x0, y0, x1, y1]` (inclusive), `None` when it is off the image.
+    boxes: Vec<Option<[usize; 4]>>,
+    /// Attenuation line integrals so far, row-major.
+    line_integral: Vec<f64>,
+    /// The first row not rendered yet.
+    next_row: usize,
+}
+
+impl RadiographInBands {
+    /// The landmarks of the phantom being rendered.
+    pub fn landmarks(&self) -> Landmarks {
+        self.thorax.landmarks
+    }
+
+    /// Renders the next `rows` rows (at least one); `true` while rows are left.
+    pub fn render_rows(&mut self, rows: usize) -> bool {
+        let size_px = self.wide.image_size.width;
+        let (first, end) = (self.next_row, (self.next_row + rows.max(1)).min(size_px));
+        let source = self.wide.source_mm();
+        for (part, bounds) in self.thorax.parts.iter().zip(&self.boxes) {
+            let Some([x0, y0, x1, y1]) = *bounds else {
                 continue;
-            }
-            for y in y0..=y1 as usize {
-                for x in x0..=x1 as usize {
-                    let dir = wide.ray_direction(x as f64 + 0.5, y as f64 + 0.5);
-                    line_integral[y * size_px + x] +=
+            };
+            for y in y0.max(first)..=y1.min(end - 1) {
+                for x in x0..=x1 {
+                    let dir = self.wide.ray_direction(x as f64 + 0.5, y as f64 + 0.5);
+                    self.line_integral[y * size_px + x] +=
                         part.attenuation_per_mm * part.chord(source, dir);
                 }
             }
         }
-        // Normalise between robust low and high percentiles.
-        let mut sorted = line_integral.clone();
-        sorted.sort_by(f64::total_cmp);
-        let low = sorted[sorted.len() / 200];
-        let high = sorted[sorted.len() - 1 - sorted.len() / 500];
+        self.next_row = end;
+        end < size_px
+    }
+
+    /// The radiograph, normalised between robust low and high percentiles of what was
+    /// rendered, and the wide view it was rendered with.
+    pub fn finish(self) -> (GreyImage, CArm) {
+        let size_px = self.wide.image_size.width;
+        let mut sorted = self.line_integral.clone();
+        let n = sorted.len();
+        // The two order statistics a full sort would give, in linear time.
+        let high = *sorted
+            .select_nth_unstable_by(n - 1 - n / 500, f64::total_cmp)
+            .1;
+        let low = *sorted.select_nth_unstable_by(n / 200, f64::total_cmp).1;
         let span = (high - low).max(1e-9);
-        let data = line_integral
+        let data = self
+            .line_integral
             .iter()
             .map(|v| (((v - low) / span) as f32).clamp(0.0, 1.0))
             .collect();
@@ -402,7 +468,7 @@ impl Thorax {
                 height: size_px,
                 data,
             },
-            wide,
+            self.wide,
         )
     }
 }
@@ -470,5 +536,16 @@ mod tests {
             lung < heart && heart < spine_above_heart,
             "{lung} {heart} {spine_above_heart}"
         );
+        // Rendered a few rows at a time (the page's thread answering in between), the same
+        // image to the bit.
+        let thorax = Thorax::adult();
+        let mut bands = thorax.radiograph_in_bands(&view, 420.0, 128);
+        let mut calls = 1;
+        while bands.render_rows(7) {
+            calls += 1;
+        }
+        assert_eq!(calls, 128usize.div_ceil(7));
+        let (banded, banded_wide) = bands.finish();
+        assert_eq!((banded, banded_wide), (image, wide));
     }
 }

@@ -15,9 +15,9 @@ use crate::vec3::{Mat3, Vec3};
 
 mod sample;
 pub use sample::{
-    Backgrounds, MaskRecipe, StereoSample, TwinConfig, TwinError, ViewPixels, ViewSample,
-    XRayRecipe, generate, luma, otsu_threshold, render_empty_xray_view, render_view, sample_rng,
-    threshold_mask,
+    Backgrounds, MaskRecipe, PHANTOM_SIDE_PX, StereoSample, TwinConfig, TwinError, ViewPixels,
+    ViewSample, XRayRecipe, generate, luma, otsu_threshold, render_empty_xray_view, render_view,
+    sample_rng, threshold_mask,
 };
 
 /// What the images look like.

@@ -17,8 +17,11 @@ use rand::{Rng, RngExt};
 use serde::{Deserialize, Serialize};
 
 use crate::simulator::carm::CArm;
-use crate::simulator::phantom::Thorax;
+use crate::simulator::phantom::{RadiographInBands, Thorax};
 use crate::simulator::raster::{GreyImage, Rect};
+
+/// The built-in phantom's field at the isocentre, millimetres: a whole adult chest.
+pub const PHANTOM_FIELD_MM: f64 = 420.0;
 
 /// The anatomical regions the generator crops around.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -126,11 +129,27 @@ impl BackgroundSource {
         }
     }
 
-    /// The built-in thorax phantom as seen from `view`'s direction (420 mm field at the
-    /// isocentre, `size_px` square), regions located by projecting the phantom's landmarks.
+    /// The built-in thorax phantom as seen from `view`'s direction ([`PHANTOM_FIELD_MM`] at
+    /// the isocentre, `size_px` square), regions located by projecting the phantom's landmarks.
     pub fn phantom(view: &CArm, size_px: usize) -> Self {
-        let thorax = Thorax::adult();
-        let (image, wide) = thorax.radiograph(view, 420.0, size_px);
+        let mut render = Self::phantom_in_bands(view, size_px);
+        while render.render_rows(size_px) {}
+        Self::of_phantom(view, render)
+    }
+
+    /// [`Self::phantom`]'s radiograph, to render a band of rows at a time
+    /// ([`RadiographInBands::render_rows`]) and make the source of with [`Self::of_phantom`]:
+    /// the same source to the bit, for a caller that must answer in between (the page's
+    /// thread).
+    pub fn phantom_in_bands(view: &CArm, size_px: usize) -> RadiographInBands {
+        Thorax::adult().radiograph_in_bands(view, PHANTOM_FIELD_MM, size_px)
+    }
+
+    /// The phantom source for `view` from its radiograph, rendered ([`Self::phantom_in_bands`]).
+    pub fn of_phantom(view: &CArm, rendered: RadiographInBands) -> Self {
+        let landmarks = rendered.landmarks();
+        let (image, wide) = rendered.finish();
+        let size_px = image.width;
         let at = |p| {
             let q = wide.project(p);
             [q.u / size_px as f64, q.v / size_px as f64]
@@ -142,9 +161,9 @@ impl BackgroundSource {
             ),
             image,
             regions: vec![
-                (Anatomy::Heart, at(thorax.landmarks.heart)),
-                (Anatomy::Aorta, at(thorax.landmarks.aorta)),
-                (Anatomy::Svc, at(thorax.landmarks.svc)),
+                (Anatomy::Heart, at(landmarks.heart)),
+                (Anatomy::Aorta, at(landmarks.aorta)),
+                (Anatomy::Svc, at(landmarks.svc)),
             ],
         }
     }

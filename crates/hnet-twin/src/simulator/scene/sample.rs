@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 use super::{Modality, SceneParams, SceneSampling};
 use crate::simulator::carm::{Biplane, CArm, CameraMatrix};
 use crate::simulator::catheter::CatheterDesign;
+use crate::simulator::phantom::RadiographInBands;
 use crate::simulator::raster::{GreyImage, RgbImage};
 use crate::simulator::render::{self, TubeRaster, XRayDetector};
 use crate::simulator::rod::{self, RodConfig, RodError, RodShape};
@@ -120,6 +121,9 @@ impl TwinConfig {
     }
 }
 
+/// The side of the built-in phantom's radiograph that backgrounds are cut from, pixels.
+pub const PHANTOM_SIDE_PX: usize = 512;
+
 /// The radiographs that X-ray backgrounds are cut from, per view.
 #[derive(Debug, Clone, Default)]
 pub struct Backgrounds {
@@ -133,10 +137,17 @@ impl Backgrounds {
         Self::of_views(Self::phantom_view(&views.a), Self::phantom_view(&views.b))
     }
 
-    /// The built-in phantom rendered in `view`'s direction (512 px): one view's share of
-    /// [`Self::phantom`], for callers that must answer between the two (the page's thread).
+    /// The built-in phantom rendered in `view`'s direction ([`PHANTOM_SIDE_PX`]): one view's
+    /// share of [`Self::phantom`].
     pub fn phantom_view(view: &CArm) -> BackgroundSource {
-        BackgroundSource::phantom(view, 512)
+        BackgroundSource::phantom(view, PHANTOM_SIDE_PX)
+    }
+
+    /// [`Self::phantom_view`] to render a band of rows at a time and make the source of with
+    /// [`BackgroundSource::of_phantom`]: for callers that must answer in between (the page's
+    /// thread, where one view takes about 0.1 s).
+    pub fn phantom_view_in_bands(view: &CArm) -> RadiographInBands {
+        BackgroundSource::phantom_in_bands(view, PHANTOM_SIDE_PX)
     }
 
     /// One source for each view.
