@@ -1,7 +1,8 @@
 //! What the page's "Fine-tune on my pairs" trains on and what it writes: the labelled pairs as
-//! the fine-tuning worker takes them (crates/hnet-tune), twin pairs of the weights' own domain
-//! (scored for reference, or rehearsed), the kept weights' provenance, and the time left. The worker is driven from `studio/tuning.rs`; the training is
-//! [`hnet_model::fine_tune`]'s, the step `hnet train`'s.
+//! the fine-tuning workers take them (crates/hnet-tune), twin pairs of the weights' own domain
+//! (scored for reference, or rehearsed), the kept weights' provenance, and the time left. The
+//! workers are driven from `studio/tuning.rs`; the training is [`hnet_model::fine_tune`]'s, the
+//! step `hnet train`'s, split between the workers ([`hnet_model::fine_tune::Share`]).
 
 use std::collections::BTreeMap;
 

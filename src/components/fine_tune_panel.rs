@@ -35,8 +35,8 @@ pub fn FineTunePanel(
          those with a force label (not on labels copied from a model's estimate). Every \
          {}th pair is held back to score the network before and after; the encoders stay as \
          they are; at most {} epochs, stopping when the held-back loss has not improved for {}. \
-         Runs in a worker of its own: nothing leaves the browser, and nothing is kept unless \
-         you keep it.",
+         Runs in workers of its own, one per core (at most two), each step split between them: \
+         nothing leaves the browser, and nothing is kept unless you keep it.",
         defaults.hold_back_every, defaults.max_epochs, defaults.patience
     );
     view! {
