@@ -230,12 +230,20 @@ fn catheter_pixels(mask: &[f32]) -> usize {
     mask.iter().filter(|&&p| is_catheter(p)).count()
 }
 
+/// The least share of a view's height that the catheter pixels 8-connected to its bottom row
+/// must span for [`reaches_bottom`]: a shaft, not a blob. On 240 off-bench pairs read by the
+/// bundled model (docs/results.md, "Where the catheter enters") a catheter read as trained
+/// spanned 51-176 of 224 rows; in views turned away from the bottom, what the upright reading
+/// left in the bottom band spanned 0-2 rows in most views and 45 or more in 4-6 of 480.
+pub const SHAFT_FROM_BOTTOM_MIN_SHARE: f64 = 0.2;
+
 /// Whether a view's mask (catheter probabilities, row-major, of `size`), read as it is, enters
 /// through the bottom edge: its bottom rows (a band 1/32 of the side deep, at least one pixel)
-/// hold at least one catheter pixel per row, and no other edge's band holds more. The shaft of
-/// a catheter read as trained leaves the view through its bottom; a view read upright whose
-/// catheter enters elsewhere loses most of its shaft, and what is left seldom reaches the
-/// bottom more than the edge it enters through.
+/// hold at least one catheter pixel per row, no other edge's band holds more, and the catheter
+/// pixels 8-connected to the bottom row span [`SHAFT_FROM_BOTTOM_MIN_SHARE`] of the height. The
+/// shaft of a catheter read as trained leaves the view through its bottom; a view read upright
+/// whose catheter enters elsewhere loses most of its shaft, and what is left seldom reaches the
+/// bottom as a shaft.
 pub fn reaches_bottom(mask: &[f32], size: ImageSize) -> bool {
     let (width, height) = (size.width, size.height);
     if width == 0 || height == 0 || mask.len() != width * height {
@@ -258,6 +266,36 @@ pub fn reaches_bottom(mask: &[f32], size: ImageSize) -> bool {
         && [rows(0), cols(0), cols(width - band)]
             .iter()
             .all(|&edge| edge <= bottom)
+        && rows_spanned_from_bottom(mask, size) as f64
+            >= SHAFT_FROM_BOTTOM_MIN_SHARE * height as f64
+}
+
+/// Rows spanned by the catheter pixels of `mask` (of `size`, checked by the caller) that are
+/// 8-connected to its bottom row: 0 when none is on the bottom row.
+fn rows_spanned_from_bottom(mask: &[f32], size: ImageSize) -> usize {
+    let (width, height) = (size.width, size.height);
+    let mut seen = alloc::vec![false; mask.len()];
+    let mut stack: Vec<usize> = ((height - 1) * width..height * width)
+        .filter(|&i| is_catheter(mask[i]))
+        .collect();
+    for &i in &stack {
+        seen[i] = true;
+    }
+    let mut top = height;
+    while let Some(i) = stack.pop() {
+        let (row, col) = (i / width, i % width);
+        top = top.min(row);
+        for r in row.saturating_sub(1)..=(row + 1).min(height - 1) {
+            for c in col.saturating_sub(1)..=(col + 1).min(width - 1) {
+                let j = r * width + c;
+                if !seen[j] && is_catheter(mask[j]) {
+                    seen[j] = true;
+                    stack.push(j);
+                }
+            }
+        }
+    }
+    height.saturating_sub(top)
 }
 
 /// One pair's search for its views' entry edges under an [`EntrySetting`]: the first reading
@@ -544,6 +582,22 @@ mod tests {
         // A catheter down the left column reaches the bottom, but the left edge more.
         let left: Vec<f32> = (0..9).map(|i| if i % 3 == 0 { 0.9 } else { 0.0 }).collect();
         assert!(!reaches_bottom(&left, SIZE));
+        // A blob in the bottom band is not a shaft: at 20 x 20 the catheter pixels connected to
+        // the bottom row must span 4 rows.
+        let square = ImageSize::square(20);
+        let shaft = |rows: usize| -> Vec<f32> {
+            (0..400)
+                .map(|i| {
+                    if i % 20 == 10 && i / 20 >= 20 - rows {
+                        0.9
+                    } else {
+                        0.0
+                    }
+                })
+                .collect()
+        };
+        assert!(!reaches_bottom(&shaft(3), square));
+        assert!(reaches_bottom(&shaft(4), square));
         // A catheter in the top row only: its view is read in the other three turns.
         let top: Vec<f32> = (0..9).map(|i| if i < 3 { 0.9 } else { 0.0 }).collect();
         assert!(!reaches_bottom(&top, SIZE));
