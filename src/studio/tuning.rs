@@ -455,10 +455,14 @@ async fn run(
         settings,
     } = *start;
     let settings_json = serde_json::to_string(&settings).unwrap_or_else(|_| "{}".into());
+    // The first worker scores the held-back pairs after each epoch; the last scores the
+    // reference pairs meanwhile (with one worker, the same one).
+    let scores_reference = workers.len() - 1;
     // Each worker gets its own copy of the pairs, handed over.
     let started = call_each(workers, "start", |i| {
         let images = Uint8Array::from(set.images.as_slice());
         let forces = Float32Array::from(set.forces.as_slice());
+        let reference = reference.filter(|_| i == scores_reference);
         let reference_images = Uint8Array::from(reference.map_or(&[][..], |r| &r.images[..]));
         let reference_forces = Float32Array::from(reference.map_or(&[][..], |r| &r.forces[..]));
         let rehearsal_images = Uint8Array::from(rehearsal.map_or(&[][..], |r| &r.images[..]));
@@ -489,6 +493,10 @@ async fn run(
         (args, transfer)
     })
     .await?;
+    let before_reference: Option<HeldBackScores> = serde_json::from_value(
+        json_reply(started[scores_reference].clone())["before_reference"].clone(),
+    )
+    .map_err(|e| reply_error("start", &e.to_string()))?;
     let started = json_reply(started.into_iter().next().unwrap_or_default());
     let split = (
         started["train"].as_u64().unwrap_or(0) as usize,
@@ -497,9 +505,6 @@ async fn run(
     let steps_per_epoch = started["steps_per_epoch"].as_u64().unwrap_or(1) as usize;
     let before: HeldBackScores = serde_json::from_value(started["before"].clone())
         .map_err(|e| reply_error("start", &e.to_string()))?;
-    let before_reference: Option<HeldBackScores> =
-        serde_json::from_value(started["before_reference"].clone())
-            .map_err(|e| reply_error("start", &e.to_string()))?;
     let total = steps_per_epoch * settings.max_epochs;
     let update = |f: &dyn Fn(&mut TuningProgress)| {
         studio.tuning.state.update(|state| {
@@ -518,8 +523,8 @@ async fn run(
     let (mut epochs, mut best, mut kept) = (Vec::<EpochReport>::new(), None, None);
     let mut done = 0;
     let reason = loop {
-        let reply = match step(workers).await {
-            Ok(reply) => reply,
+        let replies = match step(workers).await {
+            Ok(replies) => replies,
             // Stopped by the user: the best epoch so far stands.
             Err(ModuleWorkerError::Stopped { why, .. }) if why == STOPPED_BY_USER => {
                 break None;
@@ -527,8 +532,14 @@ async fn run(
             Err(e) => return Err(e),
         };
         done += 1;
-        let report: Option<EpochReport> = serde_json::from_value(json_reply(reply))
-            .map_err(|e| reply_error("apply", &e.to_string()))?;
+        let unreadable = |e: serde_json::Error| reply_error("apply", &e.to_string());
+        let mut report: Option<EpochReport> =
+            serde_json::from_value(replies[0]["report"].clone()).map_err(unreadable)?;
+        if let Some(report) = report.as_mut().filter(|r| r.reference.is_none()) {
+            report.reference =
+                serde_json::from_value(replies[scores_reference]["reference"].clone())
+                    .map_err(unreadable)?;
+        }
         let elapsed_s = (now_ms() - began) / 1000.0;
         let in_epoch = (done % steps_per_epoch.max(1)) * settings.batch_size.max(1);
         let trained = done / steps_per_epoch.max(1) * split.0 + in_epoch.min(split.0);
@@ -575,9 +586,9 @@ async fn run(
 }
 
 /// One training step on `workers`: each worker's share of its gradients, then every share,
-/// one after another, applied by each. Returns the first worker's reply (the epoch's report
-/// as JSON, or `null`).
-async fn step(workers: &[Rc<ModuleWorker>]) -> Result<JsValue, ModuleWorkerError> {
+/// one after another, applied by each. Returns every worker's reply, parsed (`report` and
+/// `reference`: hnet-tune's `apply`).
+async fn step(workers: &[Rc<ModuleWorker>]) -> Result<Vec<serde_json::Value>, ModuleWorkerError> {
     let shares = call_each(workers, "share", |i| {
         (Array::of1(&JsValue::from(i as u32)), Array::new())
     })
@@ -595,7 +606,7 @@ async fn step(workers: &[Rc<ModuleWorker>]) -> Result<JsValue, ModuleWorkerError
         (Array::of1(&copy), Array::of1(&copy.buffer()))
     })
     .await?;
-    Ok(applied.into_iter().next().unwrap_or_default())
+    Ok(applied.into_iter().map(json_reply).collect())
 }
 
 /// A worker's JSON reply, parsed (`null` when it is not JSON text).

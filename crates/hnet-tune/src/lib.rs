@@ -8,7 +8,8 @@
 //! 2. each training step is split between the page's tuning workers, one per core
 //!    ([`hnet_model::fine_tune::Share`]): [`share`] computes this worker's share of the step's
 //!    gradients, and [`apply`] applies the average of every worker's share, which the page
-//!    relays to each; at the end of an epoch the first worker scores the held-back pairs again.
+//!    relays to each; at the end of an epoch the first worker scores the held-back pairs again,
+//!    and the worker given the reference pairs (the last) scores those, at the same time.
 //!    The page calls them until the run has finished (or stops the workers);
 //! 3. [`best_weights`] writes the best epoch's network as a weights file (the first worker's).
 //!
@@ -44,7 +45,7 @@ fn json<T: serde::Serialize>(value: &T) -> Result<String, JsError> {
 /// `rehearsal_images` and `rehearsal_forces` without holding any back, with the settings in
 /// `settings_json` ([`FineTuneSettings`]; fields left out keep their defaults; `replicas` is the
 /// number of tuning workers the page runs). A `follower` (every worker but the first) only
-/// trains: it scores nothing, before or after an epoch.
+/// trains, and scores the reference pairs if it was given some.
 ///
 /// `images` holds each pair in turn at `width`×`height` pixels (row-major, `height` rows of
 /// `width` pixels): view A and view B as 8-bit RGB, then mask A and mask B (255 catheter).
@@ -53,7 +54,7 @@ fn json<T: serde::Serialize>(value: &T) -> Result<String, JsError> {
 ///
 /// Returns, as JSON, the split (`train`, `held_back`), `steps_per_epoch` and the starting
 /// network's scores on the held-back pairs (`before`) and the reference pairs
-/// (`before_reference`, `null` without any); both `null` for a follower.
+/// (`before_reference`, `null` without any); `before` is `null` for a follower.
 #[wasm_bindgen]
 #[allow(clippy::too_many_arguments)]
 pub fn start(
@@ -82,15 +83,12 @@ pub fn start(
         .and_then(|run| run.with_rehearsal(rehearsal))
         .map(|run| if follower { run.as_follower() } else { run })
         .map_err(|e| js_error(&e))?;
-    let (before, before_reference) = if follower {
-        (None, None)
+    let before = if follower {
+        None
     } else {
-        let before = run.score().map_err(|e| js_error(&e))?;
-        (
-            Some(before),
-            run.score_reference().map_err(|e| js_error(&e))?,
-        )
+        Some(run.score().map_err(|e| js_error(&e))?)
     };
+    let before_reference = run.score_reference().map_err(|e| js_error(&e))?;
     let (train, held_back) = run.split();
     let reply = serde_json::json!({
         "train": train,
@@ -153,14 +151,22 @@ pub fn share(replica: u32) -> Result<Vec<f32>, JsError> {
 }
 
 /// Applies the step whose shares are `messages` (every worker's [`share`], in replica order,
-/// one after another). Returns, as JSON, the epoch's report when the step ended an epoch on
-/// the first worker ([`hnet_model::fine_tune::EpochReport`]), or `null`.
+/// one after another). Returns, as JSON, `report`: the epoch's report when the step ended an
+/// epoch on the first worker ([`hnet_model::fine_tune::EpochReport`]), or `null`; and
+/// `reference`: a follower's scores on its reference pairs when the step ended an epoch and it
+/// holds some, or `null`.
 #[wasm_bindgen]
 pub fn apply(messages: &[f32]) -> Result<String, JsError> {
     with_run(|run| {
         let shares = Share::from_messages(messages).map_err(|e| js_error(&e))?;
+        let epochs = run.epochs_done();
         let report = run.apply(&shares).map_err(|e| js_error(&e))?;
-        json(&report)
+        let reference = if report.is_none() && run.epochs_done() > epochs {
+            run.score_reference().map_err(|e| js_error(&e))?
+        } else {
+            None
+        };
+        json(&serde_json::json!({ "report": report, "reference": reference }))
     })
 }
 

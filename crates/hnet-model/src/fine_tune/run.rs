@@ -137,8 +137,10 @@ impl FineTune {
     }
 
     /// This run as a replica that only trains: it applies every step as the scoring replica
-    /// does, and so holds the same weights, but scores nothing and keeps no best network
-    /// ([`Self::apply`] returns no epoch report). The page's tuning workers after the first.
+    /// does, and so holds the same weights, but scores no epoch and keeps no best network
+    /// ([`Self::apply`] returns no epoch report). The page's tuning workers after the first;
+    /// the last of them scores the reference pairs instead of the first
+    /// ([`Self::score_reference`], after each epoch: [`Self::epochs_done`]).
     pub fn as_follower(mut self) -> Self {
         self.scores_epochs = false;
         self
@@ -160,6 +162,11 @@ impl FineTune {
         let all: Vec<usize> = (0..self.reference.len()).collect();
         let at = (&self.reference[..], self.size, &self.plain);
         score(&net, self.spec.input(), &self.loss, at, &all).map(Some)
+    }
+
+    /// Epochs ended so far.
+    pub fn epochs_done(&self) -> usize {
+        self.epoch
     }
 
     /// The network's input size.
