@@ -100,17 +100,21 @@ pub fn tuning_set(pairs: &[LabeledPair], input: ImageSize) -> Result<TuningSet, 
     Ok(set)
 }
 
-/// The kept weights' provenance ([`fine_tuned_provenance`]): where they came from and how
-/// they did on the held-back pairs.
+/// The kept weights' provenance ([`fine_tuned_provenance`]): where they came from, on how many
+/// workers each step was split (what `hnet fine-tune --replicas` repeats), and how they did on
+/// the held-back pairs.
 pub fn kept_provenance(
     start: &BTreeMap<String, String>,
-    start_name: &str,
+    (start_name, workers): (&str, usize),
     set: &TuningSet,
     held_back: usize,
     before: &HeldBackScores,
     best: &EpochReport,
 ) -> BTreeMap<String, String> {
-    let command = format!("H-Net Studio page: Fine-tune on my pairs, from {start_name}");
+    let command = format!(
+        "H-Net Studio page: Fine-tune on my pairs, from {start_name}, each step split between \
+         {workers} worker(s) (natively: hnet fine-tune --replicas {workers})"
+    );
     fine_tuned_provenance(
         start,
         FineTuneRecord {
@@ -373,12 +377,13 @@ mod tests {
             finished: true,
             finished_because: None,
         };
-        let kept = kept_provenance(&start, "hnet-cpu.bpk", &set, 1, &scores(0.2), &best);
+        let kept = kept_provenance(&start, ("hnet-cpu.bpk", 2), &set, 1, &scores(0.2), &best);
         assert!(!kept.contains_key(FACTS_KEY));
         assert_eq!(kept["seed"], "42");
         assert_eq!(kept["held_back_before"], "catheter IoU 0.200");
         assert_eq!(kept["held_back_after"], "catheter IoU 0.900");
         assert!(kept["command"].contains("from hnet-cpu.bpk"));
+        assert!(kept["command"].ends_with("(natively: hnet fine-tune --replicas 2)"));
         assert_eq!(seconds_left(10.0, 2, 6), Some(20.0));
         assert_eq!(seconds_left(0.0, 0, 6), None);
     }

@@ -546,8 +546,14 @@ async fn run(
         if let Some(report) = report {
             epochs.push(report);
             if report.best {
-                let provenance =
-                    kept_provenance(start_provenance, start_name, set, split.1, &before, &report);
+                let provenance = kept_provenance(
+                    start_provenance,
+                    (start_name, workers.len()),
+                    set,
+                    split.1,
+                    &before,
+                    &report,
+                );
                 let provenance = serde_json::to_string(&provenance).unwrap_or_default();
                 let bytes = workers[0]
                     .call(
