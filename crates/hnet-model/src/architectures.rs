@@ -2,7 +2,7 @@
 //! one weights format) serves them all.
 //!
 //! Each network is described once, by an [`Architecture`] implementation on its settings type
-//! (name, heads, input, size rule, how to build and run it); the [`architectures!`] list below
+//! (name, heads, input, size rule, how to build and run it); the `architectures!` list below
 //! turns those into [`ModelSpec`] (which network, with its settings) and [`StereoModel`] (the
 //! network). Adding a network is one `impl Architecture` and one line in that list.
 

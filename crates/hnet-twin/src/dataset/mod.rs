@@ -190,7 +190,7 @@ impl ManifestRow {
     }
 
     /// Where its force label came from: [`LabelOrigin::Unrecorded`] when the manifest has no
-    /// [`label_origin::ORIGIN_COLUMN`](crate::dataset::label_origin::ORIGIN_COLUMN) (older datasets).
+    /// [`label_origin::ORIGIN_COLUMN`] (older datasets).
     pub fn label_origin(&self) -> Result<LabelOrigin, UnknownOrigin> {
         LabelOrigin::from_columns(|name| self.column(name))
     }

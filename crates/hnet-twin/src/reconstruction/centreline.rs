@@ -370,9 +370,8 @@ fn neighbours(i: usize, width: usize, height: usize) -> impl Iterator<Item = (us
     })
 }
 
-/// Extracts the centreline of the catheter in `mask`; `view` names the view in errors.
 /// Least share of a view's pixels that must reach half coverage for the view to show a catheter
-/// ([`find_catheter`]). Measured with `hnet study no-catheter` on the bundled model
+/// ([`catheter_seen`]). Measured with `hnet study no-catheter` on the bundled model
 /// (docs/results.md, "No catheter, no force").
 pub const MIN_CATHETER_SHARE: f64 = 0.0025;
 

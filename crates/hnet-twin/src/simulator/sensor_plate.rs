@@ -291,7 +291,7 @@ const PATH_STEPS: usize = 8;
 /// Solves the rod `config` clamped at `base` with its tip held by `plate` at `pose` moved to
 /// `contact`'s actuator positions.
 ///
-/// The loading path is followed quasi-statically: the press in [`PATH_STEPS`] steps from the
+/// The loading path is followed quasi-statically: the press in `PATH_STEPS` steps from the
 /// moment the plate touches the tip, then the slide in as many. At each step the tip first
 /// tries to stay on the point of the plate it rests on; if that takes a tangential force
 /// outside the friction cone it slides, and the point it comes to rest on is where the next step
