@@ -27,6 +27,7 @@ use crate::module_worker::{ModuleWorker, ModuleWorkerError};
 use crate::storage::{self, KeptWeights};
 use hnet_twin::model_facts::ForceDomain;
 use hnet_twin::model_facts::ModelFacts;
+use hnet_twin::simulator::carm::CArm;
 use hnet_twin::simulator::scene::{Backgrounds, TwinError};
 use hnet_twin::simulator::synthetic_xray::BackgroundSource;
 
@@ -337,6 +338,16 @@ impl Studio {
 /// 15 ms on the page's thread.
 const PHANTOM_BAND_ROWS: usize = 64;
 
+/// The built-in phantom seen from `view`: about 0.1 s of work on the page's thread, so rendered
+/// a band of rows at a time, the browser answering in between.
+async fn phantom_in_bands(view: &CArm) -> BackgroundSource {
+    let mut bands = Backgrounds::phantom_view_in_bands(view);
+    while bands.render_rows(PHANTOM_BAND_ROWS) {
+        yield_to_browser().await;
+    }
+    BackgroundSource::of_phantom(view, bands)
+}
+
 /// The reference twin pairs of `domain` (when it is the twin's) and, with `rehearse`, the pairs
 /// rehearsed, drawn one at a time with the browser answering in between.
 async fn twin_pairs(
@@ -347,17 +358,8 @@ async fn twin_pairs(
     let Some(config) = domain.and_then(TwinDomainSampler::config) else {
         return Ok((None, None));
     };
-    // Each view's phantom takes about 0.1 s to render on the page's thread: it is rendered a
-    // band of rows at a time, the browser answering in between.
-    let mut phantoms = Vec::with_capacity(2);
-    for view in [&config.views.a, &config.views.b] {
-        let mut bands = Backgrounds::phantom_view_in_bands(view);
-        while bands.render_rows(PHANTOM_BAND_ROWS) {
-            yield_to_browser().await;
-        }
-        phantoms.push(BackgroundSource::of_phantom(view, bands));
-    }
-    let [a, b] = <[BackgroundSource; 2]>::try_from(phantoms).expect("two views");
+    let a = phantom_in_bands(&config.views.a).await;
+    let b = phantom_in_bands(&config.views.b).await;
     let sampler = TwinDomainSampler::with_backgrounds(config, Backgrounds::of_views(a, b));
     let mut sets = Vec::new();
     let wanted = [
