@@ -4,6 +4,8 @@
 // and inside the page, from the click to the next frame drawn, idle and while it trains. The
 // browser's long tasks (over 50 ms) are listed from the start of the run, and after Keep.
 // Usage, after `trunk build --release` (or `trunk build`): node end2end/bench-fine-tune.mjs [PAIRS] [EPOCHS]
+// HNET_PAGE_QUERY=<query> opens the page with that query (src/page_query.rs), e.g.
+// `?tune-patience=100` to run every epoch asked for.
 import { serveDist, launchBrowser, openPage, waitForModel } from "./harness.mjs";
 
 const TABS = ["#tab-images", "#tab-twin", "#tab-images", "#tab-twin", "#tab-images", "#tab-twin"];
@@ -40,7 +42,7 @@ const epochs = Number(process.argv[3] ?? 2);
 const server = await serveDist();
 const context = await launchBrowser();
 try {
-  const { page } = await openPage(context, server.url);
+  const { page } = await openPage(context, server.url + (process.env.HNET_PAGE_QUERY ?? ""));
   await waitForModel(page);
   await page.click("#tab-twin");
   for (let i = 0; i < pairs; i++) {

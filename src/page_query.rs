@@ -35,6 +35,12 @@ pub const CPU_FUSED: &str = "cpu-fused";
 /// both can be timed in one build. Any other value, or none, lets the kernels choose.
 pub const WINOGRAD_TILES: &str = "winograd-tiles";
 
+/// The fine-tune's patience, epochs (a whole number, at least 1): `tune-patience=100` runs
+/// every epoch asked for even where the held-back loss stops improving early, so that a
+/// benchmark times them all (end2end/bench-fine-tune.mjs). Default the page's
+/// ([`hnet_model::fine_tune::FineTuneSettings::patience`]).
+pub const TUNE_PATIENCE: &str = "tune-patience";
+
 /// The value of parameter `key` in `query` (with or without its leading `?`), if given.
 fn value<'a>(query: &'a str, key: &str) -> Option<&'a str> {
     query
@@ -71,6 +77,13 @@ pub fn cpu_views_per_worker(query: &str) -> usize {
         .unwrap_or(CPU_VIEWS_PER_WORKER_DEFAULT)
 }
 
+/// The fine-tune's patience `query` asks for, if a whole number of at least 1 ([`TUNE_PATIENCE`]).
+pub fn tune_patience(query: &str) -> Option<usize> {
+    value(query, TUNE_PATIENCE)
+        .and_then(|value| value.parse::<usize>().ok())
+        .filter(|&epochs| epochs >= 1)
+}
+
 /// False when the query turns the fused CPU module off ([`CPU_FUSED`]`=0`).
 pub fn cpu_fused_allowed(query: &str) -> bool {
     value(query, CPU_FUSED) != Some("0")
@@ -93,6 +106,9 @@ mod tests {
         assert_eq!(webgpu_tolerance_scale("?webgpu-tolerance-scale=inf"), 1.0);
         assert_eq!(webgpu_tolerance_scale("?webgpu-tolerance-scale"), 1.0);
         assert!(cpu_fused_allowed("") && cpu_fused_allowed("?cpu-fused=1"));
+        assert_eq!(tune_patience("?tune-patience=100"), Some(100));
+        assert_eq!(tune_patience("?tune-patience=0"), None);
+        assert_eq!(tune_patience(""), None);
         assert!(!cpu_fused_allowed("?a=b&cpu-fused=0"));
         assert!(
             large_winograd_tiles_allowed("") && large_winograd_tiles_allowed("?winograd-tiles=4")

@@ -25,6 +25,7 @@ use crate::fine_tune::{
 use crate::imaging::WORK_SIZE;
 use crate::module_worker::{ModuleWorker, ModuleWorkerError};
 use crate::storage::{self, KeptWeights};
+use crate::{browser, page_query};
 use hnet_twin::model_facts::ForceDomain;
 use hnet_twin::model_facts::ModelFacts;
 use hnet_twin::simulator::carm::CArm;
@@ -167,6 +168,8 @@ impl Studio {
         }
         let settings = FineTuneSettings {
             replicas: workers.len(),
+            patience: page_query::tune_patience(&browser::page_query())
+                .unwrap_or(settings.patience),
             ..settings
         };
         self.tuning.workers.set_value(workers.clone());
