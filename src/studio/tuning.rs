@@ -1,8 +1,9 @@
 //! "Fine-tune on my pairs" on the page's state: the fine-tuning workers (crates/hnet-tune, one
 //! [`ModuleWorker`] per core, at most the batch) driven step by step, each step split between
 //! them and the average of their gradients relayed to each ([`hnet_model::fine_tune::Share`]),
-//! its progress, the result kept or discarded, and the kept weights chosen in the model bar. Nothing is stored until the user keeps a result: a tab
-//! closed or a run stopped midway leaves the weights in use, and those kept before, as they were.
+//! its progress, the result kept or discarded, and the kept weights chosen in the model bar.
+//! Nothing is stored until the user keeps a result: a tab closed or a run stopped midway leaves
+//! the weights in use, and those kept before, as they were.
 
 use std::rc::Rc;
 
@@ -125,8 +126,9 @@ impl Default for TuningStore {
 
 impl Studio {
     /// Starts fine-tuning the loaded network on the page's labelled pairs with `settings`, in
-    /// workers of its own, one per core (at most the batch), each step split between them; with `rehearse`, on twin pairs of the weights' own domain too (when
-    /// their file records it). Says why when it cannot.
+    /// workers of its own, one per core (at most the batch), each step split between them; with
+    /// `rehearse`, on twin pairs of the weights' own domain too (when their file records it).
+    /// Says why when it cannot.
     pub fn start_tuning(&self, settings: FineTuneSettings, rehearse: bool) {
         if matches!(self.tuning.state.get_untracked(), TuningState::Running(_)) {
             return;

@@ -506,24 +506,7 @@ fn fine_tuning_scores_held_back_pairs_and_keeps_the_best_epoch() {
     let weights = net
         .to_weights_bytes(&small_config(), &BTreeMap::new())
         .unwrap();
-    let side = 16;
-    let pair = |column: usize, force: Option<[f32; 3]>| {
-        let mut view = vec![20u8; side * side * 3];
-        let mut mask = vec![0u8; side * side];
-        for row in 0..side {
-            for x in column..column + 2 {
-                view[(row * side + x) * 3..][..3].fill(230);
-                mask[row * side + x] = 255;
-            }
-        }
-        TrainingPair {
-            view_a: view.clone(),
-            view_b: view,
-            mask_a: mask.clone(),
-            mask_b: mask,
-            force_n: force.map(TipForce::from_newtons),
-        }
-    };
+    let pair = |column: usize, force: Option<[f32; 3]>| line_pair(|_| column, 2, force);
     let pairs: Vec<TrainingPair> = (0..6)
         .map(|i| {
             pair(
@@ -631,22 +614,10 @@ fn replicas_in_two_workers_train_as_one_run_does() {
     let weights = net
         .to_weights_bytes(&small_config(), &BTreeMap::new())
         .unwrap();
-    let side = 16;
     let pairs: Vec<TrainingPair> = (0..7)
         .map(|i| {
-            let (mut view, mut mask) = (vec![20u8; side * side * 3], vec![0u8; side * side]);
-            for row in 0..side {
-                let x = 2 + i + row / 4;
-                view[(row * side + x) * 3..][..3].fill(230);
-                mask[row * side + x] = 255;
-            }
-            TrainingPair {
-                view_a: view.clone(),
-                view_b: view,
-                mask_a: mask.clone(),
-                mask_b: mask,
-                force_n: (i % 2 == 0).then(|| TipForce::from_newtons([0.05 * i as f32, 0.0, 0.1])),
-            }
+            let force = (i % 2 == 0).then_some([0.05 * i as f32, 0.0, 0.1]);
+            line_pair(|row| 2 + i + row / 4, 1, force)
         })
         .collect();
     let settings = FineTuneSettings {
@@ -700,6 +671,33 @@ fn replicas_in_two_workers_train_as_one_run_does() {
         other.apply(&[share]),
         Err(FineTuneError::Shares { .. })
     ));
+}
+
+/// A 16 x 16 pair for the fine-tuning tests: both views a bright line `width` pixels wide
+/// starting at column `column(row)` of each row, on a dark background, its mask, and `force`
+/// (newtons) when it has a label.
+#[cfg(feature = "training")]
+fn line_pair(
+    column: impl Fn(usize) -> usize,
+    width: usize,
+    force: Option<[f32; 3]>,
+) -> hnet_model::fine_tune::TrainingPair {
+    let side = 16;
+    let mut view = vec![20u8; side * side * 3];
+    let mut mask = vec![0u8; side * side];
+    for row in 0..side {
+        for x in column(row)..column(row) + width {
+            view[(row * side + x) * 3..][..3].fill(230);
+            mask[row * side + x] = 255;
+        }
+    }
+    hnet_model::fine_tune::TrainingPair {
+        view_a: view.clone(),
+        view_b: view,
+        mask_a: mask.clone(),
+        mask_b: mask,
+        force_n: force.map(TipForce::from_newtons),
+    }
 }
 
 /// The values of the first float parameter a visitor meets (the first encoder convolution).

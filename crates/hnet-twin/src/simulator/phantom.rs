@@ -356,8 +356,8 @@ impl Thorax {
     /// line integral of attenuation is large), normalised to `[0, 1]`.
     ///
     /// Returns the image and the wide view it was rendered with (to locate landmarks in it).
-    pub fn radiograph(&self, view: &CArm, field_mm: f64, size_px: usize) -> (GreyImage, CArm) {
-        let mut render = self.clone().radiograph_in_bands(view, field_mm, size_px);
+    pub fn radiograph(self, view: &CArm, field_mm: f64, size_px: usize) -> (GreyImage, CArm) {
+        let mut render = self.radiograph_in_bands(view, field_mm, size_px);
         while render.render_rows(size_px) {}
         render.finish()
     }
@@ -538,8 +538,7 @@ mod tests {
         );
         // Rendered a few rows at a time (the page's thread answering in between), the same
         // image to the bit.
-        let thorax = Thorax::adult();
-        let mut bands = thorax.radiograph_in_bands(&view, 420.0, 128);
+        let mut bands = Thorax::adult().radiograph_in_bands(&view, 420.0, 128);
         let mut calls = 1;
         while bands.render_rows(7) {
             calls += 1;
