@@ -7,6 +7,7 @@ use anyhow::Context;
 use burn::module::Module;
 use burn::tensor::Device;
 use hnet_model::catheter_entry::EntrySetting;
+use hnet_model::mask_averaging::MaskAveraging;
 use hnet_model::metrics::{
     ForceAccumulator, ForceMetrics, SegmentationAccumulator, SegmentationMetrics,
 };
@@ -24,7 +25,7 @@ use record::record_facts;
 
 use crate::backend::BackendChoice;
 use crate::data::StereoSplit;
-use crate::network::{load_run, load_weights, predict_entry};
+use crate::network::{load_run, load_weights, parse_mask_averaging, predict_entry};
 use crate::physics_check::{self, BlindEstimator, Estimator, PhysicsEvaluation};
 use crate::run_dir::RunDir;
 use hnet_twin::dataset::simulate::nominal_base;
@@ -97,6 +98,11 @@ pub struct EvalArgs {
     /// are. Square networks that segment; nothing is saved into a run folder unless `bottom`.
     #[arg(long, default_value = "bottom", value_parser = parse_entry)]
     catheter_entry: EntrySetting,
+    /// How many ways each view is read for its mask, the readings' catheter probabilities
+    /// averaged: `single`, or `mirrored` (the view and its left-right mirror image, twice the
+    /// network's work). The force head reads the views as given.
+    #[arg(long, default_value = "single", value_parser = parse_mask_averaging)]
+    mask_averaging: MaskAveraging,
     /// The catheter the blind physics estimate assumes: a catalogue name or a catheter file
     /// (`hnet calibrate`'s output).
     #[arg(long, default_value = BENCH_CATHETER, conflicts_with = "oracle")]
@@ -178,6 +184,10 @@ pub struct Evaluation {
     /// as trained (from the bottom).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub catheter_entry: Option<EntryUse>,
+    /// How many ways each view was read for its mask (`hnet eval --mask-averaging`); files
+    /// written before it existed read as `single`, which is what they were.
+    #[serde(default, skip_serializing_if = "is_single_reading")]
+    pub mask_averaging: MaskAveraging,
     /// What the physics estimate was told: `blind` (a catalogue catheter, the base fitted) or
     /// `oracle` (each pair's recorded catheter and base). Files written before the blind
     /// estimate existed read as `oracle`, which is what they were.
@@ -223,6 +233,10 @@ pub struct EntryUse {
 
 fn is_zero(turns: &u8) -> bool {
     *turns == 0
+}
+
+fn is_single_reading(averaging: &MaskAveraging) -> bool {
+    *averaging == MaskAveraging::Single
 }
 
 /// What [`evaluate`] checks and writes besides the network's own tables.
@@ -511,6 +525,7 @@ pub fn evaluate(
                     pairs: pairs.items.len(),
                 }
             }),
+            mask_averaging: model.mask_averaging,
             estimator: estimator.name().into(),
             catheter: options.catheter.clone(),
             header_error: options.header_error,
@@ -547,7 +562,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     }
     let device = args.backend.device()?;
     let run = args.run.as_ref().map(RunDir::new);
-    let (model, data) = match (&run, &args.weights) {
+    let (mut model, data) = match (&run, &args.weights) {
         (Some(run), _) => {
             let data = match &args.data {
                 Some(d) => d.clone(),
@@ -561,6 +576,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         ),
         (None, None) => anyhow::bail!("give --run or --weights"),
     };
+    model.mask_averaging = args.mask_averaging;
     let (evaluation, predictions) = evaluate(
         &model,
         &data,

@@ -31,8 +31,9 @@ use serde::Serialize;
 
 use crate::backend::BackendChoice;
 use crate::evaluation::{EvalOptions, Evaluation, evaluate};
-use crate::network::load_weights;
+use crate::network::{load_weights, parse_mask_averaging};
 use crate::simulate::{Scenes, SimulateArgs};
+use hnet_model::mask_averaging::MaskAveraging;
 
 /// `hnet study mismatch`.
 #[derive(clap::Args, Debug)]
@@ -58,6 +59,9 @@ pub struct MismatchArgs {
     /// Where to compute.
     #[arg(long, value_enum, default_value = "flex")]
     backend: BackendChoice,
+    /// How many ways each view is read for its mask (`hnet eval --mask-averaging`).
+    #[arg(long, default_value = "single", value_parser = parse_mask_averaging)]
+    mask_averaging: MaskAveraging,
 }
 
 /// One set of the suite.
@@ -369,7 +373,8 @@ pub fn markdown(weights: &Path, rows: &[MismatchRow]) -> String {
 
 pub fn run(args: &MismatchArgs) -> anyhow::Result<()> {
     let device: Device = args.backend.device()?;
-    let model = load_weights(&args.weights, None, &device)?;
+    let mut model = load_weights(&args.weights, None, &device)?;
+    model.mask_averaging = args.mask_averaging;
     let catheter = CatalogueCatheter::find(BENCH_CATHETER)?;
     // Each set's seed is the first plus its place in the whole suite, so that a set gives the
     // same pairs whether it runs alone or with the others.

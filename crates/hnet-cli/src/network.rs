@@ -8,6 +8,7 @@ use std::path::Path;
 use anyhow::Context;
 use burn::tensor::Device;
 use hnet_model::catheter_entry::{CatheterEntry, EntrySetting};
+use hnet_model::mask_averaging::MaskAveraging;
 use hnet_model::predictor::{EntryError, LoadError, PairInput, Predictor};
 use hnet_units::{ImageSize, TipForce};
 
@@ -32,6 +33,17 @@ pub fn load_weights(
         };
         anyhow::Error::new(error).context(format!("loading the network{hint}"))
     })
+}
+
+/// Parses `--mask-averaging` ([`MaskAveraging::name`]).
+pub fn parse_mask_averaging(text: &str) -> Result<MaskAveraging, String> {
+    MaskAveraging::ALL
+        .into_iter()
+        .find(|a| a.name() == text)
+        .ok_or_else(|| {
+            let names: Vec<&str> = MaskAveraging::ALL.iter().map(|a| a.name()).collect();
+            format!("`{text}` is not one of {}", names.join(", "))
+        })
 }
 
 /// Loads a run folder's `model.bpk`: H-Net at the size its weights record, a baseline at the

@@ -41,6 +41,7 @@ pub mod catheter_entry;
 pub mod fine_tune;
 pub mod inference;
 pub mod loss;
+pub mod mask_averaging;
 pub mod metrics;
 pub mod model;
 pub mod predictor;

@@ -19,6 +19,7 @@ use hnet_units::{ImageSize, TipForce};
 use crate::architectures::{ModelSpec, StereoModel};
 use crate::catheter_entry::{CatheterEntry, EntrySearch, EntrySetting, TurnedOutput, turned_pair};
 use crate::inference::{InputSizeError, PredictError, ReadbackError, push_mask, push_planar};
+use crate::mask_averaging::{MaskAveraging, average_with_mirror, mirrored};
 use crate::weights::{WeightsError, WeightsHeader};
 
 /// A network ready to read pairs: its weights, its settings and the input size it takes.
@@ -31,6 +32,8 @@ pub struct Predictor {
     pub image_size: ImageSize,
     /// The weights file's header (architecture, settings, provenance).
     pub header: WeightsHeader,
+    /// How many ways each view is read for its mask ([`crate::mask_averaging`]); one by default.
+    pub mask_averaging: MaskAveraging,
 }
 
 /// Why a weights file gives no [`Predictor`].
@@ -156,6 +159,7 @@ impl Predictor {
             spec,
             image_size,
             header,
+            mask_averaging: MaskAveraging::Single,
         })
     }
 
@@ -165,7 +169,8 @@ impl Predictor {
     }
 
     /// Runs the network on `pairs` as one batch and reads the results back, blocking until the
-    /// device is done.
+    /// device is done. With [`Self::mask_averaging`] `Mirrored`, the mirror images are one more
+    /// batch and each mask is the mean of the two readings.
     pub fn predict(
         &self,
         pairs: &[PairInput<'_>],
@@ -215,6 +220,13 @@ impl Predictor {
                 }
             }
         }
+        // The mirror images' catheter probabilities, as read (one more batch).
+        let mirror_masks = if self.segments() && self.mask_averaging == MaskAveraging::Mirrored {
+            let mirror = |planes: &[Vec<f32>; 2]| planes.each_ref().map(|p| mirrored(p, size));
+            Some(self.read_masks(mirror(&views), mirror(&masks), n, size, device)?)
+        } else {
+            None
+        };
         let [view_a, view_b] = views;
         let [mask_a, mask_b] = masks;
         let image = |data: Vec<f32>| Tensor::from_data(TensorData::new(data, [n, 3, h, w]), device);
@@ -240,7 +252,13 @@ impl Predictor {
             .map(|data| data.try_into_vec::<f32>().map_err(ReadbackError::Data));
         let mut next = || values.next().unwrap_or_else(|| Ok(Vec::new()));
         let masks = if segments {
-            Some([next()?, next()?])
+            let mut masks = [next()?, next()?];
+            if let Some(mirror_masks) = &mirror_masks {
+                for (mask, mirror_mask) in masks.iter_mut().zip(mirror_masks) {
+                    average_with_mirror(mask, mirror_mask, size);
+                }
+            }
+            Some(masks)
         } else {
             None
         };
@@ -258,6 +276,36 @@ impl Predictor {
                     .map(|f| TipForce::new(f[i * 3], f[i * 3 + 1], f[i * 3 + 2])),
             })
             .collect())
+    }
+
+    /// The catheter probabilities of `n` pairs' planar views and masks (`[n, 3, h, w]` and
+    /// `[n, 1, h, w]` each), read back as views A and B, `n · h · w` values each.
+    fn read_masks(
+        &self,
+        [view_a, view_b]: [Vec<f32>; 2],
+        [mask_a, mask_b]: [Vec<f32>; 2],
+        n: usize,
+        size: ImageSize,
+        device: &Device,
+    ) -> Result<[Vec<f32>; 2], PredictError> {
+        let [h, w] = size.height_width();
+        let image = |data: Vec<f32>| Tensor::from_data(TensorData::new(data, [n, 3, h, w]), device);
+        let mask = |data: Vec<f32>| Tensor::from_data(TensorData::new(data, [n, 1, h, w]), device);
+        let out = self
+            .net
+            .forward([image(view_a), image(view_b)], [mask(mask_a), mask(mask_b)]);
+        let Some([a, b]) = out.mask_logits else {
+            return Ok([Vec::new(), Vec::new()]);
+        };
+        let mut values = Transaction::default()
+            .register(sigmoid(a).reshape([n as i32, -1]))
+            .register(sigmoid(b).reshape([n as i32, -1]))
+            .try_execute()
+            .map_err(ReadbackError::Device)?
+            .into_iter()
+            .map(|data| data.try_into_vec::<f32>().map_err(ReadbackError::Data));
+        let mut next = || values.next().unwrap_or_else(|| Ok(Vec::new()));
+        Ok([next()?, next()?])
     }
 
     /// [`Predictor::predict`] with each pair's views read under `entry`

@@ -8,6 +8,7 @@ use hnet_model::catheter_entry::{CatheterEntry, EntrySetting};
 use hnet_model::inference::{
     JoinViewsError, StereoPair, StereoPrediction, ViewReading, host_values, stereo_batch,
 };
+use hnet_model::mask_averaging::MaskAveraging;
 use hnet_model::model::ForceScale;
 use hnet_model::predictor::{PairInput, Predictor};
 use hnet_model::{HNet, HNetConfig, HNetLossConfig};
@@ -122,6 +123,44 @@ fn predict_gives_each_pair_its_masks_and_force() {
         let [a, b] = o.masks.as_ref().unwrap();
         assert!(close(a, &p.mask_a) && close(b, &p.mask_b));
         assert!(close(&o.force.unwrap().newtons(), &p.force.newtons()));
+    }
+    // Averaged over each view and its mirror image: the mean of the two readings' masks, the
+    // mirror's moved back, and the force of the views as given.
+    let mut averaging = Predictor::from_weights_bytes(&bytes, None, &device, "small.bpk").unwrap();
+    averaging.mask_averaging = MaskAveraging::Mirrored;
+    let mirror = |rgb: &[u8]| -> Vec<u8> {
+        rgb.chunks_exact(3 * size.width)
+            .flat_map(|row| row.chunks_exact(3).rev().flatten().copied())
+            .collect()
+    };
+    let mirrored_views: Vec<[Vec<u8>; 2]> = inputs
+        .iter()
+        .map(|p| [mirror(p.view_a), mirror(p.view_b)])
+        .collect();
+    let mirrored_inputs: Vec<PairInput<'_>> = mirrored_views
+        .iter()
+        .map(|[a, b]| PairInput {
+            view_a: a,
+            view_b: b,
+            masks: None,
+        })
+        .collect();
+    let mirrored = predictor.predict(&mirrored_inputs, &device).unwrap();
+    let averaged = averaging.predict(&inputs, &device).unwrap();
+    for ((single, mirrored), averaged) in outputs.iter().zip(&mirrored).zip(&averaged) {
+        for view in 0..2 {
+            let back: Vec<f32> = mirrored.masks.as_ref().unwrap()[view]
+                .chunks_exact(size.width)
+                .flat_map(|row| row.iter().rev().copied())
+                .collect();
+            let mean: Vec<f32> = single.masks.as_ref().unwrap()[view]
+                .iter()
+                .zip(&back)
+                .map(|(a, b)| 0.5 * (a + b))
+                .collect();
+            assert!(close(&averaged.masks.as_ref().unwrap()[view], &mean));
+        }
+        assert_eq!(averaged.force, single.force);
     }
     let known = EntrySetting::Known([CatheterEntry::Bottom; 2]);
     let read = predictor.predict_entry(&inputs, &device, known).unwrap();

@@ -162,6 +162,14 @@ pub fn markdown(e: &Evaluation) -> String {
             n => format!(", both views turned {} clockwise", quarter_turns(n)),
         }
     );
+    let readings = e.mask_averaging.readings();
+    if readings > 1 {
+        let _ = writeln!(
+            s,
+            "Masks averaged over {readings} readings of each view (`{}`); the force head reads              the views as given.\n",
+            e.mask_averaging.name()
+        );
+    }
     if let Some(entry) = &e.catheter_entry {
         let [a, b] = entry.views_read_turned;
         let _ = write!(
