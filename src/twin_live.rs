@@ -313,6 +313,7 @@ impl XrayBackground {
             region: self.region,
             permutation: (0..cells as u8).collect(),
             dark: vec![false; cells],
+            grid_offset: [0.0; 2],
         };
         let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
         let a = base.reshuffled(&rule, &mut rng);

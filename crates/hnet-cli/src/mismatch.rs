@@ -74,6 +74,9 @@ struct MismatchSet {
     chest: bool,
     /// The X-ray detector the set is imaged with (the twin's default otherwise).
     detector: Option<XRayDetector>,
+    /// Whether the backgrounds' patch grid starts at a random place (`hnet simulate
+    /// --random-patch-grid`).
+    random_patch_grid: bool,
 }
 
 /// The suite: each set departs from the bench in one way.
@@ -90,6 +93,7 @@ fn suite() -> Vec<MismatchSet> {
         header_error: HeaderError::default(),
         chest: false,
         detector: None,
+        random_patch_grid: false,
     };
     let imaged = |name, why, detector: XRayDetector| MismatchSet {
         detector: Some(detector),
@@ -273,6 +277,14 @@ fn suite() -> Vec<MismatchSet> {
                 ..bench()
             },
         ),
+        MismatchSet {
+            random_patch_grid: true,
+            ..set(
+                "background-edges",
+                "the background's straight edges (the shuffled patches') anywhere in the view,                  where the bench's fall every quarter of it: a collimator blade, a wedge filter                  or another device's edge can cross a view at any place",
+                bench(),
+            )
+        },
     ]
 }
 
@@ -409,6 +421,7 @@ pub fn run(args: &MismatchArgs) -> anyhow::Result<()> {
             scenes: Scenes::Preset(Box::new(set.scenes.clone())),
             scene_sampling: None,
             detector: set.detector,
+            random_patch_grid: set.random_patch_grid,
             shard: None,
         })
         .with_context(|| format!("simulating the `{}` set", set.name))?;

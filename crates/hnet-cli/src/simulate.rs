@@ -64,6 +64,11 @@ pub struct SimulateArgs {
     /// instead of the twin's: low-dose noise, blur, scatter and veiling glare, a display curve.
     #[arg(long, value_parser = read_detector)]
     pub detector: Option<XRayDetector>,
+    /// Start each X-ray background's grid of shuffled patches at a random place, so that the
+    /// patches' edges fall anywhere rather than every quarter of the view (the paper's recipe
+    /// puts them there; a network trained on it learns to expect them there).
+    #[arg(long)]
+    pub random_patch_grid: bool,
     /// Write only part K of N of the pairs (`K/N`, K from 0: a Slurm array task's or a
     /// Kubernetes completion index), each part on its own machine; `hnet merge` joins the N
     /// parts into the dataset one run would write, byte for byte.
@@ -268,6 +273,12 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
             .check()
             .map_err(|why| anyhow::anyhow!("--detector: {why}"))?;
         config.detector = detector;
+    }
+    if args.random_patch_grid {
+        if !config.modality.is_xray() {
+            bail!("--random-patch-grid is for the X-ray modalities (xray1, xray2)");
+        }
+        config.patches.random_grid_offset = true;
     }
     let sampling = args
         .scene_sampling

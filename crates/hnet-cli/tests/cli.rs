@@ -486,6 +486,21 @@ fn bad_input_gets_a_clear_error_naming_the_file() {
         "{err}"
     );
 
+    // A patch grid asked of a modality without patches, before anything is written.
+    let err = fails(
+        hnet()
+            .args([
+                "simulate",
+                "--modality",
+                "rgb",
+                "--random-patch-grid",
+                "--out",
+            ])
+            .arg(dir.join("rgb")),
+    );
+    assert!(err.contains("--random-patch-grid"), "{err}");
+    assert!(!dir.join("rgb").exists());
+
     // A corrupt weights file.
     let run_dir = dir.join("corrupt");
     std::fs::create_dir_all(&run_dir).unwrap();

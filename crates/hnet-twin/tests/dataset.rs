@@ -564,6 +564,7 @@ mod properties {
                 region: Rect(region),
                 permutation,
                 dark,
+                grid_offset: [0.25, 0.5],
             });
         (
             carm(),

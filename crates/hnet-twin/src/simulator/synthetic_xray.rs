@@ -57,6 +57,14 @@ pub struct PatchRule {
     pub region_size: [f64; 2],
     /// Random shift of the region's centre, as a fraction of the image size.
     pub region_jitter: f64,
+    /// Whether each background's grid of patches starts at a random place (its mosaic rolled
+    /// by up to a cell, wrapping round), so that the patches' edges fall anywhere; `false`, the
+    /// paper's, puts them at fixed multiples of the cell (every 56 pixels at 224), where a
+    /// network can learn to expect them (docs/log/2026-12-07-reading-each-view-twice.md).
+    /// Files written before it existed read `false`, which is what they were, and `false` is
+    /// not written, so that a seed's files stay byte for byte as they were.
+    #[serde(default, skip_serializing_if = "core::ops::Not::not")]
+    pub random_grid_offset: bool,
 }
 
 impl PatchRule {
@@ -70,6 +78,7 @@ impl PatchRule {
             texture_contrast: 2.0,
             region_size: [0.28, 0.40],
             region_jitter: 0.04,
+            random_grid_offset: false,
         }
     }
 
@@ -199,6 +208,26 @@ pub struct PatchLayout {
     pub permutation: Vec<u8>,
     /// Whether the patch at each grid cell is dark.
     pub dark: Vec<bool>,
+    /// Where the grid starts, as a fraction of a cell across and down, in `[0, 1)`
+    /// ([`PatchRule::random_grid_offset`]); `[0, 0]` for the paper's fixed grid and for layouts
+    /// saved before it existed (and not written, as [`PatchRule::random_grid_offset`]).
+    #[serde(default, skip_serializing_if = "is_fixed_grid")]
+    pub grid_offset: [f64; 2],
+}
+
+fn is_fixed_grid(offset: &[f64; 2]) -> bool {
+    *offset == [0.0; 2]
+}
+
+/// A random start of the grid where `rule` asks for one ([`PatchRule::random_grid_offset`]),
+/// drawn after the layout's other choices so that a fixed grid leaves the random stream as it
+/// was.
+fn grid_offset(rule: &PatchRule, rng: &mut impl Rng) -> [f64; 2] {
+    if rule.random_grid_offset {
+        [rng.random(), rng.random()]
+    } else {
+        [0.0; 2]
+    }
 }
 
 impl PatchLayout {
@@ -224,26 +253,32 @@ impl PatchLayout {
         let side =
             rule.region_size[0] + (rule.region_size[1] - rule.region_size[0]) * rng.random::<f64>();
         let cells = rule.grid * rule.grid;
+        let permutation = shuffled(cells, rng);
+        let dark = (0..cells)
+            .map(|_| rng.random::<f64>() < rule.dark_probability)
+            .collect();
         Self {
             anatomy,
             region: source.square_region(centre, side),
-            permutation: shuffled(cells, rng),
-            dark: (0..cells)
-                .map(|_| rng.random::<f64>() < rule.dark_probability)
-                .collect(),
+            permutation,
+            dark,
+            grid_offset: grid_offset(rule, rng),
         }
     }
 
     /// The same region with a new random arrangement (the app's "shuffle" button).
     pub fn reshuffled(&self, rule: &PatchRule, rng: &mut impl Rng) -> Self {
         let cells = rule.grid * rule.grid;
+        let permutation = shuffled(cells, rng);
+        let dark = (0..cells)
+            .map(|_| rng.random::<f64>() < rule.dark_probability)
+            .collect();
         Self {
             anatomy: self.anatomy,
             region: self.region,
-            permutation: shuffled(cells, rng),
-            dark: (0..cells)
-                .map(|_| rng.random::<f64>() < rule.dark_probability)
-                .collect(),
+            permutation,
+            dark,
+            grid_offset: grid_offset(rule, rng),
         }
     }
 }
@@ -313,7 +348,25 @@ pub fn compose(
             }
         }
     }
-    out
+    if layout.grid_offset == [0.0; 2] {
+        return out;
+    }
+    // The mosaic rolled so that the grid starts at its offset, wrapping round.
+    let roll = |fraction: f64, size: usize| {
+        ((fraction.clamp(0.0, 1.0) * size as f64 / grid as f64) as usize).min(size - 1)
+    };
+    let (dx, dy) = (
+        roll(layout.grid_offset[0], width),
+        roll(layout.grid_offset[1], height),
+    );
+    let mut rolled = GreyImage::filled(width, height, 0.0);
+    for y in 0..height {
+        let from = &out.data[y * width..(y + 1) * width];
+        let to = &mut rolled.data[((y + dy) % height) * width..][..width];
+        to[dx..].copy_from_slice(&from[..width - dx]);
+        to[..dx].copy_from_slice(&from[width - dx..]);
+    }
+    rolled
 }
 
 #[cfg(test)]
@@ -394,6 +447,7 @@ mod tests {
             // Swap the first two cells, keep the rest.
             permutation: [1u8, 0].into_iter().chain(2..16).collect(),
             dark: vec![false; 16],
+            grid_offset: [0.0; 2],
         };
         let bg = compose(&source, &layout, &rule, 64, 64);
         let identity = PatchLayout {
@@ -408,6 +462,33 @@ mod tests {
             }
         }
         assert_eq!(bg.data[40 * 64 + 40], reference.data[40 * 64 + 40]);
+        // A grid started half a cell across and a quarter down is the same mosaic rolled by 8
+        // and 4 pixels, wrapping round.
+        let offset = PatchLayout {
+            grid_offset: [0.5, 0.25],
+            ..layout.clone()
+        };
+        let rolled = compose(&source, &offset, &rule, 64, 64);
+        for (y, x) in [(0, 0), (3, 7), (10, 20), (63, 63), (40, 60)] {
+            let (from_y, from_x) = ((y + 64 - 4) % 64, (x + 64 - 8) % 64);
+            assert_eq!(rolled.data[y * 64 + x], bg.data[from_y * 64 + from_x]);
+        }
+        // The paper's fixed grid draws no offset, so a seed's layouts stay as they were.
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let fixed = PatchLayout::random(&source, &Anatomy::ALL, &rule, &mut rng);
+        assert_eq!(fixed.grid_offset, [0.0; 2]);
+        let moving = PatchRule {
+            random_grid_offset: true,
+            ..rule
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let offset = PatchLayout::random(&source, &Anatomy::ALL, &moving, &mut rng);
+        assert_eq!(
+            (&offset.permutation, &offset.dark),
+            (&fixed.permutation, &fixed.dark)
+        );
+        assert!(offset.grid_offset.iter().all(|f| (0.0..1.0).contains(f)));
+        assert_ne!(offset.grid_offset, [0.0; 2]);
     }
 
     #[test]
