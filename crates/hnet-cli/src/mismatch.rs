@@ -281,7 +281,9 @@ fn suite() -> Vec<MismatchSet> {
             random_patch_grid: true,
             ..set(
                 "background-edges",
-                "the background's straight edges (the shuffled patches') anywhere in the view,                  where the bench's fall every quarter of it: a collimator blade, a wedge filter                  or another device's edge can cross a view at any place",
+                "the background's straight edges (the shuffled patches') anywhere in the view, \
+                 where the bench's fall every quarter of it: a collimator blade, a wedge filter \
+                 or another device's edge can cross a view at any place",
                 bench(),
             )
         },

@@ -166,7 +166,8 @@ pub fn markdown(e: &Evaluation) -> String {
     if readings > 1 {
         let _ = writeln!(
             s,
-            "Masks averaged over {readings} readings of each view (`{}`); the force head reads              the views as given.\n",
+            "Masks averaged over {readings} readings of each view (`{}`); the force head reads \
+             the views as given.\n",
             e.mask_averaging.name()
         );
     }
