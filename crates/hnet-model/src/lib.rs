@@ -20,6 +20,7 @@
 //!   with turned-view reading: the one inference API of the command-line tool;
 //! - [`catheter_entry`]: reading a view whose catheter enters through another edge than the
 //!   bottom, as every training scene had it, by turning it;
+//! - [`mask_averaging`]: reading each view and its mirror image and averaging the masks;
 //! - [`weights`]: saving and loading trained weights as a single self-describing burnpack file;
 //! - [`baselines`] and [`architectures`]: the networks H-Net is compared with, and one type for
 //!   all of them so that training and evaluation are written once.
