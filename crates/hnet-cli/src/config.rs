@@ -259,7 +259,8 @@ mod tests {
                 "force-224-turned",
                 "imaging-224",
                 "outline-224",
-                "outline-224-control"
+                "outline-224-control",
+                "random-grid-224",
             ]
         );
         let names = names_in(&dir);
