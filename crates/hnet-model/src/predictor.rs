@@ -16,7 +16,7 @@ use burn::tensor::{Device, Tensor, TensorData, Transaction};
 use hnet_units::turn::TurnError;
 use hnet_units::{ImageSize, TipForce};
 
-use crate::architectures::{ModelSpec, StereoModel};
+use crate::architectures::{ModelSpec, StereoModel, StereoOutputs};
 use crate::catheter_entry::{CatheterEntry, EntrySearch, EntrySetting, TurnedOutput, turned_pair};
 use crate::inference::{InputSizeError, PredictError, ReadbackError, push_mask, push_planar};
 use crate::mask_averaging::{MaskAveraging, average_with_mirror, mirrored};
@@ -180,7 +180,6 @@ impl Predictor {
             return Ok(Vec::new());
         }
         let size = self.image_size;
-        let [h, w] = size.height_width();
         let (n, pixels) = (pairs.len(), size.pixels());
         let mut views = [
             Vec::with_capacity(n * 3 * pixels),
@@ -227,13 +226,7 @@ impl Predictor {
         } else {
             None
         };
-        let [view_a, view_b] = views;
-        let [mask_a, mask_b] = masks;
-        let image = |data: Vec<f32>| Tensor::from_data(TensorData::new(data, [n, 3, h, w]), device);
-        let mask = |data: Vec<f32>| Tensor::from_data(TensorData::new(data, [n, 1, h, w]), device);
-        let out = self
-            .net
-            .forward([image(view_a), image(view_b)], [mask(mask_a), mask(mask_b)]);
+        let out = self.forward(views, masks, n, size, device);
         let segments = out.mask_logits.is_some();
         let estimates_force = out.force.is_some();
         let mut read = Transaction::default();
@@ -278,22 +271,34 @@ impl Predictor {
             .collect())
     }
 
-    /// The catheter probabilities of `n` pairs' planar views and masks (`[n, 3, h, w]` and
-    /// `[n, 1, h, w]` each), read back as views A and B, `n · h · w` values each.
-    fn read_masks(
+    /// The network on `n` pairs' planar views and masks of views A and B (`[n, 3, h, w]` and
+    /// `[n, 1, h, w]` values each).
+    fn forward(
         &self,
         [view_a, view_b]: [Vec<f32>; 2],
         [mask_a, mask_b]: [Vec<f32>; 2],
         n: usize,
         size: ImageSize,
         device: &Device,
-    ) -> Result<[Vec<f32>; 2], PredictError> {
+    ) -> StereoOutputs {
         let [h, w] = size.height_width();
         let image = |data: Vec<f32>| Tensor::from_data(TensorData::new(data, [n, 3, h, w]), device);
         let mask = |data: Vec<f32>| Tensor::from_data(TensorData::new(data, [n, 1, h, w]), device);
-        let out = self
-            .net
-            .forward([image(view_a), image(view_b)], [mask(mask_a), mask(mask_b)]);
+        self.net
+            .forward([image(view_a), image(view_b)], [mask(mask_a), mask(mask_b)])
+    }
+
+    /// The catheter probabilities of `n` pairs' planar views and masks (`[n, 3, h, w]` and
+    /// `[n, 1, h, w]` each), read back as views A and B, `n · h · w` values each.
+    fn read_masks(
+        &self,
+        views: [Vec<f32>; 2],
+        masks: [Vec<f32>; 2],
+        n: usize,
+        size: ImageSize,
+        device: &Device,
+    ) -> Result<[Vec<f32>; 2], PredictError> {
+        let out = self.forward(views, masks, n, size, device);
         let Some([a, b]) = out.mask_logits else {
             return Ok([Vec::new(), Vec::new()]);
         };
