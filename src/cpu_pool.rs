@@ -21,6 +21,7 @@ use std::rc::Rc;
 
 use futures::channel::oneshot;
 use hnet_model::inference::ViewReading;
+use hnet_units::mask::MaskAveraging;
 use hnet_units::{ImageSize, View, with_causes};
 use js_sys::{Array, Float32Array, Reflect, Uint8Array};
 use wasm_bindgen::prelude::*;
@@ -161,18 +162,23 @@ struct Member {
 
 impl Member {
     /// A fresh worker of `module` with the weights `weights` (`name` names them in errors)
-    /// loaded.
+    /// loaded, to read each view as `averaging` says.
     async fn start(
         module: CpuModule,
         weights: &[u8],
         name: &str,
+        averaging: MaskAveraging,
     ) -> Result<Self, ModuleWorkerError> {
         let worker = ModuleWorker::spawn(module.name(), NAME)?;
         let large_tiles = page_query::large_winograd_tiles_allowed(&browser::page_query());
         let start = Array::of1(&JsValue::from_bool(large_tiles));
         worker.call("start", &start, &Array::new()).await?;
         let bytes = Uint8Array::from(weights);
-        let args = Array::of2(&bytes, &JsValue::from_str(name));
+        let args = Array::of3(
+            &bytes,
+            &JsValue::from_str(name),
+            &JsValue::from_str(averaging.name()),
+        );
         let handle = worker
             .call("load", &args, &Array::of1(&bytes.buffer()))
             .await?
@@ -293,6 +299,7 @@ pub struct CpuPool {
     name: String,
     input: ImageSize,
     pooled: usize,
+    averaging: MaskAveraging,
     /// One slot per worker; `None` while it is replaced, or once it could not be.
     members: RefCell<Vec<Option<Rc<Member>>>>,
     /// Views handed to each slot's worker and not yet answered.
@@ -325,7 +332,8 @@ fn has_workers() -> bool {
 
 impl CpuPool {
     /// Starts `size` workers, each loading `weights` (`name` names them), for a network of input
-    /// `input` whose branch pools `pooled` features. The pool runs with the workers that
+    /// `input` whose branch pools `pooled` features, each view read as `averaging` says. The
+    /// pool runs with the workers that
     /// started; it fails only when none did.
     pub async fn start(
         size: usize,
@@ -333,15 +341,17 @@ impl CpuPool {
         name: String,
         input: ImageSize,
         pooled: usize,
+        averaging: MaskAveraging,
         on_change: Box<dyn Fn(WorkersStatus)>,
     ) -> Result<Rc<Self>, PoolError> {
         if !has_workers() {
             return Err(PoolError::NoWorkers);
         }
         let module = CpuModule::for_this_browser();
-        let started =
-            futures::future::join_all((0..size).map(|_| Member::start(module, &weights, &name)))
-                .await;
+        let started = futures::future::join_all(
+            (0..size).map(|_| Member::start(module, &weights, &name, averaging)),
+        )
+        .await;
         let mut members = Vec::with_capacity(size);
         let mut failure = None;
         for member in started {
@@ -364,6 +374,7 @@ impl CpuPool {
             name,
             input,
             pooled,
+            averaging,
             in_flight: RefCell::new(vec![0; members.len()]),
             views_per_worker: page_query::cpu_views_per_worker(&browser::page_query()),
             members: RefCell::new(members),
@@ -524,7 +535,7 @@ impl CpuPool {
         (self.on_change)(self.status());
         let pool = self.clone();
         leptos::task::spawn_local(async move {
-            let fresh = Member::start(pool.module, &pool.weights, &pool.name).await;
+            let fresh = Member::start(pool.module, &pool.weights, &pool.name, pool.averaging).await;
             pool.replacing.set(pool.replacing.get() - 1);
             if let Ok(member) = fresh {
                 pool.members.borrow_mut()[slot] = Some(Rc::new(member));

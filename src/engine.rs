@@ -15,6 +15,7 @@ use hnet_model::catheter_entry::{
 use hnet_model::inference::{JoinViewsError, PredictError, StereoPair, StereoPrediction};
 use hnet_model::weights::{WeightsError, WeightsHeader};
 use hnet_model::{HNet, HNetConfig, HNetConfigError};
+use hnet_units::mask::MaskAveraging;
 use hnet_units::turn::{TurnError, turn_clockwise};
 use hnet_units::{ImageSize, TipForce, View};
 
@@ -83,6 +84,9 @@ pub struct Engine {
     pub combination: Option<ForceCombination>,
     /// Why the file's facts could not be read, when they could not.
     pub facts_error: Option<String>,
+    /// How each view is read for its mask: as the file's calibration was measured
+    /// ([`ModelFacts::mask_averaging`]), so that its intervals hold; one reading by default.
+    pub mask_averaging: MaskAveraging,
     /// The CPU workers that read its views, once started.
     workers: RefCell<Option<Rc<CpuPool>>>,
     /// Whether the workers were asked for.
@@ -224,6 +228,7 @@ impl Engine {
             domain: TrainingDomain::of_facts(&facts),
             combination: facts.combination().copied(),
             facts_error,
+            mask_averaging: facts.mask_averaging(),
             ..Self::without_file(model, config.image_size, bytes, reason)
         })
     }
@@ -243,6 +248,7 @@ impl Engine {
             domain: None,
             combination: None,
             facts_error: None,
+            mask_averaging: MaskAveraging::Single,
             workers: RefCell::default(),
             workers_asked: Cell::new(false),
         }
@@ -286,7 +292,9 @@ impl Engine {
     /// The same network on WebGPU, in `worker`, which loads the same weights. The CPU engine is
     /// kept by the caller, for the check and the fallback.
     pub async fn on_webgpu(&self, worker: &Rc<GpuWorker>) -> Result<Self, EngineError> {
-        let network = worker.load(&self.weights, &self.weights_name).await?;
+        let network = worker
+            .load(&self.weights, &self.weights_name, self.mask_averaging)
+            .await?;
         Ok(Self {
             runner: Runner::WebGpu(network),
             backend: Backend::WebGpu,
@@ -300,6 +308,7 @@ impl Engine {
             domain: self.domain.clone(),
             combination: self.combination,
             facts_error: self.facts_error.clone(),
+            mask_averaging: self.mask_averaging,
             workers: RefCell::default(),
             workers_asked: Cell::new(false),
         })
@@ -328,6 +337,7 @@ impl Engine {
                 engine.weights_name.clone(),
                 engine.input,
                 pooled,
+                engine.mask_averaging,
                 Box::new(move |status| report(status)),
             )
             .await;
@@ -379,7 +389,13 @@ impl Engine {
                         Err(EngineError::Workers(PoolError::Stopped { .. })) => {
                             workers = 0;
                             model
-                                .predict_entry_async(pair, self.input, &Device::flex(), entry)
+                                .predict_entry_async(
+                                    pair,
+                                    self.input,
+                                    &Device::flex(),
+                                    entry,
+                                    self.mask_averaging,
+                                )
                                 .await?
                         }
                         Err(e) => return Err(e),
@@ -387,7 +403,13 @@ impl Engine {
                 }
                 None => {
                     model
-                        .predict_entry_async(pair, self.input, &Device::flex(), entry)
+                        .predict_entry_async(
+                            pair,
+                            self.input,
+                            &Device::flex(),
+                            entry,
+                            self.mask_averaging,
+                        )
                         .await?
                 }
             },

@@ -7,6 +7,7 @@ use std::rc::Rc;
 
 use hnet_model::inference::StereoPrediction;
 use hnet_units::ImageSize;
+use hnet_units::mask::MaskAveraging;
 use js_sys::{Array, Float32Array, Promise, Uint8Array};
 use wasm_bindgen::prelude::*;
 
@@ -106,15 +107,20 @@ impl GpuWorker {
         Ok(result?)
     }
 
-    /// Loads a weights file (`name` names it in errors) onto WebGPU; the network lives in the
-    /// worker until the returned handle is dropped.
+    /// Loads a weights file (`name` names it in errors) onto WebGPU, to read each view as
+    /// `averaging` says; the network lives in the worker until the returned handle is dropped.
     pub async fn load(
         self: &Rc<Self>,
         weights: &[u8],
         name: &str,
+        averaging: MaskAveraging,
     ) -> Result<GpuNetwork, GpuWorkerError> {
         let bytes = Uint8Array::from(weights);
-        let args = Array::of2(&bytes, &JsValue::from_str(name));
+        let args = Array::of3(
+            &bytes,
+            &JsValue::from_str(name),
+            &JsValue::from_str(averaging.name()),
+        );
         let handle = self
             .call("load", &args, &Array::of1(&bytes.buffer()))
             .await?

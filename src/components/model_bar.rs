@@ -6,6 +6,7 @@ use std::rc::Rc;
 use leptos::prelude::*;
 
 use hnet_model::catheter_entry::EntrySetting;
+use hnet_units::mask::MaskAveraging;
 
 use crate::browser::{read_file, take_picked_file};
 use crate::catheter_calibration;
@@ -143,6 +144,14 @@ pub fn ModelBar(
                             <div>
                                 <dt>"Input"</dt>
                                 <dd id="input-size">{format!("{} px", engine.input)}</dd>
+                                {(engine.mask_averaging == MaskAveraging::Mirrored).then(|| view! {
+                                    <dd id="mask-averaging" class="why" title="Each view is read \
+                                        as given and as its left-right mirror image, and the two \
+                                        masks averaged, as the weights' calibration was measured \
+                                        (hnet eval --mask-averaging mirrored --record): twice the \
+                                        network's work. The force head reads the views as given"
+                                    >"(each view read twice)"</dd>
+                                })}
                             </div>
                             <div>
                                 <dt>"Weights"</dt>

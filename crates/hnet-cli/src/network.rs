@@ -37,13 +37,10 @@ pub fn load_weights(
 
 /// Parses `--mask-averaging` ([`MaskAveraging::name`]).
 pub fn parse_mask_averaging(text: &str) -> Result<MaskAveraging, String> {
-    MaskAveraging::ALL
-        .into_iter()
-        .find(|a| a.name() == text)
-        .ok_or_else(|| {
-            let names: Vec<&str> = MaskAveraging::ALL.iter().map(|a| a.name()).collect();
-            format!("`{text}` is not one of {}", names.join(", "))
-        })
+    MaskAveraging::from_name(text).ok_or_else(|| {
+        let names: Vec<&str> = MaskAveraging::ALL.iter().map(|a| a.name()).collect();
+        format!("`{text}` is not one of {}", names.join(", "))
+    })
 }
 
 /// Loads a run folder's `model.bpk`: H-Net at the size its weights record, a baseline at the

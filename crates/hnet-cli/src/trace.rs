@@ -4,7 +4,8 @@
 //! estimate from the network's own masks where the rod could be fitted (the C-arms from the
 //! headers, a catalogue catheter, the fixture's nominal base fitted), else the force head alone;
 //! each with its 90 % interval when the weights carry their calibration
-//! ([`hnet_twin::model_facts`], `hnet eval --record`). The trace holds no header value besides
+//! ([`hnet_twin::model_facts`], `hnet eval --record`), each view read for its mask as that
+//! calibration was measured. The trace holds no header value besides
 //! the frame times, so no patient identifier.
 
 use std::path::PathBuf;
@@ -21,11 +22,12 @@ use hnet_twin::reconstruction::physics_force::{
 use hnet_twin::simulator::carm::Biplane;
 use hnet_twin::simulator::scene::SceneSampling;
 use hnet_units::TipForce;
+use hnet_units::mask::MaskAveraging;
 
 use crate::backend::BackendChoice;
 use crate::cine::{grey_pair, open_cine};
 use crate::data::StereoItem;
-use crate::network::{load_weights, predict};
+use crate::network::{load_weights, parse_mask_averaging, predict};
 use crate::progress;
 
 #[derive(clap::Args, Debug)]
@@ -53,13 +55,29 @@ pub struct TraceArgs {
     /// (`hnet calibrate`'s output).
     #[arg(long, default_value = BENCH_CATHETER)]
     catheter: String,
+    /// How each view is read for its mask (`single` or `mirrored`, as `hnet eval`). By default
+    /// as the weights' calibration was measured, so that its intervals hold; another setting
+    /// is allowed and said.
+    #[arg(long, value_parser = parse_mask_averaging)]
+    mask_averaging: Option<MaskAveraging>,
 }
 
 pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
     let device = args.backend.device()?;
-    let model = load_weights(&args.weights, None, &device)?;
+    let mut model = load_weights(&args.weights, None, &device)?;
     let facts = ModelFacts::read(&model.header.provenance)
         .with_context(|| format!("weights file '{}'", args.weights.display()))?;
+    let calibrated_with = facts.mask_averaging();
+    model.mask_averaging = args.mask_averaging.unwrap_or(calibrated_with);
+    if model.mask_averaging != calibrated_with && facts.combination().is_some() {
+        eprintln!(
+            "note: reading each view `{}`, while '{}' was calibrated reading them `{}`: its 90 % \
+             intervals were measured on other masks",
+            model.mask_averaging.name(),
+            args.weights.display(),
+            calibrated_with.name()
+        );
+    }
     let combination = facts.combination().copied();
     let catheter = CatalogueCatheter::find(&args.catheter)?;
     let cine = open_cine(&args.dicom_a, &args.dicom_b)?;

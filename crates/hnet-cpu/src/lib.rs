@@ -21,14 +21,16 @@ use std::rc::Rc;
 
 use burn::tensor::Device;
 use hnet_model::HNet;
+use hnet_units::mask::MaskAveraging;
 use hnet_units::{ImageSize, View, with_causes};
 use js_sys::Float32Array;
 use wasm_bindgen::prelude::*;
 
-/// A network loaded in the worker, with its input size.
+/// A network loaded in the worker, with its input size and how it reads each view.
 struct Loaded {
     model: HNet,
     input: ImageSize,
+    averaging: MaskAveraging,
 }
 
 thread_local! {
@@ -52,16 +54,31 @@ pub fn start(large_winograd_tiles: bool) {
     hnet_conv::use_large_winograd_tiles(large_winograd_tiles);
 }
 
-/// Loads H-Net from a weights file's bytes (`name` names it in errors). Returns the network's
-/// handle for [`read_view`] and [`unload`].
+/// Loads H-Net from a weights file's bytes (`name` names it in errors), to read each view as
+/// `mask_averaging` names ([`MaskAveraging::name`]: how the weights' calibration was measured).
+/// Returns the network's handle for [`read_view`] and [`unload`].
 #[wasm_bindgen]
-pub fn load(weights: &[u8], name: &str) -> Result<u32, JsError> {
+pub fn load(weights: &[u8], name: &str, mask_averaging: &str) -> Result<u32, JsError> {
+    let averaging = MaskAveraging::from_name(mask_averaging).ok_or_else(|| {
+        JsError::new(&format!(
+            "no way of reading a view is called `{mask_averaging}`"
+        ))
+    })?;
     let (model, config, _) =
         HNet::from_weights_bytes(weights, &Device::flex(), name).map_err(|e| js_error(&e))?;
     let input = config.image_size;
     let handle = NEXT_HANDLE.get();
     NEXT_HANDLE.set(handle.wrapping_add(1));
-    LOADED.with_borrow_mut(|loaded| loaded.insert(handle, Rc::new(Loaded { model, input })));
+    LOADED.with_borrow_mut(|loaded| {
+        loaded.insert(
+            handle,
+            Rc::new(Loaded {
+                model,
+                input,
+                averaging,
+            }),
+        )
+    });
     Ok(handle)
 }
 
@@ -72,8 +89,8 @@ pub fn unload(handle: u32) {
 }
 
 /// Runs the branch of view `view` (0: A, 1: B) of the network of `handle` on one 8-bit RGB
-/// image, row-major, at its input size. Returns the view's catheter probabilities and pooled
-/// features, packed ([`hnet_model::inference::ViewReading::to_packed`]).
+/// image, row-major, at its input size, as the network was loaded to read views. Returns the
+/// view's catheter probabilities and pooled features, packed ([`hnet_model::inference::ViewReading::to_packed`]).
 #[wasm_bindgen]
 pub fn read_view(handle: u32, view: u32, image: Vec<u8>) -> Result<Float32Array, JsError> {
     let loaded = LOADED
@@ -90,7 +107,13 @@ pub fn read_view(handle: u32, view: u32, image: Vec<u8>) -> Result<Float32Array,
     };
     let reading = loaded
         .model
-        .read_view(view, &image, loaded.input, &Device::flex())
+        .read_view(
+            view,
+            &image,
+            loaded.input,
+            &Device::flex(),
+            loaded.averaging,
+        )
         .map_err(|e| js_error(&e))?;
     Ok(Float32Array::from(&reading.to_packed()[..]))
 }

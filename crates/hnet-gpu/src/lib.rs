@@ -24,14 +24,16 @@ use std::rc::Rc;
 use burn::tensor::Device;
 use hnet_model::HNet;
 use hnet_model::inference::StereoPair;
+use hnet_units::mask::MaskAveraging;
 use hnet_units::{ImageSize, with_causes};
 use js_sys::Float32Array;
 use wasm_bindgen::prelude::*;
 
-/// A network loaded in the worker, with its input size.
+/// A network loaded in the worker, with its input size and how it reads each view.
 struct Loaded {
     model: HNet,
     input: ImageSize,
+    averaging: MaskAveraging,
 }
 
 thread_local! {
@@ -72,16 +74,31 @@ pub async fn start() -> Result<(), JsError> {
     Ok(())
 }
 
-/// Loads H-Net from a weights file's bytes (`name` names it in errors) onto WebGPU. Returns the
-/// network's handle for [`infer`] and [`unload`].
+/// Loads H-Net from a weights file's bytes (`name` names it in errors) onto WebGPU, to read each
+/// view as `mask_averaging` names ([`MaskAveraging::name`]: how the weights' calibration was
+/// measured). Returns the network's handle for [`infer`] and [`unload`].
 #[wasm_bindgen]
-pub fn load(weights: &[u8], name: &str) -> Result<u32, JsError> {
+pub fn load(weights: &[u8], name: &str, mask_averaging: &str) -> Result<u32, JsError> {
+    let averaging = MaskAveraging::from_name(mask_averaging).ok_or_else(|| {
+        JsError::new(&format!(
+            "no way of reading a view is called `{mask_averaging}`"
+        ))
+    })?;
     let (model, config, _) =
         HNet::from_weights_bytes(weights, &device()?, name).map_err(|e| js_error(&e))?;
     let input = config.image_size;
     let handle = NEXT_HANDLE.get();
     NEXT_HANDLE.set(handle.wrapping_add(1));
-    LOADED.with_borrow_mut(|loaded| loaded.insert(handle, Rc::new(Loaded { model, input })));
+    LOADED.with_borrow_mut(|loaded| {
+        loaded.insert(
+            handle,
+            Rc::new(Loaded {
+                model,
+                input,
+                averaging,
+            }),
+        )
+    });
     Ok(handle)
 }
 
@@ -92,7 +109,7 @@ pub fn unload(handle: u32) {
 }
 
 /// Runs the network of `handle` on one stereo pair: two 8-bit RGB images, row-major, at its
-/// input size. Returns view A's and view B's catheter probabilities and the tip force in
+/// input size, each view read as the network was loaded to. Returns view A's and view B's catheter probabilities and the tip force in
 /// newtons, packed ([`hnet_model::inference::StereoPrediction::to_packed`]).
 #[wasm_bindgen]
 pub async fn infer(handle: u32, view_a: Vec<u8>, view_b: Vec<u8>) -> Result<Float32Array, JsError> {
@@ -106,7 +123,7 @@ pub async fn infer(handle: u32, view_a: Vec<u8>, view_b: Vec<u8>) -> Result<Floa
     };
     let prediction = loaded
         .model
-        .predict_async(&[pair], loaded.input, &device)
+        .predict_async(&[pair], loaded.input, &device, loaded.averaging)
         .await
         .map_err(|e| js_error(&e))?
         .into_iter()

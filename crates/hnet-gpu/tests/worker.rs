@@ -8,6 +8,7 @@ use std::collections::BTreeMap;
 use burn::tensor::Device;
 use hnet_model::HNetConfig;
 use hnet_model::inference::{StereoPair, StereoPrediction};
+use hnet_model::mask_averaging::MaskAveraging;
 use hnet_units::ImageSize;
 use wasm_bindgen::{JsCast, JsValue};
 use wasm_bindgen_test::*;
@@ -31,7 +32,7 @@ async fn h_net_on_webgpu_computes_what_the_cpu_computes() {
     let config = HNetConfig::new().with_image_size(size);
     let cpu = config.init(&Device::flex()).unwrap();
     let weights = cpu.to_weights_bytes(&config, &BTreeMap::new()).unwrap();
-    let handle = hnet_gpu::load(&weights, "small.bpk")
+    let handle = hnet_gpu::load(&weights, "small.bpk", "single")
         .map_err(message)
         .unwrap();
     let image = |phase: f32| -> Vec<u8> {
@@ -48,6 +49,7 @@ async fn h_net_on_webgpu_computes_what_the_cpu_computes() {
             }],
             size,
             &Device::flex(),
+            MaskAveraging::Single,
         )
         .unwrap()
         .remove(0);
@@ -76,12 +78,14 @@ async fn h_net_on_webgpu_computes_what_the_cpu_computes() {
         message(err.unwrap_err()),
         format!("the WebGPU worker holds no network {handle}")
     );
-    let other = hnet_gpu::load(&weights, "small.bpk")
+    let other = hnet_gpu::load(&weights, "small.bpk", "mirrored")
         .map_err(message)
         .unwrap();
     assert_ne!(other, handle);
     let err = hnet_gpu::infer(other, vec![0; 3], vec![0; 3]).await;
     assert!(message(err.unwrap_err()).starts_with("pair 0 view A: 3 bytes"));
-    let err = hnet_gpu::load(b"not weights", "junk.bpk").unwrap_err();
+    let err = hnet_gpu::load(&weights, "small.bpk", "twice").unwrap_err();
+    assert_eq!(message(err), "no way of reading a view is called `twice`");
+    let err = hnet_gpu::load(b"not weights", "junk.bpk", "single").unwrap_err();
     assert!(message(err).starts_with("weights file 'junk.bpk': "));
 }

@@ -26,7 +26,7 @@
 use alloc::string::String;
 use alloc::vec::Vec;
 
-use hnet_units::mask::is_catheter;
+use hnet_units::mask::{MaskAveraging, is_catheter};
 use hnet_units::turn::{TurnError, turn_clockwise};
 use hnet_units::{ImageSize, TipForce, View};
 
@@ -434,7 +434,8 @@ pub enum ReadEntryError {
 
 impl HNet {
     /// [`HNet::predict_async`] for one pair (RGB images of `size`) under `setting`: the first
-    /// reading, then the further turns its [`EntrySearch`] asks for in one batch. (`hnet eval`,
+    /// reading, then the further turns its [`EntrySearch`] asks for in one batch, each view read
+    /// as `averaging` says. (`hnet eval`,
     /// which runs every architecture, searches its batches with the same [`EntrySearch`].)
     pub async fn predict_entry_async(
         &self,
@@ -442,10 +443,11 @@ impl HNet {
         size: ImageSize,
         device: &Device,
         setting: EntrySetting,
+        averaging: MaskAveraging,
     ) -> Result<EntryReading, ReadEntryError> {
         let first = turned_pair(pair.view_a, pair.view_b, size, setting.first_reading())?;
         let output = self
-            .turned_outputs(core::slice::from_ref(&first), size, device)
+            .turned_outputs(core::slice::from_ref(&first), size, device, averaging)
             .await?
             .pop()
             .ok_or(TurnError {
@@ -460,7 +462,10 @@ impl HNet {
             .map(|entry| turned_pair(pair.view_a, pair.view_b, size, entry))
             .collect::<Result<Vec<_>, _>>()?;
         if !further.is_empty() {
-            for output in self.turned_outputs(&further, size, device).await? {
+            for output in self
+                .turned_outputs(&further, size, device, averaging)
+                .await?
+            {
                 search.add_pair(output);
             }
         }
@@ -473,8 +478,11 @@ impl HNet {
         turned: &[TurnedPair],
         size: ImageSize,
         device: &Device,
+        averaging: MaskAveraging,
     ) -> Result<Vec<TurnedOutput>, PredictError> {
-        let predictions = self.predict_async(&as_pairs(turned), size, device).await?;
+        let predictions = self
+            .predict_async(&as_pairs(turned), size, device, averaging)
+            .await?;
         Ok(turned
             .iter()
             .zip(predictions)

@@ -9,6 +9,7 @@ use alloc::vec::Vec;
 use burn::tensor::{DataError, Device, ExecutionError, Tensor, TensorData, Transaction};
 use hnet_units::{ImageSize, TipForce, View};
 
+use crate::mask_averaging::{MaskAveraging, average_with_mirror, mirrored_rgb};
 use crate::model::{HNet, HNetOutput};
 use burn::tensor::activation::sigmoid;
 
@@ -174,45 +175,78 @@ fn to_vec(data: TensorData) -> Result<Vec<f32>, ReadbackError> {
 }
 
 /// Host copies of a batch's outputs as [`HNet::forward_batch`] registered them for reading
-/// (`read`: what the device returned), split per pair. (Burn returns every registered output;
-/// one that were missing would read as empty, giving no predictions rather than a panic.)
+/// (`read`: what the device returned), split per pair; with `averaging` mirrored, the batch's
+/// second half is the mirror images of its first `pairs`, whose masks it averages. (Burn returns
+/// every registered output; one that were missing would read as empty, giving no predictions
+/// rather than a panic.)
 fn read_predictions(
     size: ImageSize,
+    pairs: usize,
+    averaging: MaskAveraging,
     read: Result<Vec<TensorData>, ExecutionError>,
 ) -> Result<Vec<StereoPrediction>, PredictError> {
     let mut outputs = read.map_err(ReadbackError::Device)?.into_iter().map(to_vec);
     let mut next = || outputs.next().unwrap_or_else(|| Ok(Vec::new()));
-    let (mask_a, mask_b, force) = (next()?, next()?, next()?);
+    let (mut mask_a, mut mask_b, mut force) = (next()?, next()?, next()?);
+    if averaging == MaskAveraging::Mirrored {
+        let given = (pairs * size.pixels()).min(mask_a.len()).min(mask_b.len());
+        for mask in [&mut mask_a, &mut mask_b] {
+            let (mask, mirror) = mask.split_at_mut(given);
+            average_with_mirror(mask, mirror, size);
+        }
+        mask_a.truncate(given);
+        mask_b.truncate(given);
+        force.truncate(pairs * 3);
+    }
     Ok(split_predictions(size, mask_a, mask_b, force))
 }
 
 impl HNet {
-    /// Runs a batch of `pairs` and registers, for one read-back, the mask probabilities
-    /// `[B, H·W]` of both views and the force `[B, 3]`.
+    /// Runs a batch of `pairs` (followed by their mirror images when `averaging` is mirrored)
+    /// and registers, for one read-back, the mask probabilities `[B, H·W]` of both views and
+    /// the force `[B, 3]`.
     fn forward_batch(
         &self,
         pairs: &[StereoPair<'_>],
         size: ImageSize,
         device: &Device,
+        averaging: MaskAveraging,
     ) -> Result<Transaction, InputSizeError> {
-        let (a, b) = stereo_batch(pairs, size, device)?;
+        let mirrors: Vec<[Vec<u8>; 2]> = match averaging {
+            MaskAveraging::Single => Vec::new(),
+            MaskAveraging::Mirrored => pairs
+                .iter()
+                .map(|p| [p.view_a, p.view_b].map(|v| mirrored_rgb(v, size)))
+                .collect(),
+        };
+        let mut batch = pairs.to_vec();
+        batch.extend(mirrors.iter().map(|[a, b]| StereoPair {
+            view_a: a,
+            view_b: b,
+        }));
+        let (a, b) = stereo_batch(&batch, size, device)?;
         let output: HNetOutput = self.forward(a, b);
-        let batch = pairs.len() as i32;
+        let rows = batch.len() as i32;
         Ok(Transaction::default()
-            .register(output.mask_a().reshape([batch, -1]))
-            .register(output.mask_b().reshape([batch, -1]))
+            .register(output.mask_a().reshape([rows, -1]))
+            .register(output.mask_b().reshape([rows, -1]))
             .register(output.force))
     }
 
     /// Runs `pairs` (each image of `size`) and reads the results back, blocking until the device
-    /// is done. Use [`HNet::predict_async`] in the browser.
+    /// is done. Each view is read as `averaging` says ([`crate::mask_averaging`]; the force
+    /// always from the views as given). Use [`HNet::predict_async`] in the browser.
     pub fn predict(
         &self,
         pairs: &[StereoPair<'_>],
         size: ImageSize,
         device: &Device,
+        averaging: MaskAveraging,
     ) -> Result<Vec<StereoPrediction>, PredictError> {
-        read_predictions(size, self.forward_batch(pairs, size, device)?.try_execute())
+        let read = self
+            .forward_batch(pairs, size, device, averaging)?
+            .try_execute();
+        read_predictions(size, pairs.len(), averaging, read)
     }
 
     /// Like [`HNet::predict`], but waits for the device asynchronously (required on WebGPU in
@@ -222,9 +256,12 @@ impl HNet {
         pairs: &[StereoPair<'_>],
         size: ImageSize,
         device: &Device,
+        averaging: MaskAveraging,
     ) -> Result<Vec<StereoPrediction>, PredictError> {
-        let read = self.forward_batch(pairs, size, device)?.execute_async();
-        read_predictions(size, read.await)
+        let read = self
+            .forward_batch(pairs, size, device, averaging)?
+            .execute_async();
+        read_predictions(size, pairs.len(), averaging, read.await)
     }
 }
 
@@ -287,13 +324,16 @@ pub struct ViewsMismatch {
 
 impl HNet {
     /// Runs `view`'s branch on one 8-bit RGB image of `size` and reads its mask and pooled
-    /// features back, blocking until the device is done (the page's CPU workers).
+    /// features back, blocking until the device is done (the page's CPU workers). With
+    /// `averaging` mirrored the branch also reads the mirror image, in the same batch, and the
+    /// mask is the two readings' mean; the pooled features are always the image as given's.
     pub fn read_view(
         &self,
         view: View,
         image: &[u8],
         size: ImageSize,
         device: &Device,
+        averaging: MaskAveraging,
     ) -> Result<ViewReading, PredictError> {
         let expected = size.pixels() * 3;
         if image.len() != expected {
@@ -305,24 +345,32 @@ impl HNet {
             }
             .into());
         }
-        let mut planar = Vec::with_capacity(expected);
+        let readings = averaging.readings();
+        let mut planar = Vec::with_capacity(readings * expected);
         push_planar(image, &mut planar);
+        if averaging == MaskAveraging::Mirrored {
+            push_planar(&mirrored_rgb(image, size), &mut planar);
+        }
         let input = Tensor::from_data(
-            TensorData::new(planar, [1, 3, size.height, size.width]),
+            TensorData::new(planar, [readings, 3, size.height, size.width]),
             device,
         );
         let branch = self.forward_view(view, input);
         let read = Transaction::default()
-            .register(sigmoid(branch.mask_logits).reshape([1, -1]))
+            .register(sigmoid(branch.mask_logits).reshape([readings as i32, -1]))
             .register(branch.pooled)
             .try_execute();
         let mut outputs = read.map_err(ReadbackError::Device)?.into_iter().map(to_vec);
         let mut next = || outputs.next().unwrap_or_else(|| Ok(Vec::new()));
-        Ok(ViewReading {
-            size,
-            mask: next()?,
-            pooled: next()?,
-        })
+        let (mut mask, mut pooled) = (next()?, next()?);
+        if averaging == MaskAveraging::Mirrored {
+            let given = size.pixels().min(mask.len());
+            let (as_given, mirror) = mask.split_at_mut(given);
+            average_with_mirror(as_given, mirror, size);
+            mask.truncate(given);
+            pooled.truncate(pooled.len() / readings);
+        }
+        Ok(ViewReading { size, mask, pooled })
     }
 
     /// The pair's prediction from its two views' readings ([`HNet::read_view`]): their masks,

@@ -17,39 +17,8 @@
 use alloc::vec::Vec;
 
 use hnet_units::ImageSize;
-use serde::{Deserialize, Serialize};
 
-/// How many ways each view is read before its mask is kept.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum MaskAveraging {
-    /// One reading: the view as given.
-    #[default]
-    Single,
-    /// The view and its left-right mirror image: two readings, twice the network's work.
-    Mirrored,
-}
-
-impl MaskAveraging {
-    /// Every setting, in order of cost.
-    pub const ALL: [Self; 2] = [Self::Single, Self::Mirrored];
-
-    /// The name used on the command line and in reports.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Single => "single",
-            Self::Mirrored => "mirrored",
-        }
-    }
-
-    /// Readings of each view.
-    pub fn readings(self) -> usize {
-        match self {
-            Self::Single => 1,
-            Self::Mirrored => 2,
-        }
-    }
-}
+pub use hnet_units::mask::MaskAveraging;
 
 /// `planes` (planar, `planes · height · width` values) mirrored left to right: column `x` to
 /// `width - 1 - x`. Its own inverse.
@@ -57,6 +26,18 @@ pub fn mirrored(planes: &[f32], size: ImageSize) -> Vec<f32> {
     let mut out = planes.to_vec();
     for row in out.chunks_exact_mut(size.width) {
         row.reverse();
+    }
+    out
+}
+
+/// An interleaved 8-bit RGB image of `size` (`height·width·3` bytes, row-major) mirrored left to
+/// right. Its own inverse.
+pub fn mirrored_rgb(pixels: &[u8], size: ImageSize) -> Vec<u8> {
+    let mut out = Vec::with_capacity(pixels.len());
+    for row in pixels.chunks_exact(3 * size.width) {
+        for pixel in row.chunks_exact(3).rev() {
+            out.extend_from_slice(pixel);
+        }
     }
     out
 }
@@ -86,6 +67,10 @@ mod tests {
         let once = mirrored(&planes, size);
         assert_eq!(once[..6], [2.0, 1.0, 0.0, 5.0, 4.0, 3.0]);
         assert_eq!(mirrored(&once, size), planes);
+        let rgb: Vec<u8> = (0..18).collect();
+        let once = mirrored_rgb(&rgb, size);
+        assert_eq!(once[..9], [6, 7, 8, 3, 4, 5, 0, 1, 2]);
+        assert_eq!(mirrored_rgb(&once, size), rgb);
         let mut mask = vec![1.0, 0.0, 0.0, 0.0, 0.0, 1.0];
         average_with_mirror(&mut mask, &[0.0, 0.0, 1.0, 1.0, 0.0, 0.0], size);
         assert_eq!(mask, [1.0, 0.0, 0.0, 0.0, 0.0, 1.0]);

@@ -72,7 +72,9 @@ fn predict_gives_each_pair_its_masks_and_force() {
             view_b: &views[3],
         },
     ];
-    let predictions = model.predict(&pairs, size, &device).unwrap();
+    let predictions = model
+        .predict(&pairs, size, &device, MaskAveraging::Single)
+        .unwrap();
     // The same as the forward pass of the batch, split per pair.
     let (a, b) = stereo_batch(&pairs, size, &device).unwrap();
     let out = model.forward(a, b);
@@ -162,6 +164,33 @@ fn predict_gives_each_pair_its_masks_and_force() {
         }
         assert_eq!(averaged.force, single.force);
     }
+    // The page's paths read the same averaged masks: a pair's batch with its mirror images
+    // (page thread, WebGPU), and each view with its own on a CPU worker.
+    let page = model
+        .predict(&pairs, size, &device, MaskAveraging::Mirrored)
+        .unwrap();
+    for ((p, averaged), pair) in page.iter().zip(&averaged).zip(&pairs) {
+        let [a, b] = averaged.masks.as_ref().unwrap();
+        assert!(close(&p.mask_a, a) && close(&p.mask_b, b));
+        assert!(close(
+            &p.force.newtons(),
+            &averaged.force.unwrap().newtons()
+        ));
+        let read = |view, image| {
+            model
+                .read_view(view, image, size, &device, MaskAveraging::Mirrored)
+                .unwrap()
+        };
+        let joined = model
+            .join_views(
+                read(View::A, pair.view_a),
+                read(View::B, pair.view_b),
+                &device,
+            )
+            .unwrap();
+        assert!(close(&joined.mask_a, a) && close(&joined.mask_b, b));
+        assert!(close(&joined.force.newtons(), &p.force.newtons()));
+    }
     let known = EntrySetting::Known([CatheterEntry::Bottom; 2]);
     let read = predictor.predict_entry(&inputs, &device, known).unwrap();
     assert_eq!(
@@ -189,7 +218,9 @@ fn predict_gives_each_pair_its_masks_and_force() {
         view_a: &views[0][3..],
         view_b: &views[1],
     }];
-    let err = model.predict(&short, size, &device).unwrap_err();
+    let err = model
+        .predict(&short, size, &device, MaskAveraging::Single)
+        .unwrap_err();
     assert!(err.to_string().starts_with("pair 0 view A: "), "{err}");
 }
 
@@ -215,9 +246,16 @@ fn one_view_at_a_time_reads_the_pair_as_the_whole_network_does() {
             .with_share_weights(shared)
             .init(&device)
             .unwrap();
-        let whole = model.predict(&[pair], size, &device).unwrap().remove(0);
-        let a = model.read_view(View::A, &view_a, size, &device).unwrap();
-        let b = model.read_view(View::B, &view_b, size, &device).unwrap();
+        let whole = model
+            .predict(&[pair], size, &device, MaskAveraging::Single)
+            .unwrap()
+            .remove(0);
+        let read = |view, image: &[u8]| {
+            model
+                .read_view(view, image, size, &device, MaskAveraging::Single)
+                .unwrap()
+        };
+        let (a, b) = (read(View::A, &view_a), read(View::B, &view_b));
         assert_eq!(a.pooled.len(), model.pooled_per_view());
         // The packed form (the CPU workers') gives the reading back, and only for its shape.
         let packed = a.to_packed();
@@ -250,7 +288,7 @@ fn one_view_at_a_time_reads_the_pair_as_the_whole_network_does() {
     // A view of another size is refused, naming the view.
     let model = small_config().with_image_size(size).init(&device).unwrap();
     let refused = model
-        .read_view(View::B, &view_a[3..], size, &device)
+        .read_view(View::B, &view_a[3..], size, &device, MaskAveraging::Single)
         .unwrap_err();
     assert!(refused.to_string().contains("view B"), "{refused}");
 }

@@ -7,6 +7,7 @@
 
 use std::collections::BTreeMap;
 
+use hnet_units::mask::MaskAveraging;
 use serde::{Deserialize, Serialize};
 
 use crate::reconstruction::physics_force::ForceCombination;
@@ -54,6 +55,10 @@ pub struct MeasuredForce {
     pub pairs: usize,
     /// How the physics estimate read them: `blind` or `oracle`.
     pub estimator: String,
+    /// How the network read each view for its masks (absent in files: one reading). The page
+    /// and `hnet trace` read views the same way, so that the calibration holds.
+    #[serde(default, skip_serializing_if = "MaskAveraging::is_single")]
+    pub mask_averaging: MaskAveraging,
     /// The force head's mean square error per axis (x, y, z), N².
     pub head_mse_n2: [f32; 3],
     /// The share of the evaluated pairs whose true force the force head's own 90 % interval
@@ -121,6 +126,15 @@ impl ModelFacts {
     /// The calibrated combination with the physics estimate, when measured.
     pub fn combination(&self) -> Option<&ForceCombination> {
         Some(&self.measured.as_ref()?.combined.as_ref()?.combination)
+    }
+
+    /// How the network read each view where its force was measured and its combination
+    /// calibrated: how the page and `hnet trace` read views with these weights. One reading
+    /// when nothing was measured.
+    pub fn mask_averaging(&self) -> MaskAveraging {
+        self.measured
+            .as_ref()
+            .map_or(MaskAveraging::Single, |m| m.mask_averaging)
     }
 }
 
@@ -218,6 +232,7 @@ mod tests {
                 split: "train".into(),
                 pairs: 480,
                 estimator: "blind".into(),
+                mask_averaging: MaskAveraging::Mirrored,
                 head_mse_n2: [0.0048, 0.0051, 0.0037],
                 head_coverage_90: None,
                 combined: None,
@@ -226,6 +241,18 @@ mod tests {
         };
         facts.write(&mut provenance);
         assert_eq!(ModelFacts::read(&provenance).unwrap(), facts);
+        assert_eq!(facts.mask_averaging(), MaskAveraging::Mirrored);
+        // One reading is left out of the file, and a file without the field reads as one.
+        let mut single = facts.clone();
+        single.measured.as_mut().unwrap().mask_averaging = MaskAveraging::Single;
+        let mut written = BTreeMap::new();
+        single.write(&mut written);
+        assert!(!written[FACTS_KEY].contains("mask_averaging"));
+        assert_eq!(ModelFacts::read(&written).unwrap(), single);
+        assert_eq!(
+            ModelFacts::default().mask_averaging(),
+            MaskAveraging::Single
+        );
         assert!((facts.head_error_n().unwrap() - 0.1166).abs() < 1e-3);
         assert_eq!(facts.combination(), None);
         provenance.insert(FACTS_KEY.into(), "{".into());

@@ -7,6 +7,8 @@
 //! at one half: [`is_catheter`] and [`is_catheter_label`] agree on every 8-bit value read as a
 //! probability.
 
+use serde::{Deserialize, Serialize};
+
 /// Catheter probability at or above which a pixel counts as catheter, 0-1 (in predictions and in
 /// targets alike).
 pub const MASK_THRESHOLD: f32 = 0.5;
@@ -26,6 +28,50 @@ pub fn is_catheter(p: f32) -> bool {
 /// Whether 8-bit label `v` (0-255) calls its pixel catheter.
 pub fn is_catheter_label(v: u8) -> bool {
     v >= LABEL_THRESHOLD
+}
+
+/// How many ways a network reads each view before its mask is kept: the view as given, or also
+/// its left-right mirror image, the two catheter probabilities averaged (`hnet_model::mask_averaging`).
+/// A weights file's recorded calibration says which it was measured with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MaskAveraging {
+    /// One reading: the view as given.
+    #[default]
+    Single,
+    /// The view and its left-right mirror image: two readings, twice the network's work.
+    Mirrored,
+}
+
+impl MaskAveraging {
+    /// Every setting, in order of cost.
+    pub const ALL: [Self; 2] = [Self::Single, Self::Mirrored];
+
+    /// The name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Single => "single",
+            Self::Mirrored => "mirrored",
+        }
+    }
+
+    /// The setting of a [`Self::name`].
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|a| a.name() == name)
+    }
+
+    /// Readings of each view.
+    pub fn readings(self) -> usize {
+        match self {
+            Self::Single => 1,
+            Self::Mirrored => 2,
+        }
+    }
+
+    /// Whether one reading (the default, which files leave out).
+    pub fn is_single(&self) -> bool {
+        *self == Self::Single
+    }
 }
 
 /// The 8-bit label of a pixel: [`CATHETER_LABEL`] for catheter, 0 for background.

@@ -190,7 +190,10 @@ fn model(args: &ModelBench) -> anyhow::Result<()> {
                     view_a: &pixels,
                     view_b: &pixels,
                 }];
-                time_runs(args.runs, || net.predict(&pair, size, &device).map(drop))?
+                let single = hnet_model::mask_averaging::MaskAveraging::Single;
+                time_runs(args.runs, || {
+                    net.predict(&pair, size, &device, single).map(drop)
+                })?
             }
         };
         results.push(ModelResult {

@@ -102,6 +102,7 @@ pub(super) fn record_facts(
         split: evaluation.split.clone(),
         pairs: force.samples as usize,
         estimator: evaluation.estimator.clone(),
+        mask_averaging: evaluation.mask_averaging,
         head_mse_n2: mse(&force),
         head_coverage_90,
         combined,
