@@ -222,8 +222,9 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
     let loader_valid = builder().set_device(device.clone()).build(valid_split);
 
     let net = match &config.init_weights {
-        // A resumed run loads its checkpoint over whatever it starts from.
-        Some(path) if !request.resume => {
+        // A run resumed from a checkpoint loads it over whatever it starts from; one stopped
+        // before its first checkpoint starts again from its initial weights.
+        Some(path) if resume_from.is_none() => {
             let bytes = std::fs::read(path).with_context(|| {
                 format!(
                     "init_weights: cannot read weights file '{}'",
@@ -287,7 +288,14 @@ pub fn train(request: &TrainRequest) -> anyhow::Result<()> {
         eprintln!("resuming after epoch {epoch}");
         training = training.checkpoint(epoch);
     } else if request.resume {
-        eprintln!("no complete checkpoint yet: starting from the first epoch");
+        match &config.init_weights {
+            Some(path) => eprintln!(
+                "no complete checkpoint yet: starting from the first epoch, from the initial \
+                 weights '{}'",
+                path.display()
+            ),
+            None => eprintln!("no complete checkpoint yet: starting from the first epoch"),
+        }
     }
     let iterations_per_epoch = train_pairs.div_ceil(config.batch_size.max(1));
     let rates = learning_rates(config, iterations_per_epoch * config.epochs)?;

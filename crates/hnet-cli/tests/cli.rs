@@ -659,6 +659,24 @@ fn a_time_budget_ends_training_cleanly_with_the_best_checkpoint() {
     assert!(dir.join("second/model.bpk").is_file());
     let saved = std::fs::read_to_string(dir.join("second/config.json")).unwrap();
     assert!(saved.contains("\"init_weights\""), "{saved}");
+    // Stopped before its first checkpoint, such a stage starts again from those weights, not
+    // from fresh ones.
+    let stopped = dir.join("stopped");
+    std::fs::create_dir_all(&stopped).unwrap();
+    for file in ["config.json", "run.json"] {
+        std::fs::copy(dir.join("second").join(file), stopped.join(file)).unwrap();
+    }
+    let out = succeeds(
+        hnet()
+            .args(["train", "--resume", "--time-budget", "0s", "--out"])
+            .arg(&stopped),
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("starting from the first epoch, from the initial weights")
+            && stderr.contains("model.bpk"),
+        "{stderr}"
+    );
     // (Another size as well does not make it the same network.)
     let wider = edited_config(&dir, "wider", |c| {
         let size = serde_json::json!({"width": 24, "height": 16});
@@ -1196,6 +1214,16 @@ fn a_biplane_dicom_cine_imports_and_traces_without_patient_identifiers() {
         );
     }
     assert!(lines[2].starts_with("2,0.0667,"), "{}", lines[2]);
+    // Each view read twice with weights calibrated reading it once: allowed, and said.
+    let twice = succeeds(
+        traced(&dir.join("trace-twice.csv"), &folder_b).args(["--mask-averaging", "mirrored"]),
+    );
+    let said = String::from_utf8_lossy(&twice.stderr);
+    assert!(
+        said.contains("reading each view `mirrored`, while")
+            && said.contains("calibrated reading them `single`"),
+        "{said}"
+    );
 
     // No output names the patient, the hospital or the folders (which may be named after them).
     let mut outputs = vec![trace.clone()];
