@@ -24,8 +24,9 @@ use rayon::prelude::*;
 use crate::backend::BackendChoice;
 use crate::data::StereoItem;
 use crate::evaluation::parse_split;
-use crate::network::{load_weights, predict};
+use crate::network::{load_weights, parse_mask_averaging, predict, read_views_as_recorded};
 use hnet_twin::dataset::Split;
+use hnet_units::mask::MaskAveraging;
 use hnet_units::{ImageSize, TipForce};
 
 #[derive(clap::Args, Debug)]
@@ -53,6 +54,10 @@ pub struct CalibrateArgs {
     /// Where to compute the masks (with `--weights`).
     #[arg(long, value_enum, default_value = "flex")]
     backend: BackendChoice,
+    /// With `--weights`: how each view is read for its mask (`single` or `mirrored`, as `hnet
+    /// eval`); by default as the weights' calibration was measured.
+    #[arg(long, requires = "weights", value_parser = parse_mask_averaging)]
+    mask_averaging: Option<MaskAveraging>,
 }
 
 /// A pair's measured force and its blind estimate, N.
@@ -103,7 +108,8 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         }
         Some(weights) => {
             let device = args.backend.device()?;
-            let model = load_weights(weights, None, &device)?;
+            let mut model = load_weights(weights, None, &device)?;
+            read_views_as_recorded(&mut model, args.mask_averaging, weights)?;
             anyhow::ensure!(
                 model.spec.heads().0,
                 "weights file '{}' holds a `{}` network, which gives no masks",

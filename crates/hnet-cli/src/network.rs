@@ -10,6 +10,7 @@ use burn::tensor::Device;
 use hnet_model::catheter_entry::{CatheterEntry, EntrySetting};
 use hnet_model::mask_averaging::MaskAveraging;
 use hnet_model::predictor::{EntryError, LoadError, PairInput, Predictor};
+use hnet_twin::model_facts::ModelFacts;
 use hnet_units::{ImageSize, TipForce};
 
 use crate::data::StereoItem;
@@ -41,6 +42,30 @@ pub fn parse_mask_averaging(text: &str) -> Result<MaskAveraging, String> {
         let names: Vec<&str> = MaskAveraging::ALL.iter().map(|a| a.name()).collect();
         format!("`{text}` is not one of {}", names.join(", "))
     })
+}
+
+/// Sets how `model`, loaded from `weights`, reads each view: `asked`, or else as its recorded
+/// calibration was measured ([`ModelFacts::mask_averaging`]); reading them otherwise than a
+/// recorded calibration is allowed and said. Returns the weights' facts.
+pub fn read_views_as_recorded(
+    model: &mut Predictor,
+    asked: Option<MaskAveraging>,
+    weights: &Path,
+) -> anyhow::Result<ModelFacts> {
+    let facts = ModelFacts::read(&model.header.provenance)
+        .with_context(|| format!("weights file '{}'", weights.display()))?;
+    let calibrated_with = facts.mask_averaging();
+    model.mask_averaging = asked.unwrap_or(calibrated_with);
+    if model.mask_averaging != calibrated_with && facts.combination().is_some() {
+        eprintln!(
+            "note: reading each view `{}`, while '{}' was calibrated reading them `{}`: its 90 % \
+             intervals were measured on other masks",
+            model.mask_averaging.name(),
+            weights.display(),
+            calibrated_with.name()
+        );
+    }
+    Ok(facts)
 }
 
 /// Loads a run folder's `model.bpk`: H-Net at the size its weights record, a baseline at the

@@ -13,7 +13,7 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use hnet_dicom::{Plane, TracePoint, trace_csv};
 use hnet_twin::dataset::LoadedPair;
-use hnet_twin::model_facts::{ModelFacts, recorded_name};
+use hnet_twin::model_facts::recorded_name;
 use hnet_twin::reconstruction::catalogue::{BENCH_CATHETER, CatalogueCatheter};
 use hnet_twin::reconstruction::centreline::{CentrelineSettings, Mask, catheter_seen};
 use hnet_twin::reconstruction::physics_force::{
@@ -27,7 +27,7 @@ use hnet_units::mask::MaskAveraging;
 use crate::backend::BackendChoice;
 use crate::cine::{grey_pair, open_cine};
 use crate::data::StereoItem;
-use crate::network::{load_weights, parse_mask_averaging, predict};
+use crate::network::{load_weights, parse_mask_averaging, predict, read_views_as_recorded};
 use crate::progress;
 
 #[derive(clap::Args, Debug)]
@@ -65,19 +65,7 @@ pub struct TraceArgs {
 pub fn run(args: &TraceArgs) -> anyhow::Result<()> {
     let device = args.backend.device()?;
     let mut model = load_weights(&args.weights, None, &device)?;
-    let facts = ModelFacts::read(&model.header.provenance)
-        .with_context(|| format!("weights file '{}'", args.weights.display()))?;
-    let calibrated_with = facts.mask_averaging();
-    model.mask_averaging = args.mask_averaging.unwrap_or(calibrated_with);
-    if model.mask_averaging != calibrated_with && facts.combination().is_some() {
-        eprintln!(
-            "note: reading each view `{}`, while '{}' was calibrated reading them `{}`: its 90 % \
-             intervals were measured on other masks",
-            model.mask_averaging.name(),
-            args.weights.display(),
-            calibrated_with.name()
-        );
-    }
+    let facts = read_views_as_recorded(&mut model, args.mask_averaging, &args.weights)?;
     let combination = facts.combination().copied();
     let catheter = CatalogueCatheter::find(&args.catheter)?;
     let cine = open_cine(&args.dicom_a, &args.dicom_b)?;
