@@ -8,6 +8,7 @@ use std::rc::Rc;
 
 use burn::tensor::{Device, Tensor};
 use hnet_model::catheter_entry::{CatheterEntry, EntrySetting};
+use hnet_model::mask_averaging::MaskAveraging;
 use hnet_model::{HNet, HNetConfig};
 use hnet_studio::browser::{JsError, yield_to_browser};
 use hnet_studio::compute::{Backend, BackendChoice, choose_backend};
@@ -17,6 +18,7 @@ use hnet_studio::gpu_worker::GpuWorker;
 use hnet_studio::imaging::WORK_SIZE;
 use hnet_studio::storage;
 use hnet_studio::twin_live::{TwinControls, XrayBackground};
+use hnet_twin::model_facts::{MeasuredForce, ModelFacts};
 use wasm_bindgen::{JsCast, JsValue};
 use wasm_bindgen_test::*;
 
@@ -159,6 +161,60 @@ async fn the_engine_runs_on_a_twin_pair_at_the_working_size() {
     assert_eq!(turned.force_n, None);
     let why = turned.force_left_out().unwrap();
     assert!(why.contains("view A from the left"), "{why}");
+}
+
+/// Weights whose calibration was measured reading each view twice (`hnet eval --mask-averaging
+/// mirrored --record`) are read so on the page: the masks differ from one reading's, the force
+/// head's answer does not. (That both are what `hnet eval` reads is tested natively, in
+/// crates/hnet-model's `model.rs`.)
+#[wasm_bindgen_test]
+async fn weights_calibrated_on_two_readings_are_read_twice() {
+    let (model, config) = small_hnet(&Device::flex());
+    let mut provenance = BTreeMap::new();
+    ModelFacts {
+        force_domain: None,
+        measured: Some(MeasuredForce {
+            data: "xray2-bench-224-s33".into(),
+            split: "train".into(),
+            pairs: 480,
+            estimator: "blind".into(),
+            mask_averaging: MaskAveraging::Mirrored,
+            head_mse_n2: [0.005; 3],
+            head_coverage_90: None,
+            combined: None,
+            command: "hnet eval --mask-averaging mirrored --record".into(),
+        }),
+    }
+    .write(&mut provenance);
+    let engine = |provenance: &BTreeMap<String, String>| {
+        let bytes = model.to_weights_bytes(&config, provenance).unwrap();
+        Engine::from_weights(
+            Rc::from(bytes),
+            "small.bpk",
+            WeightsOrigin::File,
+            "test".into(),
+        )
+        .unwrap()
+    };
+    let (once, twice) = (engine(&BTreeMap::new()), engine(&provenance));
+    assert_eq!(once.mask_averaging, MaskAveraging::Single);
+    assert_eq!(twice.mask_averaging, MaskAveraging::Mirrored);
+    let pair = TwinControls::default()
+        .render("pair-0001".into(), &XrayBackground::phantom())
+        .unwrap();
+    let read = async |engine: &Engine| {
+        engine
+            .infer(&pair.view_a, &pair.view_b, EntrySetting::AS_TRAINED)
+            .await
+            .unwrap()
+    };
+    let (one, two) = (read(&once).await, read(&twice).await);
+    assert_ne!(one.mask_a, two.mask_a);
+    let [f1, f2] = [one, two].map(|p| p.head_force_n.unwrap().newtons());
+    assert!(
+        f1.iter().zip(f2).all(|(a, b)| (a - b).abs() < 1e-6),
+        "{f1:?} {f2:?}"
+    );
 }
 
 #[wasm_bindgen_test]
