@@ -71,7 +71,12 @@ pub struct FineTuneArgs {
     /// a machine with that many cores. The replicas run one after another here.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     replicas: u64,
-    /// The weights file to write (the best epoch's network).
+    /// Share of the starting weights in the network scored and kept: each epoch's weights moved
+    /// this far back towards the starting ones (0 keeps the trained weights; the page's 0.25
+    /// when left out).
+    #[arg(long)]
+    start_share: Option<f64>,
+    /// The weights file to write (the best epoch's network, as kept).
     #[arg(long)]
     out: PathBuf,
 }
@@ -132,6 +137,7 @@ pub fn run(args: &FineTuneArgs) -> anyhow::Result<()> {
         freeze_encoders: !args.train_encoders,
         seed: args.seed,
         replicas: args.replicas as usize,
+        start_share: args.start_share.unwrap_or(defaults.start_share),
         ..defaults
     };
     let count = pairs.len();
@@ -141,7 +147,7 @@ pub fn run(args: &FineTuneArgs) -> anyhow::Result<()> {
     let before = run.score()?;
     eprintln!(
         "{count} pairs of {} ({train} trained on, {held} held back), learning rate {}, {} \
-         replica(s), encoders {}; before: {}",
+         replica(s), encoders {}, {} of the starting weights kept; before: {}",
         args.data.display(),
         settings.learning_rate,
         run.replicas(),
@@ -150,6 +156,7 @@ pub fn run(args: &FineTuneArgs) -> anyhow::Result<()> {
         } else {
             "trained"
         },
+        settings.start_share,
         scores(&before)
     );
     let mut best = None;

@@ -642,7 +642,41 @@ fn fine_tuning_scores_held_back_pairs_and_keeps_the_best_epoch() {
     };
     assert_eq!(first_encoder(&tuned), first_encoder(&net));
 
+    // A share of the starting weights kept: the epoch's weights moved that far back towards
+    // the start, every parameter (one epoch, so both runs keep the same epoch).
+    let every_weight = |bytes: &[u8]| {
+        let (net, _, _) = HNet::from_weights_bytes(bytes, &device, "w.bpk").unwrap();
+        let mut visitor = AllParams::default();
+        net.visit(&mut visitor);
+        visitor.values
+    };
+    let one_epoch = |start_share| {
+        let settings = FineTuneSettings {
+            max_epochs: 1,
+            start_share,
+            ..settings
+        };
+        let mut run =
+            FineTune::new(&weights, "small.bpk", pairs.clone(), settings, &device).unwrap();
+        while run.finished().is_none() {
+            run.step().unwrap();
+        }
+        every_weight(&run.best_weights(&BTreeMap::new()).unwrap().unwrap())
+    };
+    let (trained, kept, start) = (one_epoch(0.0), one_epoch(0.25), every_weight(&weights));
+    assert_eq!(trained.len(), start.len());
+    assert!(trained.iter().zip(&start).any(|(t, s)| t != s));
+    for ((t, k), s) in trained.iter().zip(&kept).zip(&start) {
+        assert!((k - (0.75 * t + 0.25 * s)).abs() < 1e-5, "{k} {t} {s}");
+    }
+
     // Bad input, refused before anything runs.
+    let whole = FineTuneSettings {
+        start_share: 1.0,
+        ..settings
+    };
+    let refused = FineTune::new(&weights, "small.bpk", pairs.clone(), whole, &device);
+    assert!(matches!(refused, Err(FineTuneError::StartShare(1.0))));
     let too_few = FineTune::new(
         &weights,
         "small.bpk",
@@ -782,6 +816,20 @@ fn line_pair(
 #[derive(Default)]
 struct FirstParam {
     values: Option<Vec<f32>>,
+}
+
+/// Every float parameter's values, in visiting order.
+#[cfg(feature = "training")]
+#[derive(Default)]
+struct AllParams {
+    values: Vec<f32>,
+}
+
+#[cfg(feature = "training")]
+impl ModuleVisitor for AllParams {
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        self.values.extend(host_values(param.val()).unwrap());
+    }
 }
 
 #[cfg(feature = "training")]

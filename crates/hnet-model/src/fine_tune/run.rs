@@ -3,9 +3,9 @@
 use alloc::string::String;
 use alloc::vec::Vec;
 
-use burn::module::Module;
+use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
 use burn::optim::{GradientsParams, ModuleOptimizer};
-use burn::tensor::Device;
+use burn::tensor::{Device, Tensor, TensorData};
 use hnet_units::{ImageSize, TipForce};
 
 use super::replicas::{Share, average, flatten, share_range};
@@ -22,6 +22,8 @@ use crate::weights::WeightsHeader;
 /// A fine-tune in progress.
 pub struct FineTune {
     net: StereoModel,
+    /// The starting weights, for [`FineTuneSettings::start_share`].
+    start: StereoModel,
     spec: ModelSpec,
     header: WeightsHeader,
     size: ImageSize,
@@ -91,7 +93,11 @@ impl FineTune {
             net
         };
         let loss = HNetLossConfig::new().with_force_std_n(force_std_n).init();
+        if !(0.0..1.0).contains(&settings.start_share) {
+            return Err(FineTuneError::StartShare(settings.start_share));
+        }
         Ok(Self {
+            start: net.clone(),
             net,
             spec,
             header,
@@ -153,12 +159,13 @@ impl FineTune {
             .clamp(1, self.settings.batch_size.max(1))
     }
 
-    /// The current network's scores on the reference pairs, when there are some.
+    /// The current network's scores on the reference pairs, when there are some, as it would be
+    /// kept.
     pub fn score_reference(&self) -> Result<Option<HeldBackScores>, FineTuneError> {
         if self.reference.is_empty() {
             return Ok(None);
         }
-        let net = self.net.valid();
+        let net = self.kept()?.valid();
         let all: Vec<usize> = (0..self.reference.len()).collect();
         let at = (&self.reference[..], self.size, &self.plain);
         score(&net, self.spec.input(), &self.loss, at, &all).map(Some)
@@ -190,9 +197,9 @@ impl FineTune {
     }
 
     /// The current network's scores on the held-back pairs (before the first step: the
-    /// starting network's).
+    /// starting network's), as it would be kept ([`FineTuneSettings::start_share`]).
     pub fn score(&self) -> Result<HeldBackScores, FineTuneError> {
-        let net = self.net.valid();
+        let net = self.kept()?.valid();
         let input = self.spec.input();
         let at = (&self.pairs[..], self.size, &self.plain);
         score(&net, input, &self.loss, at, &self.held_back)
@@ -301,7 +308,7 @@ impl FineTune {
                 .as_ref()
                 .is_none_or(|(best, _)| held_back.loss < *best);
         if improved {
-            self.best = Some((held_back.loss, self.net.clone()));
+            self.best = Some((held_back.loss, self.kept()?));
             self.since_best = 0;
         } else {
             self.since_best += 1;
@@ -327,7 +334,61 @@ impl FineTune {
         }))
     }
 
-    /// The best epoch's network as a weights file: the starting file's header with
+    /// The current network as it would be kept: every weight moved
+    /// [`FineTuneSettings::start_share`] of the way back to its starting value.
+    fn kept(&self) -> Result<StereoModel, FineTuneError> {
+        let share = self.settings.start_share;
+        if share == 0.0 {
+            return Ok(self.net.clone());
+        }
+        struct Starting {
+            values: Vec<TensorData>,
+        }
+        impl ModuleVisitor for Starting {
+            fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+                self.values.push(param.val().into_data());
+            }
+        }
+        struct TowardsStart<'a> {
+            start: core::slice::Iter<'a, TensorData>,
+            share: f64,
+            short: bool,
+        }
+        impl ModuleMapper for TowardsStart<'_> {
+            fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+                let Some(start) = self.start.next() else {
+                    self.short = true;
+                    return param;
+                };
+                // A frozen weight is its start, exactly.
+                if !param.is_require_grad() {
+                    return param;
+                }
+                let share = self.share;
+                param.map(|trained| {
+                    let start = Tensor::<D>::from_data(start.clone(), &trained.device());
+                    trained.mul_scalar(1.0 - share) + start.mul_scalar(share)
+                })
+            }
+        }
+        let mut starting = Starting { values: Vec::new() };
+        self.start.visit(&mut starting);
+        let mut towards = TowardsStart {
+            start: starting.values.iter(),
+            share,
+            short: false,
+        };
+        let kept = self.net.clone().map(&mut towards);
+        if towards.short || towards.start.next().is_some() {
+            return Err(FineTuneError::Readback(
+                "the starting and the trained network have different parameters".into(),
+            ));
+        }
+        Ok(kept)
+    }
+
+    /// The best epoch's network, as kept ([`FineTuneSettings::start_share`]), as a weights
+    /// file: the starting file's header with
     /// `provenance` replacing its record (the caller says where it came from and drops what no
     /// longer holds, such as measured errors). `None` before an epoch improved on nothing.
     pub fn best_weights(
