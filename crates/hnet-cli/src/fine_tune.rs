@@ -72,7 +72,7 @@ pub struct FineTuneArgs {
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     replicas: u64,
     /// Share of the starting weights in the network scored and kept: each epoch's weights moved
-    /// this far back towards the starting ones (0 keeps the trained weights; the page's 0.25
+    /// this far back towards the starting ones (0 keeps the trained weights; the page's 0.15
     /// when left out).
     #[arg(long)]
     start_share: Option<f64>,
