@@ -112,6 +112,7 @@ try {
     await waitForModel(page);
     await page.selectOption("#backend-choice", "cpu");
     await waitForModel(page);
+    await loadWeightsFromEnv(page);
     await page.waitForFunction(() => /one per core|no workers:/.test(document.querySelector("#cpu-workers")?.title), null, { timeout: 60_000 });
     await page.click("#tab-cine");
     await page.click("#cine-sample");
@@ -137,6 +138,7 @@ try {
     const at = (q) => Math.round(intervals[Math.min(intervals.length - 1, Math.floor(q * intervals.length))]);
     results.push({
       trace: "twin sample cine, 24 frame pairs, 224 px, on the CPU",
+      weights: (await page.textContent("#weights"))?.trim(),
       cpu_workers: await page.getAttribute("#cpu-workers", "title"),
       runs: seconds.length,
       median_s: seconds[Math.floor(seconds.length / 2)],
