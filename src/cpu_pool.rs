@@ -333,8 +333,7 @@ fn has_workers() -> bool {
 impl CpuPool {
     /// Starts `size` workers, each loading `weights` (`name` names them), for a network of input
     /// `input` whose branch pools `pooled` features, each view read as `averaging` says. The
-    /// pool runs with the workers that
-    /// started; it fails only when none did.
+    /// pool runs with the workers that started; it fails only when none did.
     pub async fn start(
         size: usize,
         weights: Rc<[u8]>,

@@ -31,8 +31,9 @@ pub fn is_catheter_label(v: u8) -> bool {
 }
 
 /// How many ways a network reads each view before its mask is kept: the view as given, or also
-/// its left-right mirror image, the two catheter probabilities averaged (`hnet_model::mask_averaging`).
-/// A weights file's recorded calibration says which it was measured with.
+/// its left-right mirror image, the two catheter probabilities averaged
+/// (`hnet_model::mask_averaging`). A weights file's recorded calibration says which it was
+/// measured with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum MaskAveraging {

@@ -388,9 +388,9 @@ impl FineTune {
     }
 
     /// The best epoch's network, as kept ([`FineTuneSettings::start_share`]), as a weights
-    /// file: the starting file's header with
-    /// `provenance` replacing its record (the caller says where it came from and drops what no
-    /// longer holds, such as measured errors). `None` before an epoch improved on nothing.
+    /// file: the starting file's header with `provenance` replacing its record (the caller says
+    /// where it came from and drops what no longer holds, such as measured errors). `None`
+    /// before an epoch improved on nothing.
     pub fn best_weights(
         &self,
         provenance: &alloc::collections::BTreeMap<String, String>,
