@@ -25,7 +25,9 @@ use record::record_facts;
 
 use crate::backend::BackendChoice;
 use crate::data::StereoSplit;
-use crate::network::{load_run, load_weights, parse_mask_averaging, predict_entry};
+use crate::network::{
+    load_run, load_weights, parse_mask_averaging, predict_entry, read_views_as_recorded,
+};
 use crate::physics_check::{self, BlindEstimator, Estimator, PhysicsEvaluation};
 use crate::run_dir::RunDir;
 use hnet_twin::dataset::simulate::nominal_base;
@@ -100,9 +102,11 @@ pub struct EvalArgs {
     catheter_entry: EntrySetting,
     /// How many ways each view is read for its mask, the readings' catheter probabilities
     /// averaged: `single`, or `mirrored` (the view and its left-right mirror image, twice the
-    /// network's work). The force head reads the views as given.
-    #[arg(long, default_value = "single", value_parser = parse_mask_averaging)]
-    mask_averaging: MaskAveraging,
+    /// network's work). The force head reads the views as given. By default as the weights'
+    /// recorded calibration was measured (one reading for weights that record none);
+    /// `--record` records the setting used.
+    #[arg(long, value_parser = parse_mask_averaging)]
+    mask_averaging: Option<MaskAveraging>,
     /// The catheter the blind physics estimate assumes: a catalogue name or a catheter file
     /// (`hnet calibrate`'s output).
     #[arg(long, default_value = BENCH_CATHETER, conflicts_with = "oracle")]
@@ -186,7 +190,7 @@ pub struct Evaluation {
     pub catheter_entry: Option<EntryUse>,
     /// How many ways each view was read for its mask (`hnet eval --mask-averaging`); files
     /// written before it existed read as `single`, which is what they were.
-    #[serde(default, skip_serializing_if = "is_single_reading")]
+    #[serde(default, skip_serializing_if = "MaskAveraging::is_single")]
     pub mask_averaging: MaskAveraging,
     /// What the physics estimate was told: `blind` (a catalogue catheter, the base fitted) or
     /// `oracle` (each pair's recorded catheter and base). Files written before the blind
@@ -233,10 +237,6 @@ pub struct EntryUse {
 
 fn is_zero(turns: &u8) -> bool {
     *turns == 0
-}
-
-fn is_single_reading(averaging: &MaskAveraging) -> bool {
-    *averaging == MaskAveraging::Single
 }
 
 /// What [`evaluate`] checks and writes besides the network's own tables.
@@ -576,7 +576,12 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         ),
         (None, None) => anyhow::bail!("give --run or --weights"),
     };
-    model.mask_averaging = args.mask_averaging;
+    let weights_file = match (&run, &args.weights) {
+        (Some(run), _) => run.model_file(),
+        (_, Some(weights)) => weights.clone(),
+        (None, None) => unreachable!("a model was loaded"),
+    };
+    read_views_as_recorded(&mut model, args.mask_averaging, &weights_file)?;
     let (evaluation, predictions) = evaluate(
         &model,
         &data,
@@ -620,12 +625,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         )?;
     }
     if args.record {
-        let path = match (&run, &args.weights) {
-            (Some(run), _) => run.model_file(),
-            (None, Some(weights)) => weights.clone(),
-            (None, None) => unreachable!("a model was loaded"),
-        };
-        record_facts(&model, &evaluation, &predictions, args, &path)?;
+        record_facts(&model, &evaluation, &predictions, args, &weights_file)?;
     }
     if let Some(path) = &args.predictions {
         std::fs::write(path, predictions_csv(&predictions, &evaluation.estimator))

@@ -31,7 +31,7 @@ use serde::Serialize;
 
 use crate::backend::BackendChoice;
 use crate::evaluation::{EvalOptions, Evaluation, evaluate};
-use crate::network::{load_weights, parse_mask_averaging};
+use crate::network::{load_weights, parse_mask_averaging, read_views_as_recorded};
 use crate::simulate::{Scenes, SimulateArgs};
 use hnet_model::mask_averaging::MaskAveraging;
 
@@ -59,9 +59,10 @@ pub struct MismatchArgs {
     /// Where to compute.
     #[arg(long, value_enum, default_value = "flex")]
     backend: BackendChoice,
-    /// How many ways each view is read for its mask (`hnet eval --mask-averaging`).
-    #[arg(long, default_value = "single", value_parser = parse_mask_averaging)]
-    mask_averaging: MaskAveraging,
+    /// How many ways each view is read for its mask (`hnet eval --mask-averaging`); by default
+    /// as the weights' recorded calibration was measured.
+    #[arg(long, value_parser = parse_mask_averaging)]
+    mask_averaging: Option<MaskAveraging>,
 }
 
 /// One set of the suite.
@@ -388,7 +389,7 @@ pub fn markdown(weights: &Path, rows: &[MismatchRow]) -> String {
 pub fn run(args: &MismatchArgs) -> anyhow::Result<()> {
     let device: Device = args.backend.device()?;
     let mut model = load_weights(&args.weights, None, &device)?;
-    model.mask_averaging = args.mask_averaging;
+    read_views_as_recorded(&mut model, args.mask_averaging, &args.weights)?;
     let catheter = CatalogueCatheter::find(BENCH_CATHETER)?;
     // Each set's seed is the first plus its place in the whole suite, so that a set gives the
     // same pairs whether it runs alone or with the others.
