@@ -4,6 +4,11 @@
 //! The tip force is always the views as given's: the force head reads both views together, and a
 //! pair of mirrored views is not the same scene mirrored in 3D.
 //!
+//! Only for networks whose training views were left-right symmetric: on the paper bench, whose
+//! view A shows the catheter running in from one side, the mirror image is a view the network
+//! never saw, and view A's IoU fell from 0.96 to 0.34 (docs/results.md, "Reading each view
+//! twice").
+//!
 //! Why the mirror image: it keeps the bottom edge, through which every training scene's catheter
 //! entered, and every pixel's neighbours, and on an even width it keeps where the network's 2 x 2
 //! pooling windows fall. Moves that change those windows do not qualify on twin X-rays: with a
