@@ -5,8 +5,8 @@
 //! pair of mirrored views is not the same scene mirrored in 3D.
 //!
 //! Only for networks whose training views were left-right symmetric: on the paper bench, whose
-//! view A shows the catheter running in from one side, the mirror image is a view the network
-//! never saw, and view A's IoU fell from 0.96 to 0.34 (docs/results.md, "Reading each view
+//! view A shows the catheter always bending towards the same side, the mirror image is a view
+//! the network never saw, and view A's IoU fell from 0.96 to 0.34 (docs/results.md, "Reading each view
 //! twice").
 //!
 //! Why the mirror image: it keeps the bottom edge, through which every training scene's catheter
