@@ -9,7 +9,7 @@ use alloc::vec::Vec;
 use burn::tensor::{DataError, Device, ExecutionError, Tensor, TensorData, Transaction};
 use hnet_units::{ImageSize, TipForce, View};
 
-use crate::mask_averaging::{MaskAveraging, average_with_mirror, mirrored_rgb};
+use crate::mask_averaging::{MaskAveraging, average_with_mirror, mirrored};
 use crate::model::{HNet, HNetOutput};
 use burn::tensor::activation::sigmoid;
 
@@ -108,6 +108,19 @@ pub fn stereo_batch(
     size: ImageSize,
     device: &Device,
 ) -> Result<(Tensor<4>, Tensor<4>), InputSizeError> {
+    let [a, b] = stereo_planes(pairs, size)?;
+    let shape = [pairs.len(), 3, size.height, size.width];
+    Ok((
+        Tensor::from_data(TensorData::new(a, shape), device),
+        Tensor::from_data(TensorData::new(b, shape), device),
+    ))
+}
+
+/// Views A and B of a batch of pairs as planar values in `[0, 1]`, `[B, 3, H, W]` each.
+fn stereo_planes(
+    pairs: &[StereoPair<'_>],
+    size: ImageSize,
+) -> Result<[Vec<f32>; 2], InputSizeError> {
     let expected = size.pixels() * 3;
     let mut a = Vec::with_capacity(pairs.len() * expected);
     let mut b = Vec::with_capacity(pairs.len() * expected);
@@ -125,11 +138,7 @@ pub fn stereo_batch(
         push_planar(pair.view_a, &mut a);
         push_planar(pair.view_b, &mut b);
     }
-    let shape = [pairs.len(), 3, size.height, size.width];
-    Ok((
-        Tensor::from_data(TensorData::new(a, shape), device),
-        Tensor::from_data(TensorData::new(b, shape), device),
-    ))
+    Ok([a, b])
 }
 
 /// Host copies of a batch's outputs, split per pair.
@@ -212,21 +221,18 @@ impl HNet {
         device: &Device,
         averaging: MaskAveraging,
     ) -> Result<Transaction, InputSizeError> {
-        let mirrors: Vec<[Vec<u8>; 2]> = match averaging {
-            MaskAveraging::Single => Vec::new(),
-            MaskAveraging::Mirrored => pairs
-                .iter()
-                .map(|p| [p.view_a, p.view_b].map(|v| mirrored_rgb(v, size)))
-                .collect(),
-        };
-        let mut batch = pairs.to_vec();
-        batch.extend(mirrors.iter().map(|[a, b]| StereoPair {
-            view_a: a,
-            view_b: b,
-        }));
-        let (a, b) = stereo_batch(&batch, size, device)?;
+        let mut planes = stereo_planes(pairs, size)?;
+        if averaging == MaskAveraging::Mirrored {
+            for views in &mut planes {
+                let mirror = mirrored(views, size);
+                views.extend(mirror);
+            }
+        }
+        let rows = pairs.len() * averaging.readings();
+        let shape = [rows, 3, size.height, size.width];
+        let [a, b] = planes.map(|v| Tensor::from_data(TensorData::new(v, shape), device));
         let output: HNetOutput = self.forward(a, b);
-        let rows = batch.len() as i32;
+        let rows = rows as i32;
         Ok(Transaction::default()
             .register(output.mask_a().reshape([rows, -1]))
             .register(output.mask_b().reshape([rows, -1]))
@@ -349,7 +355,8 @@ impl HNet {
         let mut planar = Vec::with_capacity(readings * expected);
         push_planar(image, &mut planar);
         if averaging == MaskAveraging::Mirrored {
-            push_planar(&mirrored_rgb(image, size), &mut planar);
+            let mirror = mirrored(&planar, size);
+            planar.extend(mirror);
         }
         let input = Tensor::from_data(
             TensorData::new(planar, [readings, 3, size.height, size.width]),

@@ -35,18 +35,6 @@ pub fn mirrored(planes: &[f32], size: ImageSize) -> Vec<f32> {
     out
 }
 
-/// An interleaved 8-bit RGB image of `size` (`height·width·3` bytes, row-major) mirrored left to
-/// right. Its own inverse.
-pub fn mirrored_rgb(pixels: &[u8], size: ImageSize) -> Vec<u8> {
-    let mut out = Vec::with_capacity(pixels.len());
-    for row in pixels.chunks_exact(3 * size.width) {
-        for pixel in row.chunks_exact(3).rev() {
-            out.extend_from_slice(pixel);
-        }
-    }
-    out
-}
-
 /// The mean of `mask` (as read) and `mirror_mask` (read on the mirror image, not yet mirrored
 /// back), written into `mask`.
 pub fn average_with_mirror(mask: &mut [f32], mirror_mask: &[f32], size: ImageSize) {
@@ -72,10 +60,6 @@ mod tests {
         let once = mirrored(&planes, size);
         assert_eq!(once[..6], [2.0, 1.0, 0.0, 5.0, 4.0, 3.0]);
         assert_eq!(mirrored(&once, size), planes);
-        let rgb: Vec<u8> = (0..18).collect();
-        let once = mirrored_rgb(&rgb, size);
-        assert_eq!(once[..9], [6, 7, 8, 3, 4, 5, 0, 1, 2]);
-        assert_eq!(mirrored_rgb(&once, size), rgb);
         let mut mask = vec![1.0, 0.0, 0.0, 0.0, 0.0, 1.0];
         average_with_mirror(&mut mask, &[0.0, 0.0, 1.0, 1.0, 0.0, 0.0], size);
         assert_eq!(mask, [1.0, 0.0, 0.0, 0.0, 0.0, 1.0]);
