@@ -101,11 +101,11 @@ pub fn tuning_set(pairs: &[LabeledPair], input: ImageSize) -> Result<TuningSet, 
 }
 
 /// The kept weights' provenance ([`fine_tuned_provenance`]): where they came from, on how many
-/// workers each step was split (what `hnet fine-tune --replicas` repeats), and how they did on
-/// the held-back pairs.
+/// workers each step was split and what share of the starting weights was kept (what `hnet
+/// fine-tune --replicas --start-share` repeats), and how they did on the held-back pairs.
 pub fn kept_provenance(
     start: &BTreeMap<String, String>,
-    (start_name, workers): (&str, usize),
+    (start_name, workers, start_share): (&str, usize, f64),
     set: &TuningSet,
     held_back: usize,
     before: &HeldBackScores,
@@ -113,7 +113,8 @@ pub fn kept_provenance(
 ) -> BTreeMap<String, String> {
     let command = format!(
         "H-Net Studio page: Fine-tune on my pairs, from {start_name}, each step split between \
-         {workers} worker(s) (natively: hnet fine-tune --replicas {workers})"
+         {workers} worker(s), {start_share} of the starting weights kept (natively: hnet \
+         fine-tune --replicas {workers} --start-share {start_share})"
     );
     fine_tuned_provenance(
         start,
@@ -377,13 +378,22 @@ mod tests {
             finished: true,
             finished_because: None,
         };
-        let kept = kept_provenance(&start, ("hnet-cpu.bpk", 2), &set, 1, &scores(0.2), &best);
+        let kept = kept_provenance(
+            &start,
+            ("hnet-cpu.bpk", 2, 0.15),
+            &set,
+            1,
+            &scores(0.2),
+            &best,
+        );
         assert!(!kept.contains_key(FACTS_KEY));
         assert_eq!(kept["seed"], "42");
         assert_eq!(kept["held_back_before"], "catheter IoU 0.200");
         assert_eq!(kept["held_back_after"], "catheter IoU 0.900");
         assert!(kept["command"].contains("from hnet-cpu.bpk"));
-        assert!(kept["command"].ends_with("(natively: hnet fine-tune --replicas 2)"));
+        assert!(
+            kept["command"].ends_with("(natively: hnet fine-tune --replicas 2 --start-share 0.15)")
+        );
         assert_eq!(seconds_left(10.0, 2, 6), Some(20.0));
         assert_eq!(seconds_left(0.0, 0, 6), None);
     }

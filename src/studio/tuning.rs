@@ -555,7 +555,7 @@ async fn run(
             if report.best {
                 let provenance = kept_provenance(
                     start_provenance,
-                    (start_name, workers.len()),
+                    (start_name, workers.len(), settings.start_share),
                     set,
                     split.1,
                     &before,
