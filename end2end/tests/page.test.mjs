@@ -1023,6 +1023,8 @@ test("fine-tune on my pairs: refused without labelled pairs, a one-epoch run wit
       await page.waitForFunction((n) => document.querySelectorAll("#pairs li[data-id]").length === n, i + 1);
     }
     assert.match(await page.textContent("#tune-pairs"), /^3 of 3 pairs have labelled masks/);
+    // 15 % of the starting weights kept unless the user asks otherwise.
+    assert.equal(await page.$eval("#tune-start-share", (i) => i.value), "15");
     // Typed over what the field holds, as a person does; the value counts once the field is left.
     await page.click("#tune-epochs", { clickCount: 3 });
     await page.keyboard.type("1", { delay: 30 });
