@@ -147,6 +147,31 @@ fn a_training_killed_mid_run_resumes_and_finishes() {
     ]);
     assert!(facts(&model).contains(r#""measured":{"data":"#));
     assert!(facts(&model).contains(r#""force_domain""#));
+    // Recorded reading each view twice, the weights are read so by default, and the file says
+    // so only while it is not one reading.
+    let record = |averaging: &str| {
+        let args = [
+            "eval",
+            "--run",
+            runs.to_str().unwrap(),
+            "--no-physics",
+            "--record",
+        ];
+        run(&[&args[..], &["--mask-averaging", averaging]].concat());
+    };
+    record("mirrored");
+    assert!(facts(&model).contains(r#""mask_averaging":"mirrored""#));
+    let read = run(&[
+        "eval",
+        "--run",
+        runs.to_str().unwrap(),
+        "--no-physics",
+        "--json",
+    ]);
+    let read: serde_json::Value = serde_json::from_slice(&read.stdout).unwrap();
+    assert_eq!(read["mask_averaging"], "mirrored");
+    record("single");
+    assert!(!facts(&model).contains(r#""mask_averaging""#));
 
     // Any weights file on any data: the same tables from the weights alone.
     let weights = runs.join("model.bpk");
