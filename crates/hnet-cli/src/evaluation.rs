@@ -102,9 +102,10 @@ pub struct EvalArgs {
     catheter_entry: EntrySetting,
     /// How many ways each view is read for its mask, the readings' catheter probabilities
     /// averaged: `single`, or `mirrored` (the view and its left-right mirror image, twice the
-    /// network's work). The force head reads the views as given. By default as the weights'
-    /// recorded calibration was measured (one reading for weights that record none);
-    /// `--record` records the setting used.
+    /// network's work). The force head reads the views as given. Mirrored only for networks
+    /// whose training views were left-right symmetric (the C-arm bench's; not the paper
+    /// bench's). By default as the weights' recorded calibration was measured (one reading for
+    /// weights that record none); `--record` records the setting used.
     #[arg(long, value_parser = parse_mask_averaging)]
     mask_averaging: Option<MaskAveraging>,
     /// The catheter the blind physics estimate assumes: a catalogue name or a catheter file
