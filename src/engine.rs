@@ -376,43 +376,35 @@ impl Engine {
         let mut workers = 0;
         let mut redone = None;
         let reading: EntryReading = match &self.runner {
-            Runner::Cpu(model) => match self.running_workers() {
-                Some(pool) => {
-                    workers = pool.running();
-                    let read = on_workers(model, &pool, &a, &b, self.input, entry).await;
-                    match read {
-                        Ok((reading, why)) => {
-                            redone = why;
-                            reading
+            Runner::Cpu(model) => {
+                let on_workers = match self.running_workers() {
+                    Some(pool) => {
+                        workers = pool.running();
+                        match on_workers(model, &pool, &a, &b, self.input, entry).await {
+                            Ok((reading, why)) => {
+                                redone = why;
+                                Some(reading)
+                            }
+                            // Every worker stopped: the page's thread reads the pair.
+                            Err(EngineError::Workers(PoolError::Stopped { .. })) => {
+                                workers = 0;
+                                None
+                            }
+                            Err(e) => return Err(e),
                         }
-                        // Every worker stopped: the page's thread reads the pair.
-                        Err(EngineError::Workers(PoolError::Stopped { .. })) => {
-                            workers = 0;
-                            model
-                                .predict_entry_async(
-                                    pair,
-                                    self.input,
-                                    &Device::flex(),
-                                    entry,
-                                    self.mask_averaging,
-                                )
-                                .await?
-                        }
-                        Err(e) => return Err(e),
+                    }
+                    None => None,
+                };
+                match on_workers {
+                    Some(reading) => reading,
+                    None => {
+                        let (input, averaging) = (self.input, self.mask_averaging);
+                        model
+                            .predict_entry_async(pair, input, &Device::flex(), entry, averaging)
+                            .await?
                     }
                 }
-                None => {
-                    model
-                        .predict_entry_async(
-                            pair,
-                            self.input,
-                            &Device::flex(),
-                            entry,
-                            self.mask_averaging,
-                        )
-                        .await?
-                }
-            },
+            }
             Runner::WebGpu(network) => {
                 // The worker runs one pair per call: the first reading, then each further turn.
                 let read = async |edges: [CatheterEntry; 2]| -> Result<TurnedOutput, EngineError> {

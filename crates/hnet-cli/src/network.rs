@@ -38,10 +38,7 @@ pub fn load_weights(
 
 /// Parses `--mask-averaging` ([`MaskAveraging::name`]).
 pub fn parse_mask_averaging(text: &str) -> Result<MaskAveraging, String> {
-    MaskAveraging::from_name(text).ok_or_else(|| {
-        let names: Vec<&str> = MaskAveraging::ALL.iter().map(|a| a.name()).collect();
-        format!("`{text}` is not one of {}", names.join(", "))
-    })
+    MaskAveraging::from_name(text).map_err(|e| e.to_string())
 }
 
 /// Sets how `model`, loaded from `weights`, reads each view: `asked`, or else as its recorded

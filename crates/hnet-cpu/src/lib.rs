@@ -59,11 +59,7 @@ pub fn start(large_winograd_tiles: bool) {
 /// Returns the network's handle for [`read_view`] and [`unload`].
 #[wasm_bindgen]
 pub fn load(weights: &[u8], name: &str, mask_averaging: &str) -> Result<u32, JsError> {
-    let averaging = MaskAveraging::from_name(mask_averaging).ok_or_else(|| {
-        JsError::new(&format!(
-            "no way of reading a view is called `{mask_averaging}`"
-        ))
-    })?;
+    let averaging = MaskAveraging::from_name(mask_averaging).map_err(|e| js_error(&e))?;
     let (model, config, _) =
         HNet::from_weights_bytes(weights, &Device::flex(), name).map_err(|e| js_error(&e))?;
     let input = config.image_size;

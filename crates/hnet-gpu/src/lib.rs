@@ -79,11 +79,7 @@ pub async fn start() -> Result<(), JsError> {
 /// measured). Returns the network's handle for [`infer`] and [`unload`].
 #[wasm_bindgen]
 pub fn load(weights: &[u8], name: &str, mask_averaging: &str) -> Result<u32, JsError> {
-    let averaging = MaskAveraging::from_name(mask_averaging).ok_or_else(|| {
-        JsError::new(&format!(
-            "no way of reading a view is called `{mask_averaging}`"
-        ))
-    })?;
+    let averaging = MaskAveraging::from_name(mask_averaging).map_err(|e| js_error(&e))?;
     let (model, config, _) =
         HNet::from_weights_bytes(weights, &device()?, name).map_err(|e| js_error(&e))?;
     let input = config.image_size;

@@ -85,7 +85,10 @@ async fn h_net_on_webgpu_computes_what_the_cpu_computes() {
     let err = hnet_gpu::infer(other, vec![0; 3], vec![0; 3]).await;
     assert!(message(err.unwrap_err()).starts_with("pair 0 view A: 3 bytes"));
     let err = hnet_gpu::load(&weights, "small.bpk", "twice").unwrap_err();
-    assert_eq!(message(err), "no way of reading a view is called `twice`");
+    assert_eq!(
+        message(err),
+        "no way of reading a view is called `twice` (single or mirrored)"
+    );
     let err = hnet_gpu::load(b"not weights", "junk.bpk", "single").unwrap_err();
     assert!(message(err).starts_with("weights file 'junk.bpk': "));
 }

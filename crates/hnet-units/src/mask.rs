@@ -56,9 +56,12 @@ impl MaskAveraging {
         }
     }
 
-    /// The setting of a [`Self::name`].
-    pub fn from_name(name: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|a| a.name() == name)
+    /// The setting of a [`Self::name`]; an error that names the settings for any other text.
+    pub fn from_name(name: &str) -> Result<Self, UnknownMaskAveraging> {
+        Self::ALL
+            .into_iter()
+            .find(|a| a.name() == name)
+            .ok_or_else(|| UnknownMaskAveraging(name.to_string()))
     }
 
     /// Readings of each view.
@@ -74,6 +77,22 @@ impl MaskAveraging {
         *self == Self::Single
     }
 }
+
+/// A name that is no [`MaskAveraging`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UnknownMaskAveraging(pub String);
+
+impl core::fmt::Display for UnknownMaskAveraging {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "no way of reading a view is called `{}` (single or mirrored)",
+            self.0
+        )
+    }
+}
+
+impl core::error::Error for UnknownMaskAveraging {}
 
 /// The 8-bit label of a pixel: [`CATHETER_LABEL`] for catheter, 0 for background.
 pub fn label(catheter: bool) -> u8 {
@@ -100,6 +119,18 @@ pub fn binarize_labels(coverage: &[u8]) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn mask_averagings_read_back_by_name_and_others_are_named() {
+        for averaging in MaskAveraging::ALL {
+            assert_eq!(MaskAveraging::from_name(averaging.name()), Ok(averaging));
+        }
+        let err = MaskAveraging::from_name("twice").unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "no way of reading a view is called `twice` (single or mirrored)"
+        );
+    }
 
     #[test]
     fn labels_and_probabilities_are_cut_at_the_same_half() {

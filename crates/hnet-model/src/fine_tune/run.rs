@@ -22,8 +22,9 @@ use crate::weights::WeightsHeader;
 /// A fine-tune in progress.
 pub struct FineTune {
     net: StereoModel,
-    /// The starting weights, for [`FineTuneSettings::start_share`].
-    start: StereoModel,
+    /// The starting weights' values, in visiting order, for [`FineTuneSettings::start_share`]
+    /// (read once; none when the share is 0).
+    start: Vec<TensorData>,
     spec: ModelSpec,
     header: WeightsHeader,
     size: ImageSize,
@@ -97,7 +98,11 @@ impl FineTune {
             return Err(FineTuneError::StartShare(settings.start_share));
         }
         Ok(Self {
-            start: net.clone(),
+            start: if settings.start_share > 0.0 {
+                parameter_values(&net)
+            } else {
+                Vec::new()
+            },
             net,
             spec,
             header,
@@ -165,10 +170,14 @@ impl FineTune {
         if self.reference.is_empty() {
             return Ok(None);
         }
-        let net = self.kept()?.valid();
+        self.score_reference_of(&self.kept()?).map(Some)
+    }
+
+    /// `net`'s scores on the reference pairs.
+    fn score_reference_of(&self, net: &StereoModel) -> Result<HeldBackScores, FineTuneError> {
         let all: Vec<usize> = (0..self.reference.len()).collect();
         let at = (&self.reference[..], self.size, &self.plain);
-        score(&net, self.spec.input(), &self.loss, at, &all).map(Some)
+        score(&net.valid(), self.spec.input(), &self.loss, at, &all)
     }
 
     /// Epochs ended so far.
@@ -199,10 +208,19 @@ impl FineTune {
     /// The current network's scores on the held-back pairs (before the first step: the
     /// starting network's), as it would be kept ([`FineTuneSettings::start_share`]).
     pub fn score(&self) -> Result<HeldBackScores, FineTuneError> {
-        let net = self.kept()?.valid();
-        let input = self.spec.input();
+        self.score_of(&self.kept()?)
+    }
+
+    /// `net`'s scores on the held-back pairs.
+    fn score_of(&self, net: &StereoModel) -> Result<HeldBackScores, FineTuneError> {
         let at = (&self.pairs[..], self.size, &self.plain);
-        score(&net, input, &self.loss, at, &self.held_back)
+        score(
+            &net.valid(),
+            self.spec.input(),
+            &self.loss,
+            at,
+            &self.held_back,
+        )
     }
 
     /// One training step on the next batch: every replica's share, one after another, then
@@ -299,8 +317,13 @@ impl FineTune {
             });
             return Ok(None);
         }
-        let held_back = self.score()?;
-        let reference = self.score_reference()?;
+        let kept = self.kept()?;
+        let held_back = self.score_of(&kept)?;
+        let reference = if self.reference.is_empty() {
+            None
+        } else {
+            Some(self.score_reference_of(&kept)?)
+        };
         let improved = diverged.is_none()
             && held_back.loss.is_finite()
             && self
@@ -308,7 +331,7 @@ impl FineTune {
                 .as_ref()
                 .is_none_or(|(best, _)| held_back.loss < *best);
         if improved {
-            self.best = Some((held_back.loss, self.kept()?));
+            self.best = Some((held_back.loss, kept));
             self.since_best = 0;
         } else {
             self.since_best += 1;
@@ -341,40 +364,8 @@ impl FineTune {
         if share == 0.0 {
             return Ok(self.net.clone());
         }
-        struct Starting {
-            values: Vec<TensorData>,
-        }
-        impl ModuleVisitor for Starting {
-            fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-                self.values.push(param.val().into_data());
-            }
-        }
-        struct TowardsStart<'a> {
-            start: core::slice::Iter<'a, TensorData>,
-            share: f64,
-            short: bool,
-        }
-        impl ModuleMapper for TowardsStart<'_> {
-            fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
-                let Some(start) = self.start.next() else {
-                    self.short = true;
-                    return param;
-                };
-                // A frozen weight is its start, exactly.
-                if !param.is_require_grad() {
-                    return param;
-                }
-                let share = self.share;
-                param.map(|trained| {
-                    let start = Tensor::<D>::from_data(start.clone(), &trained.device());
-                    trained.mul_scalar(1.0 - share) + start.mul_scalar(share)
-                })
-            }
-        }
-        let mut starting = Starting { values: Vec::new() };
-        self.start.visit(&mut starting);
         let mut towards = TowardsStart {
-            start: starting.values.iter(),
+            start: self.start.iter(),
             share,
             short: false,
         };
@@ -408,6 +399,45 @@ impl FineTune {
     pub fn header(&self) -> &WeightsHeader {
         &self.header
     }
+}
+
+/// Moves each trained weight `share` of the way back to its starting value (`start`, in visiting
+/// order); frozen weights stay exactly as they are.
+struct TowardsStart<'a> {
+    start: core::slice::Iter<'a, TensorData>,
+    share: f64,
+    short: bool,
+}
+
+impl ModuleMapper for TowardsStart<'_> {
+    fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+        let Some(start) = self.start.next() else {
+            self.short = true;
+            return param;
+        };
+        // A frozen weight is its start, exactly.
+        if !param.is_require_grad() {
+            return param;
+        }
+        let share = self.share;
+        param.map(|trained| {
+            let start = Tensor::<D>::from_data(start.clone(), &trained.device());
+            trained.mul_scalar(1.0 - share) + start.mul_scalar(share)
+        })
+    }
+}
+
+/// Every float parameter's values of `net`, in visiting order.
+fn parameter_values(net: &StereoModel) -> Vec<TensorData> {
+    struct Values(Vec<TensorData>);
+    impl ModuleVisitor for Values {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            self.0.push(param.val().into_data());
+        }
+    }
+    let mut values = Values(Vec::new());
+    net.visit(&mut values);
+    values.0
 }
 
 /// The scores of `net` on the pairs `indices` (one pair per pass, without the autodiff graph).
