@@ -100,21 +100,64 @@ pub fn tuning_set(pairs: &[LabeledPair], input: ImageSize) -> Result<TuningSet, 
     Ok(set)
 }
 
-/// The kept weights' provenance ([`fine_tuned_provenance`]): where they came from, on how many
-/// workers each step was split and what share of the starting weights was kept (what `hnet
-/// fine-tune --replicas --start-share` repeats), and how they did on the held-back pairs.
+/// Where a fine-tune's steps run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TuningDevice {
+    /// WebGPU, in one worker (the page's WebGPU start-up check passed).
+    WebGpu,
+    /// The CPU, each step split between this many workers (one per core, at most the batch).
+    Cpu {
+        /// Workers.
+        workers: usize,
+    },
+}
+
+impl TuningDevice {
+    /// Replicas each step is split between ([`hnet_model::fine_tune::FineTuneSettings::replicas`]).
+    pub fn replicas(self) -> usize {
+        match self {
+            Self::WebGpu => 1,
+            Self::Cpu { workers } => workers,
+        }
+    }
+
+    /// `on WebGPU`, `on 2 CPU workers`: what the panel and the provenance say.
+    pub fn describe(self) -> String {
+        match self {
+            Self::WebGpu => "on WebGPU".into(),
+            Self::Cpu { workers: 1 } => "on 1 CPU worker".into(),
+            Self::Cpu { workers } => {
+                format!("on {workers} CPU workers, each step split between them")
+            }
+        }
+    }
+
+    /// The native command's options that repeat the run's steps: `--replicas N` on the CPU,
+    /// `--backend wgpu` on WebGPU.
+    fn native_options(self) -> String {
+        match self {
+            Self::WebGpu => "--backend wgpu".into(),
+            Self::Cpu { workers } => format!("--replicas {workers}"),
+        }
+    }
+}
+
+/// The kept weights' provenance ([`fine_tuned_provenance`]): where they came from, where each
+/// step ran and what share of the starting weights was kept (what `hnet fine-tune --replicas
+/// --start-share`, or `--backend wgpu`, repeats), and how they did on the held-back pairs.
 pub fn kept_provenance(
     start: &BTreeMap<String, String>,
-    (start_name, workers, start_share): (&str, usize, f64),
+    (start_name, device, start_share): (&str, TuningDevice, f64),
     set: &TuningSet,
     held_back: usize,
     before: &HeldBackScores,
     best: &EpochReport,
 ) -> BTreeMap<String, String> {
     let command = format!(
-        "H-Net Studio page: Fine-tune on my pairs, from {start_name}, each step split between \
-         {workers} worker(s), {start_share} of the starting weights kept (natively: hnet \
-         fine-tune --replicas {workers} --start-share {start_share})"
+        "H-Net Studio page: Fine-tune on my pairs, from {start_name}, {}, {start_share} of the \
+         starting weights kept (natively: hnet fine-tune {} --start-share {start_share})",
+        device.describe(),
+        device.native_options()
     );
     fine_tuned_provenance(
         start,
@@ -378,9 +421,25 @@ mod tests {
             finished: true,
             finished_because: None,
         };
+        let on_webgpu = kept_provenance(
+            &start,
+            ("hnet-cpu.bpk", TuningDevice::WebGpu, 0.15),
+            &set,
+            1,
+            &scores(0.2),
+            &best,
+        );
+        assert!(
+            on_webgpu["command"].ends_with(
+                "on WebGPU, 0.15 of the starting weights kept (natively: hnet fine-tune \
+                 --backend wgpu --start-share 0.15)"
+            ),
+            "{}",
+            on_webgpu["command"]
+        );
         let kept = kept_provenance(
             &start,
-            ("hnet-cpu.bpk", 2, 0.15),
+            ("hnet-cpu.bpk", TuningDevice::Cpu { workers: 2 }, 0.15),
             &set,
             1,
             &scores(0.2),

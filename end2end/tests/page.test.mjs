@@ -3,9 +3,13 @@ import { test, before, after } from "node:test";
 import assert from "node:assert/strict";
 import { mkdtemp, writeFile, readFile } from "node:fs/promises";
 import { tmpdir } from "node:os";
-import { join } from "node:path";
+import { join, dirname } from "node:path";
+import { fileURLToPath } from "node:url";
 import { serveDist, launchBrowser, openPage, waitForModel } from "../harness.mjs";
 import { catheterFrame, png, readStoredZip } from "../images.mjs";
+
+/** Weights files the project made for these tests (end2end/fixtures/README.md). */
+const fixtures = join(dirname(fileURLToPath(import.meta.url)), "..", "fixtures");
 
 let server;
 let context;
@@ -845,6 +849,67 @@ test("a DICOM cine: sample, step, scrub, play, window/level, trace with cancel, 
   await page.close();
 });
 
+test("fine-tune on WebGPU: where the network runs on WebGPU, one WebGPU worker trains it (no CPU tuning worker started), its before/after table as the CPU workers' for the same run; the result is kept and in use", async () => {
+  // A small 224 px network (end2end/fixtures/README.md): on SwiftShader, the software adapter
+  // here, the bundled weights would take minutes a step.
+  const own = await launchBrowser();
+  try {
+    const { page, errors, requests } = await openPage(own, server.url);
+    await waitForModel(page);
+    await page.setInputFiles("#weights-file", join(fixtures, "tiny-224.bpk"));
+    await page.waitForFunction(() => document.querySelector("#weights")?.textContent === "tiny-224.bpk", null, { timeout: 60_000 });
+    await waitForModel(page);
+    await page.click("#tab-twin");
+    for (let i = 0; i < 2; i++) {
+      await page.focus("#twin-fx");
+      await page.keyboard.press("ArrowRight");
+      await page.waitForSelector("#keep-draft:not([disabled])", { timeout: 120_000 });
+      await page.click("#keep-draft");
+      await page.waitForFunction((n) => document.querySelectorAll("#pairs li[data-id]").length === n, i + 1);
+    }
+    await page.click("#tune-epochs", { clickCount: 3 });
+    await page.keyboard.type("1", { delay: 30 });
+    await page.keyboard.press("Tab");
+    const table = async () => {
+      await page.waitForSelector("#tune-table", { timeout: 300_000 });
+      return page.$$eval("#tune-table tbody tr", (trs) => trs.map((tr) => [...tr.cells].map((c) => c.textContent)));
+    };
+    // The same run on the CPU workers first, discarded.
+    await page.click("#tune-start");
+    const onCpu = await table();
+    assert.ok(!requests.some(isWebGpuModule), "the WebGPU module was fetched for a CPU fine-tune");
+    await page.click("#tune-discard");
+    await page.selectOption("#backend-choice", "webgpu");
+    await page.waitForSelector("#model-status [data-state=loading]", { state: "detached", timeout: 180_000 });
+    await waitForModel(page);
+    assert.match(await page.textContent("#backend"), /^WebGPU$/);
+    const cpuTuning = requests.filter((url) => /hnet-tune/.test(url)).length;
+    const started = Date.now();
+    await page.click("#tune-start");
+    await page.waitForFunction(() => /Epoch 1 of at most 1 .* · on WebGPU$/.test(document.querySelector("#tune-progress-text")?.textContent), null, { timeout: 180_000 });
+    const onGpu = await table();
+    console.log(`# a one-epoch fine-tune of 2 pairs of a small 224 px network on WebGPU (SwiftShader): ${((Date.now() - started) / 1000).toFixed(1)} s; CPU ${JSON.stringify(onCpu)}, WebGPU ${JSON.stringify(onGpu)}`);
+    assert.equal(requests.filter((url) => /hnet-tune/.test(url)).length, cpuTuning, "a CPU tuning worker was started for a WebGPU fine-tune");
+    // Before and after as on the CPU (the same network, the same step, another device): catheter
+    // IoU, the force error and the loss, whose fall says the step was taken.
+    assert.deepEqual(onGpu.map((row) => row[0]), ["Catheter IoU", "Force MAE", "Loss"]);
+    for (const [row, within] of [[0, 0.01], [1, 0.002], [2, 0.002]]) {
+      for (const column of [1, 2]) {
+        const [cpu, gpu] = [parseFloat(onCpu[row][column]), parseFloat(onGpu[row][column])];
+        assert.ok(Math.abs(cpu - gpu) <= within, `${onGpu[row][0]} ${column === 1 ? "before" : "after"}: CPU ${cpu}, WebGPU ${gpu}`);
+      }
+    }
+    assert.ok(parseFloat(onGpu[2][2]) < parseFloat(onGpu[2][1]), `the held-back loss did not fall: ${onGpu[2]}`);
+    await page.click("#tune-keep");
+    await page.waitForFunction(() => document.querySelector("#weights")?.textContent === "hnet-fine-tuned.bpk", null, { timeout: 180_000 });
+    await waitForModel(page);
+    assert.equal(await page.$eval("#weights-choice", (s) => s.value), "fine-tuned");
+    assert.deepEqual(errors, []);
+  } finally {
+    await own.close();
+  }
+});
+
 test("WebGPU runs in its worker, checked against the CPU on a check pair before it is trusted; a mismatch or a module that cannot be fetched falls back to the CPU and says why", async () => {
   for (const [query, expected] of [
     ["", { backend: /^WebGPU$/, why: "#backend-check", text: /masks within [\d.e-]+, force within [\d.e-]+ N of the CPU on a check pair/ }],
@@ -1036,7 +1101,7 @@ test("fine-tune on my pairs: refused without labelled pairs, a one-epoch run wit
     await page.waitForFunction(() => /^2 of your pairs trained on and 8 twin pairs rehearsed, 1 held back \(3 with a force label\)\. Epoch 1 of at most 1/.test(document.querySelector("#tune-progress-text")?.textContent), null, { timeout: 120_000 });
     // Each step is split between the tuning workers: one per core, at most the batch of 2.
     const tuningWorkers = await page.evaluate(() => Math.min(Math.max(navigator.hardwareConcurrency || 1, 1), 2));
-    assert.match(await page.textContent("#tune-progress-text"), tuningWorkers === 1 ? / · 1 worker$/ : / · 2 workers$/);
+    assert.match(await page.textContent("#tune-progress-text"), tuningWorkers === 1 ? / · on 1 CPU worker$/ : / · on 2 CPU workers, each step split between them$/);
     // The page answers while the worker trains.
     await page.click("#tab-images");
     await page.waitForSelector("#tune-table", { timeout: 300_000 });

@@ -130,10 +130,7 @@ fn running(studio: Studio, p: TuningProgress) -> impl IntoView {
     let left = p
         .seconds_left
         .map(|s| format!(" · at most {} left", minutes(s)));
-    let workers = match p.workers {
-        1 => " · 1 worker".to_string(),
-        n => format!(" · {n} workers"),
-    };
+    let workers = format!(" · {}", p.device.describe());
     let what = if p.before.is_none() {
         "Scoring the held-back pairs…".to_string()
     } else {

@@ -1,7 +1,10 @@
-//! "Fine-tune on my pairs" on the page's state: the fine-tuning workers (crates/hnet-tune, one
-//! [`ModuleWorker`] per core, at most the batch) driven step by step, each step split between
-//! them and the average of their gradients relayed to each ([`hnet_model::fine_tune::Share`]),
-//! its progress, the result kept or discarded, and the kept weights chosen in the model bar.
+//! "Fine-tune on my pairs" on the page's state: the fine-tuning workers driven step by step, its
+//! progress, the result kept or discarded, and the kept weights chosen in the model bar. Where
+//! the network runs on WebGPU (its start-up check passed), one WebGPU worker trains
+//! (crates/hnet-gpu, which carries crates/hnet-tune's exports); otherwise the CPU workers
+//! (crates/hnet-tune, one [`ModuleWorker`] per core, at most the batch), each step split between
+//! them and the average of their gradients relayed to each ([`hnet_model::fine_tune::Share`]).
+//! Should WebGPU not start for the fine-tune, the CPU workers train, and the page says why.
 //! Nothing is stored until the user keeps a result: a tab closed or a run stopped midway leaves
 //! the weights in use, and those kept before, as they were.
 
@@ -16,15 +19,17 @@ use wasm_bindgen::JsValue;
 use super::{ModelState, Studio, load_model};
 use crate::browser::now_ms;
 use crate::browser::yield_to_browser;
+use crate::compute::Backend;
 use crate::cpu_pool::pool_size;
 use crate::engine::WeightsOrigin;
 use crate::error_text::with_causes;
 use crate::fine_tune::{
-    REFERENCE_PAIRS, REFERENCE_SEED, REHEARSAL_PAIRS, REHEARSAL_SEED, TuningSet, TwinDomainSampler,
-    kept_provenance, seconds_left, tuning_set,
+    REFERENCE_PAIRS, REFERENCE_SEED, REHEARSAL_PAIRS, REHEARSAL_SEED, TuningDevice, TuningSet,
+    TwinDomainSampler, kept_provenance, seconds_left, tuning_set,
 };
+use crate::gpu_worker::START_TIMEOUT_S;
 use crate::imaging::WORK_SIZE;
-use crate::module_worker::{ModuleWorker, ModuleWorkerError};
+use crate::module_worker::{ModuleWorker, ModuleWorkerError, within};
 use crate::storage::{self, KeptWeights};
 use crate::{browser, page_query};
 use hnet_twin::model_facts::ForceDomain;
@@ -53,8 +58,8 @@ pub enum TuningState {
 pub struct TuningProgress {
     /// Pairs trained on and held back, and those with a force label.
     pub split: (usize, usize),
-    /// Workers each step is split between (one per core, at most the batch).
-    pub workers: usize,
+    /// Where the steps run: WebGPU, or the CPU workers each step is split between.
+    pub device: TuningDevice,
     /// Pairs in the set, and of them with a force label.
     pub pairs: usize,
     /// Twin pairs rehearsed beside them (counted in `split`'s trained-on pairs).
@@ -154,22 +159,30 @@ impl Studio {
             .as_ref()
             .and_then(|h| ModelFacts::read(&h.provenance).ok())
             .and_then(|facts| facts.force_domain);
-        // One worker per core, at most one per pair of the batch; the run goes on with those
-        // that started.
-        let mut workers = Vec::new();
-        for _ in 0..pool_size().clamp(1, settings.batch_size.max(1)) {
-            match ModuleWorker::spawn("hnet-tune", "the fine-tuning worker") {
-                Ok(worker) => workers.push(Rc::new(worker)),
-                Err(e) if workers.is_empty() => {
-                    self.notices
-                        .error(format!("Cannot fine-tune: {}", with_causes(&e)));
-                    return;
-                }
-                Err(_) => break,
+        // WebGPU where the network runs on it; otherwise one CPU worker per core, at most one
+        // per pair of the batch.
+        let on_webgpu = engine.backend == Backend::WebGpu;
+        let spawned = if on_webgpu {
+            ModuleWorker::spawn("hnet-gpu", WEBGPU_WORKER).map(|w| vec![Rc::new(w)])
+        } else {
+            cpu_workers(settings.batch_size)
+        };
+        let workers = match spawned {
+            Ok(workers) => workers,
+            Err(e) => {
+                self.notices
+                    .error(format!("Cannot fine-tune: {}", with_causes(&e)));
+                return;
             }
-        }
+        };
+        let device = if on_webgpu {
+            TuningDevice::WebGpu
+        } else {
+            TuningDevice::Cpu {
+                workers: workers.len(),
+            }
+        };
         let settings = FineTuneSettings {
-            replicas: workers.len(),
             patience: page_query::tune_patience(&browser::page_query())
                 .unwrap_or(settings.patience),
             ..settings
@@ -186,7 +199,7 @@ impl Studio {
         );
         self.tuning.state.set(TuningState::Running(TuningProgress {
             split: (0, 0),
-            workers: workers.len(),
+            device,
             pairs: set.pairs,
             rehearsed: 0,
             with_force: set.with_force,
@@ -199,6 +212,44 @@ impl Studio {
             seconds_left: None,
         }));
         leptos::task::spawn_local(async move {
+            // WebGPU set up in its worker, or the CPU workers instead, saying why.
+            let (workers, device) = match device {
+                TuningDevice::WebGpu => match start_webgpu(&workers[0]).await {
+                    Ok(()) => (workers, device),
+                    Err(e) => {
+                        stop_all(&workers, "WebGPU did not start for the fine-tune");
+                        let cpu = match cpu_workers(settings.batch_size) {
+                            Ok(cpu) => cpu,
+                            Err(cpu_error) => {
+                                studio.tuning.workers.set_value(Vec::new());
+                                studio.tuning.state.set(TuningState::Idle);
+                                studio.notices.error(format!(
+                                    "Cannot fine-tune: {}",
+                                    with_causes(&cpu_error)
+                                ));
+                                return;
+                            }
+                        };
+                        studio.notices.info(format!(
+                            "WebGPU could not fine-tune ({}); fine-tuning on the CPU",
+                            with_causes(&e)
+                        ));
+                        let device = TuningDevice::Cpu { workers: cpu.len() };
+                        studio.tuning.workers.set_value(cpu.clone());
+                        studio.tuning.state.update(|state| {
+                            if let TuningState::Running(progress) = state {
+                                progress.device = device;
+                            }
+                        });
+                        (cpu, device)
+                    }
+                },
+                TuningDevice::Cpu { .. } => (workers, device),
+            };
+            let settings = FineTuneSettings {
+                replicas: device.replicas(),
+                ..settings
+            };
             // The twin pairs are drawn one at a time, the browser answering in between.
             let (reference, rehearsal) = match twin_pairs(domain.as_ref(), rehearse).await {
                 Ok(sets) => sets,
@@ -226,6 +277,7 @@ impl Studio {
                 reference: reference.as_ref(),
                 rehearsal: rehearsal.as_ref(),
                 settings,
+                device,
             };
             let outcome = run(studio, &workers, &start).await;
             stop_all(&workers, "the fine-tune is over");
@@ -401,6 +453,37 @@ struct TuningStart<'a> {
     /// Twin pairs of the weights' own domain, trained on too.
     rehearsal: Option<&'a TuningSet>,
     settings: FineTuneSettings,
+    /// Where the steps run (`settings.replicas` is its replicas).
+    device: TuningDevice,
+}
+
+/// The WebGPU fine-tuning worker's name in messages.
+const WEBGPU_WORKER: &str = "the WebGPU fine-tuning worker";
+
+/// The CPU fine-tuning workers: one per core, at most one per pair of a batch of `batch_size`;
+/// the run goes on with those that started.
+fn cpu_workers(batch_size: usize) -> Result<Vec<Rc<ModuleWorker>>, ModuleWorkerError> {
+    let mut workers = Vec::new();
+    for _ in 0..pool_size().clamp(1, batch_size.max(1)) {
+        match ModuleWorker::spawn("hnet-tune", "the fine-tuning worker") {
+            Ok(worker) => workers.push(Rc::new(worker)),
+            Err(e) if workers.is_empty() => return Err(e),
+            Err(_) => break,
+        }
+    }
+    Ok(workers)
+}
+
+/// Sets WebGPU up in the WebGPU fine-tuning worker (its `start`, as the page's WebGPU worker
+/// is), within the time the page's WebGPU worker is given; a failure stops it.
+async fn start_webgpu(worker: &ModuleWorker) -> Result<(), ModuleWorkerError> {
+    let sent = worker.send("start", &Array::new(), &Array::new())?;
+    let started = within(
+        sent,
+        START_TIMEOUT_S,
+        &format!("it did not start within {START_TIMEOUT_S} s"),
+    );
+    worker.reply("start", started).await.map(|_| ())
 }
 
 /// Why a run stopped when the user stopped it.
@@ -460,13 +543,14 @@ async fn run(
         reference,
         rehearsal,
         settings,
+        device,
     } = *start;
     let settings_json = serde_json::to_string(&settings).unwrap_or_else(|_| "{}".into());
     // The first worker scores the held-back pairs after each epoch; the last scores the
     // reference pairs meanwhile (with one worker, the same one).
     let scores_reference = workers.len() - 1;
     // Each worker gets its own copy of the pairs, handed over.
-    let started = call_each(workers, "start", |i| {
+    let started = call_each(workers, "start_tuning", |i| {
         let images = Uint8Array::from(set.images.as_slice());
         let forces = Float32Array::from(set.forces.as_slice());
         let reference = reference.filter(|_| i == scores_reference);
@@ -503,7 +587,7 @@ async fn run(
     let before_reference: Option<HeldBackScores> = serde_json::from_value(
         json_reply(started[scores_reference].clone())["before_reference"].clone(),
     )
-    .map_err(|e| reply_error("start", &e.to_string()))?;
+    .map_err(|e| reply_error("start_tuning", &e.to_string()))?;
     let started = json_reply(started.into_iter().next().unwrap_or_default());
     let split = (
         started["train"].as_u64().unwrap_or(0) as usize,
@@ -511,7 +595,7 @@ async fn run(
     );
     let steps_per_epoch = started["steps_per_epoch"].as_u64().unwrap_or(1) as usize;
     let before: HeldBackScores = serde_json::from_value(started["before"].clone())
-        .map_err(|e| reply_error("start", &e.to_string()))?;
+        .map_err(|e| reply_error("start_tuning", &e.to_string()))?;
     let total = steps_per_epoch * settings.max_epochs;
     let update = |f: &dyn Fn(&mut TuningProgress)| {
         studio.tuning.state.update(|state| {
@@ -555,7 +639,7 @@ async fn run(
             if report.best {
                 let provenance = kept_provenance(
                     start_provenance,
-                    (start_name, workers.len(), settings.start_share),
+                    (start_name, device, settings.start_share),
                     set,
                     split.1,
                     &before,

@@ -13,6 +13,7 @@ use hnet_model::fine_tune::{FineTune, FineTuneSettings, HeldBackScores, Training
 use hnet_twin::dataset::{Dataset, Split, SquareSymmetry};
 use hnet_twin::model_facts::{FineTuneRecord, fine_tuned_provenance, recorded_name};
 
+use crate::backend::BackendChoice;
 use crate::data::StereoSplit;
 use crate::evaluation::parse_split;
 
@@ -76,6 +77,10 @@ pub struct FineTuneArgs {
     /// when left out).
     #[arg(long)]
     start_share: Option<f64>,
+    /// Where to compute (the page fine-tunes on WebGPU when its start-up check passed, on its
+    /// CPU workers otherwise).
+    #[arg(long, value_enum, default_value = "flex")]
+    backend: BackendChoice,
     /// The weights file to write (the best epoch's network, as kept).
     #[arg(long)]
     out: PathBuf,
@@ -141,8 +146,9 @@ pub fn run(args: &FineTuneArgs) -> anyhow::Result<()> {
         ..defaults
     };
     let count = pairs.len();
-    let mut run = FineTune::new(&weights, &source, pairs, settings, &Device::flex())?
-        .with_rehearsal(rehearsed)?;
+    let device: Device = args.backend.device()?;
+    let mut run =
+        FineTune::new(&weights, &source, pairs, settings, &device)?.with_rehearsal(rehearsed)?;
     let (train, held) = run.split();
     let before = run.score()?;
     eprintln!(

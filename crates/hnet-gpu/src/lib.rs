@@ -13,6 +13,10 @@
 //!    ([`StereoPrediction::to_packed`](hnet_model::inference::StereoPrediction::to_packed));
 //! 4. [`unload`] frees it when the page no longer uses it.
 //!
+//! The same module fine-tunes on WebGPU: it carries the fine-tuning worker's exports
+//! (crates/hnet-tune: `start_tuning`, `share`, `apply`, `best_weights`), and [`start`] makes them
+//! train on its device. The page starts a worker of its own for a fine-tune, as on the CPU.
+//!
 //! The page checks WebGPU's result against its CPU's on a check pair before trusting it
 //! (src/webgpu_check.rs), and falls back to the CPU whenever the worker fails.
 #![cfg(target_arch = "wasm32")]
@@ -70,6 +74,7 @@ pub async fn start() -> Result<(), JsError> {
         .init_async()
         .await
         .map_err(|e| js_error(&e))?;
+    hnet_tune::train_on(device.clone());
     DEVICE.set(Some(device));
     Ok(())
 }

@@ -1,10 +1,13 @@
 //! Fine-tuning H-Net in the page, in a dedicated Web Worker (`www/module-worker.js?module=hnet-tune`),
 //! so that the page keeps answering while it trains. The training itself is
 //! [`hnet_model::fine_tune`]'s, on Burn's CPU backend with the project's kernels (WebAssembly
-//! SIMD). The page (src/fine_tune.rs) drives it with messages, each calling one export:
+//! SIMD), or on WebGPU in the WebGPU worker (crates/hnet-gpu links these exports and trains on
+//! its device: [`train_on`]). The page (src/studio/tuning.rs) drives it with messages, each
+//! calling one export; every read-back is asynchronous, as WebGPU requires:
 //!
-//! 1. [`start`] takes the weights file, the labelled pairs and the settings, splits the pairs
-//!    into trained-on and held-back ones, and scores the starting network on the held-back ones;
+//! 1. [`start_tuning`] takes the weights file, the labelled pairs and the settings, splits the
+//!    pairs into trained-on and held-back ones, and scores the starting network on the held-back
+//!    ones;
 //! 2. each training step is split between the page's tuning workers, one per core
 //!    ([`hnet_model::fine_tune::Share`]): [`share`] computes this worker's share of the step's
 //!    gradients, and [`apply`] applies the average of every worker's share, which the page
@@ -26,8 +29,16 @@ use hnet_units::{ImageSize, TipForce, with_causes};
 use wasm_bindgen::prelude::*;
 
 thread_local! {
-    /// The run [`start`] began.
+    /// The run [`start_tuning`] began (taken out while a call awaits the device).
     static RUN: RefCell<Option<FineTune>> = const { RefCell::new(None) };
+    /// The device trained on: the CPU unless [`train_on`] said otherwise.
+    static DEVICE: RefCell<Option<Device>> = const { RefCell::new(None) };
+}
+
+/// Trains this worker's next fine-tune on `device` (the WebGPU worker's, once set up) instead
+/// of the CPU.
+pub fn train_on(device: Device) {
+    DEVICE.set(Some(device));
 }
 
 /// The JavaScript error the page receives: the message with its causes.
@@ -57,28 +68,41 @@ fn json<T: serde::Serialize>(value: &T) -> Result<String, JsError> {
 /// (`before_reference`, `null` without any); `before` is `null` for a follower.
 #[wasm_bindgen]
 #[allow(clippy::too_many_arguments)]
-pub fn start(
-    weights: &[u8],
-    name: &str,
+pub async fn start_tuning(
+    weights: Vec<u8>,
+    name: String,
     width: u32,
     height: u32,
-    images: &[u8],
-    forces: &[f32],
-    reference_images: &[u8],
-    reference_forces: &[f32],
-    rehearsal_images: &[u8],
-    rehearsal_forces: &[f32],
-    settings_json: &str,
+    images: Vec<u8>,
+    forces: Vec<f32>,
+    reference_images: Vec<u8>,
+    reference_forces: Vec<f32>,
+    rehearsal_images: Vec<u8>,
+    rehearsal_forces: Vec<f32>,
+    settings_json: String,
     follower: bool,
 ) -> Result<String, JsError> {
     console_error_panic_hook::set_once();
-    let settings: FineTuneSettings = serde_json::from_str(settings_json)
+    let settings: FineTuneSettings = serde_json::from_str(&settings_json)
         .map_err(|e| JsError::new(&format!("the fine-tune settings are not readable: {e}")))?;
     let size = ImageSize::new(width as usize, height as usize);
-    let pairs = unpack(size, images, forces, "pairs")?;
-    let reference = unpack(size, reference_images, reference_forces, "reference pairs")?;
-    let rehearsal = unpack(size, rehearsal_images, rehearsal_forces, "rehearsed pairs")?;
-    let run = FineTune::new(weights, name, pairs, settings, &Device::flex())
+    let pairs = unpack(size, &images, &forces, "pairs")?;
+    let reference = unpack(
+        size,
+        &reference_images,
+        &reference_forces,
+        "reference pairs",
+    )?;
+    let rehearsal = unpack(
+        size,
+        &rehearsal_images,
+        &rehearsal_forces,
+        "rehearsed pairs",
+    )?;
+    let device = DEVICE
+        .with_borrow(Clone::clone)
+        .unwrap_or_else(Device::flex);
+    let run = FineTune::new(&weights, &name, pairs, settings, &device)
         .and_then(|run| run.with_reference(reference))
         .and_then(|run| run.with_rehearsal(rehearsal))
         .map(|run| if follower { run.as_follower() } else { run })
@@ -86,9 +110,12 @@ pub fn start(
     let before = if follower {
         None
     } else {
-        Some(run.score().map_err(|e| js_error(&e))?)
+        Some(run.score_async().await.map_err(|e| js_error(&e))?)
     };
-    let before_reference = run.score_reference().map_err(|e| js_error(&e))?;
+    let before_reference = run
+        .score_reference_async()
+        .await
+        .map_err(|e| js_error(&e))?;
     let (train, held_back) = run.split();
     let reply = serde_json::json!({
         "train": train,
@@ -101,7 +128,7 @@ pub fn start(
     json(&reply)
 }
 
-/// The pairs packed in `images` and `forces` ([`start`]'s layout); `what` names them in errors.
+/// The pairs packed in `images` and `forces` ([`start_tuning`]'s layout); `what` names them in errors.
 fn unpack(
     size: ImageSize,
     images: &[u8],
@@ -142,12 +169,14 @@ fn unpack(
 /// This worker's share of the next training step, replica `replica` of the settings'
 /// `replicas`, as [`Share::to_message`] writes it.
 #[wasm_bindgen]
-pub fn share(replica: u32) -> Result<Vec<f32>, JsError> {
-    with_run(|run| {
-        run.share(replica as usize)
+pub async fn share(replica: u32) -> Result<Vec<f32>, JsError> {
+    with_run(async |run| {
+        run.share_async(replica as usize)
+            .await
             .map(|share| share.to_message())
             .map_err(|e| js_error(&e))
     })
+    .await
 }
 
 /// Applies the step whose shares are `messages` (every worker's [`share`], in replica order,
@@ -156,27 +185,36 @@ pub fn share(replica: u32) -> Result<Vec<f32>, JsError> {
 /// `reference`: a follower's scores on its reference pairs when the step ended an epoch and it
 /// holds some, or `null`.
 #[wasm_bindgen]
-pub fn apply(messages: &[f32]) -> Result<String, JsError> {
-    with_run(|run| {
-        let shares = Share::from_messages(messages).map_err(|e| js_error(&e))?;
+pub async fn apply(messages: Vec<f32>) -> Result<String, JsError> {
+    with_run(async |run| {
+        let shares = Share::from_messages(&messages).map_err(|e| js_error(&e))?;
         let epochs = run.epochs_done();
-        let report = run.apply(&shares).map_err(|e| js_error(&e))?;
+        let report = run.apply_async(&shares).await.map_err(|e| js_error(&e))?;
         let reference = if report.is_none() && run.epochs_done() > epochs {
-            run.score_reference().map_err(|e| js_error(&e))?
+            run.score_reference_async()
+                .await
+                .map_err(|e| js_error(&e))?
         } else {
             None
         };
         json(&serde_json::json!({ "report": report, "reference": reference }))
     })
+    .await
 }
 
-/// `f` on the run [`start`] began.
-fn with_run<T>(f: impl FnOnce(&mut FineTune) -> Result<T, JsError>) -> Result<T, JsError> {
-    RUN.with_borrow_mut(|run| {
-        f(run
-            .as_mut()
-            .ok_or_else(|| JsError::new("no fine-tune has been started in this worker"))?)
-    })
+/// `f` on the run [`start_tuning`] began, taken out of [`RUN`] while `f` awaits the device (the
+/// page sends a worker one call at a time) and put back after.
+async fn with_run<T>(
+    f: impl AsyncFnOnce(&mut FineTune) -> Result<T, JsError>,
+) -> Result<T, JsError> {
+    let mut run = RUN.take().ok_or_else(|| {
+        JsError::new(
+            "no fine-tune has been started in this worker, or a call to it is still running",
+        )
+    })?;
+    let result = f(&mut run).await;
+    RUN.set(Some(run));
+    result
 }
 
 /// The best epoch's network as a weights file whose provenance is `provenance_json` (an object
@@ -185,7 +223,10 @@ fn with_run<T>(f: impl FnOnce(&mut FineTune) -> Result<T, JsError>) -> Result<T,
 pub fn best_weights(provenance_json: &str) -> Result<Vec<u8>, JsError> {
     let provenance: BTreeMap<String, String> = serde_json::from_str(provenance_json)
         .map_err(|e| JsError::new(&format!("the provenance is not readable: {e}")))?;
-    with_run(|run| {
+    RUN.with_borrow(|run| {
+        let run = run
+            .as_ref()
+            .ok_or_else(|| JsError::new("no fine-tune has been started in this worker"))?;
         Ok(run
             .best_weights(&provenance)
             .map_err(|e| js_error(&e))?

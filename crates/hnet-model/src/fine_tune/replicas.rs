@@ -13,11 +13,10 @@ use alloc::vec::Vec;
 
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::optim::GradientsParams;
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, Tensor, TensorData, Transaction};
 
 use super::FineTuneError;
 use crate::architectures::StereoModel;
-use crate::inference::host_values;
 
 /// One replica's part of a training step.
 #[derive(Debug, Clone, PartialEq)]
@@ -80,43 +79,72 @@ pub fn share_range(len: usize, replica: usize, replicas: usize) -> core::ops::Ra
     (len * replica / replicas)..(len * (replica + 1) / replicas)
 }
 
-/// The gradients in `grads` of `net`'s trainable parameters, flattened in visiting order.
-pub(super) fn flatten(
+/// The gradients of `grads` for `net`'s trainable parameters as a share's values, read back in
+/// one transaction (asynchronously: WebGPU in the browser reads no other way).
+pub(super) async fn flatten(
     net: &StereoModel,
     grads: &GradientsParams,
 ) -> Result<Vec<f32>, FineTuneError> {
-    struct Flatten<'a> {
-        grads: &'a GradientsParams,
-        values: Vec<f32>,
-        failed: Option<FineTuneError>,
+    /// Each trainable parameter's gradient, or its length where the step left it none.
+    enum Slot {
+        Read,
+        Zeros(usize),
     }
-    impl ModuleVisitor for Flatten<'_> {
+    struct Collect<'a> {
+        grads: &'a GradientsParams,
+        slots: Vec<Slot>,
+        transaction: Transaction,
+    }
+    impl ModuleVisitor for Collect<'_> {
         fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-            if !param.is_require_grad() || self.failed.is_some() {
+            if !param.is_require_grad() {
                 return;
             }
             match self.grads.get::<D>(param.id) {
-                Some(grad) => match host_values(grad) {
-                    Ok(values) => self.values.extend(values),
-                    Err(e) => self.failed = Some(FineTuneError::Readback(e.to_string())),
-                },
-                None => {
-                    let zeros = param.shape().num_elements();
-                    self.values.resize(self.values.len() + zeros, 0.0);
+                Some(grad) => {
+                    let transaction = core::mem::take(&mut self.transaction);
+                    self.transaction = transaction.register(grad);
+                    self.slots.push(Slot::Read);
                 }
+                None => self.slots.push(Slot::Zeros(param.shape().num_elements())),
             }
         }
     }
-    let mut flatten = Flatten {
+    let mut collect = Collect {
         grads,
-        values: Vec::new(),
-        failed: None,
+        slots: Vec::new(),
+        transaction: Transaction::default(),
     };
-    net.visit(&mut flatten);
-    match flatten.failed {
-        Some(e) => Err(e),
-        None => Ok(flatten.values),
+    net.visit(&mut collect);
+    let mut read = read_back(collect.transaction).await?.into_iter();
+    let mut values = Vec::new();
+    for slot in collect.slots {
+        match slot {
+            Slot::Read => {
+                let data = read.next().ok_or_else(|| {
+                    FineTuneError::Readback("the device returned fewer gradients than asked".into())
+                })?;
+                values.extend(self::values(data)?);
+            }
+            Slot::Zeros(len) => values.resize(values.len() + len, 0.0),
+        }
     }
+    Ok(values)
+}
+
+/// Values read back, as `f32`s.
+pub(super) fn values(data: TensorData) -> Result<Vec<f32>, FineTuneError> {
+    data.try_into_vec_as::<f32>()
+        .map_err(|e| FineTuneError::Readback(alloc::format!("{e:?}")))
+}
+
+/// What `transaction` registered, read back from the device without blocking (the one read-back
+/// of a fine-tune: WebGPU in the browser must not block).
+pub(super) async fn read_back(transaction: Transaction) -> Result<Vec<TensorData>, FineTuneError> {
+    transaction
+        .execute_async()
+        .await
+        .map_err(|e| FineTuneError::Readback(alloc::format!("{e:?}")))
 }
 
 /// The average of `shares`, each weighted by its pairs, as `net`'s gradients on `device`.

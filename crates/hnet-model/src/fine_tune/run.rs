@@ -1,19 +1,23 @@
-//! [`FineTune`]: the run (feature `training`).
+//! [`FineTune`]: the run (feature `training`), on any device with autodiff.
+//!
+//! Everything the run reads back from the device (losses, gradients, scores, the best weights)
+//! is read asynchronously, as WebGPU in the browser requires: the `_async` methods. The others
+//! wait for them ([`burn_std::future::block_on`], Burn's own), which on the CPU returns at once.
 
 use alloc::string::String;
 use alloc::vec::Vec;
 
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
 use burn::optim::{GradientsParams, ModuleOptimizer};
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, Tensor, TensorData, Transaction};
+use burn_std::future::block_on;
 use hnet_units::{ImageSize, TipForce};
 
-use super::replicas::{Share, average, flatten, share_range};
+use super::replicas::{Share, average, flatten, read_back, share_range, values};
 use super::{
     EpochReport, FineTuneError, FineTuneSettings, FinishReason, HeldBackScores, TrainingPair,
 };
 use crate::architectures::{ModelSpec, StereoInput, StereoModel};
-use crate::inference::host_values;
 use crate::loss::{HNetLoss, HNetLossConfig};
 use crate::metrics::{ForceAccumulator, SegmentationAccumulator};
 use crate::training::{LabelledPair, RmsPropSettings, TrainingBatch, step_loss};
@@ -22,6 +26,9 @@ use crate::weights::WeightsHeader;
 /// A fine-tune in progress.
 pub struct FineTune {
     net: StereoModel,
+    /// The starting network on the CPU: the starting values are read from it, and the best
+    /// weights are written through it whatever the device trained on.
+    host: StereoModel,
     /// The starting weights' values, in visiting order, for [`FineTuneSettings::start_share`]
     /// (read once; none when the share is 0).
     start: Vec<TensorData>,
@@ -48,7 +55,8 @@ pub struct FineTune {
     /// Whether this replica scores the held-back and reference pairs after each epoch and
     /// keeps the best network (the page's first tuning worker; the others only train).
     scores_epochs: bool,
-    best: Option<(f64, StereoModel)>,
+    /// The best epoch's held-back loss and its network's values as kept, in visiting order.
+    best: Option<(f64, Vec<TensorData>)>,
     since_best: usize,
     finished: Option<FinishReason>,
     rng: u64,
@@ -67,6 +75,8 @@ impl FineTune {
         let plain = device.clone().without_autodiff();
         let device = plain.clone().autodiff();
         let (net, spec, header) = StereoModel::from_weights_bytes(weights, &device, source)
+            .map_err(FineTuneError::Weights)?;
+        let (host, _, _) = StereoModel::from_weights_bytes(weights, &Device::flex(), source)
             .map_err(FineTuneError::Weights)?;
         let ModelSpec::Hnet(config) = &spec else {
             return Err(FineTuneError::NotHnet(spec.name()));
@@ -99,11 +109,12 @@ impl FineTune {
         }
         Ok(Self {
             start: if settings.start_share > 0.0 {
-                parameter_values(&net)
+                block_on(parameter_values(&host))?
             } else {
                 Vec::new()
             },
             net,
+            host,
             spec,
             header,
             size,
@@ -167,17 +178,22 @@ impl FineTune {
     /// The current network's scores on the reference pairs, when there are some, as it would be
     /// kept.
     pub fn score_reference(&self) -> Result<Option<HeldBackScores>, FineTuneError> {
+        block_on(self.score_reference_async())
+    }
+
+    /// [`Self::score_reference`], waiting for the device asynchronously.
+    pub async fn score_reference_async(&self) -> Result<Option<HeldBackScores>, FineTuneError> {
         if self.reference.is_empty() {
             return Ok(None);
         }
-        self.score_reference_of(&self.kept()?).map(Some)
+        self.score_reference_of(&self.kept()?).await.map(Some)
     }
 
     /// `net`'s scores on the reference pairs.
-    fn score_reference_of(&self, net: &StereoModel) -> Result<HeldBackScores, FineTuneError> {
+    async fn score_reference_of(&self, net: &StereoModel) -> Result<HeldBackScores, FineTuneError> {
         let all: Vec<usize> = (0..self.reference.len()).collect();
         let at = (&self.reference[..], self.size, &self.plain);
-        score(&net.valid(), self.spec.input(), &self.loss, at, &all)
+        score(&net.valid(), self.spec.input(), &self.loss, at, &all).await
     }
 
     /// Epochs ended so far.
@@ -208,38 +224,49 @@ impl FineTune {
     /// The current network's scores on the held-back pairs (before the first step: the
     /// starting network's), as it would be kept ([`FineTuneSettings::start_share`]).
     pub fn score(&self) -> Result<HeldBackScores, FineTuneError> {
-        self.score_of(&self.kept()?)
+        block_on(self.score_async())
+    }
+
+    /// [`Self::score`], waiting for the device asynchronously.
+    pub async fn score_async(&self) -> Result<HeldBackScores, FineTuneError> {
+        self.score_of(&self.kept()?).await
     }
 
     /// `net`'s scores on the held-back pairs.
-    fn score_of(&self, net: &StereoModel) -> Result<HeldBackScores, FineTuneError> {
+    async fn score_of(&self, net: &StereoModel) -> Result<HeldBackScores, FineTuneError> {
         let at = (&self.pairs[..], self.size, &self.plain);
-        score(
-            &net.valid(),
-            self.spec.input(),
-            &self.loss,
-            at,
-            &self.held_back,
-        )
+        let (input, loss) = (self.spec.input(), &self.loss);
+        score(&net.valid(), input, loss, at, &self.held_back).await
     }
 
     /// One training step on the next batch: every replica's share, one after another, then
     /// their average applied. Returns the epoch's report when the step ended an epoch, `None`
     /// otherwise (and after the run has finished).
     pub fn step(&mut self) -> Result<Option<EpochReport>, FineTuneError> {
+        block_on(self.step_async())
+    }
+
+    /// [`Self::step`], waiting for the device asynchronously.
+    pub async fn step_async(&mut self) -> Result<Option<EpochReport>, FineTuneError> {
         if self.finished.is_some() {
             return Ok(None);
         }
-        let shares = (0..self.replicas())
-            .map(|replica| self.share(replica))
-            .collect::<Result<Vec<_>, _>>()?;
-        self.apply(&shares)
+        let mut shares = Vec::with_capacity(self.replicas());
+        for replica in 0..self.replicas() {
+            shares.push(self.share_async(replica).await?);
+        }
+        self.apply_async(&shares).await
     }
 
     /// Replica `replica`'s share of the next step ([`share_range`] of its batch): the mean loss
     /// over its pairs and its gradients. Changes nothing but the epoch's visiting order, drawn
     /// once an epoch from the seed, so every replica draws the same.
     pub fn share(&mut self, replica: usize) -> Result<Share, FineTuneError> {
+        block_on(self.share_async(replica))
+    }
+
+    /// [`Self::share`], waiting for the device asynchronously.
+    pub async fn share_async(&mut self, replica: usize) -> Result<Share, FineTuneError> {
         let replicas = self.replicas();
         if replica >= replicas {
             return Err(FineTuneError::NoSuchReplica { replica, replicas });
@@ -270,12 +297,14 @@ impl FineTune {
             }
         })?;
         let step = step_loss(&self.net, self.spec.input(), &self.loss, &batch);
-        let loss = scalar(&step.terms.total)?;
+        let total = step.terms.total.clone();
         let grads = GradientsParams::from_grads(step.terms.total.backward(), &self.net);
+        let gradients = flatten(&self.net, &grads).await?;
+        let loss = scalar(total).await?;
         Ok(Share {
             pairs: mine.len(),
             loss,
-            gradients: flatten(&self.net, &grads)?,
+            gradients,
         })
     }
 
@@ -284,6 +313,14 @@ impl FineTune {
     /// step ended an epoch and this replica scores epochs, `None` otherwise. A loss that is not
     /// finite ends the run ([`FinishReason::Diverged`]) without applying the step.
     pub fn apply(&mut self, shares: &[Share]) -> Result<Option<EpochReport>, FineTuneError> {
+        block_on(self.apply_async(shares))
+    }
+
+    /// [`Self::apply`], waiting for the device asynchronously.
+    pub async fn apply_async(
+        &mut self,
+        shares: &[Share],
+    ) -> Result<Option<EpochReport>, FineTuneError> {
         if self.finished.is_some() {
             return Ok(None);
         }
@@ -292,19 +329,19 @@ impl FineTune {
             shares.iter().map(|s| s.pairs as f64 * s.loss).sum::<f64>() / pairs.max(1) as f64;
         if !loss.is_finite() {
             self.in_epoch = (self.in_epoch.0 + 1, self.in_epoch.1 + loss);
-            return self.end_epoch(Some(FinishReason::Diverged));
+            return self.end_epoch(Some(FinishReason::Diverged)).await;
         }
         let grads = average(&self.net, shares, &self.plain)?;
         self.in_epoch = (self.in_epoch.0 + 1, self.in_epoch.1 + loss);
         let net = self.net.clone();
         self.net = self.optimizer.step(self.settings.learning_rate, net, grads);
         if self.in_epoch.0 >= self.steps_per_epoch() {
-            return self.end_epoch(None);
+            return self.end_epoch(None).await;
         }
         Ok(None)
     }
 
-    fn end_epoch(
+    async fn end_epoch(
         &mut self,
         diverged: Option<FinishReason>,
     ) -> Result<Option<EpochReport>, FineTuneError> {
@@ -318,11 +355,11 @@ impl FineTune {
             return Ok(None);
         }
         let kept = self.kept()?;
-        let held_back = self.score_of(&kept)?;
+        let held_back = self.score_of(&kept).await?;
         let reference = if self.reference.is_empty() {
             None
         } else {
-            Some(self.score_reference_of(&kept)?)
+            Some(self.score_reference_of(&kept).await?)
         };
         let improved = diverged.is_none()
             && held_back.loss.is_finite()
@@ -331,7 +368,7 @@ impl FineTune {
                 .as_ref()
                 .is_none_or(|(best, _)| held_back.loss < *best);
         if improved {
-            self.best = Some((held_back.loss, kept));
+            self.best = Some((held_back.loss, parameter_values(&kept).await?));
             self.since_best = 0;
         } else {
             self.since_best += 1;
@@ -386,11 +423,20 @@ impl FineTune {
         &self,
         provenance: &alloc::collections::BTreeMap<String, String>,
     ) -> Result<Option<Vec<u8>>, FineTuneError> {
-        let Some((_, net)) = &self.best else {
+        let Some((_, values)) = &self.best else {
             return Ok(None);
         };
-        net.valid()
-            .to_weights_bytes(&self.spec, provenance)
+        let mut set = SetValues {
+            values: values.iter(),
+            short: false,
+        };
+        let net = self.host.clone().map(&mut set);
+        if set.short || set.values.next().is_some() {
+            return Err(FineTuneError::Readback(
+                "the best and the starting network have different parameters".into(),
+            ));
+        }
+        net.to_weights_bytes(&self.spec, provenance)
             .map(Some)
             .map_err(FineTuneError::Write)
     }
@@ -427,21 +473,39 @@ impl ModuleMapper for TowardsStart<'_> {
     }
 }
 
-/// Every float parameter's values of `net`, in visiting order.
-fn parameter_values(net: &StereoModel) -> Vec<TensorData> {
-    struct Values(Vec<TensorData>);
-    impl ModuleVisitor for Values {
-        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-            self.0.push(param.val().into_data());
-        }
-    }
-    let mut values = Values(Vec::new());
-    net.visit(&mut values);
-    values.0
+/// Sets every float parameter to its value in `values` (in visiting order).
+struct SetValues<'a> {
+    values: core::slice::Iter<'a, TensorData>,
+    short: bool,
 }
 
-/// The scores of `net` on the pairs `indices` (one pair per pass, without the autodiff graph).
-fn score(
+impl ModuleMapper for SetValues<'_> {
+    fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+        let Some(value) = self.values.next() else {
+            self.short = true;
+            return param;
+        };
+        param.map(|old| Tensor::<D>::from_data(value.clone(), &old.device()))
+    }
+}
+
+/// Every float parameter's values of `net`, in visiting order, read back in one transaction.
+async fn parameter_values(net: &StereoModel) -> Result<Vec<TensorData>, FineTuneError> {
+    struct Values(Transaction);
+    impl ModuleVisitor for Values {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            let transaction = core::mem::take(&mut self.0);
+            self.0 = transaction.register(param.val());
+        }
+    }
+    let mut values = Values(Transaction::default());
+    net.visit(&mut values);
+    read_back(values.0).await
+}
+
+/// The scores of `net` on the pairs `indices` (one pair per pass, without the autodiff graph,
+/// its outputs read back in one transaction).
+async fn score(
     net: &StereoModel,
     input: StereoInput,
     loss: &HNetLoss,
@@ -451,25 +515,50 @@ fn score(
     let mut masks = SegmentationAccumulator::new();
     let mut force = ForceAccumulator::new();
     let mut loss_sum = 0.0;
-    let readback = |e: crate::inference::ReadbackError| FineTuneError::Readback(e.to_string());
     for &index in indices {
         let pair = &pairs[index];
         let batch = TrainingBatch::of(&[pair.labelled()], size, device)
             .map_err(|cause| FineTuneError::OtherSize { size, cause })?;
         let step = step_loss(net, input, loss, &batch);
-        loss_sum += scalar(&step.terms.total)?;
+        // The loss, then each view's catheter probabilities and mask, then the force.
+        let mut transaction = Transaction::default().register(step.terms.total);
+        let with_masks = step.outputs.mask_logits.is_some();
         if let Some([logits_a, logits_b]) = step.outputs.mask_logits {
             for (logits, target) in [(logits_a, &batch.mask_a), (logits_b, &batch.mask_b)] {
                 let probabilities = burn::tensor::activation::sigmoid(logits);
-                let predicted = host_values(probabilities).map_err(readback)?;
-                let target = host_values(target.clone()).map_err(readback)?;
+                transaction = transaction.register(probabilities).register(target.clone());
+            }
+        }
+        let estimate = step.outputs.force.filter(|_| pair.force_n.is_some());
+        let with_force = estimate.is_some();
+        if let Some(estimate) = estimate {
+            transaction = transaction.register(estimate);
+        }
+        let mut read = read_back(transaction).await?.into_iter().map(values);
+        let mut next = || {
+            read.next().unwrap_or_else(|| {
+                Err(FineTuneError::Readback(
+                    "the device returned fewer outputs than asked".into(),
+                ))
+            })
+        };
+        loss_sum += f64::from(next()?.first().copied().unwrap_or(f32::NAN));
+        if with_masks {
+            for _ in 0..2 {
+                let (predicted, target) = (next()?, next()?);
                 masks
                     .push(&predicted, &target)
                     .map_err(|e| FineTuneError::Readback(e.to_string()))?;
             }
         }
-        if let (Some(estimate), Some(label)) = (step.outputs.force, pair.force_n) {
-            let f = host_values(estimate).map_err(readback)?;
+        if let (true, Some(label)) = (with_force, pair.force_n) {
+            let f = next()?;
+            if f.len() < 3 {
+                return Err(FineTuneError::Readback(alloc::format!(
+                    "the force head returned {} values, not 3",
+                    f.len()
+                )));
+            }
             force.push(TipForce::new(f[0], f[1], f[2]), label);
         }
     }
@@ -493,10 +582,12 @@ fn check_sizes(pairs: &[TrainingPair], size: ImageSize) -> Result<(), FineTuneEr
 }
 
 /// A one-element tensor's value on the host.
-fn scalar(t: &burn::tensor::Tensor<1>) -> Result<f64, FineTuneError> {
-    t.clone()
-        .try_into_scalar::<f64>()
-        .map_err(|e| FineTuneError::Readback(alloc::format!("{e:?}")))
+async fn scalar(t: Tensor<1>) -> Result<f64, FineTuneError> {
+    let read = read_back(Transaction::default().register(t)).await?;
+    let value = read.into_iter().next().map(values).transpose()?;
+    Ok(value
+        .and_then(|v| v.first().copied())
+        .map_or(f64::NAN, f64::from))
 }
 
 /// Fisher-Yates with SplitMix64: the visiting order, reproducible from the seed.
