@@ -78,7 +78,9 @@ try {
   await page.waitForFunction(() => /Epoch 1 of/.test(document.querySelector("#tune-progress-text")?.textContent ?? ""), null, { timeout: 600_000 });
   // The start (twin pairs drawn, workers loaded, the starting network scored) ends here.
   const trainingFrom = (Date.now() - started) / 1000;
-  const workers = Number((await page.textContent("#tune-progress-text")).match(/ · (\d+) workers?$/)?.[1]);
+  // Where the steps run: "on WebGPU", or "on N CPU workers…".
+  const progress = await page.textContent("#tune-progress-text");
+  const workers = / · on WebGPU$/.test(progress) ? "WebGPU" : Number(progress.match(/ · on (\d+) CPU workers?/)?.[1]);
   const clicks = await playwrightClicks(page, TABS.slice(0, 4));
   const clickToFrame = await clicksToFrame(page, TABS);
   await page.waitForSelector("#tune-table", { timeout: 1_800_000 });

@@ -209,9 +209,10 @@ pub fn run(args: &FineTuneArgs) -> anyhow::Result<()> {
     hnet_twin::dataset::files::write_atomically(&args.out, &bytes)
         .with_context(|| format!("cannot write '{}'", args.out.display()))?;
     eprintln!(
-        "best epoch {} ({:?}); weights in {} after {:.0} s",
+        "best epoch {} ({}); weights in {} after {:.0} s",
         best.epoch,
-        run.finished(),
+        run.finished()
+            .map_or_else(|| "not finished".to_string(), |why| why.to_string()),
         args.out.display(),
         started.elapsed().as_secs_f64()
     );

@@ -226,3 +226,14 @@ pub enum FinishReason {
     /// A loss was not finite: the run diverged; the best weights before it are kept.
     Diverged,
 }
+
+impl core::fmt::Display for FinishReason {
+    /// Why the run ended, in words: what `hnet fine-tune` says at its end.
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            Self::LastEpoch => "every epoch asked for was run",
+            Self::NoImprovement => "the held-back loss stopped improving",
+            Self::Diverged => "a loss was not finite; the best weights before it are kept",
+        })
+    }
+}
