@@ -213,38 +213,10 @@ impl Studio {
         }));
         leptos::task::spawn_local(async move {
             // WebGPU set up in its worker, or the CPU workers instead, saying why.
-            let (workers, device) = match device {
-                TuningDevice::WebGpu => match start_webgpu(&workers[0]).await {
-                    Ok(()) => (workers, device),
-                    Err(e) => {
-                        stop_all(&workers, "WebGPU did not start for the fine-tune");
-                        let cpu = match cpu_workers(settings.batch_size) {
-                            Ok(cpu) => cpu,
-                            Err(cpu_error) => {
-                                studio.tuning.workers.set_value(Vec::new());
-                                studio.tuning.state.set(TuningState::Idle);
-                                studio.notices.error(format!(
-                                    "Cannot fine-tune: {}",
-                                    with_causes(&cpu_error)
-                                ));
-                                return;
-                            }
-                        };
-                        studio.notices.info(format!(
-                            "WebGPU could not fine-tune ({}); fine-tuning on the CPU",
-                            with_causes(&e)
-                        ));
-                        let device = TuningDevice::Cpu { workers: cpu.len() };
-                        studio.tuning.workers.set_value(cpu.clone());
-                        studio.tuning.state.update(|state| {
-                            if let TuningState::Running(progress) = state {
-                                progress.device = device;
-                            }
-                        });
-                        (cpu, device)
-                    }
-                },
-                TuningDevice::Cpu { .. } => (workers, device),
+            let Some((workers, device)) =
+                ready_workers(studio, workers, device, settings.batch_size).await
+            else {
+                return;
             };
             let settings = FineTuneSettings {
                 replicas: device.replicas(),
@@ -472,6 +444,56 @@ fn cpu_workers(batch_size: usize) -> Result<Vec<Rc<ModuleWorker>>, ModuleWorkerE
         }
     }
     Ok(workers)
+}
+
+/// The workers a fine-tune on `device` runs on, ready: on WebGPU, `workers` (its one worker) once
+/// WebGPU is set up in it; should WebGPU not start there, the CPU workers instead (steps of
+/// `batch_size` pairs), the page saying why. `None`, the run over and the page told, when the
+/// user stopped it meanwhile or no worker can start.
+async fn ready_workers(
+    studio: Studio,
+    workers: Vec<Rc<ModuleWorker>>,
+    device: TuningDevice,
+    batch_size: usize,
+) -> Option<(Vec<Rc<ModuleWorker>>, TuningDevice)> {
+    let TuningDevice::WebGpu = device else {
+        return Some((workers, device));
+    };
+    let Err(why_not) = start_webgpu(&workers[0]).await else {
+        return Some((workers, device));
+    };
+    stop_all(&workers, "WebGPU did not start for the fine-tune");
+    let end = |notice: Option<String>| {
+        studio.tuning.workers.set_value(Vec::new());
+        studio.tuning.state.set(TuningState::Idle);
+        match notice {
+            Some(error) => studio.notices.error(error),
+            None => studio.notices.info("Fine-tuning stopped"),
+        }
+    };
+    if matches!(&why_not, ModuleWorkerError::Stopped { why, .. } if why == STOPPED_BY_USER) {
+        end(None);
+        return None;
+    }
+    let cpu = match cpu_workers(batch_size) {
+        Ok(cpu) => cpu,
+        Err(e) => {
+            end(Some(format!("Cannot fine-tune: {}", with_causes(&e))));
+            return None;
+        }
+    };
+    studio.notices.info(format!(
+        "WebGPU could not fine-tune ({}); fine-tuning on the CPU",
+        with_causes(&why_not)
+    ));
+    let device = TuningDevice::Cpu { workers: cpu.len() };
+    studio.tuning.workers.set_value(cpu.clone());
+    studio.tuning.state.update(|state| {
+        if let TuningState::Running(progress) = state {
+            progress.device = device;
+        }
+    });
+    Some((cpu, device))
 }
 
 /// Sets WebGPU up in the WebGPU fine-tuning worker (its `start`, as the page's WebGPU worker
