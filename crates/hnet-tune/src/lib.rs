@@ -8,8 +8,9 @@
 //! 1. [`start_tuning`] takes the weights file, the labelled pairs and the settings, splits the
 //!    pairs into trained-on and held-back ones, and scores the starting network on the held-back
 //!    ones;
-//! 2. each training step is split between the page's tuning workers, one per core
-//!    ([`hnet_model::fine_tune::Share`]): [`share`] computes this worker's share of the step's
+//! 2. each training step is split between the page's tuning workers, one per core on the CPU
+//!    and one on WebGPU, whose share is the whole step ([`hnet_model::fine_tune::Share`]):
+//!    [`share`] computes this worker's share of the step's
 //!    gradients, and [`apply`] applies the average of every worker's share, which the page
 //!    relays to each; at the end of an epoch the first worker scores the held-back pairs again,
 //!    and the worker given the reference pairs (the last) scores those, at the same time.
