@@ -115,6 +115,10 @@ pub enum HNetConfigError {
         /// The configured depth: sizes must be divisible by `2^depth`.
         depth: usize,
     },
+    /// A weight tensor's element count, from the settings, does not fit in `usize` (a file
+    /// claiming absurd sizes: no real network has them).
+    #[error("the settings' {0} overflow: no network of these sizes can exist")]
+    Overflow(&'static str),
 }
 
 impl HNetConfig {
@@ -145,7 +149,42 @@ impl HNetConfig {
                 depth: self.depth,
             });
         }
-        Ok(())
+        self.check_tensor_sizes()
+    }
+
+    /// Refuses settings whose largest weight tensors' element counts overflow `usize`: the
+    /// convolutions' `channels × filters × 3 × 3` and the force head's layers, whose input is
+    /// both views' [`HNetConfig::pooled_features_per_view`] (found by the weights property tests).
+    fn check_tensor_sizes(&self) -> Result<(), HNetConfigError> {
+        let product = |factors: &[usize]| {
+            factors
+                .iter()
+                .try_fold(1usize, |total, &factor| total.checked_mul(factor))
+        };
+        let channels = self.in_channels.checked_add(2).map(|c| c.max(self.filters));
+        let features = self
+            .depth
+            .checked_add(1)
+            .and_then(|blocks| product(&[blocks, self.filters, 2]));
+        let [hidden1, hidden2] = self.force_hidden;
+        let sizes = [
+            (
+                "convolution sizes",
+                channels.and_then(|c| product(&[c, self.filters, 9])),
+            ),
+            (
+                "force head's input",
+                features.and_then(|f| product(&[f, hidden1])),
+            ),
+            (
+                "force head's hidden layers",
+                product(&[hidden1, hidden2, 3]),
+            ),
+        ];
+        match sizes.into_iter().find(|(_, size)| size.is_none()) {
+            Some((what, _)) => Err(HNetConfigError::Overflow(what)),
+            None => Ok(()),
+        }
     }
 
     /// Whether the first convolution also reads each pixel's position

@@ -337,6 +337,23 @@ mod properties {
     }
 }
 
+/// Regression (found by `settings_claiming_any_size_are_an_error_or_a_network`, 2026-12-07): an
+/// H-Net weights file claiming 2^62 filters overflowed its force head's input size while the
+/// network was built. Such settings are refused, naming the size that overflows.
+#[test]
+fn hnet_settings_whose_sizes_overflow_are_refused() {
+    let device = Device::flex();
+    let settings = r#"{"depth":1,"filters":4611686018427387904,"force_hidden":[1048576,1048576],"image_size":{"height":51628000098,"width":12},"in_channels":1,"share_weights":false}"#;
+    let model = config().init(&device).unwrap();
+    let bytes = weights::encode(model, "hnet", settings, &provenance(), "x.bpk").unwrap();
+    let err = HNet::from_weights_bytes(&bytes, &device, "x.bpk").expect_err(settings);
+    assert!(
+        hnet_units::with_causes(&err).contains("overflow"),
+        "{}",
+        hnet_units::with_causes(&err)
+    );
+}
+
 /// Regression (found by `settings_claiming_any_size_are_an_error_or_a_network`): a U-Net weights
 /// file claiming a depth of 2^40 tried to allocate its layer list and aborted; a depth of 0
 /// underflowed. Both are now refused as out-of-range settings, as are zero or huge filter counts.
