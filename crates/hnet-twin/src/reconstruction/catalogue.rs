@@ -219,7 +219,7 @@ pub struct StiffnessCalibration {
     pub scale: f64,
     /// Pairs it was fitted on.
     pub pairs: usize,
-    /// Standard error of the scale from its fit (residual over the pairs' forces).
+    /// Standard error of the scale from its fit (the calibration curve's residuals).
     pub scale_sd: f64,
     /// Share of the measured forces' variance (about zero) the scaled estimates explain, 0-1.
     pub explained: f64,
@@ -281,8 +281,10 @@ pub enum CalibrationError {
 }
 
 /// Calibrates `catheter`'s stiffness from pairs of (measured force, blind physics estimate under
-/// its current stiffness), N: the scale `s` minimising `Σ |measured − s·estimate|²`. Refused with
-/// fewer than [`MIN_STIFFNESS_PAIRS`] pairs, near-zero forces, or pairs one scale cannot explain.
+/// its current stiffness), N: the scale `s` of the calibration curve `estimate ≈ measured / s`,
+/// fitted by least squares over the three axes (`s = Σ m·m / Σ m·e`; why this way round: the
+/// module's doc). Refused with fewer than [`MIN_STIFFNESS_PAIRS`] pairs, near-zero forces, or
+/// pairs one scale cannot explain.
 pub fn calibrate_stiffness(
     catheter: &CatalogueCatheter,
     pairs: &[(TipForce, TipForce)],
@@ -307,10 +309,12 @@ pub fn calibrate_stiffness(
     if rms_n < MIN_RMS_FORCE_N || ee <= 0.0 {
         return Err(CalibrationError::Unloaded { rms_n });
     }
-    let scale = me / ee;
-    if scale <= 0.0 {
-        return Err(CalibrationError::Opposed { scale });
+    // The curve's slope, estimate per newton measured: 1 / s.
+    let slope = me / mm;
+    if slope <= 0.0 {
+        return Err(CalibrationError::Opposed { scale: slope });
     }
+    let scale = 1.0 / slope;
     let residual: f64 = pairs
         .iter()
         .map(|(m, e)| (0..3).map(|i| (m[i] - scale * e[i]).powi(2)).sum::<f64>())
@@ -319,8 +323,13 @@ pub fn calibrate_stiffness(
     if explained < MIN_EXPLAINED {
         return Err(CalibrationError::Contradictory { explained });
     }
+    // The slope's standard error from the curve's residuals, carried to the scale (delta method).
+    let curve_residual: f64 = pairs
+        .iter()
+        .map(|(m, e)| (0..3).map(|i| (e[i] - slope * m[i]).powi(2)).sum::<f64>())
+        .sum();
     let dof = (3 * pairs.len()).saturating_sub(1).max(1) as f64;
-    let scale_sd = (residual / dof / ee).sqrt();
+    let scale_sd = (curve_residual / dof / mm).sqrt() / (slope * slope);
     Ok(CatalogueCatheter {
         bending_stiffness_n_m2: catheter.bending_stiffness_n_m2 * scale,
         calibration: Some(StiffnessCalibration {
@@ -378,6 +387,28 @@ mod tests {
         let c = calibrated.calibration.unwrap();
         assert!((c.scale - 1.3).abs() < 1e-6 && c.explained > 0.999, "{c:?}");
         assert!((calibrated.bending_stiffness_n_m2 - 0.78e-3).abs() < 1e-9);
+        // Estimates with noise of their own (a network's masks): the scale is not pulled
+        // towards zero, as regressing the forces on the estimates would pull it (to 1.22 here).
+        let noisy: Vec<_> = pairs
+            .iter()
+            .chain(&pairs)
+            .enumerate()
+            .map(|(i, (measured, exact))| {
+                let sign = if i < pairs.len() { 1.0 } else { -1.0 };
+                let noise = [0.03 * sign, -0.02 * sign, 0.015 * sign];
+                let estimate = TipForce::new(
+                    exact[0] + noise[0],
+                    exact[1] + noise[1],
+                    exact[2] + noise[2],
+                );
+                (*measured, estimate)
+            })
+            .collect();
+        let c = calibrate_stiffness(&nominal, &noisy)
+            .unwrap()
+            .calibration
+            .unwrap();
+        assert!((c.scale - 1.3).abs() < 1e-5, "{c:?}");
         assert_eq!(
             calibrate_stiffness(&nominal, &pairs[..2]),
             Err(CalibrationError::TooFewPairs { usable: 2 })
