@@ -48,6 +48,15 @@ pub struct TwinStreamConfig {
     /// curve), for masks and force that hold up on other systems (none when absent).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub imaging: Option<ImagingConfig>,
+    /// Fraction of pairs, bench and off-bench, whose X-ray background's patch grid starts
+    /// anywhere (`hnet simulate --random-patch-grid`) instead of where the dataset's does, in
+    /// `[0, 1]`: one run trains on both grids (0, the default, keeps the dataset's).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub random_patch_grid_fraction: f64,
+}
+
+fn is_zero(fraction: &f64) -> bool {
+    *fraction == 0.0
 }
 
 /// The share of bench pairs imaged by a detector drawn per pair, and the detectors' ranges.
@@ -115,6 +124,9 @@ impl TwinStreamConfig {
                 .check()
                 .map_err(|why| anyhow::anyhow!("stream.imaging.detectors: {why}"))?;
         }
+        if !(0.0..=1.0).contains(&self.random_patch_grid_fraction) {
+            bail!("stream.random_patch_grid_fraction must lie in [0, 1]");
+        }
         Ok(())
     }
 }
@@ -128,12 +140,23 @@ const SYMMETRY_SALT: u64 = 0x7475_726E_5F76_6965;
 /// Keeps a bench pair's drawn detector independent of the pair's own draws.
 const IMAGING_SALT: u64 = 0x696D_6167_696E_6721;
 
+/// Keeps the choice of a pair's patch grid independent of the pair's own draws.
+const PATCH_GRID_SALT: u64 = 0x6772_6964_5F61_6E79;
+
+/// The twin settings and off-bench draws of one patch grid.
+struct Look {
+    twin: TwinConfig,
+    off_bench: Option<OffBench>,
+}
+
 /// The twin's training pairs for the epoch in progress (a Burn dataset).
 pub struct TwinStream {
     config: TwinStreamConfig,
-    twin: TwinConfig,
+    /// The dataset's look.
+    dataset_look: Look,
+    /// The look with the patch grid anywhere, when `random_patch_grid_fraction` asks for it.
+    grid_anywhere: Option<Look>,
     bench_backgrounds: Backgrounds,
-    off_bench: Option<OffBench>,
     size: ImageSize,
     epochs_started: Arc<AtomicUsize>,
 }
@@ -214,23 +237,41 @@ impl TwinStream {
                 size.height
             );
         }
-        let off_bench = match &config.off_bench {
-            Some(off) => {
-                let (radiographs, _) =
-                    radiographs(&off.radiographs).context("stream.off_bench.radiographs")?;
-                let off_bench = OffBench::new(twin.clone(), radiographs, off.radiograph_fraction);
-                Some(match &off.scenes {
-                    Some(scenes) => off_bench.with_scenes(scenes.clone()),
-                    None => off_bench,
-                })
-            }
-            None => None,
+        if config.random_patch_grid_fraction > 0.0 && !twin.modality.is_xray() {
+            bail!(
+                "stream.random_patch_grid_fraction is for X-ray datasets; '{}' is {:?}",
+                header_file.display(),
+                twin.modality
+            );
+        }
+        let look = |twin: TwinConfig| -> anyhow::Result<Look> {
+            let off_bench = match &config.off_bench {
+                Some(off) => {
+                    let (radiographs, _) =
+                        radiographs(&off.radiographs).context("stream.off_bench.radiographs")?;
+                    let off_bench =
+                        OffBench::new(twin.clone(), radiographs, off.radiograph_fraction);
+                    Some(match &off.scenes {
+                        Some(scenes) => off_bench.with_scenes(scenes.clone()),
+                        None => off_bench,
+                    })
+                }
+                None => None,
+            };
+            Ok(Look { twin, off_bench })
+        };
+        let grid_anywhere = if config.random_patch_grid_fraction > 0.0 {
+            let mut anywhere = twin.clone();
+            anywhere.patches.random_grid_offset = true;
+            Some(look(anywhere)?)
+        } else {
+            None
         };
         Ok(Self {
             config: config.clone(),
             bench_backgrounds: Backgrounds::phantom(&twin.views),
-            twin,
-            off_bench,
+            dataset_look: look(twin)?,
+            grid_anywhere,
             size,
             epochs_started: Arc::new(AtomicUsize::new(epochs_done)),
         })
@@ -252,7 +293,10 @@ impl TwinStream {
             Some(off) => format!(
                 ", {:.0} % off the bench ({} radiographs{})",
                 off.fraction * 100.0,
-                self.off_bench.as_ref().map_or(0, OffBench::radiographs),
+                self.dataset_look
+                    .off_bench
+                    .as_ref()
+                    .map_or(0, OffBench::radiographs),
                 if off.turned_views {
                     ", views turned"
                 } else {
@@ -261,8 +305,16 @@ impl TwinStream {
             ),
             None => String::new(),
         };
+        let grid = if self.grid_anywhere.is_some() {
+            format!(
+                ", {:.0} % with the patch grid anywhere",
+                self.config.random_patch_grid_fraction * 100.0
+            )
+        } else {
+            String::new()
+        };
         format!(
-            "{} fresh twin pairs per epoch (stream seed {}{off_bench})",
+            "{} fresh twin pairs per epoch (stream seed {}{off_bench}{grid})",
             self.config.pairs_per_epoch, self.config.seed
         )
     }
@@ -272,7 +324,16 @@ impl TwinStream {
         let off_bench = self.config.off_bench.as_ref().is_some_and(|off| {
             sample_rng(self.config.seed ^ MIX_SALT, index).random::<f64>() < off.fraction
         });
-        let sample = match self.off_bench.as_ref().filter(|_| off_bench) {
+        let look = match &self.grid_anywhere {
+            Some(anywhere)
+                if sample_rng(self.config.seed ^ PATCH_GRID_SALT, index).random::<f64>()
+                    < self.config.random_patch_grid_fraction =>
+            {
+                anywhere
+            }
+            _ => &self.dataset_look,
+        };
+        let sample = match look.off_bench.as_ref().filter(|_| off_bench) {
             Some(off) => off.generate(self.config.seed, index)?.1,
             None => {
                 let mut rng = sample_rng(self.config.seed ^ IMAGING_SALT, index);
@@ -284,15 +345,15 @@ impl TwinStream {
                     Some(imaging) => {
                         let twin = TwinConfig {
                             detector: imaging.detectors.draw(&mut rng),
-                            ..self.twin.clone()
+                            ..look.twin.clone()
                         };
                         generate(&twin, &self.bench_backgrounds, self.config.seed, index)?
                     }
-                    None => generate(&self.twin, &self.bench_backgrounds, self.config.seed, index)?,
+                    None => generate(&look.twin, &self.bench_backgrounds, self.config.seed, index)?,
                 }
             }
         };
-        let mut pair = LoadedPair::from_sample(&sample, self.twin.image_size, self.size);
+        let mut pair = LoadedPair::from_sample(&sample, look.twin.image_size, self.size);
         if off_bench
             && self
                 .config
@@ -448,6 +509,7 @@ mod tests {
                 turned_views: false,
             }),
             imaging: None,
+            random_patch_grid_fraction: 0.0,
         };
         // Detectors no X-ray system has are refused, naming the field.
         let mut foggy = config.clone();
@@ -532,6 +594,26 @@ mod tests {
             moved += usize::from(s != SquareSymmetry::IDENTITY);
         }
         assert!(moved > 0, "no off-bench view was turned");
+
+        // The patch grid anywhere: the backgrounds move; a share outside [0, 1] is refused.
+        let anywhere = TwinStreamConfig {
+            random_patch_grid_fraction: 1.0,
+            ..config.clone()
+        };
+        let shifted = TwinStream::new(&anywhere, &data, size, 0).unwrap();
+        let moved = (0..8)
+            .filter(|&i| plain.pair(i).unwrap().view_a != shifted.pair(i).unwrap().view_a)
+            .count();
+        assert!(moved >= 6, "{moved} of 8 pairs' backgrounds moved");
+        let too_many = TwinStreamConfig {
+            random_patch_grid_fraction: 1.5,
+            ..config.clone()
+        };
+        let error = too_many.check().unwrap_err();
+        assert!(
+            format!("{error:#}").contains("random_patch_grid_fraction"),
+            "{error:#}"
+        );
 
         // The dataset's own seed would replay its val and test pairs: refused, naming it.
         let same = TwinStreamConfig { seed: 5, ..config };
