@@ -287,6 +287,19 @@ impl Quat {
         Self(self.0.map(|v| v / n))
     }
 
+    /// The rotation vector (unit axis times angle in `[0, π]`, rad) of this rotation.
+    pub fn rotation_vector(self) -> Vec3 {
+        let [w, x, y, z] = self.normalized().0;
+        // q and -q are the same rotation: take the one with w >= 0, whose angle is at most π.
+        let sign = if w < 0.0 { -1.0 } else { 1.0 };
+        let v = Vec3([x, y, z]) * sign;
+        let half_sin = v.norm();
+        if half_sin < 1e-15 {
+            return Vec3::ZERO;
+        }
+        v * (2.0 * half_sin.atan2(w * sign) / half_sin)
+    }
+
     /// Derivative `q' = ½ q ⊗ (0, u)` for a body-frame angular rate `u`.
     pub fn derivative(self, u: Vec3) -> [f64; 4] {
         let [w, x, y, z] = self.0;
@@ -329,6 +342,12 @@ mod tests {
         let q = Mat3::rotation(Vec3::Z, core::f64::consts::FRAC_PI_2);
         assert!(close(q * Vec3::X, Vec3::Y));
         assert!(close((q.transpose() * q) * Vec3::X, Vec3::X));
+        // The rotation vector is the axis times the angle, up to a half turn.
+        let axis = Vec3::new(1.0, 2.0, -0.5).normalized();
+        for angle in [0.0, 0.7, 3.0, core::f64::consts::PI] {
+            let w = Quat::from_matrix(&Mat3::rotation(axis, angle)).rotation_vector();
+            assert!((w - axis * angle).max_abs() < 1e-9, "{angle}: {w:?}");
+        }
     }
 
     #[test]

@@ -326,6 +326,60 @@ pub fn physics_estimate(
     })
 }
 
+/// A fitted base rotation's fit that stays farther than this from the reconstruction (RMS, mm)
+/// is tried again from other starts ([`RESTART_ROLLS_RAD`], then the nominal base), and the
+/// closest fit kept. Read blind from label masks on the stiff set (s36), good fits stay within
+/// 0.2 mm; the fits that stopped where a large force bends the rod against its pre-curve
+/// (0.5-0.8 N against a true 0.05-0.1 N) 0.49-0.56 mm.
+pub const RESTART_RMS_MM: f64 = 0.3;
+
+/// The rolls of the base about its axis a restarted fit starts from, rad: the pre-curve's plane
+/// a quarter, a half and three quarters of a turn from the first start's.
+pub const RESTART_ROLLS_RAD: [f64; 3] = [
+    std::f64::consts::FRAC_PI_2,
+    std::f64::consts::PI,
+    -std::f64::consts::FRAC_PI_2,
+];
+
+/// The rod fitted to `reconstruction` with `settings` (restarted from other starts when a
+/// fitted base stays far from it: [`RESTART_RMS_MM`]).
+fn fit_with_restarts(
+    setup: &PhysicsSetup,
+    reconstruction: &Reconstruction,
+    settings: &RodFitSettings,
+) -> Result<RodFit, RodFitError> {
+    let first = fit_rod_to_reconstruction(&setup.rod, &setup.base, reconstruction, settings);
+    if !settings.fit_base_rotation || first.as_ref().is_ok_and(|fit| fit.rms_mm <= RESTART_RMS_MM) {
+        return first;
+    }
+    let starts = RESTART_ROLLS_RAD
+        .iter()
+        .map(|&roll| RodFitSettings {
+            start_roll_rad: roll,
+            ..settings.clone()
+        })
+        .chain(settings.start_base_from_centreline.then(|| RodFitSettings {
+            start_base_from_centreline: false,
+            ..settings.clone()
+        }));
+    let mut best = first;
+    for start in starts {
+        let fit = fit_rod_to_reconstruction(&setup.rod, &setup.base, reconstruction, &start);
+        let closer = match (&fit, &best) {
+            (Ok(fit), Ok(best)) => fit.rms_mm < best.rms_mm,
+            (Ok(_), Err(_)) => true,
+            _ => false,
+        };
+        if closer {
+            best = fit;
+        }
+        if best.as_ref().is_ok_and(|fit| fit.rms_mm <= RESTART_RMS_MM) {
+            break;
+        }
+    }
+    best
+}
+
 /// The rod fitted to `reconstruction` with `settings`, refused when it stays far from the
 /// reconstruction, or its force runs into the fit's limit, or it puts its base outside the
 /// nominal pose's tolerance (checked in that order).
@@ -334,7 +388,7 @@ fn checked_fit(
     reconstruction: &Reconstruction,
     settings: &RodFitSettings,
 ) -> Result<RodFit, PhysicsError> {
-    let fit = fit_rod_to_reconstruction(&setup.rod, &setup.base, reconstruction, settings)?;
+    let fit = fit_with_restarts(setup, reconstruction, settings)?;
     if let Some(limit_mm) = setup.max_fit_rms_mm
         && (fit.rms_mm.is_nan() || fit.rms_mm > limit_mm)
     {
@@ -608,6 +662,45 @@ mod tests {
             "{far} of {} beyond 0.15 N",
             read.len()
         );
+    }
+
+    /// Two pairs of the stiff set (x1.3, base anywhere: `hnet simulate --seed 36 --scene-sampling
+    /// configs/mismatch/stiff-anywhere.json`, samples 19 and 194), read blind from their exact
+    /// masks with the catheter calibrated (x1.307): the first fit stopped 0.5 mm from the
+    /// reconstruction with 0.7-0.9 N against a true 0.07-0.13 N; restarted, the force is found.
+    #[test]
+    fn a_fit_stopped_far_from_the_catheter_is_restarted() {
+        use crate::reconstruction::catalogue::{BENCH_CATHETER, CatalogueCatheter};
+        use crate::simulator::scene::{Backgrounds, Modality, SceneSampling, TwinConfig, generate};
+        use hnet_units::ImageSize;
+        let scenes: SceneSampling = serde_json::from_str(include_str!(
+            "../../../../configs/mismatch/stiff-anywhere.json"
+        ))
+        .unwrap();
+        let nominal = scenes.nominal_base();
+        let mut twin = TwinConfig::new(Modality::Xray2, ImageSize::square(224));
+        twin.scene = scenes;
+        let backgrounds = Backgrounds::phantom(&twin.views);
+        let bench = CatalogueCatheter::find(BENCH_CATHETER).unwrap();
+        let catheter = CatalogueCatheter {
+            bending_stiffness_n_m2: bench.bending_stiffness_n_m2 * 1.307,
+            ..bench
+        };
+        let cameras = [twin.views.a.camera_matrix(), twin.views.b.camera_matrix()];
+        let blind = PhysicsSetup::blind(cameras, &catheter, &nominal);
+        for index in [19, 194] {
+            let sample = generate(&twin, &backgrounds, 36, index).unwrap();
+            let mask = |i: usize| Mask::coverage8(224, 224, &sample.views[i].mask);
+            let estimate = physics_estimate([mask(0), mask(1)], &blind).unwrap();
+            let error = (estimate.fit.force_n - sample.params.tip_force_n).max_abs();
+            assert!(
+                error < 0.03 && estimate.fit.rms_mm <= RESTART_RMS_MM,
+                "{index}: {:?} N against {:?} N, {:.3} mm",
+                estimate.fit.force_n,
+                sample.params.tip_force_n,
+                estimate.fit.rms_mm
+            );
+        }
     }
 
     /// Read blind (the catalogue's bench catheter, the base fitted from the fixture's nominal
