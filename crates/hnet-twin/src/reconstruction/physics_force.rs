@@ -358,12 +358,10 @@ fn fit_with_restarts(
         start_roll_rad: roll,
         ..settings.clone()
     });
-    let nominal = settings
-        .start_base_from_centreline
-        .then(|| RodFitSettings {
-            start_base_from_centreline: false,
-            ..settings.clone()
-        });
+    let nominal = settings.start_base_from_centreline.then(|| RodFitSettings {
+        start_base_from_centreline: false,
+        ..settings.clone()
+    });
     let closer = rolled.chain(nominal).find_map(|start| {
         fit_rod_to_reconstruction(&setup.rod, &setup.base, reconstruction, &start)
             .ok()
