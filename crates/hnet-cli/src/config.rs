@@ -250,6 +250,7 @@ mod tests {
         assert_eq!(
             names_in(&dir.join("experiments")),
             [
+                "both-grids-224",
                 "force-128-any-pose",
                 "force-128-masks-any-pose",
                 "force-128-off-bench-any-pose",
