@@ -269,14 +269,15 @@ pub enum CalibrationError {
         /// The share explained, 0-1.
         explained: f64,
     },
-    /// The fitted scale is not positive.
+    /// The calibration curve's slope is not positive: the estimates fall as the measured forces
+    /// rise.
     #[error(
-        "the estimates point against the measured forces (scale {scale:.3}); check the force \
-         labels' axes and signs"
+        "the estimates point against the measured forces (slope {slope:.3} N estimated per N \
+         measured); check the force labels' axes and signs"
     )]
     Opposed {
-        /// The fitted scale.
-        scale: f64,
+        /// The fitted slope `Σ m·e / Σ m·m`, newtons estimated per newton measured.
+        slope: f64,
     },
 }
 
@@ -312,7 +313,7 @@ pub fn calibrate_stiffness(
     // The curve's slope, estimate per newton measured: 1 / s.
     let slope = me / mm;
     if slope <= 0.0 {
-        return Err(CalibrationError::Opposed { scale: slope });
+        return Err(CalibrationError::Opposed { slope });
     }
     let scale = 1.0 / slope;
     let residual: f64 = pairs
@@ -436,5 +437,15 @@ mod tests {
             matches!(err, CalibrationError::Contradictory { .. }),
             "{err}"
         );
+        // Labels with their signs flipped: the curve falls, and the error says by how much.
+        let flipped: Vec<_> = pairs.iter().map(|(m, e)| (m.map(|f| -f), *e)).collect();
+        let err = calibrate_stiffness(&nominal, &flipped).unwrap_err();
+        match &err {
+            CalibrationError::Opposed { slope } => {
+                assert!((slope + 1.0 / 1.3).abs() < 1e-5, "{slope}")
+            }
+            other => panic!("{other}"),
+        }
+        assert!(err.to_string().contains("slope -0.769"), "{err}");
     }
 }
