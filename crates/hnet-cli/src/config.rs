@@ -275,7 +275,8 @@ mod tests {
                 "force-128-off-bench",
                 "force-224",
                 "paper",
-                "paper-bench-128"
+                "paper-bench-128",
+                "paper-bench-ynet-128"
             ]
         );
     }
